@@ -1,0 +1,38 @@
+# aogm: `make demo` and `make test` are all the set-up a fresh clone needs (Python 3.11).
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed-stamp
+OUT    := out
+SEED   := 1
+WORLDS := $(wildcard worlds/*.yaml)
+
+.PHONY: demo test bench lint install clean
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e '.[dev]'
+	touch $(STAMP)
+
+install: $(STAMP)
+
+demo: $(STAMP)
+	@mkdir -p $(OUT)
+	@for w in $(WORLDS); do \
+	  n=$$(basename $$w .yaml); \
+	  $(BIN)/aogm simulate $$w -o $(OUT)/$$n.h5 --seed $(SEED) --png $(OUT)/$$n-truth.png --quiet || exit 1; \
+	  echo "simulated $$w -> $(OUT)/$$n.h5, picture $(OUT)/$$n-truth.png"; \
+	done
+
+test: $(STAMP)
+	$(BIN)/python -m pytest
+
+bench: $(STAMP)
+	$(BIN)/python bench/bench_simulate.py
+	$(BIN)/python bench/bench_standard.py
+
+lint: $(STAMP)
+	$(BIN)/ruff check .
+
+clean:
+	rm -rf $(OUT) .pytest_cache

@@ -1,0 +1,66 @@
+"""The ``aogm`` command group: one small module per subcommand, all thin over the library.
+
+Errors: InputError -> one line on stderr and exit 2; anything else -> exit 1 (traceback
+only with ``--debug``).
+"""
+
+from __future__ import annotations
+
+import sys
+import traceback
+
+import click
+
+from aogm_cli import __version__
+from aogm_cli.errors import InputError
+
+
+class AogmGroup(click.Group):
+    """A click group that turns library errors into the exit codes of CONTRACT.md."""
+
+    def invoke(self, ctx: click.Context):
+        try:
+            return super().invoke(ctx)
+        except InputError as exc:
+            if ctx.obj and ctx.obj.get("debug"):
+                traceback.print_exc()
+            click.echo(f"aogm: error: {exc}", err=True)
+            ctx.exit(2)
+        except (click.exceptions.Exit, click.ClickException, click.Abort):
+            raise
+        except KeyboardInterrupt:
+            click.echo("aogm: interrupted", err=True)
+            ctx.exit(1)
+        except Exception as exc:  # noqa: BLE001 - the contract: one line, exit 1
+            if ctx.obj and ctx.obj.get("debug"):
+                traceback.print_exc()
+            else:
+                click.echo(f"aogm: failed: {exc.__class__.__name__}: {exc} (run with --debug for a traceback)", err=True)
+            ctx.exit(1)
+
+
+@click.group(cls=AogmGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="aogm")
+@click.option("--debug", is_flag=True, help="Show a traceback on errors.")
+@click.pass_context
+def main(ctx: click.Context, debug: bool) -> None:
+    """Occupancy-grid maps from sonar readings: standard, EM and adaptive (clusters) mappers.
+
+    \b
+    aogm simulate worlds/corridor_door.yaml -o door.h5
+    aogm map door.h5 --mode standard -o door_map.h5 --png door_map.png
+    """
+    ctx.ensure_object(dict)
+    ctx.obj["debug"] = debug
+
+
+def _register() -> None:
+    from aogm_cli.cli import simulate
+
+    main.add_command(simulate.simulate)
+
+
+_register()
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

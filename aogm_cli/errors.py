@@ -1,0 +1,24 @@
+"""The one error type for bad input: a file, a key path, what was found and what was expected.
+
+Commands turn an InputError into a short message on stderr and exit status 2.
+"""
+
+
+class InputError(Exception):
+    """Bad input from the user: a malformed file, an unknown key, an impossible value.
+
+    ``str(err)`` reads ``FILE: KEY: MESSAGE`` (file and key omitted when unknown).
+    """
+
+    def __init__(self, message: str, *, file: str | None = None, key: str | None = None):
+        self.file = file
+        self.key = key
+        self.message = message
+        parts = [p for p in (file, key) if p]
+        super().__init__(": ".join(parts + [message]))
+
+    def in_file(self, file: str) -> "InputError":
+        """The same error, naming ``file`` when it did not name one yet."""
+        if self.file:
+            return self
+        return InputError(self.message, file=file, key=self.key)

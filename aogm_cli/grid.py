@@ -1,0 +1,76 @@
+"""The one place that converts between world (x, y) metres and grid (row, col) cells.
+
+Index [row, col] = [iy, ix]; row 0 is the lowest y (ROS OccupancyGrid order). Cell [iy, ix]
+covers x in [origin_x + ix*res, origin_x + (ix+1)*res), and likewise y.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class GridSpec:
+    """Origin (x, y of the outer corner of cell [0, 0]), resolution (m per cell), shape (H, W)."""
+
+    origin_x: float
+    origin_y: float
+    resolution: float
+    height: int
+    width: int
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return (self.height, self.width)
+
+    @property
+    def origin(self) -> tuple[float, float]:
+        return (self.origin_x, self.origin_y)
+
+    @property
+    def extent(self) -> tuple[float, float, float, float]:
+        """(x_min, x_max, y_min, y_max) of the whole grid in metres."""
+        return (
+            self.origin_x,
+            self.origin_x + self.width * self.resolution,
+            self.origin_y,
+            self.origin_y + self.height * self.resolution,
+        )
+
+    @classmethod
+    def covering(cls, x_min: float, y_min: float, x_max: float, y_max: float, resolution: float) -> GridSpec:
+        """The smallest grid at ``resolution`` whose cells cover the box, origin on the box corner."""
+        width = max(1, int(math.ceil((x_max - x_min) / resolution - 1e-9)))
+        height = max(1, int(math.ceil((y_max - y_min) / resolution - 1e-9)))
+        return cls(float(x_min), float(y_min), float(resolution), height, width)
+
+    def world_to_cell(self, x, y):
+        """(row, col) integer arrays of the cells holding points (x, y); may lie outside the grid."""
+        col = np.floor((np.asarray(x, dtype=np.float64) - self.origin_x) / self.resolution).astype(np.int64)
+        row = np.floor((np.asarray(y, dtype=np.float64) - self.origin_y) / self.resolution).astype(np.int64)
+        return row, col
+
+    def cell_centre(self, row, col):
+        """(x, y) of the centres of cells (row, col)."""
+        x = self.origin_x + (np.asarray(col, dtype=np.float64) + 0.5) * self.resolution
+        y = self.origin_y + (np.asarray(row, dtype=np.float64) + 0.5) * self.resolution
+        return x, y
+
+    def centres(self):
+        """(X, Y) arrays of shape (H, W) with every cell's centre."""
+        xs = self.origin_x + (np.arange(self.width) + 0.5) * self.resolution
+        ys = self.origin_y + (np.arange(self.height) + 0.5) * self.resolution
+        return np.meshgrid(xs, ys)
+
+    def contains(self, row, col):
+        """Boolean array: which (row, col) lie inside the grid."""
+        row = np.asarray(row)
+        col = np.asarray(col)
+        return (row >= 0) & (row < self.height) & (col >= 0) & (col < self.width)
+
+    def attrs(self) -> dict:
+        """Attributes written beside a grid in every file: resolution and origin."""
+        return {"resolution": self.resolution, "origin": np.array([self.origin_x, self.origin_y])}

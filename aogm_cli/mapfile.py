@@ -1,0 +1,138 @@
+"""The map file (HDF5) of CONTRACT.md: what ``aogm map`` writes and every later step reads.
+
+``OccupancyMap`` holds a map in memory; ``write_map_file`` / ``read_map_file`` convert it.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from aogm_cli import __version__
+from aogm_cli.errors import InputError
+from aogm_cli.grid import GridSpec
+from aogm_cli.outputs import atomic_output
+
+FORMAT = "aogm-map"
+FORMAT_VERSION = 1
+MODES = ("standard", "em", "adaptive")
+
+
+@dataclass
+class OccupancyMap:
+    """A finished map: probabilities and observed mask on ``grid``, plus mode-specific layers."""
+
+    grid: GridSpec
+    probability: np.ndarray  # (H, W) float32, 0.5 where unobserved
+    observed: np.ndarray  # (H, W) bool
+    mode: str
+    params: dict = field(default_factory=dict)
+    runtime_s: float = 0.0
+    source_log: str = ""
+    log_odds: np.ndarray | None = None  # standard, adaptive
+    occupied: np.ndarray | None = None  # em, adaptive
+    clusters: np.ndarray | None = None  # adaptive
+    stats: dict = field(default_factory=dict)
+
+
+def write_map_file(path: str | Path, m: OccupancyMap, inputs: tuple = ()) -> None:
+    """Write ``m`` to ``path`` (atomically; refuses to overwrite one of ``inputs``)."""
+    with atomic_output(path, inputs) as tmp, h5py.File(tmp, "w") as f:
+        f.attrs["format"] = FORMAT
+        f.attrs["format_version"] = FORMAT_VERSION
+        f.attrs["mode"] = m.mode
+        f.attrs["aogm_version"] = __version__
+        f.attrs["source_log"] = m.source_log
+        f.attrs["runtime_s"] = float(m.runtime_s)
+        f.attrs["params"] = json.dumps(m.params, sort_keys=True)
+        g = f.create_group("map")
+        for k, v in m.grid.attrs().items():
+            g.attrs[k] = v
+        opts = {"compression": "gzip", "compression_opts": 4}
+        g.create_dataset("probability", data=np.asarray(m.probability, dtype=np.float32), **opts)
+        g.create_dataset("observed", data=np.asarray(m.observed, dtype=bool), **opts)
+        if m.log_odds is not None:
+            g.create_dataset("log_odds", data=np.asarray(m.log_odds, dtype=np.float32), **opts)
+        if m.occupied is not None:
+            g.create_dataset("occupied", data=np.asarray(m.occupied, dtype=bool), **opts)
+        if m.clusters is not None:
+            g.create_dataset("clusters", data=np.asarray(m.clusters, dtype=np.int32), **opts)
+        s = f.create_group("stats")
+        for k, v in m.stats.items():
+            s.attrs[k] = json.dumps(v) if isinstance(v, (dict, list, tuple)) else v
+
+
+def read_map_file(path: str | Path) -> OccupancyMap:
+    """Read and check a map file; InputError names the file and the missing or wrong item."""
+    path = str(path)
+    try:
+        f = h5py.File(path, "r")
+    except FileNotFoundError:
+        raise InputError("no such file", file=path) from None
+    except OSError as exc:
+        raise InputError(f"not an HDF5 file ({exc.__class__.__name__}); expected an aogm map", file=path) from None
+    with f:
+        fmt = _text(f.attrs.get("format"))
+        if fmt != FORMAT:
+            raise InputError(f"expected {FORMAT!r}, got {fmt!r}", file=path, key="format")
+        if f.attrs.get("format_version") != FORMAT_VERSION:
+            raise InputError(f"expected {FORMAT_VERSION}, got {f.attrs.get('format_version')!r}", file=path, key="format_version")
+        for name in ("map/probability", "map/observed"):
+            if name not in f:
+                raise InputError("missing dataset", file=path, key="/" + name)
+        g = f["map"]
+        prob = g["probability"][...]
+        if prob.ndim != 2:
+            raise InputError(f"expected a 2-D grid, got shape {prob.shape}", file=path, key="/map/probability")
+        ox, oy = (float(v) for v in g.attrs["origin"])
+        grid = GridSpec(ox, oy, float(g.attrs["resolution"]), prob.shape[0], prob.shape[1])
+
+        def optional(name):
+            return g[name][...] if name in g else None
+
+        stats = {}
+        if "stats" in f:
+            for k, v in f["stats"].attrs.items():
+                stats[k] = _stat(v)
+        return OccupancyMap(
+            grid=grid,
+            probability=prob,
+            observed=g["observed"][...].astype(bool),
+            mode=_text(f.attrs.get("mode", "")),
+            params=json.loads(_text(f.attrs.get("params", "{}"))),
+            runtime_s=float(f.attrs.get("runtime_s", 0.0)),
+            source_log=_text(f.attrs.get("source_log", "")),
+            log_odds=optional("log_odds"),
+            occupied=optional("occupied"),
+            clusters=optional("clusters"),
+            stats=stats,
+        )
+
+
+def is_map_file(path: str | Path) -> bool:
+    """True when ``path`` is an HDF5 file whose format attribute says aogm-map."""
+    try:
+        with h5py.File(path, "r") as f:
+            return _text(f.attrs.get("format")) == FORMAT
+    except OSError:
+        return False
+
+
+def _text(v) -> str:
+    return v.decode() if isinstance(v, bytes) else ("" if v is None else str(v))
+
+
+def _stat(v):
+    if isinstance(v, (bytes, str)):
+        s = _text(v)
+        try:
+            return json.loads(s)
+        except json.JSONDecodeError:
+            return s
+    if isinstance(v, np.generic):
+        return v.item()
+    return v

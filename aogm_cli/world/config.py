@@ -1,0 +1,147 @@
+"""The world as typed, frozen configuration: geometry, surfaces, robot, trajectory, sonar, checks.
+
+These dataclasses are what ``world.loader`` produces from YAML after validation; nothing
+else in the package reads world YAML. Angles are stored in radians, lengths in metres.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+Point = tuple[float, float]
+
+
+@dataclass(frozen=True)
+class Surface:
+    """Reflection property of a surface: echoes come back only below the specular threshold.
+
+    ``specular_threshold`` is the largest incidence angle (from the surface normal) that
+    still echoes; pi/2 means a rough surface that echoes at any angle.
+    """
+
+    name: str
+    specular_threshold: float = math.pi / 2
+
+
+@dataclass(frozen=True)
+class Opening:
+    """A gap cut into a wall: centred ``at`` metres along the polyline, ``width`` wide."""
+
+    at: float
+    width: float
+
+
+@dataclass(frozen=True)
+class Wall:
+    """A polyline wall of a given thickness, with optional openings (doors)."""
+
+    points: tuple[Point, ...]
+    thickness: float
+    surface: str
+    openings: tuple[Opening, ...] = ()
+
+
+@dataclass(frozen=True)
+class Box:
+    """A rectangle ``size`` = (width along its x, depth along its y), rotated by ``yaw`` about its centre."""
+
+    center: Point
+    size: Point
+    yaw: float
+    surface: str
+
+
+@dataclass(frozen=True)
+class Polygon:
+    """A simple closed polygon (the last point joins the first)."""
+
+    points: tuple[Point, ...]
+    surface: str
+
+
+@dataclass(frozen=True)
+class Circle:
+    center: Point
+    radius: float
+    surface: str
+
+
+@dataclass(frozen=True)
+class Floorplan:
+    """A bitmap floor plan read as ROS map_server reads ``map`` (a map_server YAML file)."""
+
+    map: str  # absolute path of the map_server YAML
+    surface: str
+
+
+@dataclass(frozen=True)
+class Robot:
+    radius: float = 0.25
+
+
+@dataclass(frozen=True)
+class Trajectory:
+    """Either waypoints driven at ``speed`` with a scan every ``scan_period`` s, or explicit poses.
+
+    ``poses`` holds (x, y, yaw) with yaw in radians; when it is non-empty, waypoints are empty
+    and scans are ``scan_period`` seconds apart.
+    """
+
+    waypoints: tuple[Point, ...] = ()
+    speed: float = 0.3
+    scan_period: float = 0.5
+    poses: tuple[tuple[float, float, float], ...] = ()
+
+
+@dataclass(frozen=True)
+class Sonar:
+    """The sonar ring: mounts (x, y, yaw) in the robot frame and the beam's properties."""
+
+    mounts: tuple[tuple[float, float, float], ...]
+    beam_width: float = math.radians(30.0)
+    min_range: float = 0.15
+    max_range: float = 5.0
+    noise_sigma: float = 0.02
+    random_rate: float = 0.02
+    sub_rays: int = 11
+    max_bounces: int = 2
+    cause_tolerance: float = 0.1
+
+
+@dataclass(frozen=True)
+class PassableCheck:
+    """A robot of ``robot_radius`` can go from ``start`` to ``goal`` through believed-free cells."""
+
+    name: str
+    start: Point
+    goal: Point
+    robot_radius: float
+
+    def as_json(self) -> dict:
+        return {
+            "name": self.name,
+            "passable": {"from": list(self.start), "to": list(self.goal), "robot_radius": self.robot_radius},
+        }
+
+
+@dataclass(frozen=True)
+class World:
+    """Everything ``aogm simulate`` needs: geometry, surfaces, robot, trajectory, sonar and checks."""
+
+    name: str
+    source: str  # path of the YAML file
+    text: str  # the YAML text, written into every log
+    bounds: tuple[float, float, float, float]  # x_min, y_min, x_max, y_max
+    truth_resolution: float
+    surfaces: dict[str, Surface]
+    walls: tuple[Wall, ...] = ()
+    boxes: tuple[Box, ...] = ()
+    polygons: tuple[Polygon, ...] = ()
+    circles: tuple[Circle, ...] = ()
+    floorplan: Floorplan | None = None
+    robot: Robot = field(default_factory=Robot)
+    trajectory: Trajectory = field(default_factory=Trajectory)
+    sonar: Sonar | None = None
+    checks: tuple[PassableCheck, ...] = ()
+    description: str = ""

@@ -1,0 +1,372 @@
+"""Reads a world YAML file into a validated ``World``: the one place world input is checked.
+
+Every error names the file and the key path (``walls[2].thickness``), what was found and
+what was expected. The format is documented in ``worlds/README.md``.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from aogm_cli.errors import InputError
+from aogm_cli.world.config import (
+    Box,
+    Circle,
+    Floorplan,
+    Opening,
+    PassableCheck,
+    Polygon,
+    Robot,
+    Sonar,
+    Surface,
+    Trajectory,
+    Wall,
+    World,
+)
+
+ROUGH = Surface("rough", math.pi / 2)
+
+
+class Node:
+    """A YAML value with its key path, so that every complaint can say where it is."""
+
+    def __init__(self, value: Any, path: str, file: str):
+        self.value = value
+        self.path = path
+        self.file = file
+
+    def error(self, message: str) -> InputError:
+        return InputError(message, file=self.file, key=self.path or "(top level)")
+
+    def child(self, key: str | int) -> Node:
+        if isinstance(key, int):
+            path = f"{self.path}[{key}]"
+            return Node(self.value[key], path, self.file)
+        path = f"{self.path}.{key}" if self.path else key
+        return Node(self.value.get(key), path, self.file)
+
+    # -- shapes -------------------------------------------------------------------------
+    def mapping(self, allowed: set[str], required: set[str] = frozenset()) -> Node:
+        if not isinstance(self.value, dict):
+            raise self.error(f"expected a mapping, got {_describe(self.value)}")
+        for key in self.value:
+            if key not in allowed:
+                hint = _closest(str(key), allowed)
+                where = f"{self.path}.{key}" if self.path else str(key)
+                raise InputError(
+                    f"unknown key{hint}; expected one of {', '.join(sorted(allowed))}",
+                    file=self.file,
+                    key=where,
+                )
+        for key in sorted(required):
+            if key not in self.value:
+                raise self.child(key).error("missing; this key is required")
+        return self
+
+    def has(self, key: str) -> bool:
+        return isinstance(self.value, dict) and key in self.value and self.value[key] is not None
+
+    def items(self) -> list[Node]:
+        if not isinstance(self.value, list):
+            raise self.error(f"expected a list, got {_describe(self.value)}")
+        return [self.child(i) for i in range(len(self.value))]
+
+    # -- scalars ------------------------------------------------------------------------
+    def number(self, *, positive: bool = False, minimum: float | None = None, maximum: float | None = None) -> float:
+        v = self.value
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
+            raise self.error(f"expected a number, got {_describe(v)}")
+        v = float(v)
+        if positive and not v > 0:
+            raise self.error(f"expected a positive number, got {v:g}")
+        if minimum is not None and v < minimum:
+            raise self.error(f"expected a number >= {minimum:g}, got {v:g}")
+        if maximum is not None and v > maximum:
+            raise self.error(f"expected a number <= {maximum:g}, got {v:g}")
+        return v
+
+    def integer(self, *, minimum: int | None = None) -> int:
+        v = self.value
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise self.error(f"expected a whole number, got {_describe(v)}")
+        if minimum is not None and v < minimum:
+            raise self.error(f"expected a whole number >= {minimum}, got {v}")
+        return int(v)
+
+    def string(self) -> str:
+        if not isinstance(self.value, str) or not self.value:
+            raise self.error(f"expected a non-empty string, got {_describe(self.value)}")
+        return self.value
+
+    def vector(self, n: int, what: str = "[x, y]") -> tuple[float, ...]:
+        v = self.value
+        if not isinstance(v, list) or len(v) != n:
+            raise self.error(f"expected {what}, got {_describe(v)}")
+        return tuple(self.child(i).number() for i in range(n))
+
+    def points(self, minimum: int) -> tuple[tuple[float, float], ...]:
+        pts = tuple(p.vector(2) for p in self.items())
+        if len(pts) < minimum:
+            raise self.error(f"expected at least {minimum} points [x, y], got {len(pts)}")
+        return pts  # type: ignore[return-value]
+
+    # -- helpers with defaults ------------------------------------------------------------
+    def get_number(self, key: str, default: float, **limits) -> float:
+        return self.child(key).number(**limits) if self.has(key) else default
+
+    def get_angle(self, key: str, default: float, **limits) -> float:
+        """An angle written in degrees under ``key``; returned in radians."""
+        return math.radians(self.child(key).number(**limits)) if self.has(key) else default
+
+
+def _describe(v: Any) -> str:
+    if v is None:
+        return "nothing"
+    if isinstance(v, bool):
+        return f"the boolean {v}"
+    if isinstance(v, (int, float)):
+        return f"{v!r}"
+    if isinstance(v, str):
+        return f"the string {v!r}"
+    if isinstance(v, list):
+        return f"a list of {len(v)}"
+    if isinstance(v, dict):
+        return "a mapping"
+    return type(v).__name__
+
+
+def _closest(key: str, allowed: set[str]) -> str:
+    import difflib
+
+    match = difflib.get_close_matches(key, sorted(allowed), n=1)
+    return f" (did you mean {match[0]!r}?)" if match else ""
+
+
+TOP_KEYS = {
+    "name", "description", "bounds", "truth_resolution", "surfaces", "default_surface", "walls",
+    "boxes", "polygons", "circles", "floorplan", "robot", "trajectory", "sonar", "checks",
+}
+
+
+def load_world(path: str | Path) -> World:
+    """Read and validate the world file at ``path``; raise InputError naming file and key."""
+    path = Path(path)
+    file = str(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError("no such file", file=file) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"cannot read: {exc}", file=file) from None
+    try:
+        raw = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
+        problem = getattr(exc, "problem", None) or str(exc)
+        raise InputError(f"{where}not valid YAML: {problem}", file=file) from None
+    return parse_world(raw, file=file, text=text, base_dir=path.parent)
+
+
+def parse_world(raw: Any, *, file: str, text: str = "", base_dir: Path = Path(".")) -> World:
+    """Validate an already-parsed YAML value as a world."""
+    top = Node(raw, "", file).mapping(TOP_KEYS, required={"bounds", "trajectory"})
+
+    name = top.child("name").string() if top.has("name") else Path(file).stem
+    description = top.child("description").string() if top.has("description") else ""
+    b = top.child("bounds").vector(4, "[x_min, y_min, x_max, y_max]")
+    if not (b[2] > b[0] and b[3] > b[1]):
+        raise top.child("bounds").error(f"expected x_max > x_min and y_max > y_min, got {list(b)}")
+    bounds = (b[0], b[1], b[2], b[3])
+    truth_resolution = top.get_number("truth_resolution", 0.05, positive=True)
+    if (b[2] - b[0]) * (b[3] - b[1]) / truth_resolution**2 > 2.5e8:
+        raise top.child("truth_resolution").error("the truth grid would exceed 250 million cells; expected a coarser resolution")
+
+    surfaces = {"rough": ROUGH}
+    if top.has("surfaces"):
+        s_node = top.child("surfaces")
+        if not isinstance(s_node.value, dict):
+            raise s_node.error(f"expected a mapping of surface names, got {_describe(s_node.value)}")
+        for sname in s_node.value:
+            n = s_node.child(sname).mapping({"specular_threshold_deg"}, required={"specular_threshold_deg"})
+            th = n.child("specular_threshold_deg").number(minimum=0.0, maximum=90.0)
+            surfaces[str(sname)] = Surface(str(sname), math.radians(th))
+    default_surface = top.child("default_surface").string() if top.has("default_surface") else "rough"
+    if default_surface not in surfaces:
+        raise top.child("default_surface").error(f"unknown surface {default_surface!r}; expected one of {sorted(surfaces)}")
+
+    def surface_of(n: Node) -> str:
+        if not n.has("surface"):
+            return default_surface
+        s = n.child("surface").string()
+        if s not in surfaces:
+            raise n.child("surface").error(f"unknown surface {s!r}; expected one of {sorted(surfaces)}")
+        return s
+
+    walls = []
+    if top.has("walls"):
+        for w in top.child("walls").items():
+            w.mapping({"points", "thickness", "surface", "openings"}, required={"points"})
+            pts = w.child("points").points(2)
+            thickness = w.get_number("thickness", 0.1, positive=True)
+            length = sum(math.dist(pts[i], pts[i + 1]) for i in range(len(pts) - 1))
+            openings = []
+            if w.has("openings"):
+                for o in w.child("openings").items():
+                    o.mapping({"at", "width"}, required={"at", "width"})
+                    at = o.child("at").number(minimum=0.0, maximum=length)
+                    width = o.child("width").number(positive=True)
+                    openings.append(Opening(at, width))
+            walls.append(Wall(pts, thickness, surface_of(w), tuple(openings)))
+
+    boxes = []
+    if top.has("boxes"):
+        for n in top.child("boxes").items():
+            n.mapping({"center", "size", "yaw_deg", "surface"}, required={"center", "size"})
+            size = n.child("size").vector(2, "[width, depth]")
+            if not (size[0] > 0 and size[1] > 0):
+                raise n.child("size").error(f"expected positive [width, depth], got {list(size)}")
+            boxes.append(Box(n.child("center").vector(2), size, n.get_angle("yaw_deg", 0.0), surface_of(n)))
+
+    polygons = []
+    if top.has("polygons"):
+        for n in top.child("polygons").items():
+            n.mapping({"points", "surface"}, required={"points"})
+            polygons.append(Polygon(n.child("points").points(3), surface_of(n)))
+
+    circles = []
+    if top.has("circles"):
+        for n in top.child("circles").items():
+            n.mapping({"center", "radius", "surface"}, required={"center", "radius"})
+            circles.append(Circle(n.child("center").vector(2), n.child("radius").number(positive=True), surface_of(n)))
+
+    floorplan = None
+    if top.has("floorplan"):
+        n = top.child("floorplan").mapping({"map", "surface"}, required={"map"})
+        map_path = (base_dir / n.child("map").string()).resolve()
+        from aogm_cli.rosmap import read_map_yaml
+
+        try:
+            read_map_yaml(map_path)
+        except InputError as exc:
+            raise n.child("map").error(f"cannot load the map_server YAML: {exc}") from None
+        floorplan = Floorplan(str(map_path), surface_of(n))
+
+    robot = Robot()
+    if top.has("robot"):
+        n = top.child("robot").mapping({"radius"})
+        robot = Robot(n.get_number("radius", 0.25, positive=True))
+
+    trajectory = _trajectory(top.child("trajectory"), bounds)
+    sonar = _sonar(top.child("sonar") if top.has("sonar") else Node({}, "sonar", file), robot)
+
+    checks = []
+    if top.has("checks"):
+        names = set()
+        for n in top.child("checks").items():
+            n.mapping({"name", "passable"}, required={"name", "passable"})
+            cname = n.child("name").string()
+            if cname in names:
+                raise n.child("name").error(f"duplicate check name {cname!r}")
+            names.add(cname)
+            p = n.child("passable").mapping({"from", "to", "robot_radius"}, required={"from", "to"})
+            start = p.child("from").vector(2)
+            goal = p.child("to").vector(2)
+            for key, pt in (("from", start), ("to", goal)):
+                if not _inside(pt, bounds):
+                    raise p.child(key).error(f"expected a point inside bounds {list(bounds)}, got {list(pt)}")
+            radius = p.get_number("robot_radius", robot.radius, minimum=0.0)
+            checks.append(PassableCheck(cname, start, goal, radius))
+
+    if not (walls or boxes or polygons or circles or floorplan):
+        raise top.error("the world has no geometry; expected walls, boxes, polygons, circles or a floorplan")
+
+    return World(
+        name=name,
+        source=file,
+        text=text,
+        bounds=bounds,
+        truth_resolution=truth_resolution,
+        surfaces=surfaces,
+        walls=tuple(walls),
+        boxes=tuple(boxes),
+        polygons=tuple(polygons),
+        circles=tuple(circles),
+        floorplan=floorplan,
+        robot=robot,
+        trajectory=trajectory,
+        sonar=sonar,
+        checks=tuple(checks),
+        description=description,
+    )
+
+
+def _inside(pt, bounds) -> bool:
+    return bounds[0] <= pt[0] <= bounds[2] and bounds[1] <= pt[1] <= bounds[3]
+
+
+def _trajectory(n: Node, bounds) -> Trajectory:
+    n.mapping({"waypoints", "speed", "scan_period", "poses"})
+    scan_period = n.get_number("scan_period", 0.5, positive=True)
+    if n.has("poses") == n.has("waypoints"):
+        raise n.error("expected exactly one of 'waypoints' (with speed) or 'poses'")
+    if n.has("poses"):
+        poses = []
+        for p in n.child("poses").items():
+            x, y, yaw_deg = p.vector(3, "[x, y, yaw_deg]")
+            if not _inside((x, y), bounds):
+                raise p.error(f"expected a pose inside bounds {list(bounds)}, got [{x:g}, {y:g}]")
+            poses.append((x, y, math.radians(yaw_deg)))
+        if not poses:
+            raise n.child("poses").error("expected at least one pose")
+        return Trajectory(poses=tuple(poses), scan_period=scan_period)
+    waypoints = n.child("waypoints").points(2)
+    for i, pt in enumerate(waypoints):
+        if not _inside(pt, bounds):
+            raise n.child("waypoints").child(i).error(f"expected a point inside bounds {list(bounds)}, got {list(pt)}")
+    if all(math.dist(waypoints[0], p) == 0 for p in waypoints):
+        raise n.child("waypoints").error("expected waypoints that span a distance, got one repeated point")
+    return Trajectory(waypoints=waypoints, speed=n.get_number("speed", 0.3, positive=True), scan_period=scan_period)
+
+
+def _sonar(n: Node, robot: Robot) -> Sonar:
+    n.mapping({
+        "count", "ring_radius", "mounts", "beam_width_deg", "min_range", "max_range", "noise_sigma",
+        "random_rate", "sub_rays", "max_bounces", "cause_tolerance",
+    })
+    if n.has("mounts") and (n.has("count") or n.has("ring_radius")):
+        raise n.error("expected either 'mounts' or 'count'/'ring_radius', not both")
+    if n.has("mounts"):
+        mounts = []
+        for m in n.child("mounts").items():
+            x, y, yaw_deg = m.vector(3, "[x, y, yaw_deg]")
+            mounts.append((x, y, math.radians(yaw_deg)))
+        if not mounts:
+            raise n.child("mounts").error("expected at least one sonar, got zero")
+    else:
+        count = n.child("count").integer(minimum=1) if n.has("count") else 24
+        ring = n.get_number("ring_radius", robot.radius, minimum=0.0)
+        mounts = []
+        for i in range(count):
+            a = 2.0 * math.pi * i / count
+            mounts.append((ring * math.cos(a), ring * math.sin(a), a))
+    beam = n.get_angle("beam_width_deg", math.radians(30.0), positive=True, maximum=179.0)
+    min_range = n.get_number("min_range", 0.15, minimum=0.0)
+    max_range = n.get_number("max_range", 5.0, positive=True)
+    if not max_range > min_range:
+        raise n.child("max_range").error(f"expected max_range > min_range ({min_range:g}), got {max_range:g}")
+    return Sonar(
+        mounts=tuple(mounts),
+        beam_width=beam,
+        min_range=min_range,
+        max_range=max_range,
+        noise_sigma=n.get_number("noise_sigma", 0.02, minimum=0.0),
+        random_rate=n.get_number("random_rate", 0.02, minimum=0.0, maximum=1.0),
+        sub_rays=n.child("sub_rays").integer(minimum=1) if n.has("sub_rays") else 11,
+        max_bounces=n.child("max_bounces").integer(minimum=0) if n.has("max_bounces") else 2,
+        cause_tolerance=n.get_number("cause_tolerance", 0.1, positive=True),
+    )

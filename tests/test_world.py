@@ -1,0 +1,110 @@
+"""World files: the bundled worlds load; bad input names the file and the key path."""
+
+import math
+from pathlib import Path
+
+import pytest
+
+from aogm_cli.errors import InputError
+from aogm_cli.world.loader import load_world, parse_world
+
+WORLDS = sorted((Path(__file__).resolve().parents[1] / "worlds").glob("*.yaml"))
+
+
+def minimal(**over):
+    raw = {
+        "bounds": [0, 0, 10, 5],
+        "walls": [{"points": [[0, 0], [10, 0]], "thickness": 0.1}],
+        "trajectory": {"waypoints": [[1, 1], [9, 1]]},
+    }
+    raw.update(over)
+    return raw
+
+
+def error_of(raw) -> str:
+    with pytest.raises(InputError) as info:
+        parse_world(raw, file="w.yaml")
+    return str(info.value)
+
+
+def test_at_least_eight_bundled_worlds_load():
+    assert len(WORLDS) >= 8
+    for path in WORLDS:
+        world = load_world(path)
+        assert world.checks, f"{path.name} has no checks"
+        assert world.sonar is not None
+
+
+def test_seed_worlds_are_the_papers():
+    door = load_world(WORLDS[0].parent / "corridor_door.yaml")
+    assert door.robot.radius == 0.25
+    (wall,) = [w for w in door.walls if w.openings]
+    assert wall.openings[0].width == pytest.approx(2 * 2 * door.robot.radius)
+    assert [c.name for c in door.checks] == ["door_passable"]
+    spec = load_world(WORLDS[0].parent / "corridor_specular.yaml")
+    assert min(s.specular_threshold for s in spec.surfaces.values()) < math.radians(25)
+    assert [c.name for c in spec.checks] == ["corridor_passable"]
+
+
+def test_defaults_give_a_24_sonar_ring():
+    w = parse_world(minimal(), file="w.yaml")
+    assert len(w.sonar.mounts) == 24
+    yaws = [m[2] for m in w.sonar.mounts]
+    assert yaws[1] - yaws[0] == pytest.approx(2 * math.pi / 24)
+    assert w.sonar.beam_width == pytest.approx(math.radians(30))
+    assert w.surfaces["rough"].specular_threshold == pytest.approx(math.pi / 2)
+
+
+def test_negative_thickness_names_the_key_path():
+    raw = minimal(walls=[{"points": [[0, 0], [1, 0]]}, {"points": [[0, 1], [1, 1]], "thickness": -0.1}])
+    assert error_of(raw) == "w.yaml: walls[1].thickness: expected a positive number, got -0.1"
+
+
+def test_misspelled_key_is_named_with_a_suggestion():
+    raw = minimal(sonar={"beam_widht_deg": 30})
+    msg = error_of(raw)
+    assert msg.startswith("w.yaml: sonar.beam_widht_deg: unknown key")
+    assert "beam_width_deg" in msg
+
+
+def test_zero_sensors_and_trajectory_outside_world():
+    assert "sonar.count" in error_of(minimal(sonar={"count": 0}))
+    msg = error_of(minimal(trajectory={"waypoints": [[1, 1], [12, 1]]}))
+    assert "trajectory.waypoints[1]" in msg and "inside bounds" in msg
+
+
+def test_unknown_surface_and_missing_required_keys():
+    assert "walls[0].surface: unknown surface 'glass'" in error_of(
+        minimal(walls=[{"points": [[0, 0], [1, 0]], "surface": "glass"}])
+    )
+    raw = minimal()
+    del raw["bounds"]
+    assert "bounds: missing" in error_of(raw)
+
+
+def test_opening_beyond_wall_length_and_bad_check():
+    msg = error_of(minimal(walls=[{"points": [[0, 0], [4, 0]], "openings": [{"at": 5, "width": 1}]}]))
+    assert "walls[0].openings[0].at" in msg
+    msg = error_of(minimal(checks=[{"name": "a", "passable": {"from": [1, 1], "to": [20, 1]}}]))
+    assert "checks[0].passable.to" in msg
+
+
+def test_explicit_poses_and_mounts_in_degrees():
+    w = parse_world(
+        minimal(trajectory={"poses": [[1, 1, 90]]}, sonar={"mounts": [[0.1, 0, 0], [0, 0.1, 90]]}), file="w.yaml"
+    )
+    assert w.trajectory.poses[0][2] == pytest.approx(math.pi / 2)
+    assert w.sonar.mounts[1][2] == pytest.approx(math.pi / 2)
+
+
+def test_malformed_yaml_names_the_file_and_line(tmp_path):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("bounds: [0, 0, 1\nwalls: x\n")
+    with pytest.raises(InputError) as info:
+        load_world(bad)
+    assert str(bad) in str(info.value) and "line" in str(info.value)
+
+
+def test_missing_file():
+    with pytest.raises(InputError, match="no such file"):
+        load_world("does/not/exist.yaml")
