@@ -55,9 +55,14 @@ def main(ctx: click.Context, debug: bool) -> None:
 
 
 def _register() -> None:
-    from aogm_cli.cli import simulate
+    """Add each subcommand module's command (one module per subcommand)."""
+    import importlib
 
-    main.add_command(simulate.simulate)
+    for module, name in (
+        ("simulate", "simulate"),
+        ("map_log", "map_log"),
+    ):
+        main.add_command(getattr(importlib.import_module(f"aogm_cli.cli.{module}"), name))
 
 
 _register()

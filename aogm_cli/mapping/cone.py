@@ -1,0 +1,273 @@
+"""Precomputed cone templates: which grid cells a sonar cone covers, in increasing range.
+
+Shared by every mapper: the standard mapper walks a template to apply the inverse model, the
+EM mapper walks it to find the obstacles of Thrun's forward model in range order.
+
+Quantisation (documented choices)
+---------------------------------
+* The sensor is snapped to the centre of the cell that contains it. A template lists cells
+  as (drow, dcol) offsets from that cell, with the range and bearing of each offset cell's
+  centre seen from the sensor cell's centre. The position error is at most res/sqrt(2).
+* Headings are quantised into ``n_bins`` bins; bin k is centred on yaw k * 2 pi / n_bins. A
+  cell is in bin k's cone when |bearing offset from the bin's axis| <= beam_width / 2 and its
+  range <= reach (= max_range + margin). The sensor's own cell (range 0) is always included.
+* ``heading_bins_for`` picks n_bins so that the worst heading error (pi / n_bins) moves a
+  point at the reach sideways by at most a quarter of a cell: n_bins >= 4 pi reach / res,
+  rounded up to a multiple of 8 (at least 64). For a 5 m sonar on a 0.05 m grid that is
+  1264 bins (0.14 degrees).
+* Only the bins of the first octant (headings 0..45 degrees, bins 0..n_bins/8) are stored.
+  Every other bin is one of the eight symmetries of the square lattice (quarter turns and
+  mirrors) applied to a stored bin: ``transform[k] = (a, b, c, d)`` maps a stored offset
+  (dc, dr) to dcol = a dc + b dr, drow = c dc + d dr. Ranges are unchanged and bearings keep
+  or flip sign (mirrors), so range order is preserved. This keeps the templates 8x smaller
+  (about 5 MB for a 5 m, 30 degree sonar at 0.05 m), small enough to stay in cache.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+
+from aogm_cli.errors import InputError
+from aogm_cli.grid import GridSpec
+
+TWO_PI = 2.0 * math.pi
+_TOL = 1e-9  # slack of the inclusion tests, so that cells exactly on the cone's edge are kept
+
+# (a, b, c, d) per octant of the heading: dcol = a*dc + b*dr, drow = c*dc + d*dr, where
+# (dc, dr) is a stored offset of the mirrored/rotated first-octant bin.
+_OCTANT_TRANSFORM = np.array(
+    [
+        (1, 0, 0, 1),  # [0, 45) deg: identity
+        (0, 1, 1, 0),  # [45, 90): mirror in y = x
+        (0, -1, 1, 0),  # [90, 135): quarter turn
+        (-1, 0, 0, 1),  # [135, 180): mirror in the y axis
+        (-1, 0, 0, -1),  # [180, 225): half turn
+        (0, -1, -1, 0),  # [225, 270): mirror in y = -x
+        (0, 1, -1, 0),  # [270, 315): three quarter turns
+        (1, 0, 0, -1),  # [315, 360): mirror in the x axis
+    ],
+    dtype=np.int64,
+)
+
+
+def heading_bins_for(resolution: float, reach: float) -> int:
+    """Number of heading bins whose worst sideways error at ``reach`` is <= resolution / 4."""
+    n = math.ceil(4.0 * math.pi * reach / resolution - 1e-9)
+    return max(64, 8 * math.ceil(n / 8))
+
+
+@dataclass(frozen=True, eq=False)
+class ConeTemplates:
+    """Cone templates in CSR form for the stored bins (0 .. n_bins/8), plus a per-bin symmetry.
+
+    Entries of stored bin b are ``offsets[b]:offsets[b+1]``, sorted by range (ties by bearing,
+    then offset). ``dcol``, ``drow`` are the offsets in the stored bin's frame, ``ranges`` (m)
+    and ``bearings`` (rad, signed, from the stored bin's axis) describe each entry.
+    ``base_bin[k]`` is the stored bin that heading bin k uses and ``transform[k]`` the lattice
+    symmetry applied to it (see the module docstring). ``extent`` bounds |drow| and |dcol|.
+    """
+
+    resolution: float
+    beam_width: float
+    reach: float
+    n_bins: int
+    offsets: np.ndarray  # (n_base + 1,) int64
+    dcol: np.ndarray  # (E,) int32
+    drow: np.ndarray  # (E,) int32
+    ranges: np.ndarray  # (E,) float64
+    bearings: np.ndarray  # (E,) float64
+    base_bin: np.ndarray  # (n_bins,) int64
+    transform: np.ndarray  # (n_bins, 4) int64
+    extent: int
+
+    @property
+    def bin_width(self) -> float:
+        return TWO_PI / self.n_bins
+
+    @property
+    def kernel_arrays(self) -> tuple:
+        """The arrays compiled kernels take, in order: offsets, dcol, drow, ranges, base_bin, transform."""
+        return (self.offsets, self.dcol, self.drow, self.ranges, self.base_bin, self.transform)
+
+    def heading_bin(self, yaw):
+        """Heading bin (int64 array) of each yaw (rad, any real): the bin whose centre is nearest."""
+        k = np.floor(np.asarray(yaw, dtype=np.float64) * (self.n_bins / TWO_PI) + 0.5).astype(np.int64)
+        return k % self.n_bins
+
+    def bin_heading(self, k):
+        """Central yaw (rad, in [0, 2 pi)) of heading bin(s) ``k``."""
+        return np.asarray(k, dtype=np.float64) * self.bin_width
+
+    def cells(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(drow, dcol, range, bearing) of every cell of heading bin ``k``'s cone, in range order.
+
+        ``bearing`` is signed, from the bin's axis, counter-clockwise positive.
+        """
+        k = int(k) % self.n_bins
+        b = int(self.base_bin[k])
+        a, bb, c, d = (int(v) for v in self.transform[k])
+        s, e = int(self.offsets[b]), int(self.offsets[b + 1])
+        dc, dr = self.dcol[s:e].astype(np.int64), self.drow[s:e].astype(np.int64)
+        det = a * d - bb * c
+        return (c * dc + d * dr, a * dc + bb * dr, self.ranges[s:e].copy(), det * self.bearings[s:e])
+
+    def reading_cells(self, grid: GridSpec, row: int, col: int, k: int, limit: float) -> tuple[np.ndarray, np.ndarray]:
+        """Cells of one reading's cone inside ``grid``, up to ``limit`` metres, in range order.
+
+        ``row``, ``col`` is the sensor's cell (it may lie outside the grid) and ``k`` its heading
+        bin. Returns (flat cell index row * W + col as int64, range in m as float64).
+        """
+        if grid.resolution != self.resolution:
+            raise ValueError(f"templates are for resolution {self.resolution}, grid has {grid.resolution}")
+        k = int(k) % self.n_bins
+        b = int(self.base_bin[k])
+        size = int(self.offsets[b + 1] - self.offsets[b])
+        out_index = np.empty(size, dtype=np.int64)
+        out_range = np.empty(size, dtype=np.float64)
+        n = cone_cells(
+            self.kernel_arrays, grid.height, grid.width, int(row), int(col), k, float(limit), out_index, out_range
+        )
+        return out_index[:n], out_range[:n]
+
+
+@numba.njit(cache=True)
+def cone_cells(tpl, height, width, row, col, k, limit, out_index, out_range):
+    """Compiled: write the grid cells of bin ``k``'s cone from cell (row, col), up to ``limit``.
+
+    ``tpl`` is ``ConeTemplates.kernel_arrays``. Cells are written in increasing range as flat
+    indices (row * width + col) to ``out_index`` with their ranges to ``out_range``; cells
+    outside the grid are left out. Returns how many were written. The outputs must hold the
+    stored bin's entry count.
+    """
+    offsets, dcol, drow, ranges, base_bin, transform = tpl
+    b = base_bin[k]
+    s = offsets[b]
+    e = offsets[b + 1]
+    ta = transform[k, 0]
+    tb = transform[k, 1]
+    tc = transform[k, 2]
+    td = transform[k, 3]
+    n = 0
+    for j in range(s, e):
+        if ranges[j] > limit:
+            break
+        dc = np.int64(dcol[j])
+        dr = np.int64(drow[j])
+        r = row + tc * dc + td * dr
+        c = col + ta * dc + tb * dr
+        if r < 0 or r >= height or c < 0 or c >= width:
+            continue
+        out_index[n] = r * width + c
+        out_range[n] = ranges[j]
+        n += 1
+    return n
+
+
+def sensor_cells(pose: np.ndarray, sensor, grid: GridSpec, templates: ConeTemplates):
+    """Each reading's sensor cell and heading bin: (rows, cols, bins, valid), each (T, S).
+
+    ``pose`` is (T, 3) robot x, y, yaw; ``sensor`` a ``logfile.SensorSpec`` whose mounts (S, 3)
+    are composed with each pose. A reading whose pose is not finite is marked invalid. Sensor
+    positions far outside the grid are pulled in to just beyond the templates' reach (they
+    still see no cell), so that cell indices never overflow.
+    """
+    pose = np.asarray(pose, dtype=np.float64).reshape(-1, 3)
+    mount = np.asarray(sensor.mount, dtype=np.float64).reshape(-1, 3)
+    x, y, yaw = pose[:, 0:1], pose[:, 1:2], pose[:, 2:3]
+    valid = np.isfinite(pose).all(axis=1)[:, None] & np.ones((1, mount.shape[0]), dtype=bool)
+    c, s = np.cos(yaw), np.sin(yaw)
+    xs = x + c * mount[:, 0] - s * mount[:, 1]
+    ys = y + s * mount[:, 0] + c * mount[:, 1]
+    yaws = yaw + mount[:, 2]
+    x_min, x_max, y_min, y_max = grid.extent
+    pad = templates.reach + 2.0 * grid.resolution
+    xs = np.clip(np.where(valid, xs, x_min - pad), x_min - pad, x_max + pad)
+    ys = np.clip(np.where(valid, ys, y_min - pad), y_min - pad, y_max + pad)
+    rows, cols = grid.world_to_cell(xs, ys)
+    bins = templates.heading_bin(np.where(valid, yaws, 0.0))
+    return rows, cols, bins, valid
+
+
+def _wrap(angle: np.ndarray) -> np.ndarray:
+    """Angles wrapped to [-pi, pi)."""
+    return (angle + math.pi) % TWO_PI - math.pi
+
+
+def build_cone_templates(
+    resolution: float, beam_width: float, max_range: float, *, margin: float = 0.0, n_bins: int | None = None
+) -> ConeTemplates:
+    """Cone templates for a grid ``resolution`` (m), a ``beam_width`` (rad) and ranges up to
+    ``max_range + margin`` (m). ``n_bins`` defaults to ``heading_bins_for`` and must be a
+    multiple of 8. Cached: equal arguments return the same (read-only) object.
+    """
+    if not (math.isfinite(resolution) and resolution > 0):
+        raise InputError(f"expected a positive resolution, got {resolution}", key="resolution")
+    if not (math.isfinite(beam_width) and 0 < beam_width <= TWO_PI):
+        raise InputError(f"expected a beam width in (0, 2 pi] rad, got {beam_width}", key="beam_width")
+    reach = float(max_range) + float(margin)
+    if not (math.isfinite(reach) and reach > 0):
+        raise InputError(f"expected a positive, finite max_range + margin, got {reach}", key="max_range")
+    if n_bins is None:
+        n_bins = heading_bins_for(resolution, reach)
+    if n_bins < 8 or n_bins % 8:
+        raise InputError(f"expected a positive multiple of 8, got {n_bins}", key="n_bins")
+    return _build(float(resolution), float(beam_width), reach, int(n_bins))
+
+
+@functools.lru_cache(maxsize=4)
+def _build(resolution: float, beam_width: float, reach: float, n_bins: int) -> ConeTemplates:
+    q = n_bins // 8
+    half = 0.5 * beam_width
+    ext = int(math.floor(reach / resolution + _TOL))
+    # every cell of the disc of radius `reach`, with integer squared range (exact ties)
+    dr, dc = np.mgrid[-ext : ext + 1, -ext : ext + 1]
+    dr = dr.ravel()
+    dc = dc.ravel()
+    r2 = dc * dc + dr * dr
+    rng = resolution * np.sqrt(r2.astype(np.float64))
+    keep = rng <= reach + _TOL * resolution
+    dr, dc, r2, rng = dr[keep], dc[keep], r2[keep], rng[keep]
+    ang = np.arctan2(dr.astype(np.float64), dc.astype(np.float64))
+    # stored bins have axes in [0, 45] deg: pre-select the cells that any of them can see
+    lo, hi = -half - 1e-6, math.pi / 4 + half + 1e-6
+    if beam_width < 1.5 * math.pi:
+        near = ((ang - lo) % TWO_PI <= hi - lo) | (r2 == 0)
+        dr, dc, r2, rng, ang = dr[near], dc[near], r2[near], rng[near], ang[near]
+
+    offsets = np.zeros(q + 2, dtype=np.int64)
+    parts_dc, parts_dr, parts_r, parts_b = [], [], [], []
+    for b in range(q + 1):
+        off = _wrap(ang - b * (TWO_PI / n_bins))
+        off[r2 == 0] = 0.0
+        sel = np.abs(off) <= half + _TOL
+        order = np.lexsort((dc[sel], dr[sel], off[sel], r2[sel]))
+        parts_dc.append(dc[sel][order])
+        parts_dr.append(dr[sel][order])
+        parts_r.append(rng[sel][order])
+        parts_b.append(off[sel][order])
+        offsets[b + 1] = offsets[b] + order.size
+
+    k = np.arange(n_bins)
+    octant = k // q
+    base_bin = np.where(octant % 2 == 0, k - octant * q, (octant + 1) * q - k).astype(np.int64)
+    transform = _OCTANT_TRANSFORM[octant].copy()
+    dcol_all = np.concatenate(parts_dc).astype(np.int32)
+    drow_all = np.concatenate(parts_dr).astype(np.int32)
+    extent = int(max(np.abs(dcol_all).max(), np.abs(drow_all).max()))
+    arrays = dict(
+        offsets=offsets,
+        dcol=dcol_all,
+        drow=drow_all,
+        ranges=np.concatenate(parts_r).astype(np.float64),
+        bearings=np.concatenate(parts_b).astype(np.float64),
+        base_bin=base_bin,
+        transform=np.ascontiguousarray(transform),
+    )
+    for a in arrays.values():
+        a.setflags(write=False)
+    return ConeTemplates(resolution, beam_width, reach, n_bins, extent=extent, **arrays)

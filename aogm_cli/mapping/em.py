@@ -1,0 +1,238 @@
+"""EM mapping with forward sensor models (Thrun 2003): hill climbing by single-cell flips.
+
+Each candidate flip is scored by the exact change of sum_t log p(z_t | m) over the readings
+whose cones hold the cell, plus the occupancy prior: the E-step redone for those readings
+after every accepted flip (generalised EM), so the objective never decreases and EM can
+create obstacles from an empty start. ``run_em`` works on any set of cells with every other
+cell held fixed, using only the readings of the given index: the adaptive mapper calls it
+once per cluster.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+
+import numba
+import numpy as np
+
+from aogm_cli.errors import InputError
+from aogm_cli.mapping.forward_model import ForwardIndex, ForwardModelConfig
+
+
+@dataclass(frozen=True)
+class EMConfig:
+    """EM parameters: the forward model, the occupancy prior, the sweep limit and the start."""
+
+    forward: ForwardModelConfig = field(default_factory=ForwardModelConfig)
+    prior_occupied: float = 0.3  # prior p(m_x = 1) of every cell
+    max_sweeps: int = 20
+    start: str = "standard"  # "standard": the thresholded standard map; "empty": all free
+
+    def validate(self) -> EMConfig:
+        self.forward.validate()
+        if self.forward.p_hit >= 1.0:
+            raise InputError(f"expected p_hit < 1 for EM, got {self.forward.p_hit:g}", key="p_hit")
+        if not 0 < self.prior_occupied < 1:
+            raise InputError(f"expected a probability in (0, 1), got {self.prior_occupied:g}", key="prior_occupied")
+        if self.max_sweeps < 1:
+            raise InputError(f"expected a whole number >= 1, got {self.max_sweeps}", key="max_sweeps")
+        if self.start not in ("standard", "empty"):
+            raise InputError(f"expected 'standard' or 'empty', got {self.start!r}", key="start")
+        return self
+
+    @property
+    def l_prior(self) -> float:
+        return math.log(self.prior_occupied / (1.0 - self.prior_occupied))
+
+    def as_dict(self) -> dict:
+        d = asdict(self)
+        d.update(d.pop("forward"))
+        return d
+
+
+@dataclass
+class EMResult:
+    """What EM did: sweeps run, flips and objective per sweep, and each candidate's residual p."""
+
+    sweeps: int
+    flips: list[int]
+    objective: list[float]  # after each sweep; objective[0] is the start
+    candidates: np.ndarray  # flat cell ids EM was free to change
+    residual: np.ndarray  # p(m_x = 1 | Z, m*) of each candidate
+
+
+# ---------------------------------------------------------------------------------------
+# compiled state: per reading its obstacles (entry positions, in range order), the prefix
+# sums of their terms, and S_t.  Capacity per reading = its number of entries (+1 for pre).
+# ---------------------------------------------------------------------------------------
+
+
+@numba.njit(cache=True)
+def _rebuild_reading(t, ptr, cell, g, g0, p_hit, occupied, obs_pos, pre, nobs, s):
+    q = 1.0 - p_hit
+    base = ptr[t]
+    pbase = ptr[t] + t
+    k = 0
+    acc = 0.0
+    qk = 1.0
+    pre[pbase] = 0.0
+    for e in range(ptr[t], ptr[t + 1]):
+        if occupied[cell[e]]:
+            obs_pos[base + k] = e
+            acc += qk * p_hit * g[e]
+            qk *= q
+            k += 1
+            pre[pbase + k] = acc
+    nobs[t] = k
+    s[t] = acc + qk * g0[t]
+
+
+@numba.njit(cache=True)
+def _init_state(ptr, cell, g, g0, p_hit, occupied):
+    n = ptr.shape[0] - 1
+    obs_pos = np.empty(ptr[n], dtype=np.int64)
+    pre = np.empty(ptr[n] + n, dtype=np.float64)
+    nobs = np.zeros(n, dtype=np.int64)
+    s = np.empty(n, dtype=np.float64)
+    for t in range(n):
+        _rebuild_reading(t, ptr, cell, g, g0, p_hit, occupied, obs_pos, pre, nobs, s)
+    return obs_pos, pre, nobs, s
+
+
+@numba.njit(cache=True)
+def _flip_gain(c, cand_cell, cand_ptr, pair_t, pair_e, ptr, g, const, w, p_hit, qpow, occupied, obs_pos, pre, nobs, s):
+    """Exact change of sum_t log p(z_t | m) when candidate c flips (data part only)."""
+    q = 1.0 - p_hit
+    adding = not occupied[cand_cell[c]]
+    delta = 0.0
+    for p in range(cand_ptr[c], cand_ptr[c + 1]):
+        t = pair_t[p]
+        e = pair_e[p]
+        # r = obstacles of reading t before entry e (binary search in its sorted positions)
+        lo = ptr[t]
+        hi = ptr[t] + nobs[t]
+        while lo < hi:
+            mid = (lo + hi) >> 1
+            if obs_pos[mid] < e:
+                lo = mid + 1
+            else:
+                hi = mid
+        r = lo - ptr[t]
+        a = pre[ptr[t] + t + r]
+        term = qpow[r] * p_hit * g[e]
+        st = s[t]
+        if adding:
+            s_new = a + term + q * (st - a)
+        else:
+            rest = st - a - term
+            if rest < 0.0:
+                rest = 0.0
+            s_new = a + rest / q
+        delta += math.log(const[t] + w * s_new) - math.log(const[t] + w * st)
+    return delta
+
+
+@numba.njit(cache=True)
+def _sweep(cand_cell, cand_ptr, pair_t, pair_e, ptr, cell, g, g0, const, w, p_hit, l_prior, qpow,
+           occupied, obs_pos, pre, nobs, s):
+    """One pass over the candidates in order; a flip is kept when it raises the objective."""
+    flips = 0
+    gain = 0.0
+    for c in range(cand_cell.shape[0]):
+        d = _flip_gain(c, cand_cell, cand_ptr, pair_t, pair_e, ptr, g, const, w, p_hit, qpow,
+                       occupied, obs_pos, pre, nobs, s)
+        x = cand_cell[c]
+        d += -l_prior if occupied[x] else l_prior
+        if d > 1e-9:
+            occupied[x] = not occupied[x]
+            flips += 1
+            gain += d
+            for p in range(cand_ptr[c], cand_ptr[c + 1]):
+                _rebuild_reading(pair_t[p], ptr, cell, g, g0, p_hit, occupied, obs_pos, pre, nobs, s)
+    return flips, gain
+
+
+@numba.njit(cache=True)
+def _objective(const, w, s, occupied, cand_cell, l_prior):
+    total = 0.0
+    for t in range(s.shape[0]):
+        total += math.log(const[t] + w * s[t])
+    for c in range(cand_cell.shape[0]):
+        if occupied[cand_cell[c]]:
+            total += l_prior
+    return total
+
+
+@numba.njit(cache=True)
+def _residual(cand_cell, cand_ptr, pair_t, pair_e, ptr, g, const, w, p_hit, l_prior, qpow,
+              occupied, obs_pos, pre, nobs, s):
+    """p(m_x = 1 | Z, m*) of each candidate with every other cell held at m*."""
+    out = np.empty(cand_cell.shape[0])
+    for c in range(cand_cell.shape[0]):
+        d = _flip_gain(c, cand_cell, cand_ptr, pair_t, pair_e, ptr, g, const, w, p_hit, qpow,
+                       occupied, obs_pos, pre, nobs, s)
+        ratio = (-d if occupied[cand_cell[c]] else d) + l_prior
+        if ratio >= 0:
+            out[c] = 1.0 / (1.0 + math.exp(-ratio))
+        else:
+            er = math.exp(ratio)
+            out[c] = er / (1.0 + er)
+    return out
+
+
+def pair_index(index: ForwardIndex, candidates: np.ndarray):
+    """Cell -> readings index for ``candidates``: (cand_cell, cand_ptr, pair_t, pair_e).
+
+    Only the candidates appear; other cells of the cones are held fixed by EM.
+    """
+    candidates = np.unique(np.asarray(candidates, dtype=np.int64))
+    n_entries = index.cell.shape[0]
+    pos = np.searchsorted(candidates, index.cell)
+    pos_clipped = np.minimum(pos, max(len(candidates) - 1, 0))
+    hit = (pos < len(candidates)) & (candidates[pos_clipped] == index.cell) if len(candidates) else np.zeros(n_entries, bool)
+    entries = np.flatnonzero(hit)
+    local = pos[entries]
+    order = np.argsort(local, kind="stable")
+    entries = entries[order]
+    counts = np.bincount(local, minlength=len(candidates))
+    cand_ptr = np.zeros(len(candidates) + 1, dtype=np.int64)
+    np.cumsum(counts, out=cand_ptr[1:])
+    reading_of_entry = np.repeat(np.arange(index.n_readings, dtype=np.int64), np.diff(index.ptr))
+    return candidates, cand_ptr, reading_of_entry[entries], entries.astype(np.int64)
+
+
+def run_em(
+    index: ForwardIndex,
+    occupied: np.ndarray,
+    candidates: np.ndarray,
+    config: EMConfig,
+    progress: Callable[[int, int, float], None] | None = None,
+) -> EMResult:
+    """Hill-climb the binary map over ``candidates`` (flat ids); ``occupied`` (flat bool) is
+    updated in place, every other cell stays as it is. Sweeps until no flip improves the
+    objective or ``config.max_sweeps``; ``progress(sweep, flips, objective)`` after each."""
+    if occupied.dtype != np.bool_ or occupied.ndim != 1:
+        raise ValueError("occupied must be a flat bool array")
+    p_hit = config.forward.p_hit
+    l_prior = config.l_prior
+    cand_cell, cand_ptr, pair_t, pair_e = pair_index(index, candidates)
+    max_entries = int(np.max(np.diff(index.ptr))) if index.n_readings else 0
+    qpow = (1.0 - p_hit) ** np.arange(max_entries + 1, dtype=np.float64)
+    args = (index.ptr, index.cell, index.g, index.g0, p_hit)
+    obs_pos, pre, nobs, s = _init_state(*args, occupied)
+    objective = [_objective(index.const, index.w, s, occupied, cand_cell, l_prior)]
+    flips: list[int] = []
+    for sweep in range(1, config.max_sweeps + 1):
+        n_flips, _ = _sweep(cand_cell, cand_ptr, pair_t, pair_e, index.ptr, index.cell, index.g, index.g0,
+                            index.const, index.w, p_hit, l_prior, qpow, occupied, obs_pos, pre, nobs, s)
+        flips.append(int(n_flips))
+        objective.append(_objective(index.const, index.w, s, occupied, cand_cell, l_prior))
+        if progress:
+            progress(sweep, int(n_flips), objective[-1])
+        if n_flips == 0:
+            break
+    residual = _residual(cand_cell, cand_ptr, pair_t, pair_e, index.ptr, index.g, index.const, index.w, p_hit,
+                         l_prior, qpow, occupied, obs_pos, pre, nobs, s)
+    return EMResult(len(flips), flips, [float(v) for v in objective], cand_cell, residual)

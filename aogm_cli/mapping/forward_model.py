@@ -1,0 +1,184 @@
+"""Thrun's (2003) forward sensor model: the likelihood of a sonar reading given a binary map.
+
+A reading has one cause: random (uniform 1/z_max), a max-range dropout (optional point mass),
+no obstacle detected (max-range reading), or the k-th obstacle of its cone in range order,
+detected with probability p_hit each. One implementation serves EM and the evaluation.
+
+For reading t with obstacles d_1 <= ... <= d_K in its cone, q = 1 - p_hit and
+g(d) = N(z; d, sigma^2), G0 = N(z; z_max, sigma^2):
+
+    p(z | m) = C + w * S,   C = p_rand / z_max + p_max * G0,   w = 1 - p_rand - p_max,
+    S = sum_k q^(k-1) p_hit g(d_k) + q^K G0.
+
+A cone is truncated ``window`` sigmas beyond z (obstacles farther away change p(z | m) by a
+factor of exp(-window^2 / 2) or less); a max-range reading keeps its whole cone up to z_max.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numba
+import numpy as np
+
+from aogm_cli.errors import InputError
+from aogm_cli.mapping.cone import cone_cells as _cone_cells
+
+
+@dataclass(frozen=True)
+class ForwardModelConfig:
+    """Parameters of the forward model; see the module docstring for their meaning."""
+
+    sigma: float = 0.1  # m, range noise of an obstacle echo
+    p_rand: float = 0.05  # prior of a random reading
+    p_hit: float = 0.4  # probability that each obstacle in the cone, nearest first, is detected
+    p_max: float = 0.1  # point mass of a max-range dropout (specular reflection)
+    window: float = 4.0  # sigmas beyond z up to which a cone's cells count
+
+    def validate(self) -> ForwardModelConfig:
+        def bad(key, msg):
+            return InputError(msg, key=key)
+
+        if not self.sigma > 0:
+            raise bad("sigma", f"expected a positive number, got {self.sigma:g}")
+        if not 0 <= self.p_rand < 1:
+            raise bad("p_rand", f"expected a probability in [0, 1), got {self.p_rand:g}")
+        if not 0 < self.p_hit <= 1:
+            raise bad("p_hit", f"expected a probability in (0, 1], got {self.p_hit:g}")
+        if not 0 <= self.p_max < 1 or self.p_rand + self.p_max >= 1:
+            raise bad("p_max", f"expected p_max in [0, 1) with p_rand + p_max < 1, got {self.p_max:g}")
+        if not self.window > 0:
+            raise bad("window", f"expected a positive number, got {self.window:g}")
+        return self
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class ForwardIndex:
+    """Readings and the cells of their (truncated) cones, in range order, as CSR arrays.
+
+    ``ptr`` (R+1,) delimits reading t's entries ``ptr[t]:ptr[t+1]``; ``cell`` holds flat grid
+    indices (row * W + col) and ``g`` the Gaussian N(z_t; d, sigma^2) of each entry's range d.
+    ``const`` (R,) is C_t, ``g0`` (R,) is G0_t. ``reading`` (R,) maps back to the caller's ids.
+    """
+
+    ptr: np.ndarray
+    cell: np.ndarray
+    g: np.ndarray
+    g0: np.ndarray
+    const: np.ndarray
+    reading: np.ndarray
+    w: float
+    p_hit: float
+
+    @property
+    def n_readings(self) -> int:
+        return int(self.ptr.shape[0] - 1)
+
+
+def gaussian(z, d, sigma):
+    """N(z; d, sigma^2) as numpy."""
+    return np.exp(-0.5 * ((z - d) / sigma) ** 2) / (math.sqrt(2.0 * math.pi) * sigma)
+
+
+def reading_constants(z: np.ndarray, z_max: float, config: ForwardModelConfig):
+    """Per-reading (g0, const, w): G0 = N(z; z_max), C = p_rand/z_max + p_max*G0, w."""
+    z_eff = np.where(np.isfinite(z), z, z_max)
+    g0 = gaussian(z_eff, z_max, config.sigma)
+    const = config.p_rand / z_max + config.p_max * g0
+    return g0, const, 1.0 - config.p_rand - config.p_max
+
+
+@numba.njit(cache=True)
+def _reading_sum(ptr, cell, g, g0, p_hit, occupied, t):
+    """S_t for reading t under the binary map ``occupied`` (flat bool)."""
+    q = 1.0 - p_hit
+    qk = 1.0
+    s = 0.0
+    for e in range(ptr[t], ptr[t + 1]):
+        if occupied[cell[e]]:
+            s += qk * p_hit * g[e]
+            qk *= q
+    return s + qk * g0[t]
+
+
+@numba.njit(cache=True)
+def reading_log_likelihoods(ptr, cell, g, g0, const, w, p_hit, occupied):
+    """log p(z_t | m) for every reading of the index."""
+    n = ptr.shape[0] - 1
+    out = np.empty(n)
+    for t in range(n):
+        out[t] = math.log(const[t] + w * _reading_sum(ptr, cell, g, g0, p_hit, occupied, t))
+    return out
+
+
+def log_likelihoods(index: ForwardIndex, occupied_flat: np.ndarray) -> np.ndarray:
+    """log p(z_t | m) per reading of ``index`` for the flat binary map ``occupied_flat``."""
+    return reading_log_likelihoods(
+        index.ptr, index.cell, index.g, index.g0, index.const, index.w, index.p_hit,
+        np.ascontiguousarray(occupied_flat, dtype=np.bool_),
+    )
+
+
+@numba.njit(cache=True)
+def _fill_index(tpl, height, width, rows, cols, bins, limits, z, sigma, out_cell, out_g, counts):
+    """Cone cells (flat ids) and Gaussians of every reading, packed reading after reading."""
+    offsets, _, _, ranges, base_bin, _ = tpl
+    scratch_cell = np.empty(offsets[-1], dtype=np.int64)
+    scratch_range = np.empty(offsets[-1], dtype=np.float64)
+    norm = 1.0 / (math.sqrt(2.0 * math.pi) * sigma)
+    pos = 0
+    for t in range(rows.shape[0]):
+        n = _cone_cells(tpl, height, width, rows[t], cols[t], bins[t], limits[t], scratch_cell, scratch_range)
+        for i in range(n):
+            out_cell[pos + i] = scratch_cell[i]
+            u = (z[t] - scratch_range[i]) / sigma
+            out_g[pos + i] = norm * math.exp(-0.5 * u * u)
+        counts[t] = n
+        pos += n
+    return pos
+
+
+def build_forward_index(
+    rows: np.ndarray,
+    cols: np.ndarray,
+    bins: np.ndarray,
+    z: np.ndarray,
+    grid,
+    templates,
+    z_max: float,
+    config: ForwardModelConfig,
+    reading_ids: np.ndarray | None = None,
+) -> ForwardIndex:
+    """The forward model's index for readings ``z`` taken from sensor cells (rows, cols) with
+    heading bins ``bins`` (as ``cone.sensor_cells`` gives them; flat arrays of one length).
+
+    NaN readings are dropped; +inf is a max-range reading (cone up to z_max). Other cones end
+    ``config.window`` sigmas beyond z. ``reading_ids`` name the readings (default 0..N-1).
+    """
+    z = np.asarray(z, dtype=np.float64).reshape(-1)
+    ids = np.arange(len(z)) if reading_ids is None else np.asarray(reading_ids).reshape(-1)
+    keep = ~np.isnan(z)
+    rows, cols, bins = (np.asarray(a, dtype=np.int64).reshape(-1)[keep] for a in (rows, cols, bins))
+    z, ids = z[keep], ids[keep]
+    z_eff = np.where(np.isfinite(z), np.minimum(z, z_max), z_max)
+    limits = np.where(np.isfinite(z), np.minimum(z + config.window * config.sigma, z_max), z_max)
+    # an upper bound of each reading's entry count: template entries within its limit
+    base = templates.base_bin[bins]
+    upper = 0
+    for b in np.unique(base):
+        sel = base == b
+        s, e = templates.offsets[b], templates.offsets[b + 1]
+        upper += int(np.searchsorted(templates.ranges[s:e], limits[sel], side="right").sum())
+    out_cell = np.empty(upper, dtype=np.int64)
+    out_g = np.empty(upper, dtype=np.float64)
+    counts = np.zeros(len(z), dtype=np.int64)
+    n = _fill_index(templates.kernel_arrays, grid.height, grid.width, rows, cols, bins, limits, z_eff,
+                    config.sigma, out_cell, out_g, counts)
+    ptr = np.zeros(len(z) + 1, dtype=np.int64)
+    np.cumsum(counts, out=ptr[1:])
+    g0, const, w = reading_constants(z, z_max, config)
+    return ForwardIndex(ptr, out_cell[:n].copy(), out_g[:n].copy(), g0, const, ids, w, config.p_hit)

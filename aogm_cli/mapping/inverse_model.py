@@ -1,0 +1,149 @@
+"""The sonar inverse model of standard mapping: its configuration and its value per cell.
+
+``InverseModelConfig`` holds every parameter (validated in one place, recorded in map files);
+``inverse_model`` is the model as a plain vectorised function, the reference that the compiled
+kernel of ``mapping.standard`` is tested against.
+
+The model (Elfes 1989; Moravec 1988; Probabilistic Robotics table 9.2)
+-----------------------------------------------------------------------
+For a reading z and a cell at range d and bearing theta from the beam axis (|theta| <= beta/2,
+beta the beam width), the inverse model's log-odds is
+
+* occupied arc, z - alpha/2 <= d <= min(z + alpha/2, max_range): l0 + w_occ * (l_occ - l0)
+* free region, min_range <= d < z - alpha/2:                     l0 + w_free * (l_free - l0)
+* anything else (beyond the arc, outside the cone, nearer than min_range): l0 (no evidence)
+
+with weights in [0, 1]:
+
+* model "elfes":    w_free = E_r(d) E_a(theta),  w_occ = E_a(theta), where
+  E_a(theta) = 1 - (2 theta / beta)^2 and E_r(d) = 1 - ((d - Rmin) / (z - alpha/2 - Rmin))^2,
+  Rmin the sensor's min_range. Free evidence is strongest next to the sensor and fades to
+  nothing at the arc; both kinds fade to nothing at the cone's edge.
+* model "constant": w_free = w_occ = 1 (l_free inside, l_occ on the arc).
+
+A max-range reading (z = +inf, or any z >= max_range: the sensor saw no echo within its
+range) is evidence of free space only: the free region runs to max_range inclusive, with
+z - alpha/2 replaced by max_range in E_r. A NaN or negative reading carries no information.
+The sensor's blind zone (d < min_range) gets no evidence in either model.
+
+alpha, the obstacle thickness, defaults to 0.1 m: Probabilistic Robotics (table 9.2) sizes
+the occupied arc by the obstacles' thickness; Elfes sizes it by the range error band. With
+sonar noise sigma = 0.02 m, +/-alpha/2 = +/-2.5 sigma holds ~99% of echoes, and 0.1 m is
+at least one 0.05 m cell deep even along a diagonal (0.05 * sqrt 2 = 0.07 m), so the arc has
+no holes on the default grid. On coarser grids choose alpha >= resolution * sqrt 2.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from aogm_cli.errors import InputError
+
+MODELS = ("elfes", "constant")
+
+
+@dataclass(frozen=True)
+class InverseModelConfig:
+    """Parameters of the sonar inverse model and of the log-odds update (log-odds, metres).
+
+    Defaults: OctoMap's hit/miss probabilities 0.7/0.4 (l_occ = +0.85, l_free = -0.41) and
+    clamping bounds [-2.0, +3.5] (probabilities 0.12/0.97); prior l0 = 0 (p = 0.5).
+    """
+
+    model: str = "elfes"
+    l_occ: float = 0.85
+    l_free: float = -0.41
+    l0: float = 0.0
+    clamp_min: float = -2.0
+    clamp_max: float = 3.5
+    alpha: float = 0.1
+
+    def validate(self) -> InverseModelConfig:
+        """Return self, or raise ``InputError(key=<field>)`` for an impossible value."""
+        if self.model not in MODELS:
+            raise InputError(f"expected one of {', '.join(MODELS)}, got {self.model!r}", key="model")
+        for name in ("l_occ", "l_free", "l0", "clamp_min", "clamp_max", "alpha"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise InputError(f"expected a finite number, got {v!r}", key=name)
+        if self.alpha <= 0:
+            raise InputError(f"expected a positive obstacle thickness (m), got {self.alpha}", key="alpha")
+        if self.l_occ < self.l0:
+            raise InputError(f"expected l_occ >= l0 = {self.l0}, got {self.l_occ}", key="l_occ")
+        if self.l_free > self.l0:
+            raise InputError(f"expected l_free <= l0 = {self.l0}, got {self.l_free}", key="l_free")
+        if self.l_free >= self.l_occ:
+            raise InputError(f"expected l_free < l_occ = {self.l_occ}, got {self.l_free}", key="l_free")
+        if self.clamp_min >= self.clamp_max:
+            raise InputError(f"expected clamp_min < clamp_max = {self.clamp_max}, got {self.clamp_min}", key="clamp_min")
+        if not self.clamp_min <= self.l0 <= self.clamp_max:
+            raise InputError(
+                f"expected the prior l0 within [clamp_min, clamp_max] = [{self.clamp_min}, {self.clamp_max}], got {self.l0}",
+                key="l0",
+            )
+        return self
+
+    def as_dict(self) -> dict:
+        """Every parameter, JSON-able, for the ``params`` attribute of map files."""
+        d = asdict(self)
+        for k, v in d.items():
+            if k != "model":
+                d[k] = float(v)
+        return d
+
+
+def angular_profile(theta, beam_width: float):
+    """Elfes' E_a(theta) = 1 - (2 theta / beta)^2 inside the cone, 0 outside."""
+    theta = np.asarray(theta, dtype=np.float64)
+    return np.where(np.abs(theta) <= 0.5 * beam_width, 1.0 - (2.0 * theta / beam_width) ** 2, 0.0)
+
+
+def range_profile(d, z_free, min_range: float):
+    """Elfes' E_r(d) = 1 - ((d - Rmin) / (z_free - Rmin))^2 on [Rmin, z_free), 0 elsewhere.
+
+    ``z_free`` is where free space ends: z - alpha/2, or max_range for a max-range reading
+    (whose free region includes max_range itself, where E_r is 0 anyway).
+    """
+    d = np.asarray(d, dtype=np.float64)
+    z_free = np.asarray(z_free, dtype=np.float64)
+    span = z_free - min_range
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = (d - min_range) / span
+        e = 1.0 - u * u
+    return np.where((d >= min_range) & (d < z_free) & (span > 0), e, 0.0)
+
+
+def inverse_model(d, theta, z, config: InverseModelConfig, *, beam_width: float, min_range: float, max_range: float):
+    """Log-odds l(x | z) of a cell at range ``d`` (m) and bearing ``theta`` (rad, from the beam
+    axis) given reading ``z`` (m; +inf = max-range reading, NaN = invalid). Broadcasts.
+
+    The log-odds update of standard mapping adds ``inverse_model(...) - config.l0``.
+    """
+    d = np.asarray(d, dtype=np.float64)
+    theta = np.asarray(theta, dtype=np.float64)
+    z = np.asarray(z, dtype=np.float64)
+    half = 0.5 * config.alpha
+    in_cone = np.abs(theta) <= 0.5 * beam_width
+    valid = z >= 0  # False for NaN and negative readings
+    max_reading = valid & (z >= max_range)
+    echo = valid & ~max_reading
+    if config.model == "elfes":
+        w_angle = angular_profile(theta, beam_width)
+    else:
+        w_angle = np.ones_like(theta)
+    z_echo = np.where(echo, z, 0.0)
+    z_free = np.where(echo, z_echo - half, max_range)
+    # written as the compiled kernel compares, so that both agree on cells at the boundaries
+    arc = echo & (d >= z_free) & (d <= np.minimum(z_echo + half, max_range))
+    free_region = valid & ~arc & (d >= min_range) & np.where(echo, d < z_free, d <= max_range)
+    if config.model == "elfes":
+        w_free = range_profile(d, z_free, min_range) * w_angle
+    else:
+        w_free = np.ones_like(w_angle)
+    out = np.full(np.broadcast(d, theta, z).shape, config.l0, dtype=np.float64)
+    out = np.where(in_cone & free_region, config.l0 + w_free * (config.l_free - config.l0), out)
+    out = np.where(in_cone & arc, config.l0 + w_angle * (config.l_occ - config.l0), out)
+    return out

@@ -1,0 +1,175 @@
+"""Log file -> map, in each mode: the grid of a log, the standard and EM pipelines, timing.
+
+``runtime_s`` counts the mapping work only: reading the log (I/O) is excluded, and the
+compiled kernels are compiled (or loaded from numba's cache) by ``warm_up`` before timing.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from aogm_cli.grid import GridSpec
+from aogm_cli.logfile import LogReader, SensorSpec
+from aogm_cli.mapfile import OccupancyMap
+from aogm_cli.mapping.cone import build_cone_templates, sensor_cells
+from aogm_cli.mapping.em import EMConfig, run_em
+from aogm_cli.mapping.forward_model import build_forward_index
+from aogm_cli.mapping.params import MapParams
+from aogm_cli.mapping.standard import probability_from_log_odds, standard_map
+
+Progress = Callable[[str, int, int], None]  # (phase, done, total)
+
+
+def log_grid(reader: LogReader, resolution: float) -> GridSpec:
+    """The truth grid of a simulated log; otherwise the poses' bounds plus max range."""
+    grid = reader.truth_grid()
+    if grid is not None:
+        return grid
+    pose = reader.poses()
+    finite = np.isfinite(pose).all(axis=1)
+    if not finite.any():
+        from aogm_cli.errors import InputError
+
+        raise InputError("no finite pose; cannot place a grid", file=reader.path, key="/scans/pose")
+    sensor = reader.sensor
+    reach = sensor.max_range + float(np.max(np.hypot(sensor.mount[:, 0], sensor.mount[:, 1]), initial=0.0))
+    lo = pose[finite, :2].min(axis=0) - reach
+    hi = pose[finite, :2].max(axis=0) + reach
+    # snap the origin to the resolution so that maps of one log at one resolution align
+    lo = np.floor(lo / resolution) * resolution
+    return GridSpec.covering(lo[0], lo[1], hi[0], hi[1], resolution)
+
+
+class _Timed:
+    """Wraps a chunk iterator and adds up the time spent reading (to subtract it)."""
+
+    def __init__(self, chunks):
+        self._chunks = iter(chunks)
+        self.io_seconds = 0.0
+
+    def __iter__(self):
+        return self
+
+    def __next__(self):
+        t0 = time.perf_counter()
+        try:
+            return next(self._chunks)
+        finally:
+            self.io_seconds += time.perf_counter() - t0
+
+
+def warm_up(sensor: SensorSpec, params: MapParams, em: bool = False) -> None:
+    """Compile (or load from cache) the kernels on a tiny map, so that timing excludes it."""
+    grid = GridSpec(0.0, 0.0, 0.5, 4, 4)
+    tiny = SensorSpec(np.zeros((1, 3)), sensor.kind, sensor.beam_width, 0.0, 1.0, sensor.noise_sigma)
+    pose = np.array([[1.0, 1.0, 0.0]])
+    ranges = np.array([[0.9]], dtype=np.float32)
+    log_odds, _ = standard_map([(0, np.zeros(1), pose, ranges)], tiny, grid, params.inverse_model)
+    if em:
+        templates = build_cone_templates(grid.resolution, tiny.beam_width, tiny.max_range)
+        rows, cols, bins, _ = sensor_cells(pose, tiny, grid, templates)
+        index = build_forward_index(rows, cols, bins, ranges, grid, templates, 1.0, params.em.forward)
+        occupied = np.zeros(grid.height * grid.width, dtype=bool)
+        run_em(index, occupied, np.unique(index.cell), EMConfig(params.em.forward, max_sweeps=1))
+
+
+def standard_pass(reader: LogReader, grid: GridSpec, params: MapParams, chunk: int = 4096):
+    """(log_odds, observed, seconds of mapping work) for the whole log, streamed in chunks."""
+    timed = _Timed(reader.chunks(chunk))
+    t0 = time.perf_counter()
+    log_odds, observed = standard_map(timed, reader.sensor, grid, params.inverse_model)
+    seconds = time.perf_counter() - t0 - timed.io_seconds
+    return log_odds, observed, seconds
+
+
+def map_standard(path: str | Path, params: MapParams, progress: Progress | None = None) -> OccupancyMap:
+    """The standard log-odds map of the log at ``path``."""
+    with LogReader(path) as reader:
+        grid = log_grid(reader, params.resolution)
+        warm_up(reader.sensor, params)
+        log_odds, observed, seconds = standard_pass(reader, grid, params)
+        n_scans = reader.n_scans
+    return OccupancyMap(
+        grid=grid,
+        probability=probability_from_log_odds(log_odds, observed),
+        observed=observed,
+        mode="standard",
+        params=_params_json(params, "standard"),
+        runtime_s=seconds,
+        source_log=str(path),
+        log_odds=log_odds,
+        stats={"scans": n_scans, "phase_seconds": {"standard": seconds}},
+    )
+
+
+def readings_of(reader: LogReader, grid: GridSpec, templates):
+    """All readings of a log as flat arrays: sensor cell rows, cols, heading bins, ranges."""
+    pose = reader.poses()
+    ranges = np.concatenate([r for _, _, _, r in reader.chunks()]) if reader.n_scans else np.zeros((0, reader.sensor.count))
+    rows, cols, bins, valid = sensor_cells(pose, reader.sensor, grid, templates)
+    z = np.where(valid, ranges, np.nan).astype(np.float64)
+    return rows.reshape(-1), cols.reshape(-1), bins.reshape(-1), z.reshape(-1)
+
+
+def em_forward_templates(grid: GridSpec, sensor: SensorSpec):
+    return build_cone_templates(grid.resolution, sensor.beam_width, sensor.max_range)
+
+
+def map_em(path: str | Path, params: MapParams, progress: Progress | None = None) -> OccupancyMap:
+    """Thrun's EM map of the log at ``path``: every observed cell is a candidate."""
+    config = params.em
+    with LogReader(path) as reader:
+        grid = log_grid(reader, params.resolution)
+        sensor = reader.sensor
+        warm_up(sensor, params, em=True)
+        log_odds, observed, t_standard = standard_pass(reader, grid, params)
+        templates = em_forward_templates(grid, sensor)
+        rows, cols, bins, z = readings_of(reader, grid, templates)
+    t0 = time.perf_counter()
+    index = build_forward_index(rows, cols, bins, z, grid, templates, sensor.max_range, config.forward)
+    t_index = time.perf_counter() - t0
+    occupied = (log_odds > 0).reshape(-1) if config.start == "standard" else np.zeros(grid.height * grid.width, bool)
+    occupied = np.ascontiguousarray(occupied)
+    candidates = np.unique(index.cell)
+
+    def on_sweep(sweep, flips, objective):
+        if progress:
+            progress("em sweep", sweep, config.max_sweeps)
+
+    t0 = time.perf_counter()
+    result = run_em(index, occupied, candidates, config, on_sweep)
+    t_em = time.perf_counter() - t0
+    probability = np.full(grid.height * grid.width, 1.0 / (1.0 + math.exp(-config.l_prior)), dtype=np.float32)
+    probability[result.candidates] = result.residual
+    probability = probability.reshape(grid.shape)
+    probability[~observed] = 0.5
+    stats = {
+        "sweeps": result.sweeps,
+        "flips_per_sweep": result.flips,
+        "objective_per_sweep": result.objective,
+        "candidate_cells": int(result.candidates.size),
+        "index_entries": int(index.cell.size),
+        "phase_seconds": {"standard": t_standard, "index": t_index, "em": t_em},
+    }
+    return OccupancyMap(
+        grid=grid,
+        probability=probability,
+        observed=observed,
+        mode="em",
+        params=_params_json(params, "em"),
+        runtime_s=t_standard + t_index + t_em,
+        source_log=str(path),
+        occupied=occupied.reshape(grid.shape) & observed,
+        stats=stats,
+    )
+
+
+def _params_json(params: MapParams, mode: str) -> dict:
+    d = params.as_dict()
+    d["mode"] = mode
+    return d

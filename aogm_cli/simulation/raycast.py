@@ -1,0 +1,321 @@
+"""Ray casting against a compiled ``Scene``: the first surface a ray hits, and how it hits it.
+
+Compiled kernels only: exact ray-segment and ray-circle intersection over the scene's bucket
+grid (a grid traversal that stops at the first bucket holding a hit), and an Amanatides-Woo
+traversal of the floor-plan bitmap. Both give the distance, the surface normal and threshold.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import namedtuple
+
+import numba
+import numpy as np
+
+from aogm_cli.world.geometry import Scene
+
+# The scene as the kernels take it (one argument). Thresholds are stored as cosines: a hit
+# echoes when cos(incidence) >= cos(threshold); a rough surface has cos_threshold = -1.
+Geometry = namedtuple(
+    "Geometry",
+    [
+        "bucket_f",  # (3,) float64: x, y of the bucket grid's corner, bucket size
+        "bucket_i",  # (2,) int64: nx, ny
+        "seg_start",  # (nx*ny + 1,) int64
+        "seg",  # (K, 4) float64: x0, y0, ex, ey per bucket entry
+        "seg_id",  # (K,) int32
+        "seg_cos_threshold",  # (N,) float64
+        "circ_start",  # (nx*ny + 1,) int64
+        "circ",  # (Kc, 3) float64: cx, cy, r per bucket entry
+        "circ_id",  # (Kc,) int32
+        "circ_cos_threshold",  # (M,) float64
+        "bitmap",  # (H, W) uint8, 1 = occupied
+        "bitmap_f",  # (3,) float64: origin x, y, resolution
+        "bitmap_cos_threshold",  # float
+        "has_bitmap",  # bool
+    ],
+)
+
+MISS = np.inf
+BOUNCE_OFFSET = 1e-8  # m: a bounced ray starts this far off the surface, on the side it came from
+
+
+def _cos_threshold(threshold):
+    """cos of specular thresholds (rad); -1 for rough surfaces (threshold >= 90 degrees)."""
+    thr = np.asarray(threshold, dtype=np.float64)
+    return np.where(thr >= math.pi / 2 - 1e-12, -1.0, np.cos(thr))
+
+
+def geometry(scene: Scene) -> Geometry:
+    """The kernel form of ``scene``."""
+    ny, nx = scene.bucket_shape
+    if scene.bitmap_grid is not None:
+        g = scene.bitmap_grid
+        bitmap_f = np.array([g.origin_x, g.origin_y, g.resolution], dtype=np.float64)
+    else:
+        bitmap_f = np.array([0.0, 0.0, 1.0])
+    return Geometry(
+        np.array([scene.bucket_origin[0], scene.bucket_origin[1], scene.bucket_size], dtype=np.float64),
+        np.array([nx, ny], dtype=np.int64),
+        np.ascontiguousarray(scene.bucket_segment_start, dtype=np.int64),
+        np.ascontiguousarray(scene.bucket_segments, dtype=np.float64),
+        np.ascontiguousarray(scene.bucket_segment_ids, dtype=np.int32),
+        _cos_threshold(scene.segment_threshold),
+        np.ascontiguousarray(scene.bucket_circle_start, dtype=np.int64),
+        np.ascontiguousarray(scene.bucket_circles, dtype=np.float64),
+        np.ascontiguousarray(scene.bucket_circle_ids, dtype=np.int32),
+        _cos_threshold(scene.circle_threshold),
+        np.ascontiguousarray(scene.bitmap, dtype=np.uint8),
+        bitmap_f,
+        float(_cos_threshold(scene.bitmap_threshold)),
+        scene.bitmap_grid is not None,
+    )
+
+
+@numba.njit(cache=True, inline="always")
+def _slab(o, d, lo, hi, t0, t1):
+    """Clip the ray interval [t0, t1] to lo <= o + t d <= hi; empty when t0 > t1."""
+    if d != 0.0:
+        ta = (lo - o) / d
+        tb = (hi - o) / d
+        if ta > tb:
+            ta, tb = tb, ta
+        return max(t0, ta), min(t1, tb)
+    if o < lo or o > hi:
+        return 1.0, 0.0
+    return t0, t1
+
+
+@numba.njit(cache=True, inline="always")
+def _interval(o, d, lo, hi):
+    """The (t_in, t_out) where lo <= o + t d <= hi; (inf, -inf) when never."""
+    if d != 0.0:
+        ta = (lo - o) / d
+        tb = (hi - o) / d
+        if ta > tb:
+            return tb, ta
+        return ta, tb
+    if o < lo or o > hi:
+        return np.inf, -np.inf
+    return -np.inf, np.inf
+
+
+@numba.njit(cache=True)
+def _cast_shapes(ox, oy, dx, dy, tmax, geo):
+    """First hit of the ray o + t d (d unit, 0 < t <= tmax) on segments and circles.
+
+    Returns (t, cos_incidence, cos_threshold, nx, ny) with n the unit surface normal (either
+    side); t = inf when nothing is hit.
+    """
+    best = np.inf
+    best_cos = 0.0
+    best_thr = -1.0
+    bnx = 0.0
+    bny = 0.0
+    gx0 = geo.bucket_f[0]
+    gy0 = geo.bucket_f[1]
+    size = geo.bucket_f[2]
+    nbx = geo.bucket_i[0]
+    nby = geo.bucket_i[1]
+    t0, t1 = _slab(ox, dx, gx0, gx0 + nbx * size, 0.0, tmax)
+    t0, t1 = _slab(oy, dy, gy0, gy0 + nby * size, t0, t1)
+    if t0 > t1:
+        return best, best_cos, best_thr, bnx, bny
+    px = ox + t0 * dx
+    py = oy + t0 * dy
+    ix = min(nbx - 1, max(0, int((px - gx0) / size)))
+    iy = min(nby - 1, max(0, int((py - gy0) / size)))
+    sx = 1 if dx > 0.0 else -1
+    sy = 1 if dy > 0.0 else -1
+    tx = ((ix + (1 if dx > 0.0 else 0)) * size + gx0 - ox) / dx if dx != 0.0 else np.inf
+    ty = ((iy + (1 if dy > 0.0 else 0)) * size + gy0 - oy) / dy if dy != 0.0 else np.inf
+    tdx = size / abs(dx) if dx != 0.0 else np.inf
+    tdy = size / abs(dy) if dy != 0.0 else np.inf
+    seg = geo.seg
+    circ = geo.circ
+    best_kind = -1
+    best_k = 0
+    while True:
+        b = iy * nbx + ix
+        for k in range(geo.seg_start[b], geo.seg_start[b + 1]):
+            ex = seg[k, 2]
+            ey = seg[k, 3]
+            denom = dx * ey - dy * ex
+            if denom == 0.0:
+                continue
+            wx = seg[k, 0] - ox
+            wy = seg[k, 1] - oy
+            inv = 1.0 / denom
+            t = (wx * ey - wy * ex) * inv
+            if t <= 0.0 or t >= best or t > tmax:
+                continue
+            s = (wx * dy - wy * dx) * inv
+            if s < 0.0 or s > 1.0:
+                continue
+            best = t
+            best_kind = 0
+            best_k = k
+        for k in range(geo.circ_start[b], geo.circ_start[b + 1]):
+            cx = ox - circ[k, 0]
+            cy = oy - circ[k, 1]
+            r = circ[k, 2]
+            bb = dx * cx + dy * cy
+            cc = cx * cx + cy * cy - r * r
+            if cc <= 0.0:
+                continue  # the ray starts inside the circle
+            disc = bb * bb - cc
+            if disc < 0.0:
+                continue
+            t = -bb - math.sqrt(disc)
+            if t <= 0.0 or t >= best or t > tmax:
+                continue
+            best = t
+            best_kind = 1
+            best_k = k
+        t_next = min(tx, ty)
+        if best <= t_next or t_next > t1:
+            break
+        if tx < ty:
+            ix += sx
+            tx += tdx
+            if ix < 0 or ix >= nbx:
+                break
+        else:
+            iy += sy
+            ty += tdy
+            if iy < 0 or iy >= nby:
+                break
+    if best_kind == 0:
+        ex = seg[best_k, 2]
+        ey = seg[best_k, 3]
+        length = math.sqrt(ex * ex + ey * ey)
+        bnx = -ey / length
+        bny = ex / length
+        best_cos = abs(dx * bnx + dy * bny)
+        best_thr = geo.seg_cos_threshold[geo.seg_id[best_k]]
+    elif best_kind == 1:
+        r = circ[best_k, 2]
+        bnx = (ox + best * dx - circ[best_k, 0]) / r
+        bny = (oy + best * dy - circ[best_k, 1]) / r
+        best_cos = abs(dx * bnx + dy * bny)
+        best_thr = geo.circ_cos_threshold[geo.circ_id[best_k]]
+    return best, best_cos, best_thr, bnx, bny
+
+
+@numba.njit(cache=True)
+def _cast_bitmap(ox, oy, dx, dy, tmax, bitmap, gx0, gy0, res):
+    """First occupied pixel the ray o + t d (d unit, t <= tmax) enters (Amanatides-Woo).
+
+    The pixel holding the origin is not tested (a ray starts in free space). Returns
+    (t, cos_incidence, nx, ny) with n the normal of the face entered; t = inf for no hit.
+    """
+    h, w = bitmap.shape
+    tx_in, tx_out = _interval(ox, dx, gx0, gx0 + w * res)
+    ty_in, ty_out = _interval(oy, dy, gy0, gy0 + h * res)
+    t0 = max(0.0, tx_in, ty_in)
+    t1 = min(tmax, tx_out, ty_out)
+    if t0 > t1:
+        return np.inf, 0.0, 0.0, 0.0
+    px = ox + t0 * dx
+    py = oy + t0 * dy
+    ix = min(w - 1, max(0, int(math.floor((px - gx0) / res))))
+    iy = min(h - 1, max(0, int(math.floor((py - gy0) / res))))
+    sx = 1 if dx > 0.0 else -1
+    sy = 1 if dy > 0.0 else -1
+    tx = ((ix + (1 if dx > 0.0 else 0)) * res + gx0 - ox) / dx if dx != 0.0 else np.inf
+    ty = ((iy + (1 if dy > 0.0 else 0)) * res + gy0 - oy) / dy if dy != 0.0 else np.inf
+    tdx = res / abs(dx) if dx != 0.0 else np.inf
+    tdy = res / abs(dy) if dy != 0.0 else np.inf
+    # entering from outside the bitmap: the entry pixel is tested, through the face crossed
+    test = t0 > 0.0
+    x_face = tx_in >= ty_in
+    t_in = t0
+    while True:
+        if test and bitmap[iy, ix] != 0:
+            if x_face:
+                return t_in, abs(dx), -float(sx), 0.0
+            return t_in, abs(dy), 0.0, -float(sy)
+        test = True
+        if tx < ty:
+            t_in = tx
+            ix += sx
+            tx += tdx
+            x_face = True
+            if ix < 0 or ix >= w:
+                break
+        else:
+            t_in = ty
+            iy += sy
+            ty += tdy
+            x_face = False
+            if iy < 0 or iy >= h:
+                break
+        if t_in > t1:
+            break
+    return np.inf, 0.0, 0.0, 0.0
+
+
+@numba.njit(cache=True)
+def first_hit(ox, oy, dx, dy, tmax, geo):
+    """First hit of the ray from (ox, oy) along unit (dx, dy) within tmax, on any surface.
+
+    Returns (t, cos_incidence, cos_threshold, nx, ny): distance (inf if none), cosine of the
+    incidence angle from the surface normal, cosine of the surface's specular threshold, and
+    the unit normal n (either side).
+    """
+    t, c, thr, nx, ny = _cast_shapes(ox, oy, dx, dy, tmax, geo)
+    if geo.has_bitmap:
+        tb, cb, bnx, bny = _cast_bitmap(ox, oy, dx, dy, min(t, tmax), geo.bitmap, geo.bitmap_f[0], geo.bitmap_f[1], geo.bitmap_f[2])
+        if tb < t:
+            return tb, cb, geo.bitmap_cos_threshold, bnx, bny
+    return t, c, thr, nx, ny
+
+
+@numba.njit(cache=True)
+def cast_ray(ox, oy, dx, dy, tmax, geo):
+    """First hit of a ray, with everything a bounce needs.
+
+    Returns (t, incidence, threshold, hx, hy, mx, my): distance (inf if none), incidence angle
+    from the surface normal in [0, pi/2], the surface's specular threshold (rad), the hit point
+    and the mirror direction. ``dx, dy`` need not be unit; t is in units of their length 1.
+    """
+    norm = math.sqrt(dx * dx + dy * dy)
+    dx /= norm
+    dy /= norm
+    t, c, cthr, nx, ny = first_hit(ox, oy, dx, dy, tmax, geo)
+    if t == np.inf:
+        return np.inf, 0.0, 0.0, np.nan, np.nan, np.nan, np.nan
+    incidence = math.acos(min(1.0, c))
+    threshold = math.pi / 2 if cthr <= -1.0 else math.acos(cthr)
+    dn = dx * nx + dy * ny
+    return t, incidence, threshold, ox + t * dx, oy + t * dy, dx - 2.0 * dn * nx, dy - 2.0 * dn * ny
+
+
+@numba.njit(cache=True)
+def trace_sub_ray(ox, oy, dx, dy, limit, max_bounces, geo):
+    """Follow one sub-ray (unit direction): echo at the first hit within its surface's
+    threshold, else mirror-bounce, up to ``max_bounces`` times, over a total path <= limit.
+
+    Returns (first_t, echo, bounces): the distance of the first surface hit (inf if none
+    within limit), the one-way path length to the echoing surface (inf if none within limit)
+    and the number of bounces before it.
+    """
+    first = np.inf
+    path = 0.0
+    for bounce in range(max_bounces + 1):
+        t, c, cthr, nx, ny = first_hit(ox, oy, dx, dy, limit - path, geo)
+        if t == np.inf:
+            break
+        if bounce == 0:
+            first = t
+        path += t
+        if c >= cthr:
+            return first, path, bounce
+        dn = dx * nx + dy * ny
+        side = 1.0 if dn > 0.0 else -1.0
+        ox = ox + t * dx - side * BOUNCE_OFFSET * nx
+        oy = oy + t * dy - side * BOUNCE_OFFSET * ny
+        dx = dx - 2.0 * dn * nx
+        dy = dy - 2.0 * dn * ny
+    return first, np.inf, 0

@@ -1,0 +1,166 @@
+"""The sonar simulator: a world in, a log with its truth out (``simulate``).
+
+Each reading casts a fan of sub-rays across the cone; the nearest echo (after specular
+bounces) is the reading, then random readings, Gaussian noise and the range limits apply. The
+cause and the noise-free range of the nearest surface of every reading are kept as truth.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numba
+import numpy as np
+
+from aogm_cli.errors import InputError
+from aogm_cli.logfile import CAUSE_ECHO, CAUSE_NO_ECHO, CAUSE_RANDOM, CAUSE_SPECULAR, Log, SensorSpec, Truth
+from aogm_cli.simulation.raycast import geometry, trace_sub_ray
+from aogm_cli.world.config import Sonar, World
+from aogm_cli.world.geometry import build_scene, trajectory_poses, truth_occupancy
+
+BLOCK_SCANS = 2048  # scans per kernel call (progress is reported between blocks)
+
+
+def sub_ray_offsets(beam_width: float, sub_rays: int) -> np.ndarray:
+    """Angles (rad) of the sub-rays relative to the sensor axis, evenly across the cone."""
+    if sub_rays == 1:
+        return np.zeros(1)
+    return np.linspace(-beam_width / 2, beam_width / 2, sub_rays)
+
+
+@numba.njit(cache=True)
+def echo_block(pose, mount, cos_off, sin_off, max_range, max_bounces, geo, echo, ideal, multipath):
+    """Noise-free readings of a block of scans (every sensor, every sub-ray), in one call.
+
+    pose (B, 3) robot poses; mount (S, 3) sensor mounts; cos_off, sin_off (R,) sub-ray
+    offsets. Writes per reading (B, S): ``echo`` the nearest echo over the sub-rays (one-way
+    path, inf if none within max_range), ``ideal`` the nearest first hit of any sub-ray
+    regardless of angle (inf if none) and ``multipath`` whether that echo came after a bounce.
+    """
+    n_sub = cos_off.shape[0]
+    for i in range(pose.shape[0]):
+        c = math.cos(pose[i, 2])
+        s = math.sin(pose[i, 2])
+        for j in range(mount.shape[0]):
+            sx = pose[i, 0] + c * mount[j, 0] - s * mount[j, 1]
+            sy = pose[i, 1] + s * mount[j, 0] + c * mount[j, 1]
+            yaw = pose[i, 2] + mount[j, 2]
+            ca = math.cos(yaw)
+            sa = math.sin(yaw)
+            best = np.inf
+            best_bounces = 0
+            nearest = np.inf
+            for r in range(n_sub):
+                dx = ca * cos_off[r] - sa * sin_off[r]
+                dy = sa * cos_off[r] + ca * sin_off[r]
+                # a surface farther than the best echo so far can change neither result
+                first, path, bounces = trace_sub_ray(sx, sy, dx, dy, min(max_range, best), max_bounces, geo)
+                if first < nearest:
+                    nearest = first
+                if path < best or (path == best and bounces < best_bounces):
+                    best = path
+                    best_bounces = bounces
+            echo[i, j] = best
+            ideal[i, j] = nearest
+            multipath[i, j] = best_bounces > 0
+
+
+def readings_from_echoes(
+    echo: np.ndarray,
+    ideal: np.ndarray,
+    multipath: np.ndarray,
+    u_random: np.ndarray,
+    u_range: np.ndarray,
+    noise: np.ndarray,
+    sonar: Sonar,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Turn noise-free echoes into readings (float32) and their causes (int8).
+
+    Cause: no echo -> 1 (+inf); an echo after a bounce or farther than ``ideal +
+    cause_tolerance`` -> 3; else 0. Then a reading with ``u_random < random_rate`` becomes
+    ``min_range + u_range * (max_range - min_range)`` (cause 2); ``noise_sigma * noise`` is
+    added; readings are clipped to >= min_range and those >= max_range become +inf (cause 1
+    unless random).
+    """
+    cause = np.full(echo.shape, CAUSE_ECHO, dtype=np.int8)
+    cause[multipath | (echo > ideal + sonar.cause_tolerance)] = CAUSE_SPECULAR
+    no_echo = ~np.isfinite(echo)
+    cause[no_echo] = CAUSE_NO_ECHO
+    reading = echo.astype(np.float64, copy=True)
+    random = u_random < sonar.random_rate
+    reading[random] = sonar.min_range + u_range[random] * (sonar.max_range - sonar.min_range)
+    cause[random] = CAUSE_RANDOM
+    with np.errstate(invalid="ignore"):
+        reading = reading + sonar.noise_sigma * noise
+    reading = np.maximum(reading, sonar.min_range)
+    too_far = reading >= sonar.max_range
+    reading[too_far] = np.inf
+    cause[too_far & ~random] = CAUSE_NO_ECHO
+    return reading.astype(np.float32), cause
+
+
+def simulate(world: World, seed: int, progress: Callable[[int], None] | None = None) -> Log:
+    """Simulate the world's sonar along its trajectory: the log, with its truth.
+
+    Random numbers are drawn up front from ``numpy.random.default_rng(seed)`` in a fixed
+    order (random-reading draws, random ranges, noise, each (T, S)), so a seed gives the same
+    arrays bit for bit. ``progress(n_scans_done)`` is called after each block of scans.
+    """
+    sonar = world.sonar
+    if sonar is None:
+        raise InputError("the world has no sonar", file=world.source, key="sonar")
+    time, pose = trajectory_poses(world)
+    mount = np.asarray(sonar.mounts, dtype=np.float64).reshape(-1, 3)
+    n_scans, n_sensors = pose.shape[0], mount.shape[0]
+
+    rng = np.random.default_rng(seed)
+    u_random = rng.random((n_scans, n_sensors))
+    u_range = rng.random((n_scans, n_sensors))
+    noise = rng.standard_normal((n_scans, n_sensors))
+
+    grid, occupancy = truth_occupancy(world)
+    geo = geometry(build_scene(world))
+    offsets = sub_ray_offsets(sonar.beam_width, sonar.sub_rays)
+    # the central sub-rays first: their echoes bound the search of the others
+    offsets = offsets[np.argsort(np.abs(offsets), kind="stable")]
+    cos_off, sin_off = np.cos(offsets), np.sin(offsets)
+
+    echo = np.empty((n_scans, n_sensors))
+    ideal = np.empty((n_scans, n_sensors))
+    multipath = np.empty((n_scans, n_sensors), dtype=np.bool_)
+    for start in range(0, n_scans, BLOCK_SCANS):
+        stop = min(n_scans, start + BLOCK_SCANS)
+        echo_block(
+            pose[start:stop], mount, cos_off, sin_off, float(sonar.max_range), int(sonar.max_bounces), geo,
+            echo[start:stop], ideal[start:stop], multipath[start:stop],
+        )
+        if progress is not None:
+            progress(stop)
+
+    ranges, cause = readings_from_echoes(echo, ideal, multipath, u_random, u_range, noise, sonar)
+    truth = Truth(
+        grid=grid,
+        occupancy=occupancy,
+        cause=cause,
+        ideal_range=ideal.astype(np.float32),
+        world=world.text,
+        checks=tuple(c.as_json() for c in world.checks),
+    )
+    sensor = SensorSpec(
+        mount=mount,
+        kind="sonar",
+        beam_width=float(sonar.beam_width),
+        min_range=float(sonar.min_range),
+        max_range=float(sonar.max_range),
+        noise_sigma=float(sonar.noise_sigma),
+    )
+    return Log(
+        time=time,
+        pose=pose,
+        ranges=ranges,
+        sensor=sensor,
+        source=f"aogm simulate {world.source}",
+        truth=truth,
+        seed=int(seed),
+    )
