@@ -241,3 +241,49 @@ def test_floorplan_world_simulates(tmp_path):
     assert log.ranges[0, 0] == pytest.approx(3.5, abs=1e-6)
     assert log.truth.cause[0, 0] == CAUSE_ECHO
     assert log.truth.occupancy[:, -10:].all() and not log.truth.occupancy[:, :-10].any()
+
+
+def test_echo_block_matches_unpruned_sub_ray_tracing():
+    """The kernel bounds each sub-ray's search by the best echo so far; that must not change results."""
+    from aogm_cli.simulation.raycast import geometry, trace_sub_ray
+    from aogm_cli.simulation.sonar import echo_block
+    from aogm_cli.world.geometry import build_scene
+
+    rng = np.random.default_rng(12)
+    walls = [
+        {"points": rng.uniform(0, 10, (3, 2)).tolist(), "thickness": float(rng.uniform(0.02, 0.3)), "surface": ["rough", "glass", "door"][k % 3]}
+        for k in range(14)
+    ]
+    circles = [{"center": rng.uniform(0, 10, 2).tolist(), "radius": 0.3, "surface": "glass"} for _ in range(4)]
+    w = parse_world(
+        {
+            "bounds": [0, 0, 10, 10],
+            "surfaces": {"glass": {"specular_threshold_deg": 10}, "door": {"specular_threshold_deg": 30}},
+            "walls": walls,
+            "circles": circles,
+            "trajectory": {"poses": [[1, 1, 0]]},
+            "sonar": {"max_bounces": 2},
+        },
+        file="test.yaml",
+    )
+    geo = geometry(build_scene(w))
+    pose = np.column_stack([rng.uniform(0, 10, (300, 2)), rng.uniform(-np.pi, np.pi, 300)])
+    mount = np.asarray(w.sonar.mounts)
+    off = sub_ray_offsets(w.sonar.beam_width, w.sonar.sub_rays)
+    co, so = np.cos(off), np.sin(off)
+    echo, ideal, multi = np.empty((300, 24)), np.empty((300, 24)), np.empty((300, 24), dtype=bool)
+    echo_block(pose, mount, co, so, 5.0, 2, geo, echo, ideal, multi)
+    for i in range(0, 300, 7):
+        c, s = math.cos(pose[i, 2]), math.sin(pose[i, 2])
+        for j in range(24):
+            sx = pose[i, 0] + c * mount[j, 0] - s * mount[j, 1]
+            sy = pose[i, 1] + s * mount[j, 0] + c * mount[j, 1]
+            yaw = pose[i, 2] + mount[j, 2]
+            ca, sa = math.cos(yaw), math.sin(yaw)
+            traced = [trace_sub_ray(sx, sy, ca * co[r] - sa * so[r], sa * co[r] + ca * so[r], 5.0, 2, geo) for r in range(len(co))]
+            first = min(t[0] for t in traced)
+            best = min(traced, key=lambda t: (t[1], t[2]))
+            assert ideal[i, j] == first
+            assert echo[i, j] == best[1]
+            assert multi[i, j] == (best[2] > 0 and np.isfinite(best[1]))
+    assert multi.any() and np.isinf(echo).any()

@@ -33,6 +33,7 @@ import numba
 import numpy as np
 
 from aogm_cli.errors import InputError
+from aogm_cli.frames import sensor_poses
 from aogm_cli.grid import GridSpec
 
 TWO_PI = 2.0 * math.pi
@@ -152,18 +153,21 @@ def cone_cells(tpl, height, width, row, col, k, limit, out_index, out_range):
     tb = transform[k, 1]
     tc = transform[k, 2]
     td = transform[k, 3]
+    rng = ranges[s:e]
+    dcs = dcol[s:e]
+    drs = drow[s:e]
     n = 0
-    for j in range(s, e):
-        if ranges[j] > limit:
+    for j in range(e - s):
+        if rng[j] > limit:
             break
-        dc = np.int64(dcol[j])
-        dr = np.int64(drow[j])
+        dc = np.int64(dcs[j])
+        dr = np.int64(drs[j])
         r = row + tc * dc + td * dr
         c = col + ta * dc + tb * dr
         if r < 0 or r >= height or c < 0 or c >= width:
             continue
         out_index[n] = r * width + c
-        out_range[n] = ranges[j]
+        out_range[n] = rng[j]
         n += 1
     return n
 
@@ -172,25 +176,34 @@ def sensor_cells(pose: np.ndarray, sensor, grid: GridSpec, templates: ConeTempla
     """Each reading's sensor cell and heading bin: (rows, cols, bins, valid), each (T, S).
 
     ``pose`` is (T, 3) robot x, y, yaw; ``sensor`` a ``logfile.SensorSpec`` whose mounts (S, 3)
-    are composed with each pose. A reading whose pose is not finite is marked invalid. Sensor
-    positions far outside the grid are pulled in to just beyond the templates' reach (they
-    still see no cell), so that cell indices never overflow.
+    are composed with each pose (``frames.sensor_poses``). A reading whose pose is not finite
+    is marked invalid. Sensor positions far outside the grid are pulled in to just beyond the
+    templates' reach (they still see no cell), so that cell indices never overflow.
     """
-    pose = np.asarray(pose, dtype=np.float64).reshape(-1, 3)
-    mount = np.asarray(sensor.mount, dtype=np.float64).reshape(-1, 3)
-    x, y, yaw = pose[:, 0:1], pose[:, 1:2], pose[:, 2:3]
-    valid = np.isfinite(pose).all(axis=1)[:, None] & np.ones((1, mount.shape[0]), dtype=bool)
-    c, s = np.cos(yaw), np.sin(yaw)
-    xs = x + c * mount[:, 0] - s * mount[:, 1]
-    ys = y + s * mount[:, 0] + c * mount[:, 1]
-    yaws = yaw + mount[:, 2]
+    rows, cols, bins, valid, _ = reading_geometry(pose, sensor, grid, templates)
+    return rows, cols, bins, valid
+
+
+def reading_geometry(pose: np.ndarray, sensor, grid: GridSpec, templates: ConeTemplates):
+    """``sensor_cells`` plus each reading's ``axis_offset`` (T, S): the sensor's offset from
+    its cell's centre along the beam axis (m, |offset| <= res / sqrt 2; 0 when invalid).
+
+    A cell at template range d lies about d - axis_offset from the real sensor, so a reading
+    z compares with template ranges at z + axis_offset.
+    """
+    sp = sensor_poses(np.asarray(pose, dtype=np.float64).reshape(-1, 3), sensor.mount)
+    xs, ys, yaws = sp[..., 0], sp[..., 1], sp[..., 2]
+    valid = np.isfinite(sp).all(axis=-1)
     x_min, x_max, y_min, y_max = grid.extent
     pad = templates.reach + 2.0 * grid.resolution
     xs = np.clip(np.where(valid, xs, x_min - pad), x_min - pad, x_max + pad)
     ys = np.clip(np.where(valid, ys, y_min - pad), y_min - pad, y_max + pad)
+    yaws = np.where(valid, yaws, 0.0)
     rows, cols = grid.world_to_cell(xs, ys)
-    bins = templates.heading_bin(np.where(valid, yaws, 0.0))
-    return rows, cols, bins, valid
+    bins = templates.heading_bin(yaws)
+    cx, cy = grid.cell_centre(rows, cols)
+    offset = np.where(valid, (xs - cx) * np.cos(yaws) + (ys - cy) * np.sin(yaws), 0.0)
+    return rows, cols, bins, valid, offset
 
 
 def _wrap(angle: np.ndarray) -> np.ndarray:

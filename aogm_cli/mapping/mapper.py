@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from aogm_cli.grid import GridSpec
+from aogm_cli.frames import sensor_poses
 from aogm_cli.logfile import LogReader, SensorSpec
 from aogm_cli.mapfile import OccupancyMap
 from aogm_cli.mapping.cone import build_cone_templates, sensor_cells
@@ -107,12 +108,27 @@ def map_standard(path: str | Path, params: MapParams, progress: Progress | None 
     )
 
 
+def range_shift(pose: np.ndarray, sensor: SensorSpec, grid: GridSpec, rows, cols) -> np.ndarray:
+    """(T, S) amount to add to each reading so that it compares with template ranges.
+
+    Templates measure ranges from the centre of the sensor's cell; the sensor itself sits
+    ``o`` away from it, which changes a cone cell's range by about -o . axis. And an obstacle
+    cell echoes from its near face, half a cell before its centre. So a reading z matches
+    the template cells at range z + o . axis + res / 2.
+    """
+    sp = sensor_poses(pose, sensor.mount)
+    cx, cy = grid.cell_centre(rows, cols)
+    shift = (sp[..., 0] - cx) * np.cos(sp[..., 2]) + (sp[..., 1] - cy) * np.sin(sp[..., 2])
+    return np.where(np.isfinite(shift), shift, 0.0) + 0.5 * grid.resolution
+
+
 def readings_of(reader: LogReader, grid: GridSpec, templates):
-    """All readings of a log as flat arrays: sensor cell rows, cols, heading bins, ranges."""
+    """All readings of a log as flat arrays: sensor cell rows, cols, heading bins, and ranges
+    shifted into template ranges (``range_shift``)."""
     pose = reader.poses()
     ranges = np.concatenate([r for _, _, _, r in reader.chunks()]) if reader.n_scans else np.zeros((0, reader.sensor.count))
     rows, cols, bins, valid = sensor_cells(pose, reader.sensor, grid, templates)
-    z = np.where(valid, ranges, np.nan).astype(np.float64)
+    z = np.where(valid, ranges, np.nan).astype(np.float64) + range_shift(pose, reader.sensor, grid, rows, cols)
     return rows.reshape(-1), cols.reshape(-1), bins.reshape(-1), z.reshape(-1)
 
 

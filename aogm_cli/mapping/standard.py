@@ -6,21 +6,28 @@ every reading and every cell of its cone, adds ``inverse_model - l0`` and clamps
 Choices (documented)
 --------------------
 * Clamping after every update (OctoMap's clamping update): a cell's log-odds never leaves
-  [clamp_min, clamp_max], so a long run of identical evidence does not make a cell too
-  confident to change back. The result depends on the order of readings, which is the
-  log's order (scans in time, sensors in mount order), so it is reproducible.
+  [clamp_min, clamp_max], so a long run of identical evidence cannot make a cell too
+  confident to change back. The result depends on the order of readings; that order is the
+  log's (scans in time, sensors in mount order), so maps are reproducible.
 * A reading visits each cell of its cone once (the templates hold each cell once).
+* Geometry: cones come from ``cone`` templates (sensor snapped to its cell's centre, heading
+  to its bin). The snap's component along the beam axis is corrected per reading: a cell at
+  template range d is taken to lie at d - axis_offset from the real sensor (see
+  ``cone.reading_geometry``), so the occupied arc does not jitter by up to res/sqrt 2 with
+  the sensor's position inside its cell. Templates therefore reach one cell beyond max_range.
 * ``observed`` marks every cell that some reading's cone covered up to min(z + alpha/2,
   max_range), or up to max_range for a max-range reading, including the blind zone next
   to the sensor, where the reading gives no evidence.
 * Arithmetic on the grid is float32 in a fixed order, so a map made chunk by chunk equals,
   bit for bit, the map made in one pass.
 
-Speed: the kernel never evaluates a transcendental function per cell. Per template entry it
-stores a = w_angle (E_a, or 1 for the constant model) and b = a * (d - Rmin)^2, so the free
-increment is c_free * a * (1 - (d - Rmin)^2 / span^2) = A a - B b with per-reading A, B; the
-occupied increment is c_occ * a. The region boundaries of a reading are binary searches in
-its template's sorted ranges.
+Speed: no transcendental function per cell. Per template entry the kernel reads the
+angular weight a (E_a, or 1 for the constant model) and the range; the free increment is
+a * (c_free - B u^2) with u = d - Rmin and B = c_free / span^2 per reading (Elfes' E_r), the
+occupied one c_occ * a. A reading's region boundaries are binary searches in its
+template's sorted ranges. The kernel's loops are written so that LLVM vectorises all but the
+read-modify-write of the grid (see ``_standard_kernel``); ``bench/bench_standard.py``
+compares it with a plain scatter-add.
 """
 
 from __future__ import annotations
@@ -32,7 +39,7 @@ import numpy as np
 
 from aogm_cli.grid import GridSpec
 from aogm_cli.logfile import SensorSpec
-from aogm_cli.mapping.cone import ConeTemplates, build_cone_templates, sensor_cells
+from aogm_cli.mapping.cone import ConeTemplates, build_cone_templates, reading_geometry
 from aogm_cli.mapping.inverse_model import InverseModelConfig, angular_profile
 
 
@@ -46,28 +53,98 @@ def probability_from_log_odds(log_odds, observed=None) -> np.ndarray:
     return p.astype(np.float32)
 
 
-def template_profiles(
-    templates: ConeTemplates, config: InverseModelConfig, sensor: SensorSpec
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per-entry profile values (a, b) as float32 and, per stored bin, the blind-zone length.
+def standard_templates(grid: GridSpec, sensor: SensorSpec) -> ConeTemplates:
+    """The cone templates the standard mapper uses: reach max_range plus one cell (for the
+    axis-offset correction)."""
+    return build_cone_templates(grid.resolution, sensor.beam_width, sensor.max_range, margin=grid.resolution)
 
-    a = E_a(theta) ("elfes") or 1 ("constant"); b = a (d - min_range)^2 ("elfes", 0 in the
-    blind zone) or 0 ("constant"). ``blind_end[b]`` counts the stored bin's entries nearer
-    than min_range.
-    """
+
+def angular_weights(templates: ConeTemplates, config: InverseModelConfig, beam_width: float) -> np.ndarray:
+    """Per template entry, float32: Elfes' E_a(bearing) (clipped at 0), or 1 for the constant model."""
     if config.model == "elfes":
-        a = angular_profile(templates.bearings, sensor.beam_width)
-        u = np.maximum(templates.ranges - sensor.min_range, 0.0)
-        b = a * u * u
-    else:
-        a = np.ones_like(templates.ranges)
-        b = np.zeros_like(templates.ranges)
-    n_base = templates.offsets.size - 1
-    blind_end = np.empty(n_base, dtype=np.int64)
-    for i in range(n_base):
-        s, e = templates.offsets[i], templates.offsets[i + 1]
-        blind_end[i] = np.searchsorted(templates.ranges[s:e], sensor.min_range, side="left")
-    return a.astype(np.float32), b.astype(np.float32), blind_end
+        return np.maximum(angular_profile(templates.bearings, beam_width), 0.0).astype(np.float32)
+    return np.ones(templates.ranges.shape, dtype=np.float32)
+
+
+class StandardMapper:
+    """Incremental standard mapping on one grid: ``update`` with chunks of scans, then ``result``.
+
+    The state is one float32 grid: a cell's log-odds once some reading's cone covered it, and
+    ``UNOBSERVED`` (-inf) before; ``result`` splits it into (log_odds, observed). Keeping
+    "observed" inside the log-odds grid saves the kernel a second scattered write per cell.
+    """
+
+    UNOBSERVED = np.float32(-np.inf)
+
+    def __init__(
+        self,
+        sensor: SensorSpec,
+        grid: GridSpec,
+        config: InverseModelConfig,
+        *,
+        templates: ConeTemplates | None = None,
+    ):
+        config.validate()
+        if templates is None:
+            templates = standard_templates(grid, sensor)
+        if templates.resolution != grid.resolution or templates.beam_width != sensor.beam_width:
+            raise ValueError("cone templates do not match the grid resolution and the sensor's beam width")
+        if templates.reach < sensor.max_range:
+            raise ValueError("cone templates do not reach the sensor's max_range")
+        if grid.height * grid.width >= 2**31:
+            raise ValueError(f"grid of {grid.height} x {grid.width} cells is too large (limit 2**31 cells)")
+        self.sensor = sensor
+        self.grid = grid
+        self.config = config
+        self.templates = templates
+        self.weights = angular_weights(templates, config, sensor.beam_width)
+        self.ranges32 = templates.ranges.astype(np.float32)
+        self.scalars = np.array(
+            [
+                0.5 * config.alpha,
+                sensor.min_range,
+                sensor.max_range,
+                config.l_free - config.l0,
+                config.l_occ - config.l0,
+                config.clamp_min,
+                config.clamp_max,
+                config.l0,
+                1.0 if config.model == "elfes" else 0.0,
+            ],
+            dtype=np.float64,
+        )
+        size = int(np.diff(templates.offsets).max())
+        self._idx_buf = np.empty(size, dtype=np.int32)
+        self._inc_buf = np.empty(size, dtype=np.float32)
+        self.state = np.full(grid.shape, self.UNOBSERVED, dtype=np.float32)
+
+    def update(self, pose: np.ndarray, ranges: np.ndarray) -> None:
+        """Apply scans (pose (T, 3), ranges (T, S)) in order: every reading's cone, clamped."""
+        rows, cols, bins, valid, offset = reading_geometry(pose, self.sensor, self.grid, self.templates)
+        z = np.where(valid, np.asarray(ranges, dtype=np.float32), np.float32(np.nan)).astype(np.float32)
+        _standard_kernel(
+            self.state.reshape(-1),
+            self.grid.height,
+            self.grid.width,
+            rows.reshape(-1),
+            cols.reshape(-1),
+            bins.reshape(-1),
+            z.reshape(-1),
+            offset.reshape(-1),
+            self.templates.kernel_arrays,
+            self.weights,
+            self.ranges32,
+            self.scalars,
+            int(self.templates.extent),
+            self._idx_buf,
+            self._inc_buf,
+        )
+
+    def result(self) -> tuple[np.ndarray, np.ndarray]:
+        """(log_odds float32 (H, W), observed bool (H, W)); unobserved cells hold the prior l0."""
+        observed = self.state != self.UNOBSERVED
+        log_odds = np.where(observed, self.state, np.float32(self.config.l0)).astype(np.float32)
+        return log_odds, observed
 
 
 def standard_map(
@@ -82,74 +159,27 @@ def standard_map(
 
     ``chunks`` yields (start, time, pose (T, 3), ranges (T, S)) like ``LogReader.chunks()``;
     memory is the grid, the templates and one chunk. Unobserved cells hold the prior l0.
-    ``templates`` defaults to ``build_cone_templates(grid.resolution, sensor.beam_width,
-    sensor.max_range)``.
+    ``templates`` defaults to ``standard_templates(grid, sensor)``.
     """
-    config.validate()
-    if templates is None:
-        templates = build_cone_templates(grid.resolution, sensor.beam_width, sensor.max_range)
-    if templates.resolution != grid.resolution or templates.beam_width != sensor.beam_width:
-        raise ValueError("cone templates do not match the grid resolution and the sensor's beam width")
-    if templates.reach < sensor.max_range:
-        raise ValueError("cone templates do not reach the sensor's max_range")
-    prof_a, prof_b, blind_end = template_profiles(templates, config, sensor)
-    log_odds = np.full(grid.shape, config.l0, dtype=np.float32)
-    observed = np.zeros(grid.shape, dtype=np.bool_)
-    state = StandardKernelArgs(templates, prof_a, prof_b, blind_end, config, sensor, grid)
+    mapper = StandardMapper(sensor, grid, config, templates=templates)
     for _start, _time, pose, ranges in chunks:
-        update_standard(log_odds, observed, pose, ranges, sensor, grid, templates, state)
-    return log_odds, observed
-
-
-class StandardKernelArgs:
-    """The per-run constants of the standard kernel, computed once per map."""
-
-    def __init__(self, templates, prof_a, prof_b, blind_end, config, sensor, grid):
-        self.tpl = templates.kernel_arrays
-        self.prof_a = prof_a
-        self.prof_b = prof_b
-        self.blind_end = blind_end
-        self.scalars = np.array(
-            [
-                0.5 * config.alpha,
-                sensor.min_range,
-                sensor.max_range,
-                config.l_free - config.l0,
-                config.l_occ - config.l0,
-                config.clamp_min,
-                config.clamp_max,
-            ],
-            dtype=np.float64,
-        )
-        self.extent = int(templates.extent)
-        self.shape = grid.shape
-
-
-def update_standard(log_odds, observed, pose, ranges, sensor, grid, templates, args: StandardKernelArgs) -> None:
-    """Apply one chunk of scans (pose (T, 3), ranges (T, S)) to ``log_odds`` and ``observed`` in place."""
-    rows, cols, bins, valid = sensor_cells(pose, sensor, grid, templates)
-    z = np.where(valid, np.asarray(ranges, dtype=np.float32), np.float32(np.nan)).astype(np.float32)
-    _standard_kernel(
-        log_odds.reshape(-1),
-        observed.reshape(-1),
-        grid.height,
-        grid.width,
-        rows.reshape(-1),
-        cols.reshape(-1),
-        bins.reshape(-1),
-        z.reshape(-1),
-        args.tpl,
-        args.prof_a,
-        args.prof_b,
-        args.blind_end,
-        args.scalars,
-        args.extent,
-    )
+        mapper.update(pose, ranges)
+    return mapper.result()
 
 
 @numba.njit(cache=True)
-def _standard_kernel(g, obs, height, width, rows, cols, bins, z, tpl, prof_a, prof_b, blind_end, scalars, ext):
-    """Compiled log-odds update of readings t = 0.. in order; ``g``/``obs`` are the flat grids."""
+def _standard_kernel(
+    state, height, width, rows, cols, bins, z, offset, tpl, weights, ranges32, scalars, ext, idx_buf, inc_buf
+):
+    """Compiled log-odds update of readings t = 0, 1, ... in order on the flat ``state``.
+
+    Per reading, entries [0, f0) of its template are the blind zone (observed only),
+    [f0, f1) get free evidence and [f1, m) occupied evidence; every update is clamped.
+    A first, vectorised pass writes the increments to ``inc_buf`` (and, for cones wholly
+    inside the grid, which is nearly all, the cells' flat indices to ``idx_buf``); then a
+    scalar pass does the read-modify-write of the grid. Loops run over slices from 0 so that
+    numba drops its negative-index checks, which would otherwise stop vectorisation.
+    """
     offsets, dcol, drow, ranges, base_bin, transform = tpl
     half_alpha = scalars[0]
     min_range = scalars[1]
@@ -158,6 +188,9 @@ def _standard_kernel(g, obs, height, width, rows, cols, bins, z, tpl, prof_a, pr
     c_occ = np.float32(scalars[4])
     lo = np.float32(scalars[5])
     hi = np.float32(scalars[6])
+    l0 = np.float32(scalars[7])
+    elfes = scalars[8] != 0.0
+    zero = np.float32(0.0)
     for t in range(z.size):
         zt = np.float64(z[t])
         if not zt >= 0.0:  # NaN or negative: no information
@@ -169,61 +202,79 @@ def _standard_kernel(g, obs, height, width, rows, cols, bins, z, tpl, prof_a, pr
         k = bins[t]
         b = base_bin[k]
         s = offsets[b]
-        e = offsets[b + 1]
-        r = ranges[s:e]
+        r = ranges[s : offsets[b + 1]]
+        # region boundaries, in template ranges (= real ranges + the sensor's axis offset)
+        shift = offset[t]
+        blind_end = np.searchsorted(r, min_range + shift, side="left")
         if zt >= max_range:  # max-range reading: free space only, up to max_range
-            free_end = np.searchsorted(r, max_range, side="right")
-            arc_end = free_end
+            f1 = np.searchsorted(r, max_range + shift, side="right")
+            m = f1
             span = max_range - min_range
         else:
             z_free = zt - half_alpha
-            free_end = np.searchsorted(r, z_free, side="left")
-            arc_end = np.searchsorted(r, min(zt + half_alpha, max_range), side="right")
+            f1 = np.searchsorted(r, z_free + shift, side="left")
+            m = np.searchsorted(r, min(zt + half_alpha, max_range) + shift, side="right")
             span = z_free - min_range
-        blind = blind_end[b]
+        f0 = min(blind_end, f1)
         fa = np.float32(c_free)
         fb = np.float32(0.0)
-        if span > 0.0:
+        if elfes and span > 0.0:
             fb = np.float32(max(c_free / (span * span), -1e30))
+        r_min = np.float32(min_range + shift)
+        # increments: free (<= 0 exactly: rounding must not make it positive), occupied (>= 0)
+        w1 = weights[s + f0 : s + f1]
+        r1 = ranges32[s + f0 : s + f1]
+        c1 = inc_buf[f0:f1]
+        for j in range(f1 - f0):
+            u = r1[j] - r_min
+            c1[j] = min(w1[j] * (fa - fb * (u * u)), zero)
+        w2 = weights[s + f1 : s + m]
+        c2 = inc_buf[f1:m]
+        for j in range(m - f1):
+            c2[j] = c_occ * w2[j]
         ta = transform[k, 0]
         tb = transform[k, 1]
         tc = transform[k, 2]
         td = transform[k, 3]
-        j_blind = s + min(blind, free_end)
-        j_free0 = s + blind
-        j_free1 = s + free_end
-        j_arc1 = s + arc_end
         if row0 - ext >= 0 and row0 + ext < height and col0 - ext >= 0 and col0 + ext < width:
-            # the whole cone lies inside the grid: no bounds checks
             p = tc * width + ta
             q = td * width + tb
             base = row0 * width + col0
-            for j in range(s, j_blind):
-                obs[base + p * dcol[j] + q * drow[j]] = True
-            for j in range(j_free0, j_free1):
-                i = base + p * dcol[j] + q * drow[j]
-                x = g[i] + (fa * prof_a[j] - fb * prof_b[j])
-                g[i] = min(max(x, lo), hi)
-                obs[i] = True
-            for j in range(j_free1, j_arc1):
-                i = base + p * dcol[j] + q * drow[j]
-                x = g[i] + c_occ * prof_a[j]
-                g[i] = min(max(x, lo), hi)
-                obs[i] = True
-        else:
-            for j in range(s, j_arc1):
-                dc = np.int64(dcol[j])
-                dr = np.int64(drow[j])
-                rr = row0 + tc * dc + td * dr
-                cc = col0 + ta * dc + tb * dr
+            dc = dcol[s : s + m]
+            dr = drow[s : s + m]
+            ib = idx_buf[:m]
+            for j in range(m):
+                ib[j] = np.int32(base + p * dc[j] + q * dr[j])
+            i0 = ib[:f0]
+            for j in range(f0):
+                i = np.uint64(np.uint32(i0[j]))
+                x = state[i]
+                state[i] = l0 if x < lo else x
+            i1 = ib[f0:f1]
+            for j in range(f1 - f0):
+                i = np.uint64(np.uint32(i1[j]))
+                x = state[i]
+                state[i] = max((l0 if x < lo else x) + c1[j], lo)
+            i2 = ib[f1:m]
+            for j in range(m - f1):
+                i = np.uint64(np.uint32(i2[j]))
+                x = state[i]
+                state[i] = min((l0 if x < lo else x) + c2[j], hi)
+        else:  # near the border: check every cell
+            for j in range(m):
+                dc_j = np.int64(dcol[s + j])
+                dr_j = np.int64(drow[s + j])
+                rr = row0 + tc * dc_j + td * dr_j
+                cc = col0 + ta * dc_j + tb * dr_j
                 if rr < 0 or rr >= height or cc < 0 or cc >= width:
                     continue
                 i = rr * width + cc
-                obs[i] = True
-                if j < j_free0 and j < j_free1:
-                    continue  # blind zone
-                if j < j_free1:
-                    x = g[i] + (fa * prof_a[j] - fb * prof_b[j])
+                x = state[i]
+                if x < lo:
+                    x = l0
+                if j < f0:
+                    state[i] = x
+                elif j < f1:
+                    state[i] = max(x + inc_buf[j], lo)
                 else:
-                    x = g[i] + c_occ * prof_a[j]
-                g[i] = min(max(x, lo), hi)
+                    state[i] = min(x + inc_buf[j], hi)

@@ -37,7 +37,10 @@ Geometry = namedtuple(
     ],
 )
 
-MISS = np.inf
+# Performance: the kernels are inlined into their callers at numba IR level and compiled
+# without the reference-counting runtime (_nrt=False; they never allocate). Passing the
+# Geometry tuple through ordinary calls, and refcounting its arrays, cost more than the
+# ray casting itself (see bench/bench_simulate.py).
 BOUNCE_OFFSET = 1e-8  # m: a bounced ray starts this far off the surface, on the side it came from
 
 
@@ -74,20 +77,6 @@ def geometry(scene: Scene) -> Geometry:
 
 
 @numba.njit(cache=True, inline="always")
-def _slab(o, d, lo, hi, t0, t1):
-    """Clip the ray interval [t0, t1] to lo <= o + t d <= hi; empty when t0 > t1."""
-    if d != 0.0:
-        ta = (lo - o) / d
-        tb = (hi - o) / d
-        if ta > tb:
-            ta, tb = tb, ta
-        return max(t0, ta), min(t1, tb)
-    if o < lo or o > hi:
-        return 1.0, 0.0
-    return t0, t1
-
-
-@numba.njit(cache=True, inline="always")
 def _interval(o, d, lo, hi):
     """The (t_in, t_out) where lo <= o + t d <= hi; (inf, -inf) when never."""
     if d != 0.0:
@@ -101,7 +90,7 @@ def _interval(o, d, lo, hi):
     return -np.inf, np.inf
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always", _nrt=False)
 def _cast_shapes(ox, oy, dx, dy, tmax, geo):
     """First hit of the ray o + t d (d unit, 0 < t <= tmax) on segments and circles.
 
@@ -118,8 +107,10 @@ def _cast_shapes(ox, oy, dx, dy, tmax, geo):
     size = geo.bucket_f[2]
     nbx = geo.bucket_i[0]
     nby = geo.bucket_i[1]
-    t0, t1 = _slab(ox, dx, gx0, gx0 + nbx * size, 0.0, tmax)
-    t0, t1 = _slab(oy, dy, gy0, gy0 + nby * size, t0, t1)
+    tx_in, tx_out = _interval(ox, dx, gx0, gx0 + nbx * size)
+    ty_in, ty_out = _interval(oy, dy, gy0, gy0 + nby * size)
+    t0 = max(0.0, tx_in, ty_in)
+    t1 = min(tmax, tx_out, ty_out)
     if t0 > t1:
         return best, best_cos, best_thr, bnx, bny
     px = ox + t0 * dx
@@ -203,7 +194,7 @@ def _cast_shapes(ox, oy, dx, dy, tmax, geo):
     return best, best_cos, best_thr, bnx, bny
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always", _nrt=False)
 def _cast_bitmap(ox, oy, dx, dy, tmax, bitmap, gx0, gy0, res):
     """First occupied pixel the ray o + t d (d unit, t <= tmax) enters (Amanatides-Woo).
 
@@ -256,7 +247,7 @@ def _cast_bitmap(ox, oy, dx, dy, tmax, bitmap, gx0, gy0, res):
     return np.inf, 0.0, 0.0, 0.0
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always", _nrt=False)
 def first_hit(ox, oy, dx, dy, tmax, geo):
     """First hit of the ray from (ox, oy) along unit (dx, dy) within tmax, on any surface.
 
@@ -272,7 +263,7 @@ def first_hit(ox, oy, dx, dy, tmax, geo):
     return t, c, thr, nx, ny
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, _nrt=False)
 def cast_ray(ox, oy, dx, dy, tmax, geo):
     """First hit of a ray, with everything a bounce needs.
 
@@ -292,7 +283,7 @@ def cast_ray(ox, oy, dx, dy, tmax, geo):
     return t, incidence, threshold, ox + t * dx, oy + t * dy, dx - 2.0 * dn * nx, dy - 2.0 * dn * ny
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always", _nrt=False)
 def trace_sub_ray(ox, oy, dx, dy, limit, max_bounces, geo):
     """Follow one sub-ray (unit direction): echo at the first hit within its surface's
     threshold, else mirror-bounce, up to ``max_bounces`` times, over a total path <= limit.

@@ -29,7 +29,7 @@ def sub_ray_offsets(beam_width: float, sub_rays: int) -> np.ndarray:
     return np.linspace(-beam_width / 2, beam_width / 2, sub_rays)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, _nrt=False)
 def echo_block(pose, mount, cos_off, sin_off, max_range, max_bounces, geo, echo, ideal, multipath):
     """Noise-free readings of a block of scans (every sensor, every sub-ray), in one call.
 

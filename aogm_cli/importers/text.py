@@ -1,0 +1,362 @@
+"""Plain-text range logs (whitespace or CSV columns) -> an aogm log, e.g. a course or lab sonar log.
+
+One row per scan; chosen columns hold the readings, the pose (x, y, yaw) and optionally the time,
+in the units the user names. Parsing is pure functions on text lines (``parse_table``,
+``build_text_log``); ``import_text`` only opens the files.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from aogm_cli.errors import InputError
+from aogm_cli.importers import Progress, clean_ranges, interpolate_poses, read_lines, wrap_angle
+from aogm_cli.logfile import Log, SensorSpec
+
+LENGTH_UNITS = {"mm": 0.001, "cm": 0.01, "m": 1.0}
+ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180, "ddeg": math.pi / 1800}  # ddeg: tenths of a degree
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
+DELIMITERS = {"auto": None, "comma": ",", "semicolon": ";", "whitespace": ""}
+COMMENT_PREFIXES = ("#", "%", "//")
+
+
+@dataclass(frozen=True)
+class Table:
+    """A text table: ``rows`` of cells (strings), each with its 1-based ``line_numbers``;
+    ``header`` holds the column names when the first row is not numeric."""
+
+    file: str | None
+    header: tuple[str, ...] | None
+    rows: list[list[str]]
+    line_numbers: list[int]
+
+    @property
+    def width(self) -> int:
+        if self.header is not None:
+            return len(self.header)
+        return len(self.rows[0]) if self.rows else 0
+
+    def column_name(self, col: int) -> str:
+        """How errors name column ``col`` (0-based): its header name, or "column k" (1-based)."""
+        if self.header is not None and self.header[col]:
+            return self.header[col]
+        return f"column {col + 1}"
+
+    def error(self, message: str, key: str | None = None, line: int | None = None) -> InputError:
+        text = f"line {line}: {message}" if line is not None else message
+        return InputError(text, file=self.file, key=key)
+
+    def column(self, col: int, *, missing_ok: bool = False) -> np.ndarray:
+        """Column ``col`` (0-based) as float64. With ``missing_ok`` an empty cell is NaN and NaN or
+        inf are allowed; without, every cell must be a finite number."""
+        cells = [row[col] if row[col] or not missing_ok else "nan" for row in self.rows]
+        try:
+            values = np.array(cells, dtype=np.float64)
+        except ValueError:
+            values = None
+        if values is not None and (missing_ok or np.isfinite(values).all()):
+            return values
+        for cell, line in zip(cells, self.line_numbers, strict=True):  # find the first bad cell
+            try:
+                v = float(cell)
+            except ValueError:
+                got = repr(cell) if cell else "an empty cell"
+                raise self.error(f"expected a number, got {got}", self.column_name(col), line) from None
+            if not math.isfinite(v):
+                raise self.error(f"expected a finite number, got {cell!r}", self.column_name(col), line)
+        raise AssertionError("unreachable")  # pragma: no cover
+
+
+@dataclass(frozen=True)
+class TextOptions:
+    """How to read the columns. Column specs are 1-based numbers, ranges "4-19" / "4-", or header
+    names, comma-separated. ``range_columns`` None = every column not used for the pose or time.
+
+    ``bearings``: "ring" (as many sensors as range columns, evenly spaced from 0), "ring:N[:START[:STEP]]"
+    or a comma-separated list, in ``bearing_unit``; each sensor sits at ``sensor_radius`` (m) along its
+    bearing. ``no_echo``: reading values (in the file's unit) that mean no echo. Readings >= ``max_range``
+    (m) become +inf, negative ones NaN. Without time columns, scan k is at time k * ``period``.
+    """
+
+    range_columns: str | None = None
+    pose_columns: str = "1,2,3"
+    range_time_column: str | None = None
+    pose_time_column: str | None = None
+    range_unit: str = "m"
+    position_unit: str = "m"
+    angle_unit: str = "rad"
+    time_unit: str = "s"
+    bearing_unit: str = "deg"
+    no_echo: tuple[float, ...] = ()
+    bearings: str = "ring"
+    sensor_radius: float = 0.0
+    kind: str = "sonar"
+    beam_width: float = math.radians(30.0)
+    min_range: float = 0.15
+    max_range: float = 5.0
+    noise_sigma: float = 0.02
+    period: float = 1.0
+    delimiter: str = "auto"
+
+
+@dataclass(frozen=True)
+class TextImport:
+    """The imported log; ``outside`` scans fell outside the poses' time span and were dropped."""
+
+    log: Log
+    outside: int = 0
+    notes: tuple[str, ...] = ()
+
+
+def _is_comment(line: str) -> bool:
+    s = line.strip()
+    return not s or s.startswith(COMMENT_PREFIXES)
+
+
+def _split(line: str, delimiter: str) -> list[str]:
+    if delimiter == "":
+        return line.split()
+    return [cell.strip() for cell in next(csv.reader([line], delimiter=delimiter))]
+
+
+def _is_number(cell: str) -> bool:
+    try:
+        float(cell)
+    except ValueError:
+        return False
+    return True
+
+
+def parse_table(lines: Iterable[str], file: str | None = None, delimiter: str = "auto") -> Table:
+    """Split text lines into a table. Blank lines and lines starting with #, % or // are skipped.
+
+    ``delimiter``: "auto" (comma or semicolon when the first row holds one, else whitespace),
+    "comma", "semicolon" or "whitespace". A first row with a non-numeric cell is the header.
+    Every row must have as many cells as the first.
+    """
+    if delimiter not in DELIMITERS:
+        raise InputError(f"expected one of {', '.join(DELIMITERS)}, got {delimiter!r}", key="delimiter")
+    sep = DELIMITERS[delimiter]
+    header: tuple[str, ...] | None = None
+    rows: list[list[str]] = []
+    numbers: list[int] = []
+    width = first_line = None
+    for n, line in enumerate(lines, start=1):
+        if _is_comment(line):
+            continue
+        if sep is None:
+            sep = "," if "," in line else ";" if ";" in line else ""
+        cells = _split(line, sep)
+        if width is None:
+            width, first_line = len(cells), n
+            if any(c and not _is_number(c) for c in cells):
+                header = tuple(cells)
+                continue
+        if len(cells) != width:
+            raise InputError(f"line {n}: expected {width} columns (as on line {first_line}), got {len(cells)}", file=file)
+        rows.append(cells)
+        numbers.append(n)
+    if not rows:
+        raise InputError("no data rows", file=file)
+    return Table(file, header, rows, numbers)
+
+
+def resolve_columns(spec: str, table: Table, key: str) -> list[int]:
+    """0-based column indices of a spec such as "3", "4-19", "4-", "x,y,theta" (header names)."""
+    names = {name: i for i, name in enumerate(table.header or ()) if name}
+    out: list[int] = []
+    for item in (s.strip() for s in spec.split(",")):
+        if not item:
+            raise InputError(f"empty item in column list {spec!r}", file=table.file, key=key)
+        if item in names:
+            out.append(names[item])
+            continue
+        lo, dash, hi = item.partition("-")
+        try:
+            first = int(lo)
+            last = (int(hi) if hi else table.width) if dash else first
+        except ValueError:
+            known = f"; the header names {', '.join(names)}" if names else " (the file has no header row)"
+            raise InputError(
+                f"expected a column number (1-based), a range such as 4-19, or a header name, got {item!r}{known}",
+                file=table.file,
+                key=key,
+            ) from None
+        if not (1 <= first <= last <= table.width):
+            raise InputError(f"column {item!r} is outside 1..{table.width}", file=table.file, key=key)
+        out.extend(range(first - 1, last))
+    return out
+
+
+def parse_bearings(spec: str, count: int, unit: str = "deg") -> np.ndarray:
+    """(count,) sensor bearings (rad) from "ring", "ring:N[:START[:STEP]]" or a list "90,50,30,..."."""
+    scale = _unit(ANGLE_UNITS, unit, "bearing_unit")
+    spec = spec.strip()
+    if spec == "ring" or spec.startswith("ring:"):
+        parts = spec.split(":")[1:]
+        try:
+            values = [float(p) for p in parts]
+        except ValueError:
+            raise InputError(f"expected ring:N[:START[:STEP]] with numbers, got {spec!r}", key="bearings") from None
+        if len(values) > 3:
+            raise InputError(f"expected ring:N[:START[:STEP]], got {spec!r}", key="bearings")
+        n = int(values[0]) if values else count
+        if values and (values[0] != n or n < 1):
+            raise InputError(f"expected a whole number of sensors >= 1 in {spec!r}", key="bearings")
+        start = values[1] * scale if len(values) > 1 else 0.0
+        step = values[2] * scale if len(values) > 2 else 2 * math.pi / n
+        bearings = start + step * np.arange(n)
+    else:
+        try:
+            bearings = np.array([float(v) for v in spec.split(",")]) * scale
+        except ValueError:
+            raise InputError(f"expected 'ring', 'ring:N[:START[:STEP]]' or a comma-separated list of numbers, got {spec!r}", key="bearings") from None
+    if bearings.size != count:
+        raise InputError(f"{bearings.size} bearings for {count} range columns; give one bearing per range column", key="bearings")
+    return wrap_angle(bearings)
+
+
+def _unit(table: dict[str, float], unit: str, key: str) -> float:
+    if unit not in table:
+        raise InputError(f"expected one of {', '.join(table)}, got {unit!r}", key=key)
+    return table[unit]
+
+
+def _one_column(spec: str | None, table: Table, key: str) -> int | None:
+    if spec is None:
+        return None
+    cols = resolve_columns(spec, table, key)
+    if len(cols) != 1:
+        raise InputError(f"expected one column, got {len(cols)} from {spec!r}", file=table.file, key=key)
+    return cols[0]
+
+
+def build_text_log(
+    range_table: Table,
+    pose_table: Table | None = None,
+    options: TextOptions = TextOptions(),
+    mounts: np.ndarray | None = None,
+    source: str = "aogm import text",
+) -> TextImport:
+    """A ``Log`` from a table of readings and a table of poses (None: the poses are columns of
+    ``range_table``). Rows pair up one to one, or by time when both tables have a time column.
+
+    ``mounts`` (S, 3): each sensor's x, y (m), yaw (rad) in the robot frame, instead of
+    ``options.bearings`` and ``options.sensor_radius``.
+    """
+    o = options
+    length = _unit(LENGTH_UNITS, o.range_unit, "range_unit")
+    position = _unit(LENGTH_UNITS, o.position_unit, "position_unit")
+    angle = _unit(ANGLE_UNITS, o.angle_unit, "angle_unit")
+    time_scale = _unit(TIME_UNITS, o.time_unit, "time_unit")
+    if o.kind not in ("sonar", "laser"):
+        raise InputError(f"expected sonar or laser, got {o.kind!r}", key="kind")
+    for key in ("beam_width", "max_range", "period"):
+        v = getattr(o, key)
+        if not (math.isfinite(v) and v > 0):
+            raise InputError(f"expected a positive number, got {v}", key=key)
+    if not (0 <= o.min_range < o.max_range):
+        raise InputError(f"expected 0 <= min_range < max_range ({o.max_range}), got {o.min_range}", key="min_range")
+
+    same = pose_table is None
+    poses_from = range_table if same else pose_table
+    pose_cols = resolve_columns(o.pose_columns, poses_from, "pose_columns")
+    if len(pose_cols) != 3:
+        raise InputError(f"expected 3 pose columns (x, y, yaw), got {len(pose_cols)} from {o.pose_columns!r}", file=poses_from.file, key="pose_columns")
+    range_time = _one_column(o.range_time_column, range_table, "range_time_column")
+    pose_time = _one_column(o.pose_time_column, poses_from, "pose_time_column")
+    if same and range_time is None:
+        range_time = pose_time
+    used = {range_time} | (set(pose_cols) | {pose_time} if same else set())
+    if o.range_columns is not None:
+        range_cols = resolve_columns(o.range_columns, range_table, "range_columns")
+    else:
+        range_cols = [c for c in range(range_table.width) if c not in used]
+    if not range_cols:
+        raise InputError("no range columns left; name them with range_columns", file=range_table.file, key="range_columns")
+    clash = sorted(set(range_cols) & used)
+    if clash:
+        raise InputError(f"{range_table.column_name(clash[0])} is both a range column and a pose or time column", file=range_table.file, key="range_columns")
+
+    raw = np.column_stack([range_table.column(c, missing_ok=True) for c in range_cols])
+    ranges = raw * length
+    if o.no_echo:
+        ranges[np.isin(raw, np.asarray(o.no_echo, dtype=np.float64))] = np.inf
+    n = raw.shape[0]
+    time = range_table.column(range_time) * time_scale if range_time is not None else o.period * np.arange(n)
+
+    pose_raw = np.column_stack([poses_from.column(c) for c in pose_cols])
+    pose = np.column_stack([pose_raw[:, :2] * position, wrap_angle(pose_raw[:, 2] * angle)])
+    keep = np.ones(n, dtype=bool)
+    notes: list[str] = []
+    if not same and pose_time is not None:
+        if range_time is None:
+            raise InputError("poses have a time column but readings do not: name range_time_column too", file=range_table.file, key="range_time_column")
+        pose, keep = interpolate_poses(poses_from.column(pose_time) * time_scale, pose, time)
+        if not keep.any():
+            raise InputError("no scan lies within the time span of the poses", file=pose_table.file, key="pose_time_column")
+        if (~keep).any():
+            notes.append(f"dropped {int((~keep).sum())} scans outside the time span of the poses")
+    elif pose.shape[0] != n:
+        raise InputError(
+            f"{pose.shape[0]} pose rows for {n} range rows; give as many, or time columns in both files to match by time",
+            file=pose_table.file,
+            key="poses",
+        )
+
+    s = len(range_cols)
+    if mounts is not None:
+        mount = np.asarray(mounts, dtype=np.float64)
+        if mount.shape != (s, 3):
+            raise InputError(f"expected {s} sensor mounts (one per range column) of x y yaw, got shape {mount.shape}", key="mounts")
+    else:
+        bearings = parse_bearings(o.bearings, s, o.bearing_unit)
+        mount = np.column_stack([o.sensor_radius * np.cos(bearings), o.sensor_radius * np.sin(bearings), bearings])
+    sensor = SensorSpec(mount, o.kind, float(o.beam_width), float(o.min_range), float(o.max_range), float(o.noise_sigma))
+    log = Log(time=time[keep], pose=pose[keep], ranges=clean_ranges(ranges[keep], o.max_range), sensor=sensor, source=source)
+    return TextImport(log, int((~keep).sum()), tuple(notes))
+
+
+def read_table(path: str | Path, delimiter: str = "auto", progress: Progress | None = None) -> Table:
+    """``parse_table`` of the (plain or gzipped) file at ``path``."""
+    try:
+        return parse_table(read_lines(path, progress), file=str(path), delimiter=delimiter)
+    except InputError as exc:
+        raise exc.in_file(str(path)) from None
+
+
+def read_mounts(path: str | Path, position_unit: str = "m", bearing_unit: str = "deg", delimiter: str = "auto") -> np.ndarray:
+    """(S, 3) sensor mounts from a table with columns x, y, yaw (one row per sensor) -> metres, radians."""
+    table = read_table(path, delimiter)
+    if table.width != 3:
+        raise InputError(f"expected 3 columns (x, y, yaw), got {table.width}", file=str(path), key="mounts")
+    m = np.column_stack([table.column(c) for c in range(3)])
+    m[:, :2] *= _unit(LENGTH_UNITS, position_unit, "position_unit")
+    m[:, 2] = wrap_angle(m[:, 2] * _unit(ANGLE_UNITS, bearing_unit, "bearing_unit"))
+    return m
+
+
+def import_text(
+    ranges_path: str | Path,
+    poses_path: str | Path | None = None,
+    options: TextOptions = TextOptions(),
+    mounts_path: str | Path | None = None,
+    progress: Progress | None = None,
+) -> TextImport:
+    """Read readings (and poses, from the same file when ``poses_path`` is None) into a ``Log``.
+
+    The log's ``source`` reads ``aogm import text <ranges file> [<poses file>]``.
+    """
+    delimiter = options.delimiter
+    range_table = read_table(ranges_path, delimiter, progress)
+    same = poses_path is None or Path(poses_path) == Path(ranges_path)
+    pose_table = None if same else read_table(poses_path, delimiter)
+    mounts = read_mounts(mounts_path, options.position_unit, options.bearing_unit, delimiter) if mounts_path else None
+    source = f"aogm import text {Path(ranges_path).name}" + ("" if same else f" {Path(poses_path).name}")
+    return build_text_log(range_table, pose_table, options, mounts, source=source)
