@@ -67,7 +67,9 @@ def test_flaser_log_is_a_laser_with_the_line_pose_and_inf_at_max_range():
 
 
 def test_flaser_options_start_angle_resolution_mount_and_max_range():
-    opts = dict(start_angle=0.0, angular_res=0.1, mount=(0.5, 0.0, HALF_PI), max_range=2.0, beam_width=0.02, noise_sigma=0.05)
+    opts = dict(
+        start_angle=0.0, angular_res=0.1, mount=(0.5, 0.0, HALF_PI), max_range=2.0, beam_width=0.02, noise_sigma=0.05
+    )
     log = parse_carmen([FLASER], CarmenOptions(**opts)).log
     assert_allclose(log.sensor.mount, [[0.5, 0, HALF_PI], [0.5, 0, HALF_PI + 0.1], [0.5, 0, HALF_PI + 0.2]])
     assert_array_equal(log.ranges, np.array([[1.0, np.inf, np.inf]], dtype=np.float32))
@@ -164,7 +166,12 @@ def test_pose_interpolation_takes_the_short_way_round_and_flags_times_outside():
 
 
 def test_scans_outside_the_odometry_span_are_dropped_and_counted():
-    lines = [RAWLASER.format(t=0.5), "ODOM 0 0 0 0 0 0 1.0 h 1.0", RAWLASER.format(t=2.0), "ODOM 2 4 1.0 0 0 0 3.0 h 3.0"]
+    lines = [
+        RAWLASER.format(t=0.5),
+        "ODOM 0 0 0 0 0 0 1.0 h 1.0",
+        RAWLASER.format(t=2.0),
+        "ODOM 2 4 1.0 0 0 0 3.0 h 3.0",
+    ]
     result = parse_carmen(lines)
     assert result.outside == 1 and result.log.n_scans == 1
     assert_array_equal(result.log.time, [2.0])
@@ -188,7 +195,10 @@ def test_pose_lines_and_their_errors():
     ("line", "match"),
     [
         ("FLASER 3 1.0 2.5 1.0 2.0 0.5 0.9 1.9 0.4 10.0 host 10.01", r"line 4: expected 13 fields after FLASER"),
-        ("FLASER 3 1.0 oops 80 1 2 0.5 0.9 1.9 0.4 10.0 host 10.01", r"line 4: field 3 \(range reading\): expected a number, got 'oops'"),
+        (
+            "FLASER 3 1.0 oops 80 1 2 0.5 0.9 1.9 0.4 10.0 host 10.01",
+            r"line 4: field 3 \(range reading\): expected a number, got 'oops'",
+        ),
         ("FLASER x", r"line 4: field 1 \(num_readings\): expected a whole number"),
         ("FLASER -2 1 h 1", r"line 4: field 1 \(num_readings\): expected a count >= 0"),
         ("SONAR 0.5 2 1.0 2.0 0 0 0 1 h 1", r"line 4: expected 13 fields after SONAR"),
@@ -218,7 +228,9 @@ def test_unknown_messages_are_skipped_and_counted():
 def test_different_beam_counts_or_message_types_are_errors_naming_the_line():
     four = "FLASER 4 1 1 1 1 0 0 0 0 0 0 11.0 h 11.0"
     err = error_of([FLASER, "NEFF 1", four])
-    assert err.key == "FLASER" and err.message.startswith("line 3: 4 readings, but the first FLASER scan (line 1) has 3")
+    assert err.key == "FLASER" and err.message.startswith(
+        "line 3: 4 readings, but the first FLASER scan (line 1) has 3"
+    )
     mixed = [FLASER, FLASER.replace("FLASER", "RLASER")]
     err = error_of(mixed)
     assert err.message.startswith("line 2: a RLASER scan") and "--message" in err.message
@@ -248,10 +260,14 @@ def test_import_carmen_reads_gzip_and_names_the_file(tmp_path):
 
 def test_cli_writes_the_log_and_reports_errors_with_exit_2(tmp_path):
     log_path = tmp_path / "tiny.log"
-    log_path.write_text("\n".join(["ODOM 0 0 0 0 0 0 1.0 h 1.0", RAWLASER.format(t=2.0), "ODOM 2 4 1.0 0 0 0 3.0 h 3.0"]) + "\n")
+    log_path.write_text(
+        "\n".join(["ODOM 0 0 0 0 0 0 1.0 h 1.0", RAWLASER.format(t=2.0), "ODOM 2 4 1.0 0 0 0 3.0 h 3.0"]) + "\n"
+    )
     out = tmp_path / "tiny.h5"
     runner = CliRunner()
-    res = runner.invoke(main, ["import", "carmen", str(log_path), "-o", str(out), "--max-range", "5", "--beam-width", "1"])
+    res = runner.invoke(
+        main, ["import", "carmen", str(log_path), "-o", str(out), "--max-range", "5", "--beam-width", "1"]
+    )
     assert res.exit_code == 0, res.output
     log = read_log(out)
     assert log.source == "aogm import carmen tiny.log"

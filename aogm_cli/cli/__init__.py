@@ -61,6 +61,8 @@ def _register() -> None:
     for module, name in (
         ("simulate", "simulate"),
         ("map_log", "map_log"),
+        ("render", "render"),
+        ("export", "export"),
         ("import_log", "import_log"),
     ):
         main.add_command(getattr(importlib.import_module(f"aogm_cli.cli.{module}"), name))

@@ -49,9 +49,9 @@ def _refuse_overwriting(output: str, *inputs: str | None) -> None:
             raise InputError("refusing to overwrite an input file; choose another output", file=output)
 
 
-def _report(output: str, log, what: str, extra: list[str]) -> None:
+def _report(output: str, log, what: str, origin: str, extra: list[str]) -> None:
     s = log.sensor
-    click.echo(f"{output}: {log.n_scans} {what} scans x {s.count} {s.kind} beams", err=True)
+    click.echo(f"{output}: {log.n_scans} {what} x {s.count} {s.kind} beams from {origin}", err=True)
     for line in extra:
         click.echo(f"  {line}", err=True)
 
@@ -72,13 +72,42 @@ def _report(output: str, log, what: str, extra: list[str]) -> None:
     help="line: the pose in the scan line (FLASER/RLASER laser pose, ROBOTLASER robot pose); odom/truepos: "
     "interpolated by time from ODOM/TRUEPOS lines; auto: line where there is one, else TRUEPOS if present, else ODOM.",
 )
-@click.option("--start-angle", type=float, default=-90.0, show_default=True, help="First beam's bearing (deg) of FLASER/RLASER, whose lines do not store it.")
-@click.option("--angular-res", type=_positive, help="Beam spacing (deg) of FLASER/RLASER. Default: 1 deg for 180/181 beams, 0.5 for 360/361, 0.25 for 400/401 (as CARMEN guesses).")
-@click.option("--max-range", type=_positive, help="Max range (m); readings at or beyond it become +inf (no echo). Default: the line's own (RAWLASER, ROBOTLASER), else 80 m for lasers, 5 m for SONAR.")
-@click.option("--min-range", type=_non_negative, help="Min range (m) of the sensor. Default 0 for lasers, 0.15 for SONAR.")
-@click.option("--beam-width", type=_angle_deg, help="Beam (cone) width (deg). Default 0.5 for lasers, the cone_angle of SONAR lines.")
-@click.option("--noise-sigma", type=_non_negative, help="Range noise (m) recorded in the log. Default 0.01 for lasers, 0.02 for SONAR.")
-@click.option("--mount", type=(float, float, float), metavar="X Y YAW", help="Laser mount in the robot frame (m, m, deg) for FLASER, RLASER, RAWLASER. Default 0 0 0.")
+@click.option(
+    "--start-angle",
+    type=float,
+    default=-90.0,
+    show_default=True,
+    help="First beam's bearing (deg) of FLASER/RLASER, whose lines do not store it.",
+)
+@click.option(
+    "--angular-res",
+    type=_positive,
+    help="Beam spacing (deg) of FLASER/RLASER. Default: 1 deg for 180/181 beams, 0.5 for 360/361, 0.25 for 400/401 (as CARMEN guesses).",
+)
+@click.option(
+    "--max-range",
+    type=_positive,
+    help="Max range (m); readings at or beyond it become +inf (no echo). Default: the line's own (RAWLASER, ROBOTLASER), else 80 m for lasers, 5 m for SONAR.",
+)
+@click.option(
+    "--min-range", type=_non_negative, help="Min range (m) of the sensor. Default 0 for lasers, 0.15 for SONAR."
+)
+@click.option(
+    "--beam-width",
+    type=_angle_deg,
+    help="Beam (cone) width (deg). Default 0.5 for lasers, the cone_angle of SONAR lines.",
+)
+@click.option(
+    "--noise-sigma",
+    type=_non_negative,
+    help="Range noise (m) recorded in the log. Default 0.01 for lasers, 0.02 for SONAR.",
+)
+@click.option(
+    "--mount",
+    type=(float, float, float),
+    metavar="X Y YAW",
+    help="Laser mount in the robot frame (m, m, deg) for FLASER, RLASER, RAWLASER. Default 0 0 0.",
+)
 @quiet_option
 def carmen(
     log_file: str,
@@ -124,7 +153,10 @@ def carmen(
         mount=None if mount is None else (mount[0], mount[1], math.radians(mount[2])),
     )
     _refuse_overwriting(output, log_file)
-    with _option_names(("mount", "pose_from", "message")), progress_bar(file_kilobytes(log_file), "import", quiet, unit="kB") as advance:
+    with (
+        _option_names(("mount", "pose_from", "message")),
+        progress_bar(file_kilobytes(log_file), "import", quiet, unit="kB") as advance,
+    ):
         result = import_carmen(log_file, options, progress=advance)
     write_log(output, result.log)
     if not quiet:
@@ -132,35 +164,116 @@ def carmen(
         if result.skipped:
             extra.append("skipped lines: " + ", ".join(f"{k} {v}" for k, v in result.skipped.items()))
         extra.extend(result.notes)
-        _report(output, result.log, result.message, extra)
+        _report(output, result.log, f"{result.message} scans", Path(log_file).name, extra)
 
 
 @import_log.command("text")
-@click.option("--ranges", "ranges_file", required=True, type=click.Path(dir_okay=False), help="Table of readings: one row per scan (whitespace, comma or semicolon separated).")
-@click.option("--poses", "poses_file", type=click.Path(dir_okay=False), help="Table of poses (x, y, yaw). Default: pose columns of the --ranges file.")
+@click.option(
+    "--ranges",
+    "ranges_file",
+    required=True,
+    type=click.Path(dir_okay=False),
+    help="Table of readings: one row per scan (whitespace, comma or semicolon separated).",
+)
+@click.option(
+    "--poses",
+    "poses_file",
+    type=click.Path(dir_okay=False),
+    help="Table of poses (x, y, yaw). Default: pose columns of the --ranges file.",
+)
 @output_option("Log file to write (HDF5).")
-@click.option("--range-columns", help="Reading columns: 1-based numbers, ranges (4-19, 4-) or header names. Default: every column not used for pose or time.")
+@click.option(
+    "--range-columns",
+    help="Reading columns: 1-based numbers, ranges (4-19, 4-) or header names. Default: every column not used for pose or time.",
+)
 @click.option("--pose-columns", default="1,2,3", show_default=True, help="The x, y, yaw columns of the pose table.")
 @click.option("--range-time-column", help="Time column of the ranges table. Without one, scan k is at k * --period.")
-@click.option("--pose-time-column", help="Time column of the pose table; with --range-time-column, poses are interpolated by time instead of paired row by row.")
-@click.option("--range-unit", type=click.Choice(list(LENGTH_UNITS)), default="m", show_default=True, help="Unit of the readings.")
-@click.option("--position-unit", type=click.Choice(list(LENGTH_UNITS)), default="m", show_default=True, help="Unit of pose x, y (and of --mounts).")
-@click.option("--angle-unit", type=click.Choice(list(ANGLE_UNITS)), default="rad", show_default=True, help="Unit of pose yaw (ddeg = tenths of a degree).")
-@click.option("--time-unit", type=click.Choice(list(TIME_UNITS)), default="s", show_default=True, help="Unit of the time columns.")
-@click.option("--no-echo", type=float, multiple=True, help="A reading value (in --range-unit) that means no echo; repeatable. Stored as +inf.")
-@click.option("--bearings", help="Sensor bearings: 'ring' (evenly spaced from 0), 'ring:N[:START[:STEP]]' or a list such as 90,50,30,10,-10,-30,-50,-90. [default: ring]")
-@click.option("--bearing-unit", type=click.Choice(list(ANGLE_UNITS)), default="deg", show_default=True, help="Unit of --bearings and of the yaw in --mounts.")
-@click.option("--sensor-radius", type=_non_negative, default=0.0, show_default=True, help="Distance (m) of each sensor from the robot centre along its bearing.")
-@click.option("--mounts", "mounts_file", type=click.Path(dir_okay=False), help="Table of sensor mounts x y yaw (one row per range column) instead of --bearings.")
+@click.option(
+    "--pose-time-column",
+    help="Time column of the pose table; with --range-time-column, poses are interpolated by time instead of paired row by row.",
+)
+@click.option(
+    "--range-unit", type=click.Choice(list(LENGTH_UNITS)), default="m", show_default=True, help="Unit of the readings."
+)
+@click.option(
+    "--position-unit",
+    type=click.Choice(list(LENGTH_UNITS)),
+    default="m",
+    show_default=True,
+    help="Unit of pose x, y (and of --mounts).",
+)
+@click.option(
+    "--angle-unit",
+    type=click.Choice(list(ANGLE_UNITS)),
+    default="rad",
+    show_default=True,
+    help="Unit of pose yaw (ddeg = tenths of a degree).",
+)
+@click.option(
+    "--time-unit", type=click.Choice(list(TIME_UNITS)), default="s", show_default=True, help="Unit of the time columns."
+)
+@click.option(
+    "--no-echo",
+    type=float,
+    multiple=True,
+    help="A reading value (in --range-unit) that means no echo; repeatable. Stored as +inf.",
+)
+@click.option(
+    "--bearings",
+    help="Sensor bearings: 'ring' (evenly spaced from 0), 'ring:N[:START[:STEP]]' or a list such as 90,50,30,10,-10,-30,-50,-90. [default: ring]",
+)
+@click.option(
+    "--bearing-unit",
+    type=click.Choice(list(ANGLE_UNITS)),
+    default="deg",
+    show_default=True,
+    help="Unit of --bearings and of the yaw in --mounts.",
+)
+@click.option(
+    "--sensor-radius",
+    type=_non_negative,
+    default=0.0,
+    show_default=True,
+    help="Distance (m) of each sensor from the robot centre along its bearing.",
+)
+@click.option(
+    "--mounts",
+    "mounts_file",
+    type=click.Path(dir_okay=False),
+    help="Table of sensor mounts x y yaw (one row per range column) instead of --bearings.",
+)
 @click.option("--kind", type=click.Choice(["sonar", "laser"]), default="sonar", show_default=True)
 @click.option("--beam-width", type=_angle_deg, default=30.0, show_default=True, help="Beam (cone) width in degrees.")
 @click.option("--min-range", type=_non_negative, default=0.15, show_default=True, help="Min range (m).")
-@click.option("--max-range", type=_positive, default=5.0, show_default=True, help="Max range (m); readings at or beyond it become +inf.")
-@click.option("--noise-sigma", type=_non_negative, default=0.02, show_default=True, help="Range noise (m) recorded in the log.")
-@click.option("--period", type=_positive, default=1.0, show_default=True, help="Seconds between scans when there is no time column.")
+@click.option(
+    "--max-range",
+    type=_positive,
+    default=5.0,
+    show_default=True,
+    help="Max range (m); readings at or beyond it become +inf.",
+)
+@click.option(
+    "--noise-sigma", type=_non_negative, default=0.02, show_default=True, help="Range noise (m) recorded in the log."
+)
+@click.option(
+    "--period",
+    type=_positive,
+    default=1.0,
+    show_default=True,
+    help="Seconds between scans when there is no time column.",
+)
 @click.option("--delimiter", type=click.Choice(list(DELIMITERS)), default="auto", show_default=True)
 @quiet_option
-def text(ranges_file: str, poses_file: str | None, output: str, bearings: str | None, mounts_file: str | None, beam_width: float, quiet: bool, **columns) -> None:
+def text(
+    ranges_file: str,
+    poses_file: str | None,
+    output: str,
+    bearings: str | None,
+    mounts_file: str | None,
+    beam_width: float,
+    quiet: bool,
+    **columns,
+) -> None:
     """Import readings and poses from text tables (whitespace or CSV, optional header row).
 
     Each row is one scan. Readings become metres: negative ones NaN (invalid), --no-echo values
@@ -185,4 +298,4 @@ def text(ranges_file: str, poses_file: str | None, output: str, bearings: str | 
         result = import_text(ranges_file, poses_file, options, mounts_path=mounts_file, progress=advance)
     write_log(output, result.log)
     if not quiet:
-        _report(output, result.log, "text", list(result.notes))
+        _report(output, result.log, "scans", Path(ranges_file).name, list(result.notes))

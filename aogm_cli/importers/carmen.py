@@ -182,7 +182,9 @@ def parse_scan_line(line: str, line_no: int, options: CarmenOptions = CarmenOpti
     name = f.name
     if name in ("FLASER", "RLASER"):
         n = f.count(1, "num_readings")
-        f.exact_length(2 + n + 6 + _TRAILER, f"num_readings, {n} readings, x y theta odom_x odom_y odom_theta, 3 trailer fields")
+        f.exact_length(
+            2 + n + 6 + _TRAILER, f"num_readings, {n} readings, x y theta odom_x odom_y odom_theta, 3 trailer fields"
+        )
         ranges = f.numbers(2, 2 + n, "range reading")
         pose = f.numbers(2 + n, 2 + n + 3, "x y theta")
         res = options.angular_res if options.angular_res is not None else guess_angular_res(n)
@@ -198,18 +200,32 @@ def parse_scan_line(line: str, line_no: int, options: CarmenOptions = CarmenOpti
         m = f.count(9 + n, "num_remissions")
         tail = 6 + 5 if robot else 0
         after = "laser and robot pose, tv rv forward_safety side_safety turn_axis, " if robot else ""
-        f.exact_length(10 + n + m + tail + _TRAILER, f"7 config fields, num_readings, {n} readings, num_remissions, {m} remissions, {after}3 trailer fields")
+        f.exact_length(
+            10 + n + m + tail + _TRAILER,
+            f"7 config fields, num_readings, {n} readings, num_remissions, {m} remissions, {after}3 trailer fields",
+        )
         ranges = f.numbers(9, 9 + n, "range reading")
         f.numbers(10 + n, 10 + n + m, "remission")
         laser_pose = pose = None
         if robot:
             laser_pose = f.numbers(10 + n + m, 13 + n + m, "laser_x laser_y laser_theta")
             pose = f.numbers(13 + n + m, 16 + n + m, "robot_x robot_y robot_theta")
-        return CarmenScan(name, line_no, f.time(), ranges, laser_beams(n, start, res), pose=pose, laser_pose=laser_pose, max_range=max_range)
+        return CarmenScan(
+            name,
+            line_no,
+            f.time(),
+            ranges,
+            laser_beams(n, start, res),
+            pose=pose,
+            laser_pose=laser_pose,
+            max_range=max_range,
+        )
     if name == "SONAR":
         cone = f.number(1, "cone_angle")
         n = f.count(2, "num_sonars")
-        f.exact_length(3 + 4 * n + _TRAILER, f"cone_angle, num_sonars, {n} readings, {n} x y theta offsets, 3 trailer fields")
+        f.exact_length(
+            3 + 4 * n + _TRAILER, f"cone_angle, num_sonars, {n} readings, {n} x y theta offsets, 3 trailer fields"
+        )
         ranges = f.numbers(3, 3 + n, "range reading")
         beams = f.numbers(3 + n, 3 + 4 * n, "sonar offset x y theta").reshape(n, 3)
         return CarmenScan(name, line_no, f.time(), ranges, beams, cone_angle=cone)
@@ -262,7 +278,9 @@ def _laser_offsets(scans: list[CarmenScan]) -> np.ndarray:
     robot = np.array([s.pose for s in scans])
     d = laser[:, :2] - robot[:, :2]
     c, s = np.cos(robot[:, 2]), np.sin(robot[:, 2])
-    return np.column_stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], wrap_angle(laser[:, 2] - robot[:, 2])])
+    return np.column_stack(
+        [c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], wrap_angle(laser[:, 2] - robot[:, 2])]
+    )
 
 
 def _compose(offset: np.ndarray, beams: np.ndarray) -> np.ndarray:
@@ -276,7 +294,9 @@ def _compose(offset: np.ndarray, beams: np.ndarray) -> np.ndarray:
     return out
 
 
-def parse_carmen(lines: Iterable[str], options: CarmenOptions = CarmenOptions(), source: str = "aogm import carmen") -> CarmenImport:
+def parse_carmen(
+    lines: Iterable[str], options: CarmenOptions = CarmenOptions(), source: str = "aogm import carmen"
+) -> CarmenImport:
     """Turn the lines of a CARMEN log into a ``Log`` (errors name the line but not the file).
 
     Scan lines of the chosen type are parsed as they come; ODOM/TRUEPOS lines are parsed only
@@ -311,6 +331,8 @@ def parse_carmen(lines: Iterable[str], options: CarmenOptions = CarmenOptions(),
 
     first = scans[0]
     message = first.message
+    if first.count == 0:
+        raise InputError(f"line {first.line}: a scan without readings; nothing to import", key=message)
     source_kind = _pose_source(options.pose_from, message, pose_lines)
     for name, entries in pose_lines.items():
         if name.lower() != source_kind and entries:
@@ -323,7 +345,9 @@ def parse_carmen(lines: Iterable[str], options: CarmenOptions = CarmenOptions(),
         if options.mount is not None:
             offset = np.asarray(options.mount, dtype=np.float64)
     elif options.mount is not None:
-        raise InputError(f"{message} lines carry their own sensor mounts; mount applies to FLASER, RLASER and RAWLASER", key="mount")
+        raise InputError(
+            f"{message} lines carry their own sensor mounts; mount applies to FLASER, RLASER and RAWLASER", key="mount"
+        )
 
     line_pose = None
     if message.startswith("ROBOTLASER"):
@@ -335,7 +359,9 @@ def parse_carmen(lines: Iterable[str], options: CarmenOptions = CarmenOptions(),
             line_pose = np.array([s.pose for s in scans])
         elif source_kind == "line":
             line_pose = np.array([s.laser_pose for s in scans])
-            notes.append("the laser offset from the robot pose varies between lines: stored the laser pose as the robot pose, mount at 0")
+            notes.append(
+                "the laser offset from the robot pose varies between lines: stored the laser pose as the robot pose, mount at 0"
+            )
         else:
             raise InputError(
                 f"the laser offset from the robot pose varies between lines (by up to {float(spread.max()):.3g}); "
@@ -380,9 +406,15 @@ def parse_carmen(lines: Iterable[str], options: CarmenOptions = CarmenOptions(),
         mount=_compose(offset, first.beams),
         kind="sonar" if sonar else "laser",
         beam_width=float(beam_width),
-        min_range=float(options.min_range if options.min_range is not None else (SONAR_MIN_RANGE if sonar else LASER_MIN_RANGE)),
+        min_range=float(
+            options.min_range if options.min_range is not None else (SONAR_MIN_RANGE if sonar else LASER_MIN_RANGE)
+        ),
         max_range=max_range,
-        noise_sigma=float(options.noise_sigma if options.noise_sigma is not None else (SONAR_NOISE_SIGMA if sonar else LASER_NOISE_SIGMA)),
+        noise_sigma=float(
+            options.noise_sigma
+            if options.noise_sigma is not None
+            else (SONAR_NOISE_SIGMA if sonar else LASER_NOISE_SIGMA)
+        ),
     )
     log = Log(
         time=time[keep],
@@ -407,7 +439,9 @@ def _pose_source(pose_from: str, message: str, pose_lines: dict[str, list]) -> s
     return pose_from
 
 
-def import_carmen(path: str | Path, options: CarmenOptions = CarmenOptions(), progress: Progress | None = None) -> CarmenImport:
+def import_carmen(
+    path: str | Path, options: CarmenOptions = CarmenOptions(), progress: Progress | None = None
+) -> CarmenImport:
     """Read the CARMEN log at ``path`` (plain or gzipped) into a ``Log``; errors name the file.
 
     The log's ``source`` reads ``aogm import carmen <file name>``.

@@ -29,7 +29,7 @@ COMMENT_PREFIXES = ("#", "%", "//")
 @dataclass(frozen=True)
 class Table:
     """A text table: ``rows`` of cells (strings), each with its 1-based ``line_numbers``;
-    ``header`` holds the column names when the first row is not numeric."""
+    ``header`` holds the column names when the first row has no number."""
 
     file: str | None
     header: tuple[str, ...] | None
@@ -137,7 +137,7 @@ def parse_table(lines: Iterable[str], file: str | None = None, delimiter: str = 
     """Split text lines into a table. Blank lines and lines starting with #, % or // are skipped.
 
     ``delimiter``: "auto" (comma or semicolon when the first row holds one, else whitespace),
-    "comma", "semicolon" or "whitespace". A first row with a non-numeric cell is the header.
+    "comma", "semicolon" or "whitespace". A first row without any number is the header.
     Every row must have as many cells as the first.
     """
     if delimiter not in DELIMITERS:
@@ -155,11 +155,13 @@ def parse_table(lines: Iterable[str], file: str | None = None, delimiter: str = 
         cells = _split(line, sep)
         if width is None:
             width, first_line = len(cells), n
-            if any(c and not _is_number(c) for c in cells):
+            if not any(_is_number(c) for c in cells):
                 header = tuple(cells)
                 continue
         if len(cells) != width:
-            raise InputError(f"line {n}: expected {width} columns (as on line {first_line}), got {len(cells)}", file=file)
+            raise InputError(
+                f"line {n}: expected {width} columns (as on line {first_line}), got {len(cells)}", file=file
+            )
         rows.append(cells)
         numbers.append(n)
     if not rows:
@@ -216,9 +218,14 @@ def parse_bearings(spec: str, count: int, unit: str = "deg") -> np.ndarray:
         try:
             bearings = np.array([float(v) for v in spec.split(",")]) * scale
         except ValueError:
-            raise InputError(f"expected 'ring', 'ring:N[:START[:STEP]]' or a comma-separated list of numbers, got {spec!r}", key="bearings") from None
+            raise InputError(
+                f"expected 'ring', 'ring:N[:START[:STEP]]' or a comma-separated list of numbers, got {spec!r}",
+                key="bearings",
+            ) from None
     if bearings.size != count:
-        raise InputError(f"{bearings.size} bearings for {count} range columns; give one bearing per range column", key="bearings")
+        raise InputError(
+            f"{bearings.size} bearings for {count} range columns; give one bearing per range column", key="bearings"
+        )
     return wrap_angle(bearings)
 
 
@@ -268,7 +275,11 @@ def build_text_log(
     poses_from = range_table if same else pose_table
     pose_cols = resolve_columns(o.pose_columns, poses_from, "pose_columns")
     if len(pose_cols) != 3:
-        raise InputError(f"expected 3 pose columns (x, y, yaw), got {len(pose_cols)} from {o.pose_columns!r}", file=poses_from.file, key="pose_columns")
+        raise InputError(
+            f"expected 3 pose columns (x, y, yaw), got {len(pose_cols)} from {o.pose_columns!r}",
+            file=poses_from.file,
+            key="pose_columns",
+        )
     range_time = _one_column(o.range_time_column, range_table, "range_time_column")
     pose_time = _one_column(o.pose_time_column, poses_from, "pose_time_column")
     if same and range_time is None:
@@ -279,10 +290,16 @@ def build_text_log(
     else:
         range_cols = [c for c in range(range_table.width) if c not in used]
     if not range_cols:
-        raise InputError("no range columns left; name them with range_columns", file=range_table.file, key="range_columns")
+        raise InputError(
+            "no range columns left; name them with range_columns", file=range_table.file, key="range_columns"
+        )
     clash = sorted(set(range_cols) & used)
     if clash:
-        raise InputError(f"{range_table.column_name(clash[0])} is both a range column and a pose or time column", file=range_table.file, key="range_columns")
+        raise InputError(
+            f"{range_table.column_name(clash[0])} is both a range column and a pose or time column",
+            file=range_table.file,
+            key="range_columns",
+        )
 
     raw = np.column_stack([range_table.column(c, missing_ok=True) for c in range_cols])
     ranges = raw * length
@@ -297,10 +314,16 @@ def build_text_log(
     notes: list[str] = []
     if not same and pose_time is not None:
         if range_time is None:
-            raise InputError("poses have a time column but readings do not: name range_time_column too", file=range_table.file, key="range_time_column")
+            raise InputError(
+                "poses have a time column but readings do not: name range_time_column too",
+                file=range_table.file,
+                key="range_time_column",
+            )
         pose, keep = interpolate_poses(poses_from.column(pose_time) * time_scale, pose, time)
         if not keep.any():
-            raise InputError("no scan lies within the time span of the poses", file=pose_table.file, key="pose_time_column")
+            raise InputError(
+                "no scan lies within the time span of the poses", file=pose_table.file, key="pose_time_column"
+            )
         if (~keep).any():
             notes.append(f"dropped {int((~keep).sum())} scans outside the time span of the poses")
     elif pose.shape[0] != n:
@@ -314,12 +337,18 @@ def build_text_log(
     if mounts is not None:
         mount = np.asarray(mounts, dtype=np.float64)
         if mount.shape != (s, 3):
-            raise InputError(f"expected {s} sensor mounts (one per range column) of x y yaw, got shape {mount.shape}", key="mounts")
+            raise InputError(
+                f"expected {s} sensor mounts (one per range column) of x y yaw, got shape {mount.shape}", key="mounts"
+            )
     else:
         bearings = parse_bearings(o.bearings, s, o.bearing_unit)
         mount = np.column_stack([o.sensor_radius * np.cos(bearings), o.sensor_radius * np.sin(bearings), bearings])
-    sensor = SensorSpec(mount, o.kind, float(o.beam_width), float(o.min_range), float(o.max_range), float(o.noise_sigma))
-    log = Log(time=time[keep], pose=pose[keep], ranges=clean_ranges(ranges[keep], o.max_range), sensor=sensor, source=source)
+    sensor = SensorSpec(
+        mount, o.kind, float(o.beam_width), float(o.min_range), float(o.max_range), float(o.noise_sigma)
+    )
+    log = Log(
+        time=time[keep], pose=pose[keep], ranges=clean_ranges(ranges[keep], o.max_range), sensor=sensor, source=source
+    )
     return TextImport(log, int((~keep).sum()), tuple(notes))
 
 
@@ -331,7 +360,9 @@ def read_table(path: str | Path, delimiter: str = "auto", progress: Progress | N
         raise exc.in_file(str(path)) from None
 
 
-def read_mounts(path: str | Path, position_unit: str = "m", bearing_unit: str = "deg", delimiter: str = "auto") -> np.ndarray:
+def read_mounts(
+    path: str | Path, position_unit: str = "m", bearing_unit: str = "deg", delimiter: str = "auto"
+) -> np.ndarray:
     """(S, 3) sensor mounts from a table with columns x, y, yaw (one row per sensor) -> metres, radians."""
     table = read_table(path, delimiter)
     if table.width != 3:

@@ -1,0 +1,35 @@
+"""``aogm export``: map file -> ROS map_server files (trinary PGM, scale PNG, YAML)."""
+
+from __future__ import annotations
+
+import click
+
+
+@click.command()
+@click.argument("map_file", metavar="MAP.h5", type=click.Path(dir_okay=False))
+@click.option("--format", "fmt", type=click.Choice(["ros"]), default="ros", show_default=True, help="Export format.")
+@click.option("-o", "--output", "prefix", required=True, help="Output prefix: writes PREFIX.pgm, PREFIX.yaml, PREFIX.png, PREFIX_scale.yaml.")
+@click.option("--occupied-thresh", type=click.FloatRange(0, 1), default=0.65, show_default=True, help="p above this is occupied (0) in the PGM.")
+@click.option("--free-thresh", type=click.FloatRange(0, 1), default=0.196, show_default=True, help="p below this is free (254) in the PGM.")
+def export(map_file: str, fmt: str, prefix: str, occupied_thresh: float, free_thresh: float) -> None:
+    """Export MAP.h5 for ROS map_server, as map_saver writes maps.
+
+    PREFIX.pgm is trinary (0 occupied, 254 free, 205 unknown) with PREFIX.yaml beside it;
+    PREFIX.png keeps the probabilities (grey = 255 * (1 - p), unobserved transparent) and
+    PREFIX_scale.yaml loads it in map_server's scale mode.
+
+    \b
+    Example:
+      aogm export door_map.h5 --format ros -o door_map
+      rosrun map_server map_server door_map.yaml
+    """
+    from aogm_cli.errors import InputError
+    from aogm_cli.mapfile import read_map_file
+    from aogm_cli.rosmap import write_map
+
+    if free_thresh > occupied_thresh:
+        raise InputError(f"expected free-thresh <= occupied-thresh ({occupied_thresh:g}), got {free_thresh:g}", key="--free-thresh")
+    m = read_map_file(map_file)
+    paths = write_map(prefix, m.probability, m.observed, m.grid.resolution, (m.grid.origin_x, m.grid.origin_y, 0.0),
+                      occupied_thresh=occupied_thresh, free_thresh=free_thresh)
+    click.echo(" ".join(str(p) for p in paths), err=True)

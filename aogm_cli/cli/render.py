@@ -1,0 +1,27 @@
+"""``aogm render``: map file -> PNG (grey probabilities, unknown tinted, clusters outlined)."""
+
+from __future__ import annotations
+
+import click
+
+from aogm_cli.cli.options import output_option
+
+
+@click.command()
+@click.argument("map_file", metavar="MAP.h5", type=click.Path(dir_okay=False))
+@output_option("PNG to write.")
+@click.option("--title", help="Title above the map (default: mode, source log and runtime).")
+def render(map_file: str, output: str, title: str | None) -> None:
+    """Draw MAP.h5 as a PNG: white free, black occupied, grey between; unobserved cells pale
+    blue; clusters (adaptive maps) outlined in orange; axes in metres.
+
+    \b
+    Example:
+      aogm render door_map.h5 -o door_map.png
+    """
+    from aogm_cli.mapfile import read_map_file
+    from aogm_cli.render import render_map
+
+    m = read_map_file(map_file)
+    render_map(output, m.grid, m.probability, m.observed, m.clusters,
+               title=title or f"{m.mode} map of {m.source_log} ({m.runtime_s:.2f} s)")

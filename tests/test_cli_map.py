@@ -1,0 +1,115 @@
+"""``aogm map``, ``render`` and ``export`` end to end on a simulated corridor."""
+
+import json
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from aogm_cli.cli import main
+from aogm_cli.evaluation import evaluate
+from aogm_cli.logfile import read_log
+from aogm_cli.mapfile import read_map_file
+from aogm_cli.rosmap import read_map_yaml
+
+WORLDS = Path(__file__).resolve().parents[1] / "worlds"
+
+
+def run(*args):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+@pytest.fixture(scope="module")
+def door_log(tmp_path_factory):
+    out = tmp_path_factory.mktemp("logs") / "door.h5"
+    assert run("simulate", WORLDS / "corridor_door.yaml", "-o", out, "--seed", 1, "-q").exit_code == 0
+    return out
+
+
+@pytest.mark.parametrize("mode", ["standard", "em"])
+def test_map_file_follows_the_contract(door_log, tmp_path, mode):
+    out = tmp_path / f"{mode}.h5"
+    result = run("map", door_log, "--mode", mode, "-o", out, "--png", tmp_path / "m.png", "-q")
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "m.png").stat().st_size > 1000
+    with h5py.File(out) as f:
+        assert f.attrs["format"] == "aogm-map" and f.attrs["format_version"] == 1
+        assert f.attrs["mode"] == mode and f.attrs["source_log"] == str(door_log)
+        assert f.attrs["runtime_s"] > 0
+        params = json.loads(f.attrs["params"])
+        assert params["inverse_model"]["clamp_max"] == 3.5 and "p_hit" in params["em"]
+        p = f["map/probability"][...]
+        obs = f["map/observed"][...]
+        assert p.dtype == np.float32 and obs.dtype == bool
+        assert np.all(p[~obs] == 0.5) and 0 <= p.min() and p.max() <= 1
+        assert ("log_odds" in f["map"]) == (mode == "standard")
+        assert ("occupied" in f["map"]) == (mode == "em")
+        assert "stats" in f
+    truth = read_log(door_log).truth
+    m = read_map_file(out)
+    assert m.grid.shape == truth.grid.shape
+    metrics = evaluate(m, truth)
+    assert metrics["accuracy"] > 0.75 and 0 < metrics["occupied_f1"] <= 1
+
+
+def test_em_objective_never_decreases(door_log, tmp_path):
+    out = tmp_path / "em.h5"
+    assert run("map", door_log, "--mode", "em", "-o", out, "-q").exit_code == 0
+    objective = read_map_file(out).stats["objective_per_sweep"]
+    assert len(objective) >= 2
+    assert all(b >= a - 1e-6 for a, b in zip(objective, objective[1:], strict=False))
+
+
+def test_parameters_from_options_and_file_are_recorded(door_log, tmp_path):
+    params = tmp_path / "p.yaml"
+    params.write_text("inverse_model: {l_occ: 1.2, model: constant}\nem: {p_hit: 0.5}\n")
+    out = tmp_path / "m.h5"
+    result = run("map", door_log, "--mode", "standard", "-o", out, "--params", params, "--l-occ", 1.0, "-q")
+    assert result.exit_code == 0, result.output
+    recorded = read_map_file(out).params
+    assert recorded["inverse_model"]["l_occ"] == 1.0  # the option wins over the file
+    assert recorded["inverse_model"]["model"] == "constant" and recorded["em"]["p_hit"] == 0.5
+
+
+@pytest.mark.parametrize(
+    "text, key", [("inverse_model: {l_ocq: 1}\n", "inverse_model.l_ocq"), ("em: {p_hit: 2}\n", "em.p_hit"), ("[1, 2\n", "p.yaml")]
+)
+def test_bad_params_exit_2_without_output(door_log, tmp_path, text, key):
+    params = tmp_path / "p.yaml"
+    params.write_text(text)
+    out = tmp_path / "m.h5"
+    result = run("map", door_log, "--mode", "standard", "-o", out, "--params", params, "-q")
+    assert result.exit_code == 2 and key in result.output and "Traceback" not in result.output
+    assert not out.exists()
+
+
+def test_not_a_log_exits_2(tmp_path):
+    bad = tmp_path / "bad.h5"
+    bad.write_bytes(b"not hdf5")
+    result = run("map", bad, "--mode", "standard", "-o", tmp_path / "m.h5", "-q")
+    assert result.exit_code == 2 and str(bad) in result.output
+    with h5py.File(tmp_path / "other.h5", "w") as f:
+        f.attrs["format"] = "something"
+    result = run("map", tmp_path / "other.h5", "--mode", "standard", "-o", tmp_path / "m.h5", "-q")
+    assert result.exit_code == 2 and "format" in result.output
+    assert not (tmp_path / "m.h5").exists()
+
+
+def test_render_and_ros_export_round_trip(door_log, tmp_path):
+    out = tmp_path / "m.h5"
+    assert run("map", door_log, "--mode", "standard", "-o", out, "-q").exit_code == 0
+    assert run("render", out, "-o", tmp_path / "r.png").exit_code == 0
+    assert (tmp_path / "r.png").read_bytes()[:4] == b"\x89PNG"
+    assert run("export", out, "--format", "ros", "-o", tmp_path / "ros").exit_code == 0
+    m = read_map_file(out)
+    back = read_map_yaml(tmp_path / "ros.yaml")
+    expected = np.full(m.grid.shape, -1, dtype=np.int8)
+    expected[m.observed & (m.probability > 0.65)] = 100
+    expected[m.observed & (m.probability < 0.196)] = 0
+    assert np.array_equal(back.data, expected)
+    assert back.resolution == m.grid.resolution
+    assert back.origin[:2] == pytest.approx(m.grid.origin)
+    scale = read_map_yaml(tmp_path / "ros_scale.yaml")
+    assert np.allclose(scale.occupancy_probability[m.observed], m.probability[m.observed], atol=1 / 255)
