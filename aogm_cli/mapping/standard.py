@@ -66,6 +66,25 @@ def angular_weights(templates: ConeTemplates, config: InverseModelConfig, beam_w
     return np.ones(templates.ranges.shape, dtype=np.float32)
 
 
+def flat_offsets(templates: ConeTemplates, width: int) -> tuple[np.ndarray, np.ndarray]:
+    """Template offsets as flat index offsets on a grid ``width`` cells wide, without multiplies.
+
+    Every lattice symmetry maps a stored offset (dc, dr) to +/- one of dr W + dc, dr W - dc,
+    dc W + dr, dc W - dr. Returns those four (4, E) int32 arrays and, per heading bin, which
+    one and the sign: (n_bins, 2) int64.
+    """
+    dc = templates.dcol.astype(np.int64)
+    dr = templates.drow.astype(np.int64)
+    offs = np.stack([dr * width + dc, dr * width - dc, dc * width + dr, dc * width - dr]).astype(np.int32)
+    # transform (a, b, c, d): dcol = a dc + b dr, drow = c dc + d dr; flat = drow W + dcol
+    table = {
+        (1, 0, 0, 1): (0, 1), (-1, 0, 0, 1): (1, 1), (0, 1, 1, 0): (2, 1), (0, -1, 1, 0): (3, 1),
+        (-1, 0, 0, -1): (0, -1), (1, 0, 0, -1): (1, -1), (0, -1, -1, 0): (2, -1), (0, 1, -1, 0): (3, -1),
+    }
+    sel = np.array([table[tuple(int(v) for v in tr)] for tr in templates.transform], dtype=np.int64)
+    return offs, sel
+
+
 class StandardMapper:
     """Incremental standard mapping on one grid: ``update`` with chunks of scans, then ``result``.
 
@@ -113,17 +132,20 @@ class StandardMapper:
             ],
             dtype=np.float64,
         )
+        self.flat_offsets, self.flat_sel = flat_offsets(templates, grid.width)
         size = int(np.diff(templates.offsets).max())
         self._idx_buf = np.empty(size, dtype=np.int32)
         self._inc_buf = np.empty(size, dtype=np.float32)
-        self.state = np.full(grid.shape, self.UNOBSERVED, dtype=np.float32)
+        # one spare cell after the grid absorbs updates of cone cells outside it
+        self._flat = np.full(grid.height * grid.width + 1, self.UNOBSERVED, dtype=np.float32)
+        self.state = self._flat[:-1].reshape(grid.shape)
 
     def update(self, pose: np.ndarray, ranges: np.ndarray) -> None:
         """Apply scans (pose (T, 3), ranges (T, S)) in order: every reading's cone, clamped."""
         rows, cols, bins, valid, offset = reading_geometry(pose, self.sensor, self.grid, self.templates)
         z = np.where(valid, np.asarray(ranges, dtype=np.float32), np.float32(np.nan)).astype(np.float32)
         _standard_kernel(
-            self.state.reshape(-1),
+            self._flat,
             self.grid.height,
             self.grid.width,
             rows.reshape(-1),
@@ -132,6 +154,8 @@ class StandardMapper:
             z.reshape(-1),
             offset.reshape(-1),
             self.templates.kernel_arrays,
+            self.flat_offsets,
+            self.flat_sel,
             self.weights,
             self.ranges32,
             self.scalars,
@@ -169,16 +193,18 @@ def standard_map(
 
 @numba.njit(cache=True)
 def _standard_kernel(
-    state, height, width, rows, cols, bins, z, offset, tpl, weights, ranges32, scalars, ext, idx_buf, inc_buf
+    state, height, width, rows, cols, bins, z, offset, tpl, flat_offsets, flat_sel, weights, ranges32, scalars, ext,
+    idx_buf, inc_buf,
 ):
     """Compiled log-odds update of readings t = 0, 1, ... in order on the flat ``state``.
 
-    Per reading, entries [0, f0) of its template are the blind zone (observed only),
-    [f0, f1) get free evidence and [f1, m) occupied evidence; every update is clamped.
-    A first, vectorised pass writes the increments to ``inc_buf`` (and, for cones wholly
-    inside the grid, which is nearly all, the cells' flat indices to ``idx_buf``); then a
-    scalar pass does the read-modify-write of the grid. Loops run over slices from 0 so that
-    numba drops its negative-index checks, which would otherwise stop vectorisation.
+    ``state`` holds height * width cells plus one spare cell at the end that absorbs the
+    updates of cone cells outside the grid. Per reading, entries [0, f0) of its template are
+    the blind zone (observed only), [f0, f1) get free evidence and [f1, m) occupied
+    evidence; every update is clamped. Vectorised passes write the increments to
+    ``inc_buf`` and the cells' flat indices to ``idx_buf``; then a scalar pass does the
+    read-modify-write of the grid. Loops run over slices from 0 so that numba drops its
+    negative-index checks, which would otherwise stop vectorisation.
     """
     offsets, dcol, drow, ranges, base_bin, transform = tpl
     half_alpha = scalars[0]
@@ -191,6 +217,7 @@ def _standard_kernel(
     l0 = np.float32(scalars[7])
     elfes = scalars[8] != 0.0
     zero = np.float32(0.0)
+    spare = height * width
     for t in range(z.size):
         zt = np.float64(z[t])
         if not zt >= 0.0:  # NaN or negative: no information
@@ -216,12 +243,12 @@ def _standard_kernel(
             m = np.searchsorted(r, min(zt + half_alpha, max_range) + shift, side="right")
             span = z_free - min_range
         f0 = min(blind_end, f1)
+        # increments: free (<= 0 exactly: rounding must not make it positive), occupied (>= 0)
         fa = np.float32(c_free)
         fb = np.float32(0.0)
         if elfes and span > 0.0:
             fb = np.float32(max(c_free / (span * span), -1e30))
         r_min = np.float32(min_range + shift)
-        # increments: free (<= 0 exactly: rounding must not make it positive), occupied (>= 0)
         w1 = weights[s + f0 : s + f1]
         r1 = ranges32[s + f0 : s + f1]
         c1 = inc_buf[f0:f1]
@@ -232,49 +259,42 @@ def _standard_kernel(
         c2 = inc_buf[f1:m]
         for j in range(m - f1):
             c2[j] = c_occ * w2[j]
-        ta = transform[k, 0]
-        tb = transform[k, 1]
-        tc = transform[k, 2]
-        td = transform[k, 3]
+        # flat cell indices
+        ib = idx_buf[:m]
         if row0 - ext >= 0 and row0 + ext < height and col0 - ext >= 0 and col0 + ext < width:
-            p = tc * width + ta
-            q = td * width + tb
             base = row0 * width + col0
+            x_off = flat_offsets[flat_sel[k, 0], s : s + m]
+            if flat_sel[k, 1] > 0:
+                for j in range(m):
+                    ib[j] = np.int32(base + x_off[j])
+            else:
+                for j in range(m):
+                    ib[j] = np.int32(base - x_off[j])
+        else:  # near the border: cells outside the grid go to the spare cell
+            ta = transform[k, 0]
+            tb = transform[k, 1]
+            tc = transform[k, 2]
+            td = transform[k, 3]
             dc = dcol[s : s + m]
             dr = drow[s : s + m]
-            ib = idx_buf[:m]
             for j in range(m):
-                ib[j] = np.int32(base + p * dc[j] + q * dr[j])
-            i0 = ib[:f0]
-            for j in range(f0):
-                i = np.uint64(np.uint32(i0[j]))
-                x = state[i]
-                state[i] = l0 if x < lo else x
-            i1 = ib[f0:f1]
-            for j in range(f1 - f0):
-                i = np.uint64(np.uint32(i1[j]))
-                x = state[i]
-                state[i] = max((l0 if x < lo else x) + c1[j], lo)
-            i2 = ib[f1:m]
-            for j in range(m - f1):
-                i = np.uint64(np.uint32(i2[j]))
-                x = state[i]
-                state[i] = min((l0 if x < lo else x) + c2[j], hi)
-        else:  # near the border: check every cell
-            for j in range(m):
-                dc_j = np.int64(dcol[s + j])
-                dr_j = np.int64(drow[s + j])
-                rr = row0 + tc * dc_j + td * dr_j
-                cc = col0 + ta * dc_j + tb * dr_j
-                if rr < 0 or rr >= height or cc < 0 or cc >= width:
-                    continue
-                i = rr * width + cc
-                x = state[i]
-                if x < lo:
-                    x = l0
-                if j < f0:
-                    state[i] = x
-                elif j < f1:
-                    state[i] = max(x + inc_buf[j], lo)
-                else:
-                    state[i] = min(x + inc_buf[j], hi)
+                rr = row0 + tc * dc[j] + td * dr[j]
+                cc = col0 + ta * dc[j] + tb * dr[j]
+                inside = (rr >= 0) & (rr < height) & (cc >= 0) & (cc < width)
+                ib[j] = np.int32(rr * width + cc if inside else spare)
+        # read-modify-write: the only loops that touch the grid
+        i0 = ib[:f0]
+        for j in range(f0):
+            i = np.uint64(np.uint32(i0[j]))
+            x = state[i]
+            state[i] = l0 if x < lo else x
+        i1 = ib[f0:f1]
+        for j in range(f1 - f0):
+            i = np.uint64(np.uint32(i1[j]))
+            x = state[i]
+            state[i] = max((l0 if x < lo else x) + c1[j], lo)
+        i2 = ib[f1:m]
+        for j in range(m - f1):
+            i = np.uint64(np.uint32(i2[j]))
+            x = state[i]
+            state[i] = min((l0 if x < lo else x) + c2[j], hi)
