@@ -90,6 +90,39 @@ def _rebuild_reading(t, ptr, cell, g, g0, p_hit, occupied, obs_pos, pre, nobs, s
 
 
 @numba.njit(cache=True)
+def _update_reading(t, e, adding, ptr, g, g0, p_hit, qpow, obs_pos, pre, nobs, s):
+    """Insert (or remove) entry ``e`` into reading t's obstacle list and redo its prefix sums
+    from that rank on: O(obstacles) instead of O(cone cells)."""
+    base = ptr[t]
+    pbase = ptr[t] + t
+    n = nobs[t]
+    lo = base
+    hi = base + n
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if obs_pos[mid] < e:
+            lo = mid + 1
+        else:
+            hi = mid
+    r = lo - base
+    if adding:
+        for k in range(n, r, -1):
+            obs_pos[base + k] = obs_pos[base + k - 1]
+        obs_pos[base + r] = e
+        n += 1
+    else:
+        for k in range(r, n - 1):
+            obs_pos[base + k] = obs_pos[base + k + 1]
+        n -= 1
+    nobs[t] = n
+    acc = pre[pbase + r]
+    for k in range(r, n):
+        acc += qpow[k] * p_hit * g[obs_pos[base + k]]
+        pre[pbase + k + 1] = acc
+    s[t] = acc + qpow[n] * g0[t]
+
+
+@numba.njit(cache=True)
 def _init_state(ptr, cell, g, g0, p_hit, occupied):
     n = ptr.shape[0] - 1
     obs_pos = np.empty(ptr[n], dtype=np.int64)
@@ -130,7 +163,7 @@ def _flip_gain(c, cand_cell, cand_ptr, pair_t, pair_e, ptr, g, const, w, p_hit, 
             if rest < 0.0:
                 rest = 0.0
             s_new = a + rest / q
-        delta += math.log(const[t] + w * s_new) - math.log(const[t] + w * st)
+        delta += math.log((const[t] + w * s_new) / (const[t] + w * st))
     return delta
 
 
@@ -164,8 +197,9 @@ def _sweep(cand_cell, cand_ptr, pair_t, pair_e, ptr, cell, g, g0, const, w, p_hi
             occupied[x] = not occupied[x]
             flips += 1
             clock[0] += 1
+            adding = occupied[x]
             for p in range(cand_ptr[c], cand_ptr[c + 1]):
-                _rebuild_reading(pair_t[p], ptr, cell, g, g0, p_hit, occupied, obs_pos, pre, nobs, s)
+                _update_reading(pair_t[p], pair_e[p], adding, ptr, g, g0, p_hit, qpow, obs_pos, pre, nobs, s)
                 reading_stamp[pair_t[p]] = clock[0]
         cand_stamp[c] = clock[0]
     return flips, evaluated
@@ -199,25 +233,45 @@ def _residual(cand_cell, cand_ptr, pair_t, pair_e, ptr, g, const, w, p_hit, l_pr
     return out
 
 
+@numba.njit(cache=True)
+def _pair_index(ptr, cell, lookup, lo, n_cand):
+    n_read = ptr.shape[0] - 1
+    counts = np.zeros(n_cand + 1, dtype=np.int64)
+    for e in range(cell.shape[0]):
+        k = cell[e] - lo
+        if 0 <= k < lookup.shape[0] and lookup[k] >= 0:
+            counts[lookup[k] + 1] += 1
+    cand_ptr = np.cumsum(counts)
+    fill = cand_ptr[:-1].copy()
+    pair_t = np.empty(cand_ptr[-1], dtype=np.int64)
+    pair_e = np.empty(cand_ptr[-1], dtype=np.int64)
+    for t in range(n_read):
+        for e in range(ptr[t], ptr[t + 1]):
+            k = cell[e] - lo
+            if 0 <= k < lookup.shape[0] and lookup[k] >= 0:
+                j = fill[lookup[k]]
+                pair_t[j] = t
+                pair_e[j] = e
+                fill[lookup[k]] += 1
+    return cand_ptr, pair_t, pair_e
+
+
 def pair_index(index: ForwardIndex, candidates: np.ndarray):
     """Cell -> readings index for ``candidates``: (cand_cell, cand_ptr, pair_t, pair_e).
 
-    Only the candidates appear; other cells of the cones are held fixed by EM.
+    Only the candidates appear (each with its (reading, entry) pairs in reading order); other
+    cells of the cones are held fixed by EM. The look-up table spans the candidates' range of
+    flat ids only, so a small cluster costs little.
     """
     candidates = np.unique(np.asarray(candidates, dtype=np.int64))
-    n_entries = index.cell.shape[0]
-    pos = np.searchsorted(candidates, index.cell)
-    pos_clipped = np.minimum(pos, max(len(candidates) - 1, 0))
-    hit = (pos < len(candidates)) & (candidates[pos_clipped] == index.cell) if len(candidates) else np.zeros(n_entries, bool)
-    entries = np.flatnonzero(hit)
-    local = pos[entries]
-    order = np.argsort(local, kind="stable")
-    entries = entries[order]
-    counts = np.bincount(local, minlength=len(candidates))
-    cand_ptr = np.zeros(len(candidates) + 1, dtype=np.int64)
-    np.cumsum(counts, out=cand_ptr[1:])
-    reading_of_entry = np.repeat(np.arange(index.n_readings, dtype=np.int64), np.diff(index.ptr))
-    return candidates, cand_ptr, reading_of_entry[entries], entries.astype(np.int64)
+    if candidates.size == 0:
+        empty = np.zeros(0, dtype=np.int64)
+        return candidates, np.zeros(1, dtype=np.int64), empty, empty
+    lo = int(candidates[0])
+    lookup = np.full(int(candidates[-1]) - lo + 1, -1, dtype=np.int64)
+    lookup[candidates - lo] = np.arange(candidates.size)
+    cand_ptr, pair_t, pair_e = _pair_index(index.ptr, index.cell, lookup, lo, candidates.size)
+    return candidates, cand_ptr, pair_t, pair_e
 
 
 def run_em(

@@ -1,0 +1,291 @@
+"""Quality gates of ``aogm compare``: ``--require`` expressions over ``mode.metric`` names.
+
+A tiny parser (no eval): numbers, names, + - * /, parentheses and exactly one comparison;
+each gate is evaluated per log, and a failure reads with the numbers substituted.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+from aogm_cli.errors import InputError
+
+MODES = ("standard", "em", "adaptive")
+# metric names of a gate -> what they mean; runtime is runtime_s, checks_passed a fraction
+METRICS = ("accuracy", "occupied_precision", "occupied_recall", "occupied_f1", "brier", "runtime", "checks_passed")
+COMPARISONS = ("<=", ">=", "==", "!=", "<", ">")
+OPTION = "--require"
+
+_TOKEN = re.compile(
+    r"(?:"
+    r"(?P<number>(?:\d+\.?\d*|\.\d+)(?:[eE][+-]?\d+)?)"
+    r"|(?P<name>[A-Za-z_][A-Za-z0-9_]*(?:\.[A-Za-z_][A-Za-z0-9_]*)*)"
+    r"|(?P<op><=|>=|==|!=|<|>|[-+*/()])"
+    r")"
+)
+
+
+@dataclass(frozen=True)
+class Token:
+    kind: str  # number, name, op, end
+    text: str
+    start: int
+    end: int
+
+
+# Expression nodes: ("num", value) | ("name", (mode, metric)) | ("neg", node) | (op, left, right)
+Node = tuple
+
+
+@dataclass(frozen=True)
+class GateOutcome:
+    """The result of one gate on one log: passed, and the expression with numbers substituted."""
+
+    passed: bool
+    substituted: str
+    left: float
+    right: float
+    reason: str = ""  # why it could not be evaluated (a missing value, a division by zero)
+
+
+@dataclass(frozen=True)
+class Gate:
+    """A parsed ``--require`` expression: ``left OP right``."""
+
+    text: str
+    left: Node
+    op: str
+    right: Node
+    names: tuple[tuple[str, str], ...]  # (mode, metric) in order of appearance, with the token spans
+    spans: tuple[tuple[int, int], ...]
+
+    @property
+    def modes(self) -> set[str]:
+        return {mode for mode, _ in self.names}
+
+    def evaluate(self, values: Mapping[tuple[str, str], float | None]) -> GateOutcome:
+        """Evaluate on one log; ``values[(mode, metric)]`` is None when unavailable (no truth)."""
+        substituted = self.substitute(values)
+        missing = [f"{m}.{k}" for m, k in self.names if values.get((m, k)) is None]
+        if missing:
+            return GateOutcome(False, substituted, math.nan, math.nan, f"{', '.join(dict.fromkeys(missing))} not available")
+        try:
+            left = _value(self.left, values)
+            right = _value(self.right, values)
+        except ZeroDivisionError:
+            return GateOutcome(False, substituted, math.nan, math.nan, "division by zero")
+        if math.isnan(left) or math.isnan(right):
+            return GateOutcome(False, substituted, left, right, "not a number")
+        return GateOutcome(_compare(left, self.op, right), substituted, left, right)
+
+    def substitute(self, values: Mapping[tuple[str, str], float | None]) -> str:
+        """The expression's text with each name replaced by its value (``n/a`` when missing)."""
+        out, last = [], 0
+        for (mode, metric), (start, end) in zip(self.names, self.spans, strict=True):
+            v = values.get((mode, metric))
+            out.append(self.text[last:start])
+            out.append("n/a" if v is None else format_number(v))
+            last = end
+        out.append(self.text[last:])
+        return "".join(out).strip()
+
+    def describe_failure(self, outcome: GateOutcome) -> str:
+        """``EXPR  (substituted)`` plus the evaluated sides when either side is compound."""
+        detail = outcome.substituted
+        if outcome.reason:
+            detail += f"; {outcome.reason}"
+        elif self.left[0] not in ("num", "name") or self.right[0] not in ("num", "name"):
+            detail += f"; {format_number(outcome.left)} {self.op} {format_number(outcome.right)}"
+        return f"{self.text.strip()}  ({detail})"
+
+
+def format_number(v: float) -> str:
+    return f"{v:.6g}"
+
+
+def _compare(a: float, op: str, b: float) -> bool:
+    return {"<=": a <= b, ">=": a >= b, "==": a == b, "!=": a != b, "<": a < b, ">": a > b}[op]
+
+
+def _value(node: Node, values) -> float:
+    kind = node[0]
+    if kind == "num":
+        return node[1]
+    if kind == "name":
+        return float(values[node[1]])
+    if kind == "neg":
+        return -_value(node[1], values)
+    a, b = _value(node[1], values), _value(node[2], values)
+    if kind == "+":
+        return a + b
+    if kind == "-":
+        return a - b
+    if kind == "*":
+        return a * b
+    return a / b  # "/": ZeroDivisionError is reported by Gate.evaluate
+
+
+def tokenize(text: str) -> list[Token]:
+    """Tokens of ``text``; an InputError names the first character that is not part of one."""
+    tokens, pos = [], 0
+    while True:
+        while pos < len(text) and text[pos].isspace():
+            pos += 1
+        if pos == len(text):
+            break
+        m = _TOKEN.match(text, pos)
+        if not m:
+            raise _error(text, f"unexpected character {text[pos]!r} at position {pos + 1}")
+        kind = m.lastgroup
+        tokens.append(Token(kind, m.group(kind), m.start(kind), m.end(kind)))
+        pos = m.end()
+    tokens.append(Token("end", "", len(text), len(text)))
+    return tokens
+
+
+def _error(text: str, message: str) -> InputError:
+    return InputError(f"{text.strip()!r}: {message}", key=OPTION)
+
+
+class _Parser:
+    """Recursive descent: gate := expr CMP expr; expr := term (+|- term)*; term := factor (*|/ factor)*;
+    factor := (+|-) factor | number | mode.metric | ( expr )."""
+
+    def __init__(self, text: str):
+        self.text = text
+        self.tokens = tokenize(text)
+        self.i = 0
+        self.names: list[tuple[str, str]] = []
+        self.spans: list[tuple[int, int]] = []
+
+    def peek(self) -> Token:
+        return self.tokens[self.i]
+
+    def take(self) -> Token:
+        tok = self.tokens[self.i]
+        self.i += 1
+        return tok
+
+    def unexpected(self, tok: Token, expected: str) -> InputError:
+        found = "the end" if tok.kind == "end" else repr(tok.text)
+        return _error(self.text, f"expected {expected}, found {found}")
+
+    def gate(self) -> Gate:
+        left = self.expr()
+        tok = self.take()
+        if tok.kind != "op" or tok.text not in COMPARISONS:
+            raise self.unexpected(tok, f"an operator or one comparison ({' '.join(COMPARISONS)})")
+        right = self.expr()
+        end = self.take()
+        if end.kind == "op" and end.text in COMPARISONS:
+            raise _error(self.text, "expected exactly one comparison, found a second one")
+        if end.kind != "end":
+            raise self.unexpected(end, "an operator or the end")
+        return Gate(self.text, left, tok.text, right, tuple(self.names), tuple(self.spans))
+
+    def expr(self) -> Node:
+        node = self.term()
+        while self.peek().kind == "op" and self.peek().text in ("+", "-"):
+            op = self.take().text
+            node = (op, node, self.term())
+        return node
+
+    def term(self) -> Node:
+        node = self.factor()
+        while self.peek().kind == "op" and self.peek().text in ("*", "/"):
+            op = self.take().text
+            node = (op, node, self.factor())
+        return node
+
+    def factor(self) -> Node:
+        tok = self.take()
+        if tok.kind == "op" and tok.text in ("+", "-"):
+            inner = self.factor()
+            return inner if tok.text == "+" else ("neg", inner)
+        if tok.kind == "number":
+            return ("num", float(tok.text))
+        if tok.kind == "name":
+            name = self.name(tok)
+            self.names.append(name)
+            self.spans.append((tok.start, tok.end))
+            return ("name", name)
+        if tok.kind == "op" and tok.text == "(":
+            node = self.expr()
+            close = self.take()
+            if close.kind != "op" or close.text != ")":
+                raise self.unexpected(close, "')'")
+            return node
+        raise self.unexpected(tok, "a number, a name such as em.accuracy, or '('")
+
+    def name(self, tok: Token) -> tuple[str, str]:
+        parts = tok.text.split(".")
+        if len(parts) != 2:
+            raise _error(self.text, f"unknown name {tok.text!r}; expected MODE.METRIC, e.g. em.accuracy")
+        mode, metric = parts
+        if mode not in MODES:
+            raise _error(self.text, f"unknown mode {mode!r} in {tok.text!r}; expected one of {', '.join(MODES)}")
+        if metric not in METRICS:
+            raise _error(self.text, f"unknown metric {metric!r} in {tok.text!r}; expected one of {', '.join(METRICS)}")
+        return (mode, metric)
+
+
+def parse_gate(text: str) -> Gate:
+    """Parse one ``--require`` expression; InputError (key ``--require``) when malformed."""
+    if not text.strip():
+        raise _error(text, "empty expression; expected e.g. 'adaptive.accuracy >= em.accuracy - 0.005'")
+    return _Parser(text).gate()
+
+
+def check_gate_modes(gates: list[Gate], modes: tuple[str, ...]) -> None:
+    """Every mode a gate names must be among the modes compared."""
+    for gate in gates:
+        for mode in sorted(gate.modes - set(modes), key=MODES.index):
+            raise _error(gate.text, f"mode {mode!r} is not among the modes compared ({', '.join(modes)}); add it to --modes")
+
+
+@dataclass(frozen=True)
+class GateFailure:
+    """One failed gate on one log, ready to print."""
+
+    log_label: str
+    message: str
+
+    def __str__(self) -> str:
+        return f"FAILED {self.log_label}: {self.message}"
+
+
+def evaluate_gates(
+    gates: list[Gate], logs: list[tuple[str, Mapping[tuple[str, str], float | None]]]
+) -> tuple[int, list[GateFailure]]:
+    """Evaluate every gate on every log ``(label, values)``: (number evaluated, failures)."""
+    failures, count = [], 0
+    for label, values in logs:
+        for gate in gates:
+            count += 1
+            outcome = gate.evaluate(values)
+            if not outcome.passed:
+                failures.append(GateFailure(label, gate.describe_failure(outcome)))
+    return count, failures
+
+
+def evaluate_required_checks(
+    modes: list[str], logs: list[tuple[str, Mapping[str, list[dict] | None]]]
+) -> tuple[int, list[GateFailure]]:
+    """``--require-checks MODE``: every check of every log ``(label, {mode: checks})`` passes in
+    each of ``modes``; checks None means the log has no truth, which fails (nothing to verify)."""
+    failures, count = [], 0
+    for label, checks_by_mode in logs:
+        for mode in modes:
+            count += 1
+            checks = checks_by_mode.get(mode)
+            if checks is None:
+                failures.append(GateFailure(label, f"{mode} checks  (the log has no truth to check)"))
+                continue
+            failed = [c["name"] for c in checks if not c["passed"]]
+            if failed:
+                passed = len(checks) - len(failed)
+                failures.append(GateFailure(label, f"{mode} checks  ({passed}/{len(checks)} passed; failed: {', '.join(failed)})"))
+    return count, failures

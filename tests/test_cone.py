@@ -1,0 +1,174 @@
+"""Cone templates: cells inside the cone, complete, in range order; heading bins; clipping."""
+
+import math
+
+import numpy as np
+import pytest
+
+from aogm_cli.errors import InputError
+from aogm_cli.grid import GridSpec
+from aogm_cli.logfile import SensorSpec
+from aogm_cli.mapping.cone import (
+    build_cone_templates,
+    cone_cells,
+    heading_bins_for,
+    reading_geometry,
+    sensor_cells,
+)
+
+BEAM = math.radians(30.0)
+
+
+def wrap(a):
+    return (np.asarray(a) + math.pi) % (2 * math.pi) - math.pi
+
+
+def brute_force_cone(resolution, beam, reach, heading):
+    """Set of (drow, dcol) whose centre lies in the cone, from first principles."""
+    n = int(reach / resolution) + 2
+    cells = set()
+    for dr in range(-n, n + 1):
+        for dc in range(-n, n + 1):
+            d = resolution * math.hypot(dr, dc)
+            if d > reach + 1e-9:
+                continue
+            if dr == 0 and dc == 0:
+                cells.add((0, 0))
+                continue
+            if abs(wrap(math.atan2(dr, dc) - heading)) <= beam / 2 + 1e-9:
+                cells.add((dr, dc))
+    return cells
+
+
+def test_heading_bins_quantisation_below_a_quarter_cell():
+    for res, reach in [(0.05, 5.0), (0.1, 5.0), (0.02, 8.0), (0.5, 1.0)]:
+        n = heading_bins_for(res, reach)
+        assert n % 8 == 0 and n >= 64
+        assert reach * math.pi / n <= res / 4 + 1e-12
+    assert heading_bins_for(0.05, 5.0) == 1264
+
+
+@pytest.mark.parametrize("n_bins", [64, 72])
+def test_template_is_the_cone_for_every_heading_bin(n_bins):
+    tpl = build_cone_templates(0.1, BEAM, 1.0, n_bins=n_bins)
+    for k in range(n_bins):
+        drow, dcol, rng, bearing = tpl.cells(k)
+        got = set(zip(drow.tolist(), dcol.tolist(), strict=True))
+        assert len(got) == drow.size  # each cell once
+        assert got == brute_force_cone(0.1, BEAM, 1.0, tpl.bin_heading(k))
+        # ranges and bearings describe the cells, and ranges are sorted
+        np.testing.assert_allclose(rng, 0.1 * np.hypot(drow, dcol), atol=1e-12)
+        assert np.all(np.diff(rng) >= 0)
+        assert np.all(rng <= 1.0 + 1e-9)
+        off = np.where(rng > 0, wrap(np.arctan2(drow, dcol) - tpl.bin_heading(k)), 0.0)
+        np.testing.assert_allclose(bearing, off, atol=1e-9)
+        assert np.all(np.abs(bearing) <= BEAM / 2 + 1e-9)
+
+
+def test_template_first_cell_is_the_sensor_cell_and_axis_cells_follow():
+    tpl = build_cone_templates(0.1, BEAM, 0.5, n_bins=64)
+    drow, dcol, rng, _ = tpl.cells(0)  # pointing +x
+    assert (drow[0], dcol[0], rng[0]) == (0, 0, 0.0)
+    on_axis = [(r, c) for r, c in zip(drow.tolist(), dcol.tolist(), strict=True) if r == 0]
+    assert on_axis == [(0, i) for i in range(6)]
+    # pointing +y (bin 16 of 64), the cone is the +x cone turned a quarter
+    drow_y, dcol_y, rng_y, _ = tpl.cells(16)
+    assert set(zip(drow_y.tolist(), dcol_y.tolist(), strict=True)) == set(zip(dcol.tolist(), (-drow).tolist(), strict=True))
+    np.testing.assert_array_equal(np.sort(rng_y), np.sort(rng))
+
+
+def test_margin_extends_the_reach():
+    a = build_cone_templates(0.1, BEAM, 1.0, n_bins=64)
+    b = build_cone_templates(0.1, BEAM, 1.0, margin=0.2, n_bins=64)
+    assert b.reach == pytest.approx(1.2)
+    assert b.cells(0)[2].max() > 1.1 >= a.cells(0)[2].max()
+
+
+def test_heading_bins_cover_all_yaws():
+    tpl = build_cone_templates(0.1, BEAM, 1.0, n_bins=64)
+    yaw = np.linspace(-4 * math.pi, 4 * math.pi, 100_001)
+    k = tpl.heading_bin(yaw)
+    assert k.min() >= 0 and k.max() < 64
+    assert set(np.unique(k).tolist()) == set(range(64))
+    err = np.abs(wrap(yaw - tpl.bin_heading(k)))
+    assert err.max() <= math.pi / 64 + 1e-12
+    np.testing.assert_array_equal(tpl.heading_bin(tpl.bin_heading(np.arange(64))), np.arange(64))
+    assert tpl.heading_bin(-1e-9) == 0 and tpl.heading_bin(2 * math.pi) == 0
+
+
+def test_reading_cells_in_range_order_clipped_to_the_grid():
+    grid = GridSpec(0.0, 0.0, 0.1, 8, 8)
+    tpl = build_cone_templates(0.1, BEAM, 1.0, n_bins=64)
+    k = 8  # 45 degrees
+    index, rng = tpl.reading_cells(grid, 1, 1, k, 0.75)
+    drow, dcol, full_rng, _ = tpl.cells(k)
+    rows, cols = 1 + drow, 1 + dcol
+    keep = grid.contains(rows, cols) & (full_rng <= 0.75)
+    np.testing.assert_array_equal(index, (rows * 8 + cols)[keep])
+    np.testing.assert_array_equal(rng, full_rng[keep])
+    assert np.all(np.diff(rng) >= 0)
+    # a sensor cell outside the grid still sees the cells of its cone that are inside
+    index, _ = tpl.reading_cells(grid, -2, 3, 16, 1.0)  # pointing +y from below the grid
+    assert index.size > 0 and np.all(index // 8 >= 0)
+    # a cone pointing away from the grid sees nothing
+    assert tpl.reading_cells(grid, -2, 3, 48, 1.0)[0].size == 0
+
+
+def test_cone_cells_kernel_matches_the_wrapper():
+    grid = GridSpec(0.0, 0.0, 0.1, 20, 20)
+    tpl = build_cone_templates(0.1, BEAM, 1.0, n_bins=64)
+    out_i = np.empty(500, dtype=np.int64)
+    out_r = np.empty(500, dtype=np.float64)
+    n = cone_cells(tpl.kernel_arrays, 20, 20, 10, 10, 40, 0.6, out_i, out_r)
+    index, rng = tpl.reading_cells(grid, 10, 10, 40, 0.6)
+    np.testing.assert_array_equal(out_i[:n], index)
+    np.testing.assert_array_equal(out_r[:n], rng)
+
+
+def test_sensor_cells_compose_pose_and_mount():
+    grid = GridSpec(0.0, 0.0, 0.1, 30, 30)
+    tpl = build_cone_templates(0.1, BEAM, 1.0, n_bins=64)
+    sensor = SensorSpec(mount=np.array([[0.2, 0.0, 0.0], [0.0, 0.0, math.pi / 2]]))
+    pose = np.array([[1.05, 1.05, math.pi / 2], [np.nan, 1.0, 0.0]])
+    rows, cols, bins, valid = sensor_cells(pose, sensor, grid, tpl)
+    assert rows.shape == (2, 2)
+    # sensor 0 sits 0.2 m ahead of the robot, which faces +y: at (1.05, 1.25), pointing +y
+    assert (rows[0, 0], cols[0, 0], bins[0, 0]) == (12, 10, 16)
+    # sensor 1 sits at the robot's centre, pointing -x
+    assert (rows[0, 1], cols[0, 1], bins[0, 1]) == (10, 10, 32)
+    assert valid.tolist() == [[True, True], [False, False]]
+
+
+def test_reading_geometry_axis_offset():
+    grid = GridSpec(0.0, 0.0, 0.1, 10, 10)
+    tpl = build_cone_templates(0.1, BEAM, 1.0, n_bins=64)
+    sensor = SensorSpec(mount=np.zeros((1, 3)))
+    pose = np.array([[0.25, 0.55, 0.0], [0.29, 0.55, 0.0], [0.29, 0.55, math.pi], [0.25, 0.58, math.pi / 2]])
+    *_, offset = reading_geometry(pose, sensor, grid, tpl)
+    np.testing.assert_allclose(offset[:, 0], [0.0, 0.04, -0.04, 0.03], atol=1e-12)
+
+
+def test_far_away_sensors_do_not_overflow():
+    grid = GridSpec(0.0, 0.0, 0.1, 10, 10)
+    tpl = build_cone_templates(0.1, BEAM, 1.0, n_bins=64)
+    sensor = SensorSpec(mount=np.zeros((1, 3)))
+    rows, cols, _, valid = sensor_cells(np.array([[1e300, -1e300, 0.0]]), sensor, grid, tpl)
+    assert valid.all()
+    assert rows[0, 0] < -tpl.extent and cols[0, 0] > 10 + tpl.extent
+
+
+@pytest.mark.parametrize(
+    "kwargs, key",
+    [
+        (dict(resolution=0.0), "resolution"),
+        (dict(beam_width=-1.0), "beam_width"),
+        (dict(max_range=float("inf")), "max_range"),
+        (dict(n_bins=60), "n_bins"),
+    ],
+)
+def test_bad_template_parameters(kwargs, key):
+    args = dict(resolution=0.1, beam_width=BEAM, max_range=1.0) | kwargs
+    n_bins = args.pop("n_bins", None)
+    with pytest.raises(InputError) as err:
+        build_cone_templates(args["resolution"], args["beam_width"], args["max_range"], n_bins=n_bins)
+    assert err.value.key == key
