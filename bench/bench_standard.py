@@ -18,9 +18,9 @@ import numpy as np
 
 from aogm_cli.grid import GridSpec
 from aogm_cli.logfile import SensorSpec
-from aogm_cli.mapping.cone import build_cone_templates, cone_cells, sensor_cells
+from aogm_cli.mapping.cone import cone_cells, reading_geometry
 from aogm_cli.mapping.inverse_model import InverseModelConfig
-from aogm_cli.mapping.standard import standard_map
+from aogm_cli.mapping.standard import standard_map, standard_templates
 
 CHUNK = 4096  # scans per chunk, as LogReader.chunks() yields them
 
@@ -53,16 +53,17 @@ def chunks_of(pose, ranges, size=CHUNK):
 
 
 @numba.njit(cache=True)
-def _reading_limits(z, half_alpha, max_range):
+def _reading_limits(z, offset, half_alpha, max_range):
+    """Template range up to which the mapper visits each reading's cone (-1: skipped)."""
     out = np.empty(z.size, dtype=np.float64)
     for t in range(z.size):
         zt = np.float64(z[t])
         if not zt >= 0.0:
             out[t] = -1.0
         elif zt >= max_range:
-            out[t] = max_range
+            out[t] = max_range + offset[t]
         else:
-            out[t] = min(zt + half_alpha, max_range)
+            out[t] = min(zt + half_alpha, max_range) + offset[t]
     return out
 
 
@@ -98,9 +99,9 @@ def ceiling(pose, ranges, sensor, grid, config, templates, block=500):
     updates = 0
     for start in range(0, pose.shape[0], block):
         stop = min(pose.shape[0], start + block)
-        rows, cols, bins, valid = sensor_cells(pose[start:stop], sensor, grid, templates)
+        rows, cols, bins, valid, offset = reading_geometry(pose[start:stop], sensor, grid, templates)
         z = np.where(valid, ranges[start:stop], np.nan).astype(np.float32).reshape(-1)
-        limits = _reading_limits(z, 0.5 * config.alpha, sensor.max_range)
+        limits = _reading_limits(z, offset.reshape(-1), 0.5 * config.alpha, sensor.max_range)
         idx = _gather_cells(
             templates.kernel_arrays, grid.height, grid.width,
             rows.reshape(-1), cols.reshape(-1), bins.reshape(-1), limits, max_cells,
@@ -115,7 +116,7 @@ def ceiling(pose, ranges, sensor, grid, config, templates, block=500):
 
 def run(n_scans: int, grid: GridSpec, config: InverseModelConfig, repeat: int) -> None:
     pose, ranges, sensor = synthetic_log(n_scans)
-    templates = build_cone_templates(grid.resolution, sensor.beam_width, sensor.max_range)
+    templates = standard_templates(grid, sensor)
     best_map = math.inf
     for _ in range(repeat):
         t0 = time.perf_counter()
@@ -145,7 +146,7 @@ def main() -> None:
     config = InverseModelConfig(model=args.model)
     # compile (and warm the template cache) on a tiny log first
     pose, ranges, sensor = synthetic_log(50)
-    templates = build_cone_templates(grid.resolution, sensor.beam_width, sensor.max_range)
+    templates = standard_templates(grid, sensor)
     standard_map(chunks_of(pose, ranges), sensor, grid, config, templates=templates)
     ceiling(pose, ranges, sensor, grid, config, templates)
     print(f"numba {numba.__version__}, threads used: 1, templates: {templates.n_bins} heading bins, "

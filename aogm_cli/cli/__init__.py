@@ -64,6 +64,7 @@ def _register() -> None:
         ("render", "render"),
         ("export", "export"),
         ("import_log", "import_log"),
+        ("compare", "compare"),
     ):
         main.add_command(getattr(importlib.import_module(f"aogm_cli.cli.{module}"), name))
 

@@ -85,6 +85,11 @@ def flat_offsets(templates: ConeTemplates, width: int) -> tuple[np.ndarray, np.n
     return offs, sel
 
 
+# Cone cells outside the grid are sent to SPARE_MASK + 1 spare cells after it, in turn, so
+# that their dummy updates do not form one long chain through a single memory cell.
+SPARE_MASK = 255
+
+
 class StandardMapper:
     """Incremental standard mapping on one grid: ``update`` with chunks of scans, then ``result``.
 
@@ -136,9 +141,9 @@ class StandardMapper:
         size = int(np.diff(templates.offsets).max())
         self._idx_buf = np.empty(size, dtype=np.int32)
         self._inc_buf = np.empty(size, dtype=np.float32)
-        # one spare cell after the grid absorbs updates of cone cells outside it
-        self._flat = np.full(grid.height * grid.width + 1, self.UNOBSERVED, dtype=np.float32)
-        self.state = self._flat[:-1].reshape(grid.shape)
+        # spare cells after the grid absorb the updates of cone cells outside it
+        self._flat = np.full(grid.height * grid.width + SPARE_MASK + 1, self.UNOBSERVED, dtype=np.float32)
+        self.state = self._flat[: grid.height * grid.width].reshape(grid.shape)
 
     def update(self, pose: np.ndarray, ranges: np.ndarray) -> None:
         """Apply scans (pose (T, 3), ranges (T, S)) in order: every reading's cone, clamped."""
@@ -198,8 +203,8 @@ def _standard_kernel(
 ):
     """Compiled log-odds update of readings t = 0, 1, ... in order on the flat ``state``.
 
-    ``state`` holds height * width cells plus one spare cell at the end that absorbs the
-    updates of cone cells outside the grid. Per reading, entries [0, f0) of its template are
+    ``state`` holds height * width cells plus SPARE_MASK + 1 spare cells at the end that
+    absorb the updates of cone cells outside the grid. Per reading, entries [0, f0) of its template are
     the blind zone (observed only), [f0, f1) get free evidence and [f1, m) occupied
     evidence; every update is clamped. Vectorised passes write the increments to
     ``inc_buf`` and the cells' flat indices to ``idx_buf``; then a scalar pass does the
@@ -261,27 +266,33 @@ def _standard_kernel(
             c2[j] = c_occ * w2[j]
         # flat cell indices
         ib = idx_buf[:m]
+        base = row0 * width + col0
+        x_off = flat_offsets[flat_sel[k, 0], s : s + m]
+        positive = flat_sel[k, 1] > 0
         if row0 - ext >= 0 and row0 + ext < height and col0 - ext >= 0 and col0 + ext < width:
-            base = row0 * width + col0
-            x_off = flat_offsets[flat_sel[k, 0], s : s + m]
-            if flat_sel[k, 1] > 0:
+            if positive:
                 for j in range(m):
                     ib[j] = np.int32(base + x_off[j])
             else:
                 for j in range(m):
                     ib[j] = np.int32(base - x_off[j])
-        else:  # near the border: cells outside the grid go to the spare cell
-            ta = transform[k, 0]
-            tb = transform[k, 1]
-            tc = transform[k, 2]
-            td = transform[k, 3]
+        else:  # near the border: cells outside the grid go to the spare cells
+            # the grid's bounds as bounds on the stored offsets (dc, dr): the transform
+            # (a, b, c, d) takes drow from c dc or d dr and dcol from a dc or b dr
+            r_lo, r_hi = -row0, height - 1 - row0
+            c_lo, c_hi = -col0, width - 1 - col0
+            if transform[k, 2] != 0:  # drow = c dc, dcol = b dr
+                dc_lo, dc_hi = (r_lo, r_hi) if transform[k, 2] > 0 else (-r_hi, -r_lo)
+                dr_lo, dr_hi = (c_lo, c_hi) if transform[k, 1] > 0 else (-c_hi, -c_lo)
+            else:  # drow = d dr, dcol = a dc
+                dr_lo, dr_hi = (r_lo, r_hi) if transform[k, 3] > 0 else (-r_hi, -r_lo)
+                dc_lo, dc_hi = (c_lo, c_hi) if transform[k, 0] > 0 else (-c_hi, -c_lo)
             dc = dcol[s : s + m]
             dr = drow[s : s + m]
+            sign = 1 if positive else -1
             for j in range(m):
-                rr = row0 + tc * dc[j] + td * dr[j]
-                cc = col0 + ta * dc[j] + tb * dr[j]
-                inside = (rr >= 0) & (rr < height) & (cc >= 0) & (cc < width)
-                ib[j] = np.int32(rr * width + cc if inside else spare)
+                inside = (dc[j] >= dc_lo) & (dc[j] <= dc_hi) & (dr[j] >= dr_lo) & (dr[j] <= dr_hi)
+                ib[j] = np.int32(base + sign * x_off[j] if inside else spare + (j & SPARE_MASK))
         # read-modify-write: the only loops that touch the grid
         i0 = ib[:f0]
         for j in range(f0):

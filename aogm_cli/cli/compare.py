@@ -1,0 +1,178 @@
+"""``aogm compare``: logs (or their map files) x modes -> a metrics table, JSON, a figure, and
+quality gates (``--require``, ``--require-checks``) that set the exit status."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from aogm_cli.cli.options import progress_bar, quiet_option
+
+MODE_NAMES = ("standard", "em", "adaptive")
+
+
+def _check_output_folder(path: str | None, option: str) -> None:
+    from aogm_cli.errors import InputError
+
+    if path is None:
+        return
+    folder = Path(path).parent
+    if not folder.is_dir():
+        raise InputError(f"the output folder {str(folder)!r} does not exist", file=path, key=option)
+
+
+def _print_table(results, labels, quiet: bool) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    from aogm_cli.report.compare import relative_runtimes
+
+    console = Console()
+    if not console.is_terminal:
+        console = Console(width=max(console.width, 200), no_color=True, highlight=False)
+    relative = relative_runtimes(results)
+    table = Table(title=None if quiet else "aogm compare")
+    for name, justify in (
+        ("World", "left"), ("Mode", "left"), ("Accuracy", "right"), ("Occ. F1", "right"), ("Brier", "right"),
+        ("Checks", "right"), ("Runtime (s)", "right"), ("vs standard", "right"), ("Map", "left"),
+    ):
+        table.add_column(name, justify=justify, no_wrap=name != "Map", overflow="fold")
+    previous = None
+    for r in results:
+        label = labels[r.log]
+        if previous is not None and label != previous:
+            table.add_section()
+        previous = label
+        if r.metrics is None:
+            acc = f1 = brier = checks = "n/a"
+        else:
+            acc = f"{r.metrics['accuracy']:.4f}"
+            f1 = f"{r.metrics['occupied_f1']:.4f}"
+            brier = f"{r.metrics['brier']:.4f}"
+            passed = sum(c["passed"] for c in r.metrics["checks"])
+            checks = f"{passed}/{len(r.metrics['checks'])}"
+        rel = relative[(r.log, r.mode)]
+        table.add_row(
+            label, r.mode, acc, f1, brier, checks, f"{r.runtime_s:.3f}", "–" if rel is None else f"x{rel:.2f}",
+            _source(r),
+        )
+    console.print(table)
+
+
+def _source(r) -> str:
+    """Where a row's map came from: a file given, or mapped here (and written to --maps-dir)."""
+    if r.reused:
+        return f"file {Path(r.map_file).name}"
+    return "mapped" if r.map_file is None else f"mapped -> {Path(r.map_file).name}"
+
+
+@click.command("compare")
+@click.argument("inputs", nargs=-1, required=True, metavar="LOG.h5|MAP.h5 ...", type=click.Path(dir_okay=False))
+@click.option("--modes", "modes_text",
+              help="Comma-separated modes to compare.  [default: standard,em,adaptive; with map files only, their modes]")
+@click.option("--detector", type=click.Path(dir_okay=False), help="Detector file for adaptive mode (default: the packaged one).")
+@click.option("--params", "params_file", type=click.Path(dir_okay=False),
+              help="YAML with sections inverse_model:, em: and key resolution:, used by every mapping.")
+@click.option("--json", "json_out", type=click.Path(dir_okay=False), help="Write the results as JSON (CONTRACT.md shape).")
+@click.option("--figure", "figure_out", type=click.Path(dir_okay=False),
+              help="Write a PNG: one row per log; truth and each mode's map, titled with accuracy and runtime.")
+@click.option("--maps-dir", type=click.Path(file_okay=False),
+              help="Also write every map computed here as DIR/<logstem>_<mode>.h5, to pass back in later.")
+@click.option("--require", "requires", multiple=True, metavar="EXPR",
+              help="Gate, evaluated per log, e.g. 'adaptive.accuracy >= em.accuracy - 0.005'. Repeatable.")
+@click.option("--require-checks", multiple=True, type=click.Choice(MODE_NAMES),
+              help="Gate: every world check of every log passes in this mode. Repeatable.")
+@click.option("--jobs", "-j", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Map in this many worker processes (see Timings above).")
+@quiet_option
+def compare(inputs, modes_text, detector, params_file, json_out, figure_out, maps_dir, requires, require_checks, jobs, quiet):
+    """Map every log in every mode, evaluate each map against the log's truth, and print a table
+    (accuracy, occupied F1, Brier, checks passed, runtime, runtime relative to the standard map
+    of the same log).
+
+    Arguments may also be map files made earlier (aogm map, or --maps-dir): each is used for
+    its mode instead of mapping again; its source_log attribute names the log with the truth.
+
+    \b
+    Gates (exit status 1 when one fails, after --json and --figure are written):
+      --require EXPR       MODE.METRIC names, numbers, + - * /, ( ), one of < <= > >= == !=
+                           METRIC: accuracy, occupied_precision, occupied_recall,
+                           occupied_f1, brier, runtime (= runtime_s), checks_passed (fraction)
+      --require-checks M   every check of every log passes in mode M
+
+    \b
+    Timings: each map's runtime_s is measured inside the process that builds it, around the
+    mapping work only (the mapper excludes file I/O and one-time compilation). With --jobs N > 1
+    the workers compete for cores and memory bandwidth, so for fair runtimes use --jobs 1 (the
+    default) or N no larger than the number of cores. Runtimes relative to standard are always
+    taken within one log.
+
+    \b
+    Examples:
+      aogm compare door.h5 hall.h5 --modes standard,em --json results.json --figure cmp.png
+      aogm compare door.h5 --maps-dir maps/ --require "em.accuracy >= standard.accuracy"
+      aogm compare maps/door_standard.h5 maps/door_em.h5 --require-checks em
+    """
+    from aogm_cli.mapping.params import resolve_params
+    from aogm_cli.report import compare as lib
+    from aogm_cli.report.gates import check_gate_modes, evaluate_gates, evaluate_required_checks, parse_gate
+
+    gates = [parse_gate(text) for text in requires]  # malformed -> exit 2 before any work
+    params = resolve_params(params_file)
+    entries = lib.collect_inputs(list(inputs))
+    modes = lib.parse_modes(modes_text) if modes_text else lib.default_modes(entries)
+    check_gate_modes(gates, modes)
+    for mode in require_checks:
+        if mode not in modes:
+            from aogm_cli.errors import InputError
+
+            raise InputError(f"mode {mode!r} is not among the modes compared ({', '.join(modes)})", key="--require-checks")
+    _check_output_folder(json_out, "--json")
+    _check_output_folder(figure_out, "--figure")
+    if maps_dir and Path(maps_dir).exists() and not Path(maps_dir).is_dir():
+        from aogm_cli.errors import InputError
+
+        raise InputError("exists and is not a folder", file=maps_dir, key="--maps-dir")
+
+    n_tasks = sum(mode not in e.maps for e in entries for mode in modes)
+    with progress_bar(n_tasks, "compare", quiet, unit="map") as advance:
+        results = lib.run_comparison(
+            entries, modes, params, detector=detector, jobs=jobs, maps_dir=maps_dir, inputs=tuple(inputs),
+            on_map=lambda i, mode, m: advance(1),
+        )
+
+    for r in results:
+        differs = lib.params_differences(r.map.params, params) if r.reused else []
+        if differs:
+            click.echo(f"aogm: note: {r.map_file} was made with other {', '.join(differs)} parameters than "
+                       "this comparison's; it is reported as it is", err=True)
+    labels = lib.log_labels(entries)
+    _print_table(results, labels, quiet)
+    if json_out:
+        lib.write_json(json_out, results, inputs=tuple(inputs))
+    if figure_out:
+        from aogm_cli.report.figure import write_comparison_figure
+
+        write_comparison_figure(figure_out, entries, results, labels)
+    if not quiet:
+        for path in (json_out, figure_out):
+            if path:
+                click.echo(f"wrote {path}", err=True)
+
+    per_log = [(labels[log], values) for log, values in lib.gate_values(results)]
+    n_gates, failures = evaluate_gates(gates, per_log)
+    checks_by_log: dict[str, dict] = {}
+    for r in results:
+        checks_by_log.setdefault(labels[r.log], {})[r.mode] = None if r.metrics is None else r.metrics["checks"]
+    n_checks, check_failures = evaluate_required_checks(list(require_checks), list(checks_by_log.items()))
+    failures += check_failures
+    total = n_gates + n_checks
+    for failure in failures:
+        click.echo(str(failure))
+    if total:
+        click.echo(f"gates: {total - len(failures)} of {total} passed")
+    if failures:
+        click.echo(f"aogm: {len(failures)} of {total} gates failed", err=True)
+        click.get_current_context().exit(1)
+

@@ -1,0 +1,399 @@
+"""The library behind ``aogm compare``: collect logs and map files, map what is missing in each
+mode (optionally in worker processes), evaluate against the truth, and build the JSON of
+CONTRACT.md ("Metrics").
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import h5py
+import yaml
+
+from aogm_cli import __version__
+from aogm_cli.errors import InputError
+from aogm_cli.evaluation import evaluate
+from aogm_cli.logfile import LogReader, Truth
+from aogm_cli.mapfile import MODES, OccupancyMap, is_map_file, read_map_file, write_map_file
+from aogm_cli.mapping.params import MapParams
+from aogm_cli.outputs import atomic_output
+
+METRIC_KEYS = ("accuracy", "occupied_precision", "occupied_recall", "occupied_f1", "brier")
+
+
+class ModeUnavailable(RuntimeError):
+    """A mapping mode that this build cannot run (the adaptive mapper is not there yet)."""
+
+
+@dataclass
+class LogEntry:
+    """One log of the comparison: its path, world name, truth, and the map files given for it."""
+
+    path: str  # as given on the command line, else as found from a map's source_log
+    world: str
+    truth: Truth | None
+    maps: dict[str, str] = field(default_factory=dict)  # mode -> map file given
+    given: bool = False  # the log itself was an argument
+
+    @property
+    def stem(self) -> str:
+        return Path(self.path).stem
+
+
+@dataclass
+class ModeResult:
+    """One (log, mode): the map, its runtime, its metrics (None without truth), where it came from."""
+
+    log: str
+    world: str
+    mode: str
+    runtime_s: float
+    metrics: dict | None
+    map: OccupancyMap
+    map_file: str | None = None  # the map file given, or the one written to --maps-dir
+    reused: bool = False
+
+
+def parse_modes(text: str) -> tuple[str, ...]:
+    """``"standard,em"`` -> ("standard", "em"); InputError (key ``--modes``) on unknown or repeated modes."""
+    modes = tuple(m.strip() for m in text.split(",") if m.strip())
+    if not modes:
+        raise InputError(f"expected a comma-separated list of {', '.join(MODES)}, got {text!r}", key="--modes")
+    for m in modes:
+        if m not in MODES:
+            raise InputError(f"unknown mode {m!r}; expected a comma-separated list of {', '.join(MODES)}", key="--modes")
+    if len(set(modes)) != len(modes):
+        raise InputError(f"a mode is repeated in {text!r}", key="--modes")
+    return modes
+
+
+def world_name(truth: Truth | None, log_path: str) -> str:
+    """The ``name`` of the world file inside the log's truth; else the log's file stem."""
+    if truth is not None and truth.world:
+        try:
+            raw = yaml.safe_load(truth.world)
+        except yaml.YAMLError:
+            raw = None
+        if isinstance(raw, dict) and isinstance(raw.get("name"), str) and raw["name"].strip():
+            return raw["name"].strip()
+    return Path(log_path).stem
+
+
+def _map_header(path: str) -> tuple[str, str]:
+    """(mode, source_log) of a map file, read from its attributes only."""
+    with h5py.File(path, "r") as f:
+        version = f.attrs.get("format_version")
+        if version != 1:
+            raise InputError(f"expected 1, got {version!r}", file=path, key="format_version")
+        mode = _text(f.attrs.get("mode"))
+        source = _text(f.attrs.get("source_log"))
+    if mode not in MODES:
+        raise InputError(f"expected one of {', '.join(MODES)}, got {mode!r}", file=path, key="mode")
+    if not source:
+        raise InputError("empty; the map does not name the log it was made from", file=path, key="source_log")
+    return mode, source
+
+
+def _text(v) -> str:
+    return v.decode() if isinstance(v, bytes) else ("" if v is None else str(v))
+
+
+def _find_log(source_log: str, map_path: str, given_logs: list[str]) -> str:
+    """The log a map was made from: its source_log as a path (from here, then from the map's
+    folder), else the file of that name in the map's folder or among the logs given."""
+    folder = Path(map_path).parent
+    name = Path(source_log).name
+    for candidate in (Path(source_log), folder / source_log, folder / name):
+        if candidate.is_file():
+            return str(candidate)
+    same_name = [p for p in given_logs if Path(p).name == name]
+    if len(same_name) == 1:
+        return same_name[0]
+    raise InputError(
+        f"the log {source_log!r} it was made from was not found (also looked in {str(folder)!r}); "
+        "expected the log file, with its truth, next to the map or among the arguments",
+        file=map_path,
+        key="source_log",
+    )
+
+
+def collect_inputs(paths: list[str]) -> list[LogEntry]:
+    """Sort the arguments into logs and map files (``is_map_file``), each map attached to its
+    log via ``source_log``; logs in order of first mention. InputError on a bad file or on two
+    map files of one mode for one log."""
+    kinds = [(p, is_map_file(p)) for p in paths]
+    given_logs = [p for p, is_map in kinds if not is_map]
+    entries: dict[str, LogEntry] = {}
+
+    def entry_for(log_path: str) -> LogEntry:
+        key = os.path.realpath(log_path)
+        if key not in entries:
+            with LogReader(log_path) as reader:
+                truth = reader.truth()
+            entries[key] = LogEntry(path=log_path, world=world_name(truth, log_path), truth=truth)
+        return entries[key]
+
+    for path, is_map in kinds:
+        if is_map:
+            mode, source = _map_header(path)
+            entry = entry_for(_find_log(source, path, given_logs))
+            other = entry.maps.get(mode)
+            if other is not None and os.path.realpath(other) != os.path.realpath(path):
+                raise InputError(f"a second {mode} map of the log {entry.path}; the first was {other}", file=path)
+            entry.maps[mode] = path
+        else:
+            entry = entry_for(path)
+            if not entry.given:
+                entry.path, entry.given = path, True
+                entry.world = world_name(entry.truth, path)
+    return list(entries.values())
+
+
+def default_modes(entries: list[LogEntry]) -> tuple[str, ...]:
+    """All three modes when a log was given itself; with map files only, the modes they have."""
+    if any(e.given for e in entries):
+        return MODES
+    present = {mode for e in entries for mode in e.maps}
+    return tuple(m for m in MODES if m in present)
+
+
+def adaptive_available() -> bool:
+    from aogm_cli.mapping import mapper
+
+    return hasattr(mapper, "map_adaptive")
+
+
+def map_one(path: str, mode: str, params: MapParams, detector: str | None = None) -> OccupancyMap:
+    """Map one log in one mode. A top-level function, so that worker processes can run it; the
+    mapper measures ``runtime_s`` around the mapping work only, inside the process that maps."""
+    from aogm_cli.mapping import mapper
+
+    if mode == "standard":
+        return mapper.map_standard(path, params)
+    if mode == "em":
+        return mapper.map_em(path, params)
+    if mode == "adaptive":
+        if not hasattr(mapper, "map_adaptive"):
+            raise ModeUnavailable("the adaptive mapper is not available in this build; use --modes standard,em")
+        try:
+            return mapper.map_adaptive(path, params, detector)
+        except ModuleNotFoundError as exc:
+            if not (exc.name or "").startswith("aogm_cli"):
+                raise
+            raise ModeUnavailable(f"the adaptive mapper is incomplete in this build ({exc}); use --modes standard,em") from None
+    raise ValueError(f"unknown mode {mode!r}")
+
+
+def maps_dir_targets(entries: list[LogEntry], modes: tuple[str, ...], maps_dir: str) -> dict[tuple[int, str], Path]:
+    """DIR/<logstem>_<mode>.h5 for every map to compute; InputError when two logs share a stem."""
+    targets: dict[tuple[int, str], Path] = {}
+    owner: dict[Path, str] = {}
+    for i, e in enumerate(entries):
+        for mode in modes:
+            if mode in e.maps:
+                continue
+            target = Path(maps_dir) / f"{e.stem}_{mode}.h5"
+            if target in owner:
+                raise InputError(f"two logs would write {target}: {owner[target]} and {e.path}; rename one", key="--maps-dir")
+            owner[target] = e.path
+            targets[(i, mode)] = target
+    return targets
+
+
+def params_differences(map_params: dict, params: MapParams) -> list[str]:
+    """The parameter sections (resolution, inverse_model, em) in which a map's recorded
+    parameters differ from ``params``."""
+    wanted = json.loads(json.dumps(params.as_dict()))
+    return [k for k, v in wanted.items() if k in map_params and map_params[k] != v]
+
+
+def load_given_maps(entries: list[LogEntry], modes: tuple[str, ...]) -> dict[tuple[int, str], OccupancyMap]:
+    """Read the map files given for the modes compared, and check each against its log's truth grid."""
+    maps = {}
+    for i, e in enumerate(entries):
+        for mode in modes:
+            if mode not in e.maps:
+                continue
+            path = e.maps[mode]
+            m = read_map_file(path)
+            if e.truth is not None and m.grid.shape != e.truth.grid.shape:
+                raise InputError(
+                    f"grid {m.grid.height}x{m.grid.width} does not match the truth grid "
+                    f"{e.truth.grid.height}x{e.truth.grid.width} of {e.path}",
+                    file=path,
+                    key="/map/probability",
+                )
+            maps[(i, mode)] = m
+    return maps
+
+
+def compute_maps(
+    entries: list[LogEntry],
+    tasks: list[tuple[int, str]],
+    params: MapParams,
+    detector: str | None = None,
+    jobs: int = 1,
+    on_map: Callable[[int, str, OccupancyMap], None] | None = None,
+) -> dict[tuple[int, str], OccupancyMap]:
+    """Map each (log index, mode) of ``tasks``; with ``jobs`` > 1 in that many worker processes.
+
+    ``on_map`` is called in this process as each map is finished (in order of completion).
+    """
+    done: dict[tuple[int, str], OccupancyMap] = {}
+    if jobs <= 1 or len(tasks) <= 1:
+        for i, mode in tasks:
+            m = map_one(entries[i].path, mode, params, detector)
+            done[(i, mode)] = m
+            if on_map:
+                on_map(i, mode, m)
+        return done
+    from concurrent.futures import FIRST_EXCEPTION, ProcessPoolExecutor, wait
+
+    with ProcessPoolExecutor(max_workers=min(jobs, len(tasks))) as pool:
+        futures = {pool.submit(map_one, entries[i].path, mode, params, detector): (i, mode) for i, mode in tasks}
+        pending = set(futures)
+        try:
+            while pending:
+                finished, pending = wait(pending, return_when=FIRST_EXCEPTION)
+                for fut in finished:
+                    key = futures[fut]
+                    m = fut.result()  # re-raises a worker's error here
+                    done[key] = m
+                    if on_map:
+                        on_map(key[0], key[1], m)
+        except BaseException:
+            for fut in pending:
+                fut.cancel()
+            raise
+    return done
+
+
+def evaluate_result(entry: LogEntry, mode: str, m: OccupancyMap, map_file: str | None, reused: bool) -> ModeResult:
+    metrics = None
+    if entry.truth is not None:
+        try:
+            metrics = evaluate(m, entry.truth)
+        except ValueError as exc:
+            raise InputError(str(exc), file=map_file or entry.path) from None
+    return ModeResult(entry.path, entry.world, mode, float(m.runtime_s), metrics, m, map_file, reused)
+
+
+def run_comparison(
+    entries: list[LogEntry],
+    modes: tuple[str, ...],
+    params: MapParams,
+    detector: str | None = None,
+    jobs: int = 1,
+    maps_dir: str | None = None,
+    inputs: tuple[str, ...] = (),
+    on_map: Callable[[int, str, OccupancyMap], None] | None = None,
+) -> list[ModeResult]:
+    """Every log in every mode: given maps reused, the others computed (and written to
+    ``maps_dir`` as DIR/<logstem>_<mode>.h5 when set); results per log, then per mode."""
+    tasks = [(i, mode) for i, e in enumerate(entries) for mode in modes if mode not in e.maps]
+    if any(mode == "adaptive" for _, mode in tasks) and not adaptive_available():
+        raise ModeUnavailable("the adaptive mapper is not available in this build; use --modes standard,em")
+    targets = maps_dir_targets(entries, modes, maps_dir) if maps_dir else {}
+    if targets:
+        Path(maps_dir).mkdir(parents=True, exist_ok=True)
+    given = load_given_maps(entries, modes)
+    written: dict[tuple[int, str], str] = {}
+
+    def finished(i: int, mode: str, m: OccupancyMap) -> None:
+        if (i, mode) in targets:
+            write_map_file(targets[(i, mode)], m, inputs=inputs)
+            written[(i, mode)] = str(targets[(i, mode)])
+        if on_map:
+            on_map(i, mode, m)
+
+    computed = compute_maps(entries, tasks, params, detector, jobs, finished)
+    results = []
+    for i, e in enumerate(entries):
+        for mode in modes:
+            if (i, mode) in given:
+                results.append(evaluate_result(e, mode, given[(i, mode)], e.maps[mode], True))
+            else:
+                results.append(evaluate_result(e, mode, computed[(i, mode)], written.get((i, mode)), False))
+    return results
+
+
+def checks_passed(metrics: dict | None) -> float | None:
+    """Fraction of the world's checks that pass (1.0 when it has none); None without truth."""
+    if metrics is None:
+        return None
+    checks = metrics["checks"]
+    return sum(c["passed"] for c in checks) / len(checks) if checks else 1.0
+
+
+def metric_values(result: ModeResult) -> dict[str, float | None]:
+    """The values a gate can name for one (log, mode): metrics, runtime, checks_passed."""
+    values: dict[str, float | None] = {k: (None if result.metrics is None else result.metrics[k]) for k in METRIC_KEYS}
+    values["runtime"] = result.runtime_s
+    values["checks_passed"] = checks_passed(result.metrics)
+    return values
+
+
+def gate_values(results: list[ModeResult]) -> list[tuple[str, dict[tuple[str, str], float | None]]]:
+    """Per log (in order): (log path, {(mode, metric): value})."""
+    by_log: dict[str, dict[tuple[str, str], float | None]] = {}
+    for r in results:
+        values = by_log.setdefault(r.log, {})
+        for metric, v in metric_values(r).items():
+            values[(r.mode, metric)] = v
+    return list(by_log.items())
+
+
+def log_labels(entries: list[LogEntry]) -> dict[str, str]:
+    """log path -> how tables and messages name it: the world name, plus the file stem when two
+    logs share a world name."""
+    count: dict[str, int] = {}
+    for e in entries:
+        count[e.world] = count.get(e.world, 0) + 1
+    return {e.path: e.world if count[e.world] == 1 else f"{e.world} ({e.stem})" for e in entries}
+
+
+def relative_runtimes(results: list[ModeResult]) -> dict[tuple[str, str], float | None]:
+    """(log, mode) -> runtime / the standard map's runtime of the same log (None without one)."""
+    standard = {r.log: r.runtime_s for r in results if r.mode == "standard"}
+    out = {}
+    for r in results:
+        base = standard.get(r.log)
+        out[(r.log, r.mode)] = r.runtime_s / base if base else None
+    return out
+
+
+def _finite(v):
+    return None if isinstance(v, float) and not math.isfinite(v) else v
+
+
+def metrics_json(metrics: dict | None) -> dict | None:
+    """The metrics object of CONTRACT.md (NaN, e.g. nothing observed, becomes null)."""
+    if metrics is None:
+        return None
+    out = {k: _finite(float(metrics[k])) for k in METRIC_KEYS}
+    out["checks"] = [{"name": c["name"], "passed": bool(c["passed"])} for c in metrics["checks"]]
+    return out
+
+
+def results_json(results: list[ModeResult]) -> dict:
+    """``{"aogm_version", "results": [{log, world, mode, runtime_s, metrics}]}`` as in CONTRACT.md."""
+    return {
+        "aogm_version": __version__,
+        "results": [
+            {"log": r.log, "world": r.world, "mode": r.mode, "runtime_s": _finite(float(r.runtime_s)),
+             "metrics": metrics_json(r.metrics)}
+            for r in results
+        ],
+    }
+
+
+def write_json(path: str | Path, results: list[ModeResult], inputs: tuple[str, ...] = ()) -> None:
+    """Write ``results_json`` to ``path`` atomically."""
+    text = json.dumps(results_json(results), indent=2, allow_nan=False) + "\n"
+    with atomic_output(path, inputs) as tmp:
+        Path(tmp).write_text(text, encoding="utf-8")

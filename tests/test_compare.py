@@ -1,0 +1,267 @@
+"""``aogm compare`` end to end on tiny simulated corridors: JSON, map reuse, gates, figure."""
+
+import dataclasses
+import json
+import shutil
+
+import h5py
+import numpy as np
+import pytest
+import yaml
+from click.testing import CliRunner
+
+from aogm_cli.cli import main
+from aogm_cli.evaluation import map_metrics, run_checks
+from aogm_cli.grid import GridSpec
+from aogm_cli.logfile import read_log, write_log
+from aogm_cli.mapping import mapper
+from aogm_cli.simulation.sonar import simulate
+from aogm_cli.world.loader import parse_world
+
+WORLD = """
+name: tiny_door
+bounds: [-0.5, -0.5, 6.5, 4.0]
+truth_resolution: 0.1
+walls:
+  - points: [[0, 0], [6, 0]]
+  - points: [[0, 2], [6, 2]]
+    openings: [{at: 3.0, width: 1.0}]
+  - points: [[0, 0], [0, 2]]
+  - points: [[6, 0], [6, 2]]
+  - points: [[2, 2], [2, 3.5], [4, 3.5], [4, 2]]
+trajectory:
+  waypoints: [[0.5, 1.0], [5.5, 1.0]]
+  speed: 0.5
+  scan_period: 0.5
+sonar: {count: 16, max_range: 4.0}
+checks:
+  - name: door_passable
+    passable: {from: [3.0, 1.0], to: [3.0, 3.0], robot_radius: 0.2}
+  - name: through_wall
+    passable: {from: [1.0, 1.0], to: [1.0, -0.3], robot_radius: 0.1}
+"""
+METRICS = ("accuracy", "occupied_precision", "occupied_recall", "occupied_f1", "brier")
+
+
+def run(*args):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+@pytest.fixture(scope="module")
+def logs(tmp_path_factory):
+    """Two ~20-scan logs of one small corridor world (seeds 1 and 2)."""
+    folder = tmp_path_factory.mktemp("logs")
+    world = parse_world(yaml.safe_load(WORLD), file="tiny_door.yaml", text=WORLD)
+    paths = []
+    for seed in (1, 2):
+        log = simulate(world, seed=seed)
+        assert 15 <= log.n_scans <= 25
+        path = folder / f"door_{seed}.h5"
+        write_log(path, log)
+        paths.append(path)
+    return paths
+
+
+@pytest.fixture(scope="module")
+def compared(logs, tmp_path_factory):
+    """``compare --modes standard,em`` on both logs, with --json and --maps-dir."""
+    out = tmp_path_factory.mktemp("cmp")
+    result = run("compare", *logs, "--modes", "standard,em", "--json", out / "r.json", "--maps-dir", out / "maps", "-q")
+    assert result.exit_code == 0, result.output
+    return out, json.loads((out / "r.json").read_text()), result.output
+
+
+def independent_metrics(map_path, log_path):
+    """Metrics straight from the files: the map's arrays and the log's truth, via map_metrics."""
+    with h5py.File(map_path) as f:
+        probability, observed = f["map/probability"][...], f["map/observed"][...]
+        runtime = float(f.attrs["runtime_s"])
+        origin, resolution = f["map"].attrs["origin"], float(f["map"].attrs["resolution"])
+    with h5py.File(log_path) as f:
+        truth = f["truth/occupancy"][...]
+        checks = json.loads(f["truth"].attrs["checks"])
+    metrics = map_metrics(probability, observed, truth)
+    grid = GridSpec(float(origin[0]), float(origin[1]), resolution, *probability.shape)
+    metrics["checks"] = run_checks(grid, probability, observed, checks)
+    return metrics, runtime
+
+
+def test_json_follows_the_contract_and_matches_the_map_files(logs, compared):
+    out, data, _ = compared
+    assert set(data) == {"aogm_version", "results"} and data["aogm_version"] == "0.1.0"
+    assert [(r["log"], r["mode"]) for r in data["results"]] == [
+        (str(logs[0]), "standard"), (str(logs[0]), "em"), (str(logs[1]), "standard"), (str(logs[1]), "em")
+    ]
+    for r in data["results"]:
+        assert set(r) == {"log", "world", "mode", "runtime_s", "metrics"}
+        assert r["world"] == "tiny_door"
+        assert set(r["metrics"]) == set(METRICS) | {"checks"}
+        stem = r["log"].rsplit("/", 1)[-1][:-3]
+        expected, runtime = independent_metrics(out / "maps" / f"{stem}_{r['mode']}.h5", r["log"])
+        for key in METRICS:
+            assert r["metrics"][key] == pytest.approx(expected[key], abs=1e-12)
+        assert r["metrics"]["checks"] == expected["checks"]
+        assert [c["name"] for c in r["metrics"]["checks"]] == ["door_passable", "through_wall"]
+        assert r["runtime_s"] == runtime and r["runtime_s"] > 0
+
+
+def test_table_names_worlds_modes_and_relative_runtime(compared):
+    _, data, output = compared
+    # two logs of one world: the label adds the file stem
+    assert "tiny_door (door_1)" in output and "tiny_door (door_2)" in output
+    assert output.count("x1.00") >= 2  # each standard map relative to itself
+    em = data["results"][1]
+    ratio = em["runtime_s"] / data["results"][0]["runtime_s"]
+    assert f"x{ratio:.2f}" in output
+    passed = sum(c["passed"] for c in em["metrics"]["checks"])
+    assert f"{passed}/2" in output
+
+
+def test_map_files_give_the_same_numbers_without_mapping(logs, compared, monkeypatch, tmp_path):
+    out, data, _ = compared
+
+    def no_mapping(*args, **kwargs):
+        raise AssertionError("a map was computed again")
+
+    monkeypatch.setattr(mapper, "map_standard", no_mapping)
+    monkeypatch.setattr(mapper, "map_em", no_mapping)
+    maps = sorted((out / "maps").glob("*.h5"))
+    assert len(maps) == 4
+    result = run("compare", *maps, "--json", tmp_path / "again.json", "-q")  # modes from the map files
+    assert result.exit_code == 0, result.output
+    assert json.loads((tmp_path / "again.json").read_text()) == data
+    # a log together with one of its maps: only the missing mode is mapped
+    monkeypatch.undo()
+    result = run("compare", logs[0], out / "maps" / "door_1_em.h5", "--modes", "standard,em", "--json", tmp_path / "mix.json", "-q")
+    assert result.exit_code == 0, result.output
+    mixed = json.loads((tmp_path / "mix.json").read_text())["results"]
+    assert mixed[1] == data["results"][1]
+    assert "file " in result.output and "door_1_em.h5" in result.output
+
+
+def test_parallel_jobs_give_the_same_metrics(logs, compared, tmp_path):
+    _, data, _ = compared
+    result = run("compare", *logs, "--modes", "standard,em", "--jobs", 2, "--json", tmp_path / "p.json", "-q")
+    assert result.exit_code == 0, result.output
+    parallel = json.loads((tmp_path / "p.json").read_text())["results"]
+    assert [r["metrics"] for r in parallel] == [r["metrics"] for r in data["results"]]
+
+
+def test_gates_pass_and_fail(logs, compared, tmp_path):
+    out, data, _ = compared
+    maps = sorted((out / "maps").glob("door_1_*.h5"))
+    ok = run("compare", *maps, "--require", "em.accuracy >= 0", "--require", "standard.runtime > 0", "-q")
+    assert ok.exit_code == 0, ok.output
+    assert "gates: 2 of 2 passed" in ok.output
+    bad = run("compare", *maps, "--require", "em.accuracy >= standard.accuracy + 2", "--json", tmp_path / "r.json",
+              "--figure", tmp_path / "f.png", "-q")
+    assert bad.exit_code == 1
+    em, std = data["results"][1]["metrics"]["accuracy"], data["results"][0]["metrics"]["accuracy"]
+    assert f"FAILED tiny_door: em.accuracy >= standard.accuracy + 2  ({em:.6g} >= {std:.6g} + 2" in bad.output
+    assert "1 of 1 gates failed" in bad.output
+    assert (tmp_path / "r.json").exists() and (tmp_path / "f.png").exists()  # written before exit 1
+
+
+def test_require_checks_fails_on_a_failed_check(compared):
+    out, _, _ = compared
+    maps = sorted((out / "maps").glob("door_1_*.h5"))
+    result = run("compare", *maps, "--require-checks", "em", "-q")
+    assert result.exit_code == 1  # through_wall can never pass: the far side is unobserved
+    assert "FAILED tiny_door: em checks" in result.output and "through_wall" in result.output
+
+
+@pytest.mark.parametrize(
+    "args, words",
+    [
+        (["--require", "em.accuracy >= (standard.accuracy"], "--require"),
+        (["--require", "em.acc > 0"], "unknown metric 'acc'"),
+        (["--require", "adaptive.accuracy > 0", "--modes", "standard,em"], "'adaptive' is not among the modes"),
+        (["--modes", "standard,emm"], "--modes"),
+        (["--require-checks", "adaptive", "--modes", "standard,em"], "--require-checks"),
+    ],
+)
+def test_malformed_gates_exit_2_before_mapping(logs, tmp_path, monkeypatch, args, words):
+    def no_mapping(*a, **k):
+        raise AssertionError("mapping started")
+
+    monkeypatch.setattr(mapper, "map_standard", no_mapping)
+    monkeypatch.setattr(mapper, "map_em", no_mapping)
+    result = run("compare", logs[0], *args, "--json", tmp_path / "r.json", "-q")
+    assert result.exit_code == 2, result.output
+    assert words in result.output and "Traceback" not in result.output
+    assert not (tmp_path / "r.json").exists()
+
+
+def test_figure_is_a_png(compared, tmp_path):
+    out, _, _ = compared
+    result = run("compare", *sorted((out / "maps").glob("*.h5")), "--figure", tmp_path / "cmp.png", "-q")
+    assert result.exit_code == 0, result.output
+    data = (tmp_path / "cmp.png").read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000
+    assert not list(tmp_path.glob(".*.tmp"))
+
+
+def test_adaptive_unavailable_fails_clearly_before_mapping(logs, monkeypatch):
+    monkeypatch.delattr(mapper, "map_adaptive", raising=False)
+    monkeypatch.setattr(mapper, "map_standard", lambda *a, **k: pytest.fail("mapping started"))
+    result = run("compare", logs[0], "--modes", "standard,adaptive", "-q")
+    assert result.exit_code == 1
+    assert "adaptive mapper is not available" in result.output and "--modes standard,em" in result.output
+
+
+def test_a_map_whose_log_is_missing_exits_2(compared, tmp_path):
+    out, _, _ = compared
+    lone = tmp_path / "lone.h5"
+    shutil.copy(out / "maps" / "door_1_em.h5", lone)
+    with h5py.File(lone, "a") as f:
+        f.attrs["source_log"] = "nowhere/ghost.h5"
+    result = run("compare", lone, "-q")
+    assert result.exit_code == 2 and "source_log" in result.output and "ghost.h5" in result.output
+
+
+def test_a_log_without_truth_reports_runtime_only(logs, tmp_path):
+    log = read_log(logs[0])
+    bare = tmp_path / "bare.h5"
+    write_log(bare, dataclasses.replace(log, truth=None))
+    params = tmp_path / "p.yaml"
+    params.write_text("resolution: 0.2\n")
+    result = run("compare", bare, "--modes", "standard", "--params", params, "--json", tmp_path / "r.json",
+                 "--require", "standard.runtime > 0", "--require", "standard.accuracy > 0.5", "-q")
+    assert result.exit_code == 1
+    assert "FAILED bare: standard.accuracy > 0.5  (n/a > 0.5; standard.accuracy not available)" in result.output
+    (r,) = json.loads((tmp_path / "r.json").read_text())["results"]
+    assert r["world"] == "bare" and r["metrics"] is None and r["runtime_s"] > 0
+    assert "n/a" in result.output
+
+
+def test_params_reach_every_mapping(logs, tmp_path):
+    params = tmp_path / "p.yaml"
+    params.write_text("inverse_model: {l_occ: 1.3}\n")
+    result = run("compare", logs[0], "--modes", "standard", "--params", params, "--maps-dir", tmp_path / "m", "-q")
+    assert result.exit_code == 0, result.output
+    with h5py.File(tmp_path / "m" / "door_1_standard.h5") as f:
+        assert json.loads(f.attrs["params"])["inverse_model"]["l_occ"] == 1.3
+        assert np.isfinite(f["map/probability"][...]).all()
+
+
+def test_adaptive_mode_is_wired_to_map_adaptive(logs, monkeypatch, tmp_path):
+    """A stand-in adaptive mapper: compare passes the detector, reports the mode and draws clusters."""
+    seen = {}
+    real_standard = mapper.map_standard
+
+    def fake_adaptive(path, params, detector_path=None, progress=None):
+        seen["detector"] = detector_path
+        m = real_standard(path, params)
+        clusters = np.zeros(m.grid.shape, dtype=np.int32)
+        clusters[15:25, 30:40] = 1
+        return dataclasses.replace(m, mode="adaptive", clusters=clusters, runtime_s=m.runtime_s + 10.0)
+
+    monkeypatch.setattr(mapper, "map_adaptive", fake_adaptive, raising=False)
+    result = run("compare", logs[0], "--modes", "standard,adaptive", "--detector", "det.h5", "--json", tmp_path / "r.json",
+                 "--figure", tmp_path / "f.png", "--require", "adaptive.runtime <= 1.5 * standard.runtime", "-q")
+    assert seen["detector"] == "det.h5"
+    assert result.exit_code == 1  # 10 s slower than any standard map here
+    assert "FAILED tiny_door: adaptive.runtime <= 1.5 * standard.runtime  (" in result.output
+    modes = [r["mode"] for r in json.loads((tmp_path / "r.json").read_text())["results"]]
+    assert modes == ["standard", "adaptive"]
+    assert (tmp_path / "f.png").read_bytes()[:4] == b"\x89PNG"
