@@ -17,12 +17,15 @@ $(STAMP): pyproject.toml
 install: $(STAMP)
 
 demo: $(STAMP)
-	@mkdir -p $(OUT)
+	@mkdir -p $(OUT)/maps
 	@for w in $(WORLDS); do \
 	  n=$$(basename $$w .yaml); \
 	  $(BIN)/aogm simulate $$w -o $(OUT)/$$n.h5 --seed $(SEED) --png $(OUT)/$$n-truth.png --quiet || exit 1; \
-	  echo "simulated $$w -> $(OUT)/$$n.h5, picture $(OUT)/$$n-truth.png"; \
+	  echo "simulated $$w -> $(OUT)/$$n.h5 (truth picture $(OUT)/$$n-truth.png)"; \
 	done
+	$(BIN)/aogm compare $(addprefix $(OUT)/,$(notdir $(WORLDS:.yaml=.h5))) --modes standard,em,adaptive \
+	  --maps-dir $(OUT)/maps --json $(OUT)/report.json --figure $(OUT)/report.png --quiet
+	@echo "table above; figure $(OUT)/report.png, JSON $(OUT)/report.json, maps in $(OUT)/maps/"
 
 test: $(STAMP)
 	$(BIN)/python -m pytest

@@ -12,6 +12,7 @@ from aogm_cli.mapping.cone import (
     build_cone_templates,
     cone_cells,
     heading_bins_for,
+    range_search,
     reading_geometry,
     sensor_cells,
 )
@@ -172,3 +173,15 @@ def test_bad_template_parameters(kwargs, key):
     with pytest.raises(InputError) as err:
         build_cone_templates(args["resolution"], args["beam_width"], args["max_range"], n_bins=n_bins)
     assert err.value.key == key
+
+
+def test_range_search_is_searchsorted():
+    tpl = build_cone_templates(0.05, BEAM, 2.0)
+    rng = np.random.default_rng(1)
+    for b in (0, 3, tpl.offsets.size - 2):
+        r = tpl.ranges[tpl.offsets[b] : tpl.offsets[b + 1]]
+        values = np.r_[rng.uniform(-0.1, 2.2, 300), r[::7], r[::11] + 1e-12, [0.0, 2.0, 5.0, np.inf, np.nan]]
+        for v in values:
+            for right in (False, True):
+                want = np.searchsorted(r, v, side="right" if right else "left") if v >= 0 else 0
+                assert range_search(r, tpl.range_index[b], tpl.resolution, v, right) == want

@@ -11,6 +11,7 @@ from aogm_cli.mapping.cone import build_cone_templates
 from aogm_cli.mapping.inverse_model import InverseModelConfig, inverse_model
 from aogm_cli.mapping.standard import (
     StandardMapper,
+    flat_offsets,
     probability_from_log_odds,
     standard_map,
     standard_templates,
@@ -74,11 +75,14 @@ def test_elfes_model_on_a_tiny_grid_by_hand():
 
 
 @pytest.mark.parametrize("model", ["elfes", "constant"])
-@pytest.mark.parametrize("k, z", [(0, 1.23), (37, 0.8), (100, 2.0), (161, np.inf), (90, 0.07)])
-def test_kernel_agrees_with_the_inverse_model_function(model, k, z):
+@pytest.mark.parametrize(
+    "octant, z", [(0, 1.23), (1, 0.8), (2, 2.0), (3, np.inf), (4, 0.07), (5, 4.99), (6, 0.5), (7, 3.3)]
+)
+def test_kernel_agrees_with_the_inverse_model_function(model, octant, z):
     grid = GridSpec(0.0, 0.0, 0.1, 110, 110)
     config = InverseModelConfig(model=model)
     templates = standard_templates(grid, ONE_SONAR)
+    k = int(templates.n_bins * (octant + 0.37) / 8)  # a heading bin in every octant
     yaw = float(templates.bin_heading(k))
     pose = [5.55, 5.45, yaw]  # the centre of cell (54, 55)
     log_odds, observed = standard_map([(0, None, np.array([pose]), np.array([[z]], np.float32))],
@@ -93,6 +97,16 @@ def test_kernel_agrees_with_the_inverse_model_function(model, k, z):
     seen = np.zeros((110, 110), dtype=bool)
     seen[54 + drow[cover], 55 + dcol[cover]] = True
     np.testing.assert_array_equal(observed, seen)
+
+
+def test_flat_offsets_follow_every_heading_bin():
+    templates = build_cone_templates(0.1, BEAM, 1.0, n_bins=64)
+    offs, sel = flat_offsets(templates, 37)
+    for k in range(64):
+        drow, dcol, _, _ = templates.cells(k)
+        b = templates.base_bin[k]
+        x = offs[sel[k, 0], templates.offsets[b] : templates.offsets[b + 1]]
+        np.testing.assert_array_equal(sel[k, 1] * x.astype(np.int64), drow * 37 + dcol)
 
 
 def test_max_range_reading_only_clears():

@@ -21,17 +21,27 @@ Choices (documented)
 * Arithmetic on the grid is float32 in a fixed order, so a map made chunk by chunk equals,
   bit for bit, the map made in one pass.
 
-Speed: no transcendental function per cell. Per template entry the kernel reads the
-angular weight a (E_a, or 1 for the constant model) and the range; the free increment is
-a * (c_free - B u^2) with u = d - Rmin and B = c_free / span^2 per reading (Elfes' E_r), the
-occupied one c_occ * a. A reading's region boundaries are binary searches in its
-template's sorted ranges. The kernel's loops are written so that LLVM vectorises all but the
-read-modify-write of the grid (see ``_standard_kernel``); ``bench/bench_standard.py``
-compares it with a plain scatter-add.
+Speed (``bench/bench_standard.py``: about 0.7 G cone-cell updates/s, 60% of a plain
+compiled scatter-add over the same cells, on one core of the development machine):
+
+* no transcendental function per cell: per template entry the kernel reads a precomputed
+  angular weight a (E_a, or 1 for the constant model), the range d and a flat index offset;
+  the free increment is a (c_free - B u^2) with u = d - Rmin and B = c_free / span^2 per
+  reading (Elfes' E_r), the occupied one c_occ a;
+* a reading's region boundaries are short table-assisted binary searches in its template's
+  sorted ranges (``cone.range_search``);
+* increments and flat indices are computed in vectorised passes (loops over slices from 0,
+  so that numba drops its negative-index checks; flat offsets precomputed per grid width,
+  so no integer multiplies), leaving a scalar read-modify-write loop as lean as the
+  scatter-add's;
+* "observed" lives in the log-odds grid itself (-inf until first seen), and the grid is
+  padded by the cone's reach, so that there is no second scattered write and no bounds
+  check for sensors inside the grid.
 """
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Iterable
 
 import numba
@@ -39,7 +49,7 @@ import numpy as np
 
 from aogm_cli.grid import GridSpec
 from aogm_cli.logfile import SensorSpec
-from aogm_cli.mapping.cone import ConeTemplates, build_cone_templates, reading_geometry
+from aogm_cli.mapping.cone import ConeTemplates, build_cone_templates, range_search, reading_geometry
 from aogm_cli.mapping.inverse_model import InverseModelConfig, angular_profile
 
 
@@ -61,27 +71,41 @@ def standard_templates(grid: GridSpec, sensor: SensorSpec) -> ConeTemplates:
 
 def angular_weights(templates: ConeTemplates, config: InverseModelConfig, beam_width: float) -> np.ndarray:
     """Per template entry, float32: Elfes' E_a(bearing) (clipped at 0), or 1 for the constant model."""
-    if config.model == "elfes":
-        return np.maximum(angular_profile(templates.bearings, beam_width), 0.0).astype(np.float32)
-    return np.ones(templates.ranges.shape, dtype=np.float32)
+    return _entry_tables(templates, config.model, float(beam_width))[0]
 
 
+@functools.lru_cache(maxsize=8)
+def _entry_tables(templates: ConeTemplates, model: str, beam_width: float) -> tuple[np.ndarray, np.ndarray]:
+    """(angular weights, ranges) per template entry as read-only float32 arrays; cached."""
+    if model == "elfes":
+        weights = np.maximum(angular_profile(templates.bearings, beam_width), 0.0).astype(np.float32)
+    else:
+        weights = np.ones(templates.ranges.shape, dtype=np.float32)
+    ranges32 = templates.ranges.astype(np.float32)
+    weights.setflags(write=False)
+    ranges32.setflags(write=False)
+    return weights, ranges32
+
+
+@functools.lru_cache(maxsize=8)
 def flat_offsets(templates: ConeTemplates, width: int) -> tuple[np.ndarray, np.ndarray]:
     """Template offsets as flat index offsets on a grid ``width`` cells wide, without multiplies.
 
     Every lattice symmetry maps a stored offset (dc, dr) to +/- one of dr W + dc, dr W - dc,
     dc W + dr, dc W - dr. Returns those four (4, E) int32 arrays and, per heading bin, which
-    one and the sign: (n_bins, 2) int64.
+    one and the sign: (n_bins, 2) int64. Cached per (templates, width).
     """
     dc = templates.dcol.astype(np.int64)
     dr = templates.drow.astype(np.int64)
     offs = np.stack([dr * width + dc, dr * width - dc, dc * width + dr, dc * width - dr]).astype(np.int32)
     # transform (a, b, c, d): dcol = a dc + b dr, drow = c dc + d dr; flat = drow W + dcol
-    table = {
-        (1, 0, 0, 1): (0, 1), (-1, 0, 0, 1): (1, 1), (0, 1, 1, 0): (2, 1), (0, -1, 1, 0): (3, 1),
-        (-1, 0, 0, -1): (0, -1), (1, 0, 0, -1): (1, -1), (0, -1, -1, 0): (2, -1), (0, 1, -1, 0): (3, -1),
-    }
-    sel = np.array([table[tuple(int(v) for v in tr)] for tr in templates.transform], dtype=np.int64)
+    a, b, c, d = templates.transform.T
+    from_dr = c == 0  # flat = d (dr W + (a/d) dc), else c (dc W + (b/c) dr)
+    which = np.where(from_dr, np.where(a == d, 0, 1), np.where(b == c, 2, 3))
+    sign = np.where(from_dr, d, c)
+    sel = np.stack([which, sign], axis=1).astype(np.int64)
+    offs.setflags(write=False)
+    sel.setflags(write=False)
     return offs, sel
 
 
@@ -96,6 +120,9 @@ class StandardMapper:
     The state is one float32 grid: a cell's log-odds once some reading's cone covered it, and
     ``UNOBSERVED`` (-inf) before; ``result`` splits it into (log_odds, observed). Keeping
     "observed" inside the log-odds grid saves the kernel a second scattered write per cell.
+    The state is padded by the templates' extent on every side (a 2000 x 2000 grid at 0.05 m
+    with a 5 m sonar grows by 20%), so that the cone of a sensor inside the grid never needs
+    bounds checks; only sensors outside the grid take the kernel's checked path.
     """
 
     UNOBSERVED = np.float32(-np.inf)
@@ -115,14 +142,11 @@ class StandardMapper:
             raise ValueError("cone templates do not match the grid resolution and the sensor's beam width")
         if templates.reach < sensor.max_range:
             raise ValueError("cone templates do not reach the sensor's max_range")
-        if grid.height * grid.width >= 2**31:
-            raise ValueError(f"grid of {grid.height} x {grid.width} cells is too large (limit 2**31 cells)")
         self.sensor = sensor
         self.grid = grid
         self.config = config
         self.templates = templates
-        self.weights = angular_weights(templates, config, sensor.beam_width)
-        self.ranges32 = templates.ranges.astype(np.float32)
+        self.weights, self.ranges32 = _entry_tables(templates, config.model, float(sensor.beam_width))
         self.scalars = np.array(
             [
                 0.5 * config.alpha,
@@ -134,16 +158,25 @@ class StandardMapper:
                 config.clamp_max,
                 config.l0,
                 1.0 if config.model == "elfes" else 0.0,
+                templates.resolution,
             ],
             dtype=np.float64,
         )
-        self.flat_offsets, self.flat_sel = flat_offsets(templates, grid.width)
+        # the state is padded by the templates' extent on every side, so that the cone of any
+        # sensor inside the grid lies wholly inside the padded state: no bounds checks
+        self.pad = int(templates.extent)
+        self.padded_shape = (grid.height + 2 * self.pad, grid.width + 2 * self.pad)
+        if self.padded_shape[0] * self.padded_shape[1] + SPARE_MASK + 1 >= 2**31:
+            raise ValueError(f"grid of {grid.height} x {grid.width} cells is too large (limit 2**31 cells)")
+        self.flat_offsets, self.flat_sel = flat_offsets(templates, self.padded_shape[1])
         size = int(np.diff(templates.offsets).max())
         self._idx_buf = np.empty(size, dtype=np.int32)
         self._inc_buf = np.empty(size, dtype=np.float32)
         # spare cells after the grid absorb the updates of cone cells outside it
-        self._flat = np.full(grid.height * grid.width + SPARE_MASK + 1, self.UNOBSERVED, dtype=np.float32)
-        self.state = self._flat[: grid.height * grid.width].reshape(grid.shape)
+        hp, wp = self.padded_shape
+        self._flat = np.full(hp * wp + SPARE_MASK + 1, self.UNOBSERVED, dtype=np.float32)
+        padded = self._flat[: hp * wp].reshape(hp, wp)
+        self.state = padded[self.pad : self.pad + grid.height, self.pad : self.pad + grid.width]
 
     def update(self, pose: np.ndarray, ranges: np.ndarray) -> None:
         """Apply scans (pose (T, 3), ranges (T, S)) in order: every reading's cone, clamped."""
@@ -151,14 +184,15 @@ class StandardMapper:
         z = np.where(valid, np.asarray(ranges, dtype=np.float32), np.float32(np.nan)).astype(np.float32)
         _standard_kernel(
             self._flat,
-            self.grid.height,
-            self.grid.width,
-            rows.reshape(-1),
-            cols.reshape(-1),
+            self.padded_shape[0],
+            self.padded_shape[1],
+            rows.reshape(-1) + self.pad,
+            cols.reshape(-1) + self.pad,
             bins.reshape(-1),
             z.reshape(-1),
             offset.reshape(-1),
             self.templates.kernel_arrays,
+            self.templates.range_index,
             self.flat_offsets,
             self.flat_sel,
             self.weights,
@@ -171,8 +205,9 @@ class StandardMapper:
 
     def result(self) -> tuple[np.ndarray, np.ndarray]:
         """(log_odds float32 (H, W), observed bool (H, W)); unobserved cells hold the prior l0."""
-        observed = self.state != self.UNOBSERVED
-        log_odds = np.where(observed, self.state, np.float32(self.config.l0)).astype(np.float32)
+        log_odds = self.state.copy()
+        observed = log_odds != self.UNOBSERVED
+        log_odds[~observed] = np.float32(self.config.l0)
         return log_odds, observed
 
 
@@ -198,15 +233,15 @@ def standard_map(
 
 @numba.njit(cache=True)
 def _standard_kernel(
-    state, height, width, rows, cols, bins, z, offset, tpl, flat_offsets, flat_sel, weights, ranges32, scalars, ext,
-    idx_buf, inc_buf,
+    state, height, width, rows, cols, bins, z, offset, tpl, range_index, flat_offsets, flat_sel, weights, ranges32,
+    scalars, ext, idx_buf, inc_buf,
 ):
     """Compiled log-odds update of readings t = 0, 1, ... in order on the flat ``state``.
 
-    ``state`` holds height * width cells plus SPARE_MASK + 1 spare cells at the end that
-    absorb the updates of cone cells outside the grid. Per reading, entries [0, f0) of its template are
-    the blind zone (observed only), [f0, f1) get free evidence and [f1, m) occupied
-    evidence; every update is clamped. Vectorised passes write the increments to
+    ``state`` holds height * width cells (the padded grid) plus SPARE_MASK + 1 spare cells
+    at the end that absorb the updates of cone cells outside it. Per reading, entries
+    [0, f0) of its template are the blind zone (observed only), [f0, f1) get free evidence
+    and [f1, m) occupied evidence; every update is clamped. Vectorised passes write the increments to
     ``inc_buf`` and the cells' flat indices to ``idx_buf``; then a scalar pass does the
     read-modify-write of the grid. Loops run over slices from 0 so that numba drops its
     negative-index checks, which would otherwise stop vectorisation.
@@ -221,6 +256,7 @@ def _standard_kernel(
     hi = np.float32(scalars[6])
     l0 = np.float32(scalars[7])
     elfes = scalars[8] != 0.0
+    resolution = scalars[9]
     zero = np.float32(0.0)
     spare = height * width
     for t in range(z.size):
@@ -235,17 +271,18 @@ def _standard_kernel(
         b = base_bin[k]
         s = offsets[b]
         r = ranges[s : offsets[b + 1]]
+        ri = range_index[b]
         # region boundaries, in template ranges (= real ranges + the sensor's axis offset)
         shift = offset[t]
-        blind_end = np.searchsorted(r, min_range + shift, side="left")
+        blind_end = range_search(r, ri, resolution, min_range + shift, False)
         if zt >= max_range:  # max-range reading: free space only, up to max_range
-            f1 = np.searchsorted(r, max_range + shift, side="right")
+            f1 = range_search(r, ri, resolution, max_range + shift, True)
             m = f1
             span = max_range - min_range
         else:
             z_free = zt - half_alpha
-            f1 = np.searchsorted(r, z_free + shift, side="left")
-            m = np.searchsorted(r, min(zt + half_alpha, max_range) + shift, side="right")
+            f1 = range_search(r, ri, resolution, z_free + shift, False)
+            m = range_search(r, ri, resolution, min(zt + half_alpha, max_range) + shift, True)
             span = z_free - min_range
         f0 = min(blind_end, f1)
         # increments: free (<= 0 exactly: rounding must not make it positive), occupied (>= 0)

@@ -1,0 +1,206 @@
+"""The detector file (HDF5) of CONTRACT.md and the network's inference in numpy.
+
+``load_detector`` reads and checks a file, ``save_detector`` writes one atomically, and
+``Detector.flag`` turns a (T, S) range array into the paper's y (which readings make clusters).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from aogm_cli import __version__
+from aogm_cli.detector.features import FeatureSpec, features
+from aogm_cli.errors import InputError
+from aogm_cli.outputs import atomic_output
+
+FORMAT = "aogm-detector"
+FORMAT_VERSION = 1
+LAYOUT = "y = activation(x @ weight + bias); weight has shape (inputs, outputs); the last layer's one output is p(y = 1)"
+
+
+def _identity(x):
+    return x
+
+
+def _relu(x):
+    return np.maximum(x, 0.0)
+
+
+def _logistic(x):
+    # 1 / (1 + exp(-x)), computed without overflow warnings for large |x|
+    out = np.empty_like(x)
+    pos = x >= 0
+    out[pos] = 1.0 / (1.0 + np.exp(-x[pos]))
+    e = np.exp(x[~pos])
+    out[~pos] = e / (1.0 + e)
+    return out
+
+
+ACTIVATIONS = {"identity": _identity, "relu": _relu, "tanh": np.tanh, "logistic": _logistic}
+
+
+@dataclass(frozen=True)
+class Layer:
+    """One dense layer: ``activation(x @ weight + bias)`` with weight (inputs, outputs)."""
+
+    weight: np.ndarray
+    bias: np.ndarray
+    activation: str
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        return ACTIVATIONS[self.activation](x @ self.weight + self.bias)
+
+
+@dataclass(frozen=True)
+class Detector:
+    """A trained cluster detector: layers, the feature spec they expect, and the flag threshold."""
+
+    layers: tuple[Layer, ...]
+    feature_spec: FeatureSpec
+    threshold: float
+    labels: dict = field(default_factory=dict)  # the label definition it was trained on
+    metrics: dict = field(default_factory=dict)  # training and validation precision/recall/F1
+    training: dict = field(default_factory=dict)  # how it was trained (network, seed, logs)
+    path: str | None = None
+
+    @property
+    def scan_context(self) -> int:
+        """Scans needed on each side of a reading to build its features (time neighbours)."""
+        return self.feature_spec.time_neighbours
+
+    def predict_proba(self, x: np.ndarray) -> np.ndarray:
+        """(N,) float64 p(y = 1) for (N, F) features (the second column of sklearn's predict_proba)."""
+        h = np.asarray(x, dtype=np.float64)
+        if h.ndim != 2 or h.shape[1] != self.feature_spec.n_features:
+            raise ValueError(f"expected features of shape (N, {self.feature_spec.n_features}), got {h.shape}")
+        for layer in self.layers:
+            h = layer(h)
+        return h[:, 0]
+
+    def flag_features(self, x: np.ndarray) -> np.ndarray:
+        """(N,) bool: p(y = 1) >= threshold."""
+        return self.predict_proba(x) >= self.threshold
+
+    def flag(self, ranges: np.ndarray, max_range: float) -> np.ndarray:
+        """(T, S) bool: the readings whose swept region is cluttered or erroneous (y = 1)."""
+        ranges = np.asarray(ranges)
+        if ranges.size == 0:
+            return np.zeros(ranges.shape, dtype=bool)
+        return self.flag_features(features(ranges, max_range, self.feature_spec)).reshape(ranges.shape)
+
+
+def default_detector_path() -> Path:
+    """The detector that ships inside the package (rebuilt by ``make detector``)."""
+    return Path(__file__).resolve().parent.parent / "data" / "detector.h5"
+
+
+def save_detector(path: str | Path, detector: Detector, inputs: tuple[str | Path, ...] = ()) -> None:
+    """Write ``detector`` to ``path`` in the format of CONTRACT.md (atomically)."""
+    with atomic_output(path, inputs=inputs) as tmp, h5py.File(tmp, "w") as f:
+        f.attrs["format"] = FORMAT
+        f.attrs["format_version"] = FORMAT_VERSION
+        f.attrs["aogm_version"] = __version__
+        f.attrs["features"] = detector.feature_spec.to_json()
+        f.attrs["metrics"] = json.dumps(detector.metrics)
+        f.attrs["threshold"] = float(detector.threshold)
+        f.attrs["labels"] = json.dumps(detector.labels)
+        f.attrs["training"] = json.dumps(detector.training)
+        group = f.create_group("layers")
+        group.attrs["layout"] = LAYOUT
+        for i, layer in enumerate(detector.layers):
+            g = group.create_group(str(i))
+            g.create_dataset("weight", data=np.asarray(layer.weight, dtype=np.float64))
+            g.create_dataset("bias", data=np.asarray(layer.bias, dtype=np.float64))
+            g.attrs["activation"] = layer.activation
+
+
+def load_detector(path: str | Path | None = None) -> Detector:
+    """Read and check a detector file; ``None`` reads the packaged default detector."""
+    path = str(default_detector_path() if path is None else path)
+    try:
+        f = h5py.File(path, "r")
+    except FileNotFoundError:
+        raise InputError("no such file", file=path) from None
+    except OSError as exc:
+        raise InputError(f"not an HDF5 file ({exc.__class__.__name__}); expected an aogm detector", file=path) from None
+    with f:
+        return _read(f, path)
+
+
+def _text(v) -> str:
+    return v.decode() if isinstance(v, bytes) else str(v)
+
+
+def _json_attr(f: h5py.File, key: str, path: str, required: bool = True) -> dict:
+    if key not in f.attrs:
+        if required:
+            raise InputError("missing attribute", file=path, key=key)
+        return {}
+    try:
+        value = json.loads(_text(f.attrs[key]))
+    except ValueError:
+        raise InputError("expected JSON", file=path, key=key) from None
+    if not isinstance(value, dict):
+        raise InputError(f"expected a JSON object, got {type(value).__name__}", file=path, key=key)
+    return value
+
+
+def _read(f: h5py.File, path: str) -> Detector:
+    fmt = _text(f.attrs["format"]) if "format" in f.attrs else None
+    if fmt != FORMAT:
+        raise InputError(f"expected {FORMAT!r}, got {fmt!r}", file=path, key="format")
+    version = f.attrs.get("format_version")
+    if version != FORMAT_VERSION:
+        raise InputError(f"expected {FORMAT_VERSION}, got {version!r}", file=path, key="format_version")
+    if "features" not in f.attrs:
+        raise InputError("missing attribute", file=path, key="features")
+    spec = FeatureSpec.from_json(_text(f.attrs["features"]), file=path)
+    metrics = _json_attr(f, "metrics", path)
+    labels = _json_attr(f, "labels", path, required=False)
+    training = _json_attr(f, "training", path, required=False)
+    if "threshold" not in f.attrs:
+        raise InputError("missing attribute", file=path, key="threshold")
+    try:
+        threshold = float(f.attrs["threshold"])
+    except (TypeError, ValueError):
+        raise InputError(f"expected a number, got {f.attrs['threshold']!r}", file=path, key="threshold") from None
+    if not 0.0 <= threshold <= 1.0:
+        raise InputError(f"expected a probability in [0, 1], got {threshold}", file=path, key="threshold")
+    if "layers" not in f or not isinstance(f["layers"], h5py.Group) or len(f["layers"]) == 0:
+        raise InputError("missing group (the network's weights)", file=path, key="/layers")
+    names = sorted(f["layers"].keys(), key=lambda k: int(k) if k.isdigit() else -1)
+    if names != [str(i) for i in range(len(names))]:
+        raise InputError(f"expected layers named 0..{len(names) - 1}, got {sorted(f['layers'].keys())}", file=path, key="/layers")
+    layers = []
+    inputs = spec.n_features
+    for name in names:
+        g = f["layers"][name]
+        key = f"/layers/{name}"
+        for part in ("weight", "bias"):
+            if part not in g or not isinstance(g[part], h5py.Dataset):
+                raise InputError("missing dataset", file=path, key=f"{key}/{part}")
+        weight = g["weight"][...].astype(np.float64)
+        bias = g["bias"][...].astype(np.float64)
+        if weight.ndim != 2 or weight.shape[0] != inputs:
+            raise InputError(f"expected shape ({inputs}, outputs), got {weight.shape}", file=path, key=f"{key}/weight")
+        if bias.shape != (weight.shape[1],):
+            raise InputError(f"expected shape ({weight.shape[1]},), got {bias.shape}", file=path, key=f"{key}/bias")
+        if not (np.all(np.isfinite(weight)) and np.all(np.isfinite(bias))):
+            raise InputError("expected finite numbers", file=path, key=key)
+        activation = _text(g.attrs["activation"]) if "activation" in g.attrs else None
+        if activation not in ACTIVATIONS:
+            raise InputError(f"expected one of {sorted(ACTIVATIONS)}, got {activation!r}", file=path, key=f"{key}.activation")
+        layers.append(Layer(weight, bias, activation))
+        inputs = weight.shape[1]
+    if inputs != 1 or layers[-1].activation != "logistic":
+        raise InputError(
+            f"expected the last layer to have 1 logistic output, got {inputs} {layers[-1].activation}",
+            file=path,
+            key=f"/layers/{names[-1]}",
+        )
+    return Detector(tuple(layers), spec, threshold, labels, metrics, training, path)
