@@ -14,14 +14,13 @@ from pathlib import Path
 import numpy as np
 
 from aogm_cli.grid import GridSpec
-from aogm_cli.frames import sensor_poses
 from aogm_cli.logfile import LogReader, SensorSpec
 from aogm_cli.mapfile import OccupancyMap
-from aogm_cli.mapping.cone import build_cone_templates, sensor_cells
+from aogm_cli.mapping.cone import build_cone_templates, reading_geometry, sensor_cells
 from aogm_cli.mapping.em import EMConfig, run_em
 from aogm_cli.mapping.forward_model import build_forward_index, select_readings
 from aogm_cli.mapping.params import MapParams
-from aogm_cli.mapping.standard import probability_from_log_odds, standard_map
+from aogm_cli.mapping.standard import probability_from_log_odds, standard_map, standard_templates
 
 Progress = Callable[[str, int, int], None]  # (phase, done, total)
 
@@ -44,6 +43,14 @@ def log_grid(reader: LogReader, resolution: float) -> GridSpec:
     # snap the origin to the resolution so that maps of one log at one resolution align
     lo = np.floor(lo / resolution) * resolution
     return GridSpec.covering(lo[0], lo[1], hi[0], hi[1], resolution)
+
+
+def echo_ranges(ranges: np.ndarray, grid: GridSpec) -> np.ndarray:
+    """Ranges as both mappers use them: half a cell longer. A truth (and map) cell is
+    occupied when its centre lies inside an obstacle, so the first occupied cell along a
+    beam has its centre between 0 and 1 cell beyond the surface that echoed: half a cell on
+    average. Without this, standard and EM maps put walls half a cell too near the robot."""
+    return np.asarray(ranges, dtype=np.float64) + 0.5 * grid.resolution
 
 
 class _Timed:
@@ -82,11 +89,13 @@ def warm_up(sensor: SensorSpec, params: MapParams, em: bool = False) -> None:
 def standard_pass(reader: LogReader, grid: GridSpec, params: MapParams, chunk: int = 4096):
     """(log_odds, observed, seconds of mapping work) for the whole log, streamed in chunks.
 
-    The cone templates are built (or taken from the cache) before the clock starts: like
-    compilation, they are a one-time set-up per resolution, beam width and max range.
+    One-time set-up is done before the clock starts, like compilation: the cone templates
+    and their per-grid-width tables are built (or found in their caches) by mapping no scans.
     """
-    templates = build_cone_templates(grid.resolution, reader.sensor.beam_width, reader.sensor.max_range)
-    timed = _Timed(reader.chunks(chunk))
+    templates = standard_templates(grid, reader.sensor)
+    standard_map([], reader.sensor, grid, params.inverse_model, templates=templates)
+    chunks = ((s, t, p, echo_ranges(r, grid).astype(np.float32)) for s, t, p, r in reader.chunks(chunk))
+    timed = _Timed(chunks)
     t0 = time.perf_counter()
     log_odds, observed = standard_map(timed, reader.sensor, grid, params.inverse_model, templates=templates)
     seconds = time.perf_counter() - t0 - timed.io_seconds
@@ -113,32 +122,20 @@ def map_standard(path: str | Path, params: MapParams, progress: Progress | None 
     )
 
 
-def range_shift(pose: np.ndarray, sensor: SensorSpec, grid: GridSpec, rows, cols) -> np.ndarray:
-    """(T, S) amount to add to each reading so that it compares with template ranges.
-
-    Templates measure ranges from the centre of the sensor's cell; the sensor itself sits
-    ``o`` away from it, which changes a cone cell's range by about -o . axis. And an obstacle
-    cell echoes from its near face, half a cell before its centre. So a reading z matches
-    the template cells at range z + o . axis + res / 2.
-    """
-    sp = sensor_poses(pose, sensor.mount)
-    cx, cy = grid.cell_centre(rows, cols)
-    shift = (sp[..., 0] - cx) * np.cos(sp[..., 2]) + (sp[..., 1] - cy) * np.sin(sp[..., 2])
-    return np.where(np.isfinite(shift), shift, 0.0) + 0.5 * grid.resolution
-
-
 def readings_of(reader: LogReader, grid: GridSpec, templates):
     """All readings of a log as flat arrays: sensor cell rows, cols, heading bins, and ranges
-    shifted into template ranges (``range_shift``)."""
+    shifted into template ranges: ``echo_ranges`` plus the sensor's offset from its cell's
+    centre along the beam (``cone.reading_geometry``)."""
     pose = reader.poses()
     ranges = np.concatenate([r for _, _, _, r in reader.chunks()]) if reader.n_scans else np.zeros((0, reader.sensor.count))
-    rows, cols, bins, valid = sensor_cells(pose, reader.sensor, grid, templates)
-    z = np.where(valid, ranges, np.nan).astype(np.float64) + range_shift(pose, reader.sensor, grid, rows, cols)
+    rows, cols, bins, valid, offset = reading_geometry(pose, reader.sensor, grid, templates)
+    z = np.where(valid, echo_ranges(ranges, grid), np.nan) + offset
     return rows.reshape(-1), cols.reshape(-1), bins.reshape(-1), z.reshape(-1)
 
 
 def em_forward_templates(grid: GridSpec, sensor: SensorSpec):
-    return build_cone_templates(grid.resolution, sensor.beam_width, sensor.max_range)
+    """The forward model's cone templates: the standard mapper's (one cache for both)."""
+    return standard_templates(grid, sensor)
 
 
 def map_em(path: str | Path, params: MapParams, progress: Progress | None = None) -> OccupancyMap:
