@@ -37,7 +37,7 @@ def model_at(cell, z, config, **geom):
 
 
 def test_constant_model_by_hand():
-    cfg = InverseModelConfig(model="constant")
+    cfg = InverseModelConfig(alpha=0.1, model="constant")
     # free space: d < z - alpha/2 = 0.45; occupied arc: 0.45 <= d <= 0.55
     assert model_at((0, 1), 0.5, cfg) == pytest.approx(-0.41)
     assert model_at((0, 4), 0.5, cfg) == pytest.approx(-0.41)
@@ -50,7 +50,7 @@ def test_constant_model_by_hand():
 
 
 def test_elfes_model_by_hand():
-    cfg = InverseModelConfig()  # elfes
+    cfg = InverseModelConfig(alpha=0.1)  # elfes
     span = 0.45 - 0.05  # z - alpha/2 - Rmin
     assert model_at((0, 1), 0.5, cfg) == pytest.approx(-0.41 * (1 - (0.05 / span) ** 2))  # -0.40359
     assert model_at((0, 4), 0.5, cfg) == pytest.approx(-0.41 * (1 - (0.35 / span) ** 2))  # -0.09609
@@ -65,17 +65,17 @@ def test_elfes_model_by_hand():
 
 
 def test_prior_enters_as_the_no_information_value():
-    cfg = InverseModelConfig(model="constant", l0=0.2, l_occ=1.0, l_free=-0.5)
+    cfg = InverseModelConfig(alpha=0.1, model="constant", l0=0.2, l_occ=1.0, l_free=-0.5)
     assert model_at((0, 6), 0.5, cfg) == pytest.approx(0.2)
     assert model_at((0, 1), 0.5, cfg) == pytest.approx(-0.5)
-    elfes = InverseModelConfig(l0=0.2, l_occ=1.0, l_free=-0.5)
+    elfes = InverseModelConfig(alpha=0.1, l0=0.2, l_occ=1.0, l_free=-0.5)
     e_a = 1 - (2 * math.atan2(1, 5) / BEAM) ** 2
     assert model_at((1, 5), 0.5, elfes) == pytest.approx(0.2 + e_a * (1.0 - 0.2))
 
 
 @pytest.mark.parametrize("model", ["elfes", "constant"])
 def test_max_range_reading_only_clears(model):
-    cfg = InverseModelConfig(model=model)
+    cfg = InverseModelConfig(alpha=0.1, model=model)
     d = np.linspace(0.0, 6.0, 601)
     theta = np.linspace(-BEAM / 2, BEAM / 2, 7)[:, None]
     for z in (np.inf, 5.0, 7.5):  # no echo; a reading at or beyond max_range is one too
@@ -90,20 +90,20 @@ def test_max_range_reading_only_clears(model):
 
 
 def test_nan_and_negative_readings_carry_no_information():
-    cfg = InverseModelConfig()
+    cfg = InverseModelConfig(alpha=0.1)
     d = np.linspace(0.0, 5.0, 51)
     for z in (np.nan, -1.0, -np.inf):
         assert np.all(inverse_model(d, 0.0, z, cfg, **GEOM) == 0.0)
 
 
 def test_occupied_arc_stops_at_max_range():
-    cfg = InverseModelConfig(model="constant")
+    cfg = InverseModelConfig(alpha=0.1, model="constant")
     out = inverse_model(np.array([4.94, 4.99, 5.01]), 0.0, 4.98, cfg, **GEOM)
     np.testing.assert_allclose(out, [0.85, 0.85, 0.0])
 
 
 def test_short_reading_has_no_free_region():
-    cfg = InverseModelConfig()
+    cfg = InverseModelConfig(alpha=0.1)
     # z - alpha/2 = 0.05 = min_range: nothing is free, the arc is still occupied
     out = inverse_model(np.array([0.0, 0.04, 0.06, 0.1, 0.16]), 0.0, 0.1, cfg, **GEOM)
     np.testing.assert_allclose(out, [0.0, 0.0, 0.85, 0.85, 0.0])
@@ -120,7 +120,7 @@ def test_config_defaults_and_record():
     assert cfg.validate() is cfg
     d = cfg.as_dict()
     assert d == {"model": "elfes", "l_occ": 0.85, "l_free": -0.41, "l0": 0.0,
-                 "clamp_min": -2.0, "clamp_max": 3.5, "alpha": 0.1}
+                 "clamp_min": -2.0, "clamp_max": 3.5, "alpha": 0.05}
     assert json.loads(json.dumps(d)) == d
     # OctoMap's hit / miss probabilities
     assert 1 / (1 + math.exp(-cfg.l_occ)) == pytest.approx(0.7, abs=0.001)

@@ -23,7 +23,7 @@ ONE_SONAR = SensorSpec(mount=np.zeros((1, 3)), beam_width=BEAM, min_range=0.05, 
 
 def run(pose, ranges, sensor=ONE_SONAR, grid=None, config=None, chunk=None):
     grid = grid or GridSpec(0.0, 0.0, 0.1, 11, 11)
-    config = config or InverseModelConfig()
+    config = config or InverseModelConfig(alpha=0.1)
     pose = np.asarray(pose, dtype=np.float64).reshape(-1, 3)
     ranges = np.asarray(ranges, dtype=np.float32).reshape(pose.shape[0], -1)
     chunk = chunk or max(1, pose.shape[0])
@@ -39,7 +39,7 @@ POSE = [0.25, 0.55, 0.0]
 
 
 def test_constant_model_on_a_tiny_grid_by_hand():
-    log_odds, observed = run(POSE, 0.5, config=InverseModelConfig(model="constant"))
+    log_odds, observed = run(POSE, 0.5, config=InverseModelConfig(alpha=0.1, model="constant"))
     expected = np.zeros((11, 11), dtype=np.float32)
     # free: cells nearer than z - alpha/2 = 0.45 m in the cone (not the sensor's own cell,
     # nearer than min_range); occupied: cells within alpha/2 of z = 0.5 m
@@ -80,7 +80,7 @@ def test_elfes_model_on_a_tiny_grid_by_hand():
 )
 def test_kernel_agrees_with_the_inverse_model_function(model, octant, z):
     grid = GridSpec(0.0, 0.0, 0.1, 110, 110)
-    config = InverseModelConfig(model=model)
+    config = InverseModelConfig(alpha=0.1, model=model)
     templates = standard_templates(grid, ONE_SONAR)
     k = int(templates.n_bins * (octant + 0.37) / 8)  # a heading bin in every octant
     yaw = float(templates.bin_heading(k))
@@ -129,7 +129,7 @@ def test_clamping_after_many_identical_readings():
 
 
 def test_clamping_applies_after_every_update():
-    config = InverseModelConfig(model="constant")
+    config = InverseModelConfig(alpha=0.1, model="constant")
     # ten readings put cell (5, 7) on the arc (0.85 each, clamped at 3.5), then one reading
     # at 1.0 m makes it free: 3.5 - 0.41, not 8.5 - 0.41
     ranges = np.r_[np.full(10, 0.5), 1.0]
@@ -190,7 +190,7 @@ def test_cones_across_the_border_equal_a_crop_of_a_larger_grid(model):
     sensor = SensorSpec(mount=sensor.mount, beam_width=BEAM, min_range=0.15, max_range=1.5)
     small = GridSpec(0.0, 0.0, 0.05, 60, 60)
     large = GridSpec(-3.0, -3.0, 0.05, 180, 180)
-    config = InverseModelConfig(model=model)
+    config = InverseModelConfig(alpha=0.1, model=model)
     ls, os_ = run(pose, ranges, sensor, small, config)
     ll, ol = run(pose, ranges, sensor, large, config)
     np.testing.assert_array_equal(ls.view(np.uint32), ll[60:120, 60:120].view(np.uint32))
@@ -205,7 +205,7 @@ def test_cone_outside_the_grid_changes_nothing():
 
 def test_sensor_off_its_cell_centre_moves_the_arc():
     """The sensor 0.04 m ahead of its cell centre: ranges are corrected along the axis."""
-    config = InverseModelConfig(model="constant")
+    config = InverseModelConfig(alpha=0.1, model="constant")
     log_odds, _ = run([0.29, 0.55, 0.0], 0.44, config=config)
     # true ranges of the axis cells (cols 3..7) are 0.06, 0.16, ..., 0.46: the arc
     # [0.39, 0.49] holds col 7 only (uncorrected, it would hold col 6 instead)
@@ -213,7 +213,7 @@ def test_sensor_off_its_cell_centre_moves_the_arc():
 
 
 def test_unobserved_cells_hold_the_prior():
-    config = InverseModelConfig(model="constant", l0=0.5, l_occ=1.2, l_free=-0.2)
+    config = InverseModelConfig(alpha=0.1, model="constant", l0=0.5, l_occ=1.2, l_free=-0.2)
     log_odds, observed = run(POSE, 0.5, config=config)
     assert log_odds[0, 0] == np.float32(0.5) and not observed[0, 0]
     assert log_odds[5, 2] == np.float32(0.5) and observed[5, 2]  # blind zone: observed, prior
@@ -233,7 +233,7 @@ def test_probability_from_log_odds():
 def test_incremental_mapper_and_template_checks():
     pose, ranges, sensor = random_log(40)
     grid = GridSpec(0.0, 0.0, 0.05, 200, 200)
-    mapper = StandardMapper(sensor, grid, InverseModelConfig())
+    mapper = StandardMapper(sensor, grid, InverseModelConfig(alpha=0.1))
     mapper.update(pose[:25], ranges[:25])
     mapper.update(pose[25:], ranges[25:])
     lo, ob = mapper.result()
@@ -241,6 +241,6 @@ def test_incremental_mapper_and_template_checks():
     np.testing.assert_array_equal(lo, l1)
     np.testing.assert_array_equal(ob, o1)
     with pytest.raises(ValueError):
-        StandardMapper(sensor, grid, InverseModelConfig(), templates=build_cone_templates(0.1, BEAM, 5.0))
+        StandardMapper(sensor, grid, InverseModelConfig(alpha=0.1), templates=build_cone_templates(0.1, BEAM, 5.0))
     with pytest.raises(ValueError):
-        StandardMapper(sensor, grid, InverseModelConfig(), templates=build_cone_templates(0.05, BEAM, 2.0))
+        StandardMapper(sensor, grid, InverseModelConfig(alpha=0.1), templates=build_cone_templates(0.05, BEAM, 2.0))
