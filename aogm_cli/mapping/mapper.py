@@ -187,6 +187,25 @@ def map_em(path: str | Path, params: MapParams, progress: Progress | None = None
     )
 
 
+def readings_near_clusters(clusters, rows, cols, z, grid: GridSpec, z_max: float, forward) -> np.ndarray:
+    """Positions of the readings whose forward cone could reach a cluster: the square of the
+    cone's reach around the sensor's cell overlaps the cluster's bounding box."""
+    from scipy import ndimage
+
+    reach = np.where(np.isfinite(z), np.minimum(z + forward.window * forward.sigma, z_max), z_max)
+    reach = np.where(np.isnan(z), -1.0, reach)
+    r = np.ceil(reach / grid.resolution).astype(np.int64) + 1
+    boxes = ndimage.find_objects(clusters)
+    near = np.zeros(len(z), dtype=bool)
+    for box in boxes:
+        if box is None:
+            continue
+        rs, cs = box
+        near |= (rows + r >= rs.start) & (rows - r < rs.stop) & (cols + r >= cs.start) & (cols - r < cs.stop)
+    near &= reach >= 0
+    return np.flatnonzero(near)
+
+
 def map_adaptive(path: str | Path, params: MapParams, detector_path: str | None = None,
                  progress: Progress | None = None) -> OccupancyMap:
     """The paper's adaptive map: standard log-odds everywhere, then EM inside each cluster
@@ -224,9 +243,12 @@ def map_adaptive(path: str | Path, params: MapParams, detector_path: str | None 
     probability = probability_from_log_odds(log_odds, observed).reshape(-1)
     sweeps, flips = [], []
     if n_clusters:
-        # one index over the readings whose forward cones touch any cluster ...
+        # one index over the readings whose forward cones may reach a cluster (cone within
+        # a square of its reach around the sensor cell, against each cluster's bounding box) ...
         flat_clusters = clusters.reshape(-1)
-        index = build_forward_index(rows, cols, bins, z, grid, templates, sensor.max_range, config.forward)
+        near = readings_near_clusters(clusters, rows, cols, z, grid, sensor.max_range, config.forward)
+        index = build_forward_index(rows[near], cols[near], bins[near], z[near], grid, templates, sensor.max_range,
+                                    config.forward)
         entry_cluster = flat_clusters[index.cell]
         reading_of_entry = np.repeat(np.arange(index.n_readings), np.diff(index.ptr))
         touching = entry_cluster > 0
