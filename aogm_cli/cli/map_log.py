@@ -5,6 +5,40 @@ from __future__ import annotations
 import click
 
 from aogm_cli.cli.options import output_option, progress_bar, quiet_option
+from aogm_cli.mapping.em import EMConfig
+from aogm_cli.mapping.forward_model import ForwardModelConfig
+from aogm_cli.mapping.inverse_model import InverseModelConfig
+
+# (option, section, key, type, help); defaults are read from the config dataclasses
+PARAMETER_OPTIONS = (
+    ("--model", "inverse_model", "model", click.Choice(["elfes", "constant"]), "Inverse model."),
+    ("--l-occ", "inverse_model", "l_occ", float, "Log-odds of the occupied arc."),
+    ("--l-free", "inverse_model", "l_free", float, "Log-odds of the free region."),
+    ("--clamp-min", "inverse_model", "clamp_min", float, "Lower log-odds clamp."),
+    ("--clamp-max", "inverse_model", "clamp_max", float, "Upper log-odds clamp."),
+    ("--alpha", "inverse_model", "alpha", float, "Obstacle thickness (m) of the occupied arc."),
+    ("--sigma", "em", "sigma", float, "EM: range noise of the forward model (m)."),
+    ("--p-rand", "em", "p_rand", float, "EM: prior of a random reading."),
+    ("--p-hit", "em", "p_hit", float, "EM: detection probability of each obstacle."),
+    ("--p-max", "em", "p_max", float, "EM: point mass of max-range dropouts."),
+    ("--prior", "em", "prior_occupied", float, "EM: prior occupancy of a cell."),
+    ("--max-sweeps", "em", "max_sweeps", click.IntRange(min=1), "EM: sweep limit."),
+    ("--em-start", "em", "start", click.Choice(["standard", "empty"]), "EM: start map."),
+)
+
+
+def _default(section: str, key: str):
+    if section == "inverse_model":
+        return getattr(InverseModelConfig(), key)
+    em = EMConfig()
+    return getattr(em.forward if hasattr(ForwardModelConfig, key) else em, key)
+
+
+def parameter_options(f):
+    """Decorate ``f`` with one option per mapping parameter (None when not given)."""
+    for opt, section, key, kind, text in reversed(PARAMETER_OPTIONS):
+        f = click.option(opt, f"{section}__{key}", type=kind, help=f"{text}  [default: {_default(section, key)}]")(f)
+    return f
 
 
 @click.command("map")
@@ -15,19 +49,7 @@ from aogm_cli.cli.options import output_option, progress_bar, quiet_option
 @click.option("--detector", type=click.Path(dir_okay=False), help="Detector file for --mode adaptive (default: the packaged one).")
 @click.option("--params", "params_file", type=click.Path(dir_okay=False), help="YAML with sections inverse_model:, em: and key resolution:.")
 @click.option("--resolution", type=float, help="Cell size (m) for logs without truth.  [default: 0.05]")
-@click.option("--model", type=click.Choice(["elfes", "constant"]), help="Inverse model.  [default: elfes]")
-@click.option("--l-occ", type=float, help="Log-odds of the occupied arc.  [default: 0.85]")
-@click.option("--l-free", type=float, help="Log-odds of the free region.  [default: -0.41]")
-@click.option("--clamp-min", type=float, help="Lower log-odds clamp.  [default: -2.0]")
-@click.option("--clamp-max", type=float, help="Upper log-odds clamp.  [default: 3.5]")
-@click.option("--alpha", type=float, help="Obstacle thickness (m) of the occupied arc.  [default: 0.1]")
-@click.option("--sigma", type=float, help="EM: range noise of the forward model (m).  [default: 0.03]")
-@click.option("--p-rand", type=float, help="EM: prior of a random reading.  [default: 0.05]")
-@click.option("--p-hit", type=float, help="EM: detection probability of each obstacle.  [default: 0.7]")
-@click.option("--p-max", type=float, help="EM: point mass of max-range dropouts.  [default: 0.1]")
-@click.option("--prior", "prior_occupied", type=float, help="EM: prior occupancy of a cell.  [default: 0.3]")
-@click.option("--max-sweeps", type=click.IntRange(min=1), help="EM: sweep limit.  [default: 20]")
-@click.option("--em-start", type=click.Choice(["standard", "empty"]), help="EM: start map.  [default: standard]")
+@parameter_options
 @quiet_option
 def map_log(log_file, mode, output, png, detector, params_file, resolution, quiet, **options) -> None:
     """Build an occupancy-grid map from LOG.h5.
@@ -48,12 +70,10 @@ def map_log(log_file, mode, output, png, detector, params_file, resolution, quie
     from aogm_cli.mapping import mapper
     from aogm_cli.mapping.params import resolve_params
 
-    inverse_keys = ("model", "l_occ", "l_free", "clamp_min", "clamp_max", "alpha")
-    overrides = {
-        "resolution": resolution,
-        "inverse_model": {k: options[k] for k in inverse_keys},
-        "em": {k: v for k, v in options.items() if k not in inverse_keys and k != "em_start"} | {"start": options["em_start"]},
-    }
+    overrides: dict = {"resolution": resolution, "inverse_model": {}, "em": {}}
+    for name, value in options.items():
+        section, key = name.split("__")
+        overrides[section][key] = value
     params = resolve_params(params_file, overrides)
     with progress_bar(params.em.max_sweeps, f"map ({mode})", quiet, unit="sweep") as advance:
         def progress(phase, done, total):

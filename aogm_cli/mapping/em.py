@@ -90,21 +90,26 @@ def _rebuild_reading(t, ptr, cell, g, g0, p_hit, occupied, obs_pos, pre, nobs, s
 
 
 @numba.njit(cache=True)
-def _update_reading(t, e, adding, ptr, g, g0, p_hit, qpow, obs_pos, pre, nobs, s):
-    """Insert (or remove) entry ``e`` into reading t's obstacle list and redo its prefix sums
-    from that rank on: O(obstacles) instead of O(cone cells)."""
-    base = ptr[t]
-    pbase = ptr[t] + t
-    n = nobs[t]
-    lo = base
-    hi = base + n
+def _rank(obs_pos, lo, hi, e):
+    """How many of the sorted entry positions obs_pos[lo:hi] lie before entry ``e``."""
+    start = lo
     while lo < hi:
         mid = (lo + hi) >> 1
         if obs_pos[mid] < e:
             lo = mid + 1
         else:
             hi = mid
-    r = lo - base
+    return lo - start
+
+
+@numba.njit(cache=True)
+def _update_reading(t, e, adding, ptr, g, g0, p_hit, qpow, obs_pos, pre, nobs, s):
+    """Insert (or remove) entry ``e`` into reading t's obstacle list and redo its prefix sums
+    from that rank on: O(obstacles) instead of O(cone cells)."""
+    base = ptr[t]
+    pbase = ptr[t] + t
+    n = nobs[t]
+    r = _rank(obs_pos, base, base + n, e)
     if adding:
         for k in range(n, r, -1):
             obs_pos[base + k] = obs_pos[base + k - 1]
@@ -144,15 +149,7 @@ def _flip_gain(c, cand_cell, cand_ptr, pair_t, pair_e, ptr, g, const, w, p_hit, 
         t = pair_t[p]
         e = pair_e[p]
         # r = obstacles of reading t before entry e (binary search in its sorted positions)
-        lo = ptr[t]
-        hi = ptr[t] + nobs[t]
-        while lo < hi:
-            mid = (lo + hi) >> 1
-            if obs_pos[mid] < e:
-                lo = mid + 1
-            else:
-                hi = mid
-        r = lo - ptr[t]
+        r = _rank(obs_pos, ptr[t], ptr[t] + nobs[t], e)
         a = pre[ptr[t] + t + r]
         term = qpow[r] * p_hit * g[e]
         st = s[t]
