@@ -56,10 +56,11 @@ def bench(world_name: str, folder: Path) -> None:
     occupied = np.ascontiguousarray((log_odds > 0).reshape(-1))
     state = E._init_state(index.ptr, index.cell, index.g, index.g0, p_hit, occupied)
     stamps = (np.zeros(index.n_readings, np.int64), np.full(cand_cell.size, -1, np.int64), np.zeros(1, np.int64))
+    last_gain = np.zeros(cand_cell.size)
     for _ in range(config.max_sweeps):
         t0 = time.perf_counter()
         n, _ = E._sweep(cand_cell, cand_ptr, pair_t, pair_e, index.ptr, index.cell, index.g, index.g0, index.const,
-                        index.w, p_hit, l_prior, qpow, occupied, *state, *stamps)
+                        index.w, p_hit, l_prior, qpow, occupied, *state, *stamps, last_gain)
         sweep_times.append(time.perf_counter() - t0)
         flips.append(int(n))
         if n == 0:

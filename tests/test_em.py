@@ -106,3 +106,28 @@ def test_forward_model_likelihood_by_hand():
     assert log_likelihoods(index, occupied)[0] == pytest.approx(math.log(expected))
     occupied[:] = False
     assert log_likelihoods(index, occupied)[0] == pytest.approx(math.log(0.05 / 4.0 + 0.95 * g0))
+
+
+def test_residual_from_the_last_sweep_equals_a_fresh_pass():
+    from aogm_cli.mapping import em as E
+
+    index, _ = index_for([1.0, 1.0, 1.02, 1.5, 0.6, np.inf, 2.0])
+    occupied = np.zeros(GRID.height * GRID.width, dtype=bool)
+    result = run_em(index, occupied, np.unique(index.cell), CONFIG)
+    assert result.flips[-1] == 0
+    cand_cell, cand_ptr, pair_t, pair_e = E.pair_index(index, result.candidates)
+    qpow = (1 - FORWARD.p_hit) ** np.arange(np.max(np.diff(index.ptr)) + 1)
+    state = E._init_state(index.ptr, index.cell, index.g, index.g0, FORWARD.p_hit, occupied)
+    fresh = E._residual(cand_cell, cand_ptr, pair_t, pair_e, index.ptr, index.g, index.const, index.w,
+                        FORWARD.p_hit, CONFIG.l_prior, qpow, occupied, *state)
+    assert np.allclose(result.residual, fresh, rtol=1e-9, atol=1e-12)
+
+
+def test_a_mask_keeps_only_the_readings_that_touch_it():
+    tpl = build_cone_templates(GRID.resolution, math.radians(10.0), 4.0)
+    rows, cols = np.array([10, 10]), np.array([5, 5])
+    bins = tpl.heading_bin(np.array([0.0, math.pi / 2]))  # one reading along +x, one along +y
+    mask = np.zeros(GRID.height * GRID.width, dtype=bool)
+    mask[10 * GRID.width + 12] = True  # on the +x beam
+    index = build_forward_index(rows, cols, bins, np.array([1.0, 1.0]), GRID, tpl, 4.0, FORWARD, mask=mask)
+    assert np.diff(index.ptr).tolist()[1] == 0 and np.diff(index.ptr)[0] > 0

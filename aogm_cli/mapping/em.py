@@ -166,13 +166,15 @@ def _flip_gain(c, cand_cell, cand_ptr, pair_t, pair_e, ptr, g, const, w, p_hit, 
 
 @numba.njit(cache=True)
 def _sweep(cand_cell, cand_ptr, pair_t, pair_e, ptr, cell, g, g0, const, w, p_hit, l_prior, qpow,
-           occupied, obs_pos, pre, nobs, s, reading_stamp, cand_stamp, clock):
+           occupied, obs_pos, pre, nobs, s, reading_stamp, cand_stamp, clock, last_gain):
     """One pass over the candidates in order; a flip is kept when it raises the objective.
 
     A candidate none of whose readings changed since it was last scored keeps its (non-
     improving) gain, so it is skipped: the result equals a full sweep's, at a fraction of
     the cost once the map settles. ``clock[0]`` counts accepted flips; ``reading_stamp`` and
-    ``cand_stamp`` record when a reading last changed and when a candidate was last scored.
+    ``cand_stamp`` record when a reading last changed and when a candidate was last scored;
+    ``last_gain`` keeps each candidate's last data gain (after a sweep without flips, every
+    one is current, which gives the residual probabilities without another pass).
     """
     flips = 0
     evaluated = 0
@@ -188,10 +190,12 @@ def _sweep(cand_cell, cand_ptr, pair_t, pair_e, ptr, cell, g, g0, const, w, p_hi
         evaluated += 1
         d = _flip_gain(c, cand_cell, cand_ptr, pair_t, pair_e, ptr, g, const, w, p_hit, qpow,
                        occupied, obs_pos, pre, nobs, s)
+        last_gain[c] = d
         x = cand_cell[c]
         d += -l_prior if occupied[x] else l_prior
         if d > 1e-9:
             occupied[x] = not occupied[x]
+            last_gain[c] = -last_gain[c]  # flipping back undoes exactly this gain
             flips += 1
             clock[0] += 1
             adding = occupied[x]
@@ -211,6 +215,20 @@ def _objective(const, w, s, occupied, cand_cell, l_prior):
         if occupied[cand_cell[c]]:
             total += l_prior
     return total
+
+
+@numba.njit(cache=True)
+def _residual_from_gains(cand_cell, occupied, last_gain, l_prior):
+    """p(m_x = 1 | Z, m*) from each candidate's current data gain of flipping."""
+    out = np.empty(cand_cell.shape[0])
+    for c in range(cand_cell.shape[0]):
+        ratio = (-last_gain[c] if occupied[cand_cell[c]] else last_gain[c]) + l_prior
+        if ratio >= 0:
+            out[c] = 1.0 / (1.0 + math.exp(-ratio))
+        else:
+            er = math.exp(ratio)
+            out[c] = er / (1.0 + er)
+    return out
 
 
 @numba.njit(cache=True)
@@ -295,16 +313,20 @@ def run_em(
     reading_stamp = np.zeros(index.n_readings, dtype=np.int64)
     cand_stamp = np.full(cand_cell.shape[0], -1, dtype=np.int64)
     clock = np.zeros(1, dtype=np.int64)
+    last_gain = np.zeros(cand_cell.shape[0], dtype=np.float64)
     for sweep in range(1, config.max_sweeps + 1):
         n_flips, _ = _sweep(cand_cell, cand_ptr, pair_t, pair_e, index.ptr, index.cell, index.g, index.g0,
                             index.const, index.w, p_hit, l_prior, qpow, occupied, obs_pos, pre, nobs, s,
-                            reading_stamp, cand_stamp, clock)
+                            reading_stamp, cand_stamp, clock, last_gain)
         flips.append(int(n_flips))
         objective.append(_objective(index.const, index.w, s, occupied, cand_cell, l_prior))
         if progress:
             progress(sweep, int(n_flips), objective[-1])
         if n_flips == 0:
             break
-    residual = _residual(cand_cell, cand_ptr, pair_t, pair_e, index.ptr, index.g, index.const, index.w, p_hit,
-                         l_prior, qpow, occupied, obs_pos, pre, nobs, s)
+    if flips and flips[-1] == 0:
+        residual = _residual_from_gains(cand_cell, occupied, last_gain, l_prior)
+    else:  # stopped by max_sweeps: score every candidate once more
+        residual = _residual(cand_cell, cand_ptr, pair_t, pair_e, index.ptr, index.g, index.const, index.w, p_hit,
+                             l_prior, qpow, occupied, obs_pos, pre, nobs, s)
     return EMResult(len(flips), flips, [float(v) for v in objective], cand_cell, residual)

@@ -128,15 +128,29 @@ def log_likelihoods(index: ForwardIndex, occupied_flat: np.ndarray) -> np.ndarra
 
 
 @numba.njit(cache=True)
-def _fill_index(tpl, height, width, rows, cols, bins, limits, z, sigma, out_cell, out_g, counts):
-    """Cone cells (flat ids) and Gaussians of every reading, packed reading after reading."""
-    offsets, _, _, ranges, base_bin, _ = tpl
+def _fill_index(tpl, height, width, rows, cols, bins, limits, z, sigma, mask, out_cell, out_g, counts):
+    """Cone cells (flat ids) and Gaussians of every reading, packed reading after reading.
+
+    With a non-empty ``mask`` (flat bool), a reading none of whose cells is in the mask gets
+    no entries (its Gaussians are never computed).
+    """
+    offsets = tpl[0]
     scratch_cell = np.empty(offsets[-1], dtype=np.int64)
     scratch_range = np.empty(offsets[-1], dtype=np.float64)
     norm = 1.0 / (math.sqrt(2.0 * math.pi) * sigma)
+    use_mask = mask.shape[0] > 0
     pos = 0
     for t in range(rows.shape[0]):
         n = _cone_cells(tpl, height, width, rows[t], cols[t], bins[t], limits[t], scratch_cell, scratch_range)
+        if use_mask:
+            touches = False
+            for i in range(n):
+                if mask[scratch_cell[i]]:
+                    touches = True
+                    break
+            if not touches:
+                counts[t] = 0
+                continue
         for i in range(n):
             out_cell[pos + i] = scratch_cell[i]
             u = (z[t] - scratch_range[i]) / sigma
@@ -156,12 +170,15 @@ def build_forward_index(
     z_max: float,
     config: ForwardModelConfig,
     reading_ids: np.ndarray | None = None,
+    mask: np.ndarray | None = None,
 ) -> ForwardIndex:
     """The forward model's index for readings ``z`` taken from sensor cells (rows, cols) with
     heading bins ``bins`` (as ``cone.sensor_cells`` gives them; flat arrays of one length).
 
     NaN readings are dropped; +inf is a max-range reading (cone up to z_max). Other cones end
     ``config.window`` sigmas beyond z. ``reading_ids`` name the readings (default 0..N-1).
+    With ``mask`` (flat bool over the grid), only the readings whose cones touch it get
+    entries; the others stay in the index with none.
     """
     z = np.asarray(z, dtype=np.float64).reshape(-1)
     ids = np.arange(len(z)) if reading_ids is None else np.asarray(reading_ids).reshape(-1)
@@ -180,8 +197,9 @@ def build_forward_index(
     out_cell = np.empty(upper, dtype=np.int64)
     out_g = np.empty(upper, dtype=np.float64)
     counts = np.zeros(len(z), dtype=np.int64)
+    mask = np.zeros(0, dtype=np.bool_) if mask is None else np.ascontiguousarray(mask, dtype=np.bool_).reshape(-1)
     n = _fill_index(templates.kernel_arrays, grid.height, grid.width, rows, cols, bins, limits, z_eff,
-                    config.sigma, out_cell, out_g, counts)
+                    config.sigma, mask, out_cell, out_g, counts)
     ptr = np.zeros(len(z) + 1, dtype=np.int64)
     np.cumsum(counts, out=ptr[1:])
     g0, const, w = reading_constants(z, z_max, config)
