@@ -32,11 +32,14 @@ def _print_table(results, labels, quiet: bool) -> None:
     if not console.is_terminal:
         console = Console(width=max(console.width, 200), no_color=True, highlight=False)
     relative = relative_runtimes(results)
+    consistency = any(r.consistency is not None for r in results)  # some log has no truth
     table = Table(title=None if quiet else "aogm compare")
-    for name, justify in (
-        ("World", "left"), ("Mode", "left"), ("Accuracy", "right"), ("Occ. F1", "right"), ("Brier", "right"),
-        ("Checks", "right"), ("Runtime (s)", "right"), ("vs standard", "right"), ("Map", "left"),
-    ):
+    columns = [("World", "left"), ("Mode", "left"), ("Accuracy", "right"), ("Occ. F1", "right"), ("Brier", "right"),
+               ("Checks", "right")]
+    if consistency:
+        columns += [("Ends on occ.", "right"), ("±1 cell", "right"), ("Free contra.", "right")]
+    columns += [("Runtime (s)", "right"), ("vs standard", "right"), ("Map", "left")]
+    for name, justify in columns:
         table.add_column(name, justify=justify, no_wrap=name != "Map", overflow="fold")
     previous = None
     for r in results:
@@ -53,11 +56,18 @@ def _print_table(results, labels, quiet: bool) -> None:
             passed = sum(c["passed"] for c in r.metrics["checks"])
             checks = f"{passed}/{len(r.metrics['checks'])}"
         rel = relative[(r.log, r.mode)]
-        table.add_row(
-            label, r.mode, acc, f1, brier, checks, f"{r.runtime_s:.3f}", "–" if rel is None else f"x{rel:.2f}",
-            _source(r),
-        )
+        row = [label, r.mode, acc, f1, brier, checks]
+        if consistency:
+            c = r.consistency or {}
+            row += [_share(c.get("endpoint_occupied")), _share(c.get("endpoint_occupied_8")),
+                    _share(c.get("free_contradicted"))]
+        row += [f"{r.runtime_s:.3f}", "–" if rel is None else f"x{rel:.2f}", _source(r)]
+        table.add_row(*row)
     console.print(table)
+
+
+def _share(v) -> str:
+    return "n/a" if v is None else f"{v:.4f}"
 
 
 def _source(r) -> str:
@@ -90,6 +100,11 @@ def compare(inputs, modes_text, detector, params_file, json_out, figure_out, map
     """Map every log in every mode, evaluate each map against the log's truth, and print a table
     (accuracy, occupied F1, Brier, checks passed, runtime, runtime relative to the standard map
     of the same log).
+
+    A log without truth (an imported real log) is scored by re-casting its in-range readings
+    against each map instead: the share whose endpoint (a sonar's occupied arc) lies on a cell
+    believed occupied, the same within one cell, and the share of believed-free cells that a
+    reading ends on (columns "Ends on occ.", "±1 cell", "Free contra."; JSON "consistency").
 
     Arguments may also be map files made earlier (aogm map, or --maps-dir): each is used for
     its mode instead of mapping again; its source_log attribute names the log with the truth.

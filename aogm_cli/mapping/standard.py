@@ -20,6 +20,9 @@ Choices (documented)
   to the sensor, where the reading gives no evidence.
 * Arithmetic on the grid is float32 in a fixed order, so a map made chunk by chunk equals,
   bit for bit, the map made in one pass.
+* Narrow beams (lasers, or a cone under a cell wide at max range: ``beam.is_narrow_beam``)
+  are traced as rays by ``beam.BeamMapper`` instead (``standard_mapper`` chooses); cone
+  templates of an 80 m laser would be enormous and a ray is the laser's own model.
 
 Speed (``bench/bench_standard.py``: about 0.7 G cone-cell updates/s, 60% of a plain
 compiled scatter-add over the same cells, on one core of the development machine):
@@ -49,6 +52,7 @@ import numpy as np
 
 from aogm_cli.grid import GridSpec
 from aogm_cli.logfile import SensorSpec
+from aogm_cli.mapping.beam import BeamMapper, is_narrow_beam
 from aogm_cli.mapping.cone import ConeTemplates, build_cone_templates, range_search, reading_geometry
 from aogm_cli.mapping.inverse_model import InverseModelConfig, angular_profile
 
@@ -211,6 +215,16 @@ class StandardMapper:
         return log_odds, observed
 
 
+def standard_mapper(
+    sensor: SensorSpec, grid: GridSpec, config: InverseModelConfig, *, templates: ConeTemplates | None = None
+) -> StandardMapper | BeamMapper:
+    """The standard mapper for ``sensor``: rays (``beam.BeamMapper``) when ``beam.is_narrow_beam``,
+    else cone templates (``StandardMapper``; ``templates`` is ignored for rays)."""
+    if is_narrow_beam(sensor, grid.resolution):
+        return BeamMapper(sensor, grid, config)
+    return StandardMapper(sensor, grid, config, templates=templates)
+
+
 def standard_map(
     chunks: Iterable[tuple[int, np.ndarray, np.ndarray, np.ndarray]],
     sensor: SensorSpec,
@@ -223,9 +237,10 @@ def standard_map(
 
     ``chunks`` yields (start, time, pose (T, 3), ranges (T, S)) like ``LogReader.chunks()``;
     memory is the grid, the templates and one chunk. Unobserved cells hold the prior l0.
-    ``templates`` defaults to ``standard_templates(grid, sensor)``.
+    ``templates`` defaults to ``standard_templates(grid, sensor)``; narrow beams are traced as
+    rays and need none (see ``standard_mapper``).
     """
-    mapper = StandardMapper(sensor, grid, config, templates=templates)
+    mapper = standard_mapper(sensor, grid, config, templates=templates)
     for _start, _time, pose, ranges in chunks:
         mapper.update(pose, ranges)
     return mapper.result()

@@ -1,6 +1,7 @@
 """The library behind ``aogm compare``: collect logs and map files, map what is missing in each
 mode (optionally in worker processes), evaluate against the truth, and build the JSON of
-CONTRACT.md ("Metrics").
+CONTRACT.md ("Metrics"). Maps of logs without truth are scored by their consistency with
+the log instead (``aogm_cli.consistency``).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import h5py
 import yaml
 
 from aogm_cli import __version__
+from aogm_cli.consistency import map_consistency
 from aogm_cli.errors import InputError
 from aogm_cli.evaluation import evaluate
 from aogm_cli.logfile import LogReader, Truth
@@ -47,7 +49,8 @@ class LogEntry:
 
 @dataclass
 class ModeResult:
-    """One (log, mode): the map, its runtime, its metrics (None without truth), where it came from."""
+    """One (log, mode): the map, its runtime, its metrics (None without truth), where it came
+    from, and for a log without truth its consistency with the log (``consistency.log_consistency``)."""
 
     log: str
     world: str
@@ -57,6 +60,7 @@ class ModeResult:
     map: OccupancyMap
     map_file: str | None = None  # the map file given, or the one written to --maps-dir
     reused: bool = False
+    consistency: dict | None = None  # logs without truth only
 
 
 def parse_modes(text: str) -> tuple[str, ...]:
@@ -274,13 +278,17 @@ def compute_maps(
 
 
 def evaluate_result(entry: LogEntry, mode: str, m: OccupancyMap, map_file: str | None, reused: bool) -> ModeResult:
+    """Metrics against the truth; without truth, the map's consistency with its log instead."""
     metrics = None
+    consistency = None
     if entry.truth is not None:
         try:
             metrics = evaluate(m, entry.truth)
         except ValueError as exc:
             raise InputError(str(exc), file=map_file or entry.path) from None
-    return ModeResult(entry.path, entry.world, mode, float(m.runtime_s), metrics, m, map_file, reused)
+    else:
+        consistency = map_consistency(entry.path, m)
+    return ModeResult(entry.path, entry.world, mode, float(m.runtime_s), metrics, m, map_file, reused, consistency)
 
 
 def run_comparison(
@@ -380,16 +388,28 @@ def metrics_json(metrics: dict | None) -> dict | None:
     return out
 
 
+def consistency_json(consistency: dict | None) -> dict | None:
+    """The consistency object of a log without truth (NaN becomes null)."""
+    if consistency is None:
+        return None
+    return {k: _finite(float(v)) if isinstance(v, float) else v for k, v in consistency.items()}
+
+
 def results_json(results: list[ModeResult]) -> dict:
-    """``{"aogm_version", "results": [{log, world, mode, runtime_s, metrics}]}`` as in CONTRACT.md."""
-    return {
-        "aogm_version": __version__,
-        "results": [
-            {"log": r.log, "world": r.world, "mode": r.mode, "runtime_s": _finite(float(r.runtime_s)),
-             "metrics": metrics_json(r.metrics)}
-            for r in results
-        ],
-    }
+    """``{"aogm_version", "results": [{log, world, mode, runtime_s, metrics}]}`` as in CONTRACT.md.
+
+    A result of a log without truth has ``metrics`` null and a ``consistency`` object beside
+    it (``aogm_cli.consistency``: method, readings, endpoint_occupied, endpoint_occupied_8,
+    endpoint_free, free_cells, free_contradicted).
+    """
+    out = []
+    for r in results:
+        item = {"log": r.log, "world": r.world, "mode": r.mode, "runtime_s": _finite(float(r.runtime_s)),
+                "metrics": metrics_json(r.metrics)}
+        if r.consistency is not None:
+            item["consistency"] = consistency_json(r.consistency)
+        out.append(item)
+    return {"aogm_version": __version__, "results": out}
 
 
 def write_json(path: str | Path, results: list[ModeResult], inputs: tuple[str, ...] = ()) -> None:

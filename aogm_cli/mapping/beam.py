@@ -1,0 +1,301 @@
+"""Standard mapping of narrow-beam sensors (lasers): one ray per reading instead of a cone template.
+
+Owns the dispatch rule (``is_narrow_beam``), the Amanatides-Woo grid traversal (``ray_cells``)
+and ``BeamMapper``, the log-odds update along rays with the state and clamping of ``standard``.
+
+The model along a ray (Amanatides & Woo 1987, traversed from the sensor's true position)
+-----------------------------------------------------------------------------------------
+A cell is the stretch [t_enter, t_exit) of the ray inside it (t in metres from the sensor).
+For a reading z (the hit: the range as logged, see ``mapper.standard_pass``):
+
+* occupied: cells that overlap the hit band [z - alpha/2, min(z + alpha/2, max_range)], so
+  the cell holding the endpoint always (OctoMap's and GMapping's convention), and the cell
+  before it when the endpoint lies within alpha/2 of their common edge;
+* free:     the cells before the band (t_exit <= z - alpha/2) that reach past min_range;
+* observed only: the blind zone (t_exit <= min_range), no evidence.
+
+A max-range reading (z >= max_range, or +inf) clears the cells that overlap
+[min_range, max_range] and marks nothing occupied; NaN or negative readings carry nothing.
+Increments are the constant model's (``l_free - l0``, ``l_occ - l0``) whichever model the
+``InverseModelConfig`` names: a ray has no angular profile, and Elfes' range profile, which
+models a sonar's fading cone, is not applied to a laser.
+
+Within one scan (one row of the log's ranges), a cell in some reading's hit band gets no free
+evidence from the other readings of that scan (OctoMap's insertPointCloud: occupied wins).
+Otherwise every reading updates its cells once each, clamped, in the log's order, exactly as
+``standard.StandardMapper`` does. A ray through a lattice corner steps diagonally: a cell the
+ray crosses for less than ``TOUCH`` cells (zero, up to rounding) is skipped. On the intel log (910 scans x 180 beams, 30 m max range, 0.05 m
+cells) hit precedence raises the share of endpoints on occupied cells from 0.879 to 0.892.
+
+Cost: O(cells on the ray) per reading, no set-up; the intel log maps in about 0.1 s.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from aogm_cli.frames import sensor_poses
+from aogm_cli.grid import GridSpec
+from aogm_cli.logfile import SensorSpec
+from aogm_cli.mapping.inverse_model import InverseModelConfig
+
+# a ray that stays in a cell for at most this many cells' length only touches it (a corner,
+# up to rounding) and leaves it alone
+TOUCH = 1e-9
+
+
+def is_narrow_beam(sensor: SensorSpec, resolution: float) -> bool:
+    """Does standard mapping trace this sensor's readings as rays rather than cones?
+
+    Yes for a laser (``kind == "laser"``: its reading is the first return near the beam's
+    axis, and its beam, 0.5 deg or less, is no wider than the spacing of its beams), and for
+    any sensor whose cone is under a cell wide at max range (beam_width * max_range < resolution).
+    """
+    return sensor.kind == "laser" or float(sensor.beam_width) * float(sensor.max_range) < float(resolution)
+
+
+def ray_cells(grid: GridSpec, x: float, y: float, yaw: float, length: float):
+    """Cells of ``grid`` that the ray from (x, y) along ``yaw`` crosses up to ``length`` metres.
+
+    Returns (rows, cols, t_enter, t_exit) in order along the ray: int64 cell indices and the
+    float64 stretch [t_enter, t_exit) of the ray inside each cell (t from (x, y), clipped to
+    [0, length]); cells the ray only touches (a corner, or a stretch under ``TOUCH`` cells)
+    are left out. The start may lie
+    outside the grid; cells outside it are left out.
+    """
+    n_max = int(grid.height + grid.width + 2)
+    rows = np.empty(n_max, dtype=np.int64)
+    cols = np.empty(n_max, dtype=np.int64)
+    t0 = np.empty(n_max, dtype=np.float64)
+    t1 = np.empty(n_max, dtype=np.float64)
+    n = _ray_cells_kernel(
+        float(x) - grid.origin_x, float(y) - grid.origin_y, math.cos(yaw), math.sin(yaw), float(length),
+        grid.height, grid.width, grid.resolution, rows, cols, t0, t1,
+    )
+    return rows[:n], cols[:n], t0[:n], t1[:n]
+
+
+class BeamMapper:
+    """Incremental standard mapping of a narrow-beam sensor: ``update`` with chunks, then ``result``.
+
+    Same interface and state as ``standard.StandardMapper``: one float32 grid holding each
+    cell's log-odds once some ray covered it and ``UNOBSERVED`` (-inf) before; plus, per cell,
+    the last scan whose hit band covered it (for hit precedence within a scan).
+    """
+
+    UNOBSERVED = np.float32(-np.inf)
+
+    def __init__(self, sensor: SensorSpec, grid: GridSpec, config: InverseModelConfig):
+        config.validate()
+        self.sensor = sensor
+        self.grid = grid
+        self.config = config
+        self.scalars = np.array(
+            [
+                0.5 * config.alpha,
+                sensor.min_range,
+                sensor.max_range,
+                config.l_free - config.l0,
+                config.l_occ - config.l0,
+                config.clamp_min,
+                config.clamp_max,
+                config.l0,
+                grid.resolution,
+            ],
+            dtype=np.float64,
+        )
+        self.state = np.full(grid.shape, self.UNOBSERVED, dtype=np.float32)
+        self._hit_scan = np.full(grid.height * grid.width, -1, dtype=np.int32)
+        self.scans_done = 0
+
+    def update(self, pose: np.ndarray, ranges: np.ndarray) -> None:
+        """Apply scans (pose (T, 3), ranges (T, S)) in order: every reading's ray, clamped."""
+        pose = np.asarray(pose, dtype=np.float64).reshape(-1, 3)
+        z = np.ascontiguousarray(ranges, dtype=np.float32).reshape(-1)
+        if z.size != pose.shape[0] * self.sensor.count:
+            raise ValueError(f"expected {pose.shape[0]} x {self.sensor.count} ranges, got {z.size}")
+        sp = sensor_poses(pose, self.sensor.mount).reshape(-1, 3)
+        _beam_kernel(
+            self.state.reshape(-1),
+            self._hit_scan,
+            self.grid.height,
+            self.grid.width,
+            np.ascontiguousarray(sp[:, 0] - self.grid.origin_x),
+            np.ascontiguousarray(sp[:, 1] - self.grid.origin_y),
+            np.cos(sp[:, 2]),
+            np.sin(sp[:, 2]),
+            z,
+            self.scalars,
+            self.sensor.count,
+            self.scans_done,
+        )
+        self.scans_done += pose.shape[0]
+
+    def result(self) -> tuple[np.ndarray, np.ndarray]:
+        """(log_odds float32 (H, W), observed bool (H, W)); unobserved cells hold the prior l0."""
+        log_odds = self.state.copy()
+        observed = log_odds != self.UNOBSERVED
+        log_odds[~observed] = np.float32(self.config.l0)
+        return log_odds, observed
+
+
+@numba.njit(cache=True)
+def _ray_start(px, py, ux, uy, begin, end, height, width, res):
+    """Set-up of the traversal of [begin, end] along one ray, in metres from the grid's origin.
+
+    Returns (row, col, t_start, t_stop, t_max_row, t_max_col, t_delta_row, t_delta_col,
+    step_row, step_col); t_start >= t_stop when that stretch misses the grid.
+    """
+    inf = np.inf
+    if not (np.isfinite(px) and np.isfinite(py) and np.isfinite(ux) and np.isfinite(uy)):
+        return 0, 0, 1.0, 0.0, inf, inf, inf, inf, 0, 0
+    t_lo = max(begin, 0.0)
+    t_hi = end
+    x_max = width * res
+    y_max = height * res
+    # clip the stretch to the grid's box (slab method)
+    if ux > 0.0:
+        t_lo = max(t_lo, -px / ux)
+        t_hi = min(t_hi, (x_max - px) / ux)
+    elif ux < 0.0:
+        t_lo = max(t_lo, (x_max - px) / ux)
+        t_hi = min(t_hi, -px / ux)
+    elif not (0.0 <= px < x_max):
+        t_hi = -1.0
+    if uy > 0.0:
+        t_lo = max(t_lo, -py / uy)
+        t_hi = min(t_hi, (y_max - py) / uy)
+    elif uy < 0.0:
+        t_lo = max(t_lo, (y_max - py) / uy)
+        t_hi = min(t_hi, -py / uy)
+    elif not (0.0 <= py < y_max):
+        t_hi = -1.0
+    if not t_lo < t_hi:
+        return 0, 0, 1.0, 0.0, inf, inf, inf, inf, 0, 0
+    col = min(max(int(math.floor((px + ux * t_lo) / res)), 0), width - 1)
+    row = min(max(int(math.floor((py + uy * t_lo) / res)), 0), height - 1)
+    # t of the next column / row edge, from the sensor's own position (no drift)
+    if ux > 0.0:
+        step_col, t_max_col, t_delta_col = 1, ((col + 1) * res - px) / ux, res / ux
+    elif ux < 0.0:
+        step_col, t_max_col, t_delta_col = -1, (col * res - px) / ux, -res / ux
+    else:
+        step_col, t_max_col, t_delta_col = 0, inf, inf
+    if uy > 0.0:
+        step_row, t_max_row, t_delta_row = 1, ((row + 1) * res - py) / uy, res / uy
+    elif uy < 0.0:
+        step_row, t_max_row, t_delta_row = -1, (row * res - py) / uy, -res / uy
+    else:
+        step_row, t_max_row, t_delta_row = 0, inf, inf
+    return row, col, t_lo, t_hi, t_max_row, t_max_col, t_delta_row, t_delta_col, step_row, step_col
+
+
+@numba.njit(cache=True)
+def _next_cell(row, col, t_max_row, t_max_col, d_row, d_col, s_row, s_col, height, width):
+    """One Amanatides-Woo step: (row, col, t_max_row, t_max_col, still inside the grid).
+    On a tie (a corner) the row steps first; the column's zero-length cell that follows is
+    skipped by the callers."""
+    if t_max_col < t_max_row:
+        col += s_col
+        return row, col, t_max_row, t_max_col + d_col, 0 <= col < width
+    row += s_row
+    return row, col, t_max_row + d_row, t_max_col, 0 <= row < height
+
+
+@numba.njit(cache=True)
+def _ray_cells_kernel(px, py, ux, uy, length, height, width, res, rows, cols, t_enter, t_exit):
+    """Write the cells of one ray (see ``ray_cells``) to the outputs; return how many."""
+    row, col, t0, t_stop, t_max_row, t_max_col, d_row, d_col, s_row, s_col = _ray_start(
+        px, py, ux, uy, 0.0, length, height, width, res
+    )
+    tiny = TOUCH * res
+    n = 0
+    inside = True
+    while inside and t0 < t_stop and n < rows.size:
+        t1 = min(t_max_row, t_max_col)
+        t1c = min(t1, t_stop)
+        if t1c - t0 > tiny:
+            rows[n] = row
+            cols[n] = col
+            t_enter[n] = t0
+            t_exit[n] = t1c
+            n += 1
+        row, col, t_max_row, t_max_col, inside = _next_cell(
+            row, col, t_max_row, t_max_col, d_row, d_col, s_row, s_col, height, width
+        )
+        t0 = max(t0, t1)
+    return n
+
+
+@numba.njit(cache=True)
+def _beam_kernel(state, hit_scan, height, width, px, py, ux, uy, z, scalars, n_beams, first_scan):
+    """Compiled log-odds update of the readings in order, scan by scan (``n_beams`` readings
+    each), on the flat (H * W) ``state``. Reading t is a ray from (px[t], py[t]) (m, from the
+    grid's origin) along (ux[t], uy[t]). First pass per scan: stamp the cells of every hit band
+    with the scan's number in ``hit_scan``; second pass: update every ray's cells, with no free
+    evidence for stamped cells.
+    """
+    half_alpha = scalars[0]
+    min_range = scalars[1]
+    max_range = scalars[2]
+    c_free = np.float32(scalars[3])
+    c_occ = np.float32(scalars[4])
+    lo = np.float32(scalars[5])
+    hi = np.float32(scalars[6])
+    l0 = np.float32(scalars[7])
+    res = scalars[8]
+    tiny = TOUCH * res
+    for k in range(z.size // n_beams):
+        scan = first_scan + k
+        first = k * n_beams
+        # pass 1: the hit bands of this scan
+        for t in range(first, first + n_beams):
+            zt = np.float64(z[t])
+            if not (zt >= 0.0 and zt < max_range):
+                continue
+            row, col, t0, t_stop, t_max_row, t_max_col, d_row, d_col, s_row, s_col = _ray_start(
+                px[t], py[t], ux[t], uy[t], zt - half_alpha, min(zt + half_alpha, max_range), height, width, res
+            )
+            inside = True
+            while inside and t0 < t_stop:  # False for a NaN pose
+                t1 = min(t_max_row, t_max_col)
+                if min(t1, t_stop) - t0 > tiny:
+                    hit_scan[row * width + col] = scan
+                row, col, t_max_row, t_max_col, inside = _next_cell(
+                    row, col, t_max_row, t_max_col, d_row, d_col, s_row, s_col, height, width
+                )
+                t0 = max(t0, t1)
+        # pass 2: every ray's update, clamped
+        for t in range(first, first + n_beams):
+            zt = np.float64(z[t])
+            if not zt >= 0.0:  # NaN or negative: no information
+                continue
+            if zt >= max_range:  # max-range reading: free space only, up to max_range
+                end = max_range
+                z_free = np.inf
+            else:
+                end = min(zt + half_alpha, max_range)
+                z_free = zt - half_alpha
+            row, col, t0, t_stop, t_max_row, t_max_col, d_row, d_col, s_row, s_col = _ray_start(
+                px[t], py[t], ux[t], uy[t], 0.0, end, height, width, res
+            )
+            inside = True
+            while inside and t0 < t_stop:
+                t1 = min(t_max_row, t_max_col)
+                t1c = min(t1, t_stop)
+                if t1c - t0 > tiny:
+                    i = row * width + col
+                    x = state[i]
+                    x = l0 if x < lo else x
+                    if t1c > z_free:
+                        x = min(x + c_occ, hi)
+                    elif t1c > min_range and hit_scan[i] != scan:
+                        x = max(x + c_free, lo)
+                    state[i] = x
+                row, col, t_max_row, t_max_col, inside = _next_cell(
+                    row, col, t_max_row, t_max_col, d_row, d_col, s_row, s_col, height, width
+                )
+                t0 = max(t0, t1)
