@@ -70,7 +70,22 @@ class EMResult:
 
 
 @numba.njit(cache=True)
-def _rebuild_reading(t, ptr, cell, g, g0, p_hit, occupied, obs_pos, pre, nobs, s):
+def _set_sum(t, value, p_hit, const, w, s, far_gain):
+    """Store S_t and the gains of adding / removing an obstacle before the reading's window.
+
+    Such a cell has g = 0 and so have all obstacles before it (they are nearer), so adding
+    it makes S_t -> q S_t and removing it S_t -> S_t / q, whatever its rank: one value per
+    reading instead of a search per (cell, reading) pair.
+    """
+    q = 1.0 - p_hit
+    s[t] = value
+    base = const[t] + w * value
+    far_gain[2 * t] = math.log((const[t] + w * q * value) / base)
+    far_gain[2 * t + 1] = math.log((const[t] + w * value / q) / base)
+
+
+@numba.njit(cache=True)
+def _rebuild_reading(t, ptr, cell, g, g0, p_hit, occupied, obs_pos, pre, nobs, s, const, w, far_gain):
     q = 1.0 - p_hit
     base = ptr[t]
     pbase = ptr[t] + t
@@ -86,7 +101,7 @@ def _rebuild_reading(t, ptr, cell, g, g0, p_hit, occupied, obs_pos, pre, nobs, s
             k += 1
             pre[pbase + k] = acc
     nobs[t] = k
-    s[t] = acc + qk * g0[t]
+    _set_sum(t, acc + qk * g0[t], p_hit, const, w, s, far_gain)
 
 
 @numba.njit(cache=True)
@@ -103,7 +118,7 @@ def _rank(obs_pos, lo, hi, e):
 
 
 @numba.njit(cache=True)
-def _update_reading(t, e, adding, ptr, g, g0, p_hit, qpow, obs_pos, pre, nobs, s):
+def _update_reading(t, e, adding, ptr, g, g0, p_hit, qpow, obs_pos, pre, nobs, s, const, w, far_gain):
     """Insert (or remove) entry ``e`` into reading t's obstacle list and redo its prefix sums
     from that rank on: O(obstacles) instead of O(cone cells)."""
     base = ptr[t]
@@ -124,34 +139,43 @@ def _update_reading(t, e, adding, ptr, g, g0, p_hit, qpow, obs_pos, pre, nobs, s
     for k in range(r, n):
         acc += qpow[k] * p_hit * g[obs_pos[base + k]]
         pre[pbase + k + 1] = acc
-    s[t] = acc + qpow[n] * g0[t]
+    _set_sum(t, acc + qpow[n] * g0[t], p_hit, const, w, s, far_gain)
 
 
 @numba.njit(cache=True)
-def _init_state(ptr, cell, g, g0, p_hit, occupied):
+def _init_state(ptr, cell, g, g0, const, w, p_hit, occupied):
     n = ptr.shape[0] - 1
     obs_pos = np.empty(ptr[n], dtype=np.int64)
     pre = np.empty(ptr[n] + n, dtype=np.float64)
     nobs = np.zeros(n, dtype=np.int64)
     s = np.empty(n, dtype=np.float64)
+    far_gain = np.empty(2 * n, dtype=np.float64)
     for t in range(n):
-        _rebuild_reading(t, ptr, cell, g, g0, p_hit, occupied, obs_pos, pre, nobs, s)
-    return obs_pos, pre, nobs, s
+        _rebuild_reading(t, ptr, cell, g, g0, p_hit, occupied, obs_pos, pre, nobs, s, const, w, far_gain)
+    return obs_pos, pre, nobs, s, far_gain
 
 
 @numba.njit(cache=True)
-def _flip_gain(c, cand_cell, cand_ptr, pair_t, pair_e, ptr, g, const, w, p_hit, qpow, occupied, obs_pos, pre, nobs, s):
-    """Exact change of sum_t log p(z_t | m) when candidate c flips (data part only)."""
+def _flip_gain(c, cand_cell, cand_ptr, pair_t, pair_e, ptr, pair_g, const, w, p_hit, qpow, occupied, obs_pos, pre,
+               nobs, s, far_gain):
+    """Exact change of sum_t log p(z_t | m) when candidate c flips (data part only).
+
+    ``pair_g`` holds each pair's Gaussian (index.g of its entry), stored along the pairs so
+    that the hot loop reads it sequentially."""
     q = 1.0 - p_hit
     adding = not occupied[cand_cell[c]]
     delta = 0.0
+    far = 0 if adding else 1
     for p in range(cand_ptr[c], cand_ptr[c + 1]):
         t = pair_t[p]
+        if pair_g[p] == 0.0:  # before the reading's window: see _set_sum
+            delta += far_gain[2 * t + far]
+            continue
         e = pair_e[p]
         # r = obstacles of reading t before entry e (binary search in its sorted positions)
         r = _rank(obs_pos, ptr[t], ptr[t] + nobs[t], e)
         a = pre[ptr[t] + t + r]
-        term = qpow[r] * p_hit * g[e]
+        term = qpow[r] * p_hit * pair_g[p]
         st = s[t]
         if adding:
             s_new = a + term + q * (st - a)
@@ -166,7 +190,7 @@ def _flip_gain(c, cand_cell, cand_ptr, pair_t, pair_e, ptr, g, const, w, p_hit, 
 
 @numba.njit(cache=True)
 def _sweep(cand_cell, cand_ptr, pair_t, pair_e, ptr, cell, g, g0, const, w, p_hit, l_prior, qpow,
-           occupied, obs_pos, pre, nobs, s, reading_stamp, cand_stamp, clock, last_gain):
+           occupied, obs_pos, pre, nobs, s, far_gain, reading_stamp, cand_stamp, clock, last_gain, pair_g):
     """One pass over the candidates in order; a flip is kept when it raises the objective.
 
     A candidate none of whose readings changed since it was last scored keeps its (non-
@@ -188,8 +212,8 @@ def _sweep(cand_cell, cand_ptr, pair_t, pair_e, ptr, cell, g, g0, const, w, p_hi
             if not dirty:
                 continue
         evaluated += 1
-        d = _flip_gain(c, cand_cell, cand_ptr, pair_t, pair_e, ptr, g, const, w, p_hit, qpow,
-                       occupied, obs_pos, pre, nobs, s)
+        d = _flip_gain(c, cand_cell, cand_ptr, pair_t, pair_e, ptr, pair_g, const, w, p_hit, qpow,
+                       occupied, obs_pos, pre, nobs, s, far_gain)
         last_gain[c] = d
         x = cand_cell[c]
         d += -l_prior if occupied[x] else l_prior
@@ -200,7 +224,8 @@ def _sweep(cand_cell, cand_ptr, pair_t, pair_e, ptr, cell, g, g0, const, w, p_hi
             clock[0] += 1
             adding = occupied[x]
             for p in range(cand_ptr[c], cand_ptr[c + 1]):
-                _update_reading(pair_t[p], pair_e[p], adding, ptr, g, g0, p_hit, qpow, obs_pos, pre, nobs, s)
+                _update_reading(pair_t[p], pair_e[p], adding, ptr, g, g0, p_hit, qpow, obs_pos, pre, nobs, s,
+                                const, w, far_gain)
                 reading_stamp[pair_t[p]] = clock[0]
         cand_stamp[c] = clock[0]
     return flips, evaluated
@@ -232,13 +257,13 @@ def _residual_from_gains(cand_cell, occupied, last_gain, l_prior):
 
 
 @numba.njit(cache=True)
-def _residual(cand_cell, cand_ptr, pair_t, pair_e, ptr, g, const, w, p_hit, l_prior, qpow,
-              occupied, obs_pos, pre, nobs, s):
+def _residual(cand_cell, cand_ptr, pair_t, pair_e, ptr, pair_g, const, w, p_hit, l_prior, qpow,
+              occupied, obs_pos, pre, nobs, s, far_gain):
     """p(m_x = 1 | Z, m*) of each candidate with every other cell held at m*."""
     out = np.empty(cand_cell.shape[0])
     for c in range(cand_cell.shape[0]):
-        d = _flip_gain(c, cand_cell, cand_ptr, pair_t, pair_e, ptr, g, const, w, p_hit, qpow,
-                       occupied, obs_pos, pre, nobs, s)
+        d = _flip_gain(c, cand_cell, cand_ptr, pair_t, pair_e, ptr, pair_g, const, w, p_hit, qpow,
+                       occupied, obs_pos, pre, nobs, s, far_gain)
         ratio = (-d if occupied[cand_cell[c]] else d) + l_prior
         if ratio >= 0:
             out[c] = 1.0 / (1.0 + math.exp(-ratio))
@@ -304,10 +329,11 @@ def run_em(
     p_hit = config.forward.p_hit
     l_prior = config.l_prior
     cand_cell, cand_ptr, pair_t, pair_e = pair_index(index, candidates)
+    pair_g = index.g[pair_e]
     max_entries = int(np.max(np.diff(index.ptr))) if index.n_readings else 0
     qpow = (1.0 - p_hit) ** np.arange(max_entries + 1, dtype=np.float64)
-    args = (index.ptr, index.cell, index.g, index.g0, p_hit)
-    obs_pos, pre, nobs, s = _init_state(*args, occupied)
+    state = _init_state(index.ptr, index.cell, index.g, index.g0, index.const, index.w, p_hit, occupied)
+    s = state[3]
     objective = [_objective(index.const, index.w, s, occupied, cand_cell, l_prior)]
     flips: list[int] = []
     reading_stamp = np.zeros(index.n_readings, dtype=np.int64)
@@ -316,8 +342,8 @@ def run_em(
     last_gain = np.zeros(cand_cell.shape[0], dtype=np.float64)
     for sweep in range(1, config.max_sweeps + 1):
         n_flips, _ = _sweep(cand_cell, cand_ptr, pair_t, pair_e, index.ptr, index.cell, index.g, index.g0,
-                            index.const, index.w, p_hit, l_prior, qpow, occupied, obs_pos, pre, nobs, s,
-                            reading_stamp, cand_stamp, clock, last_gain)
+                            index.const, index.w, p_hit, l_prior, qpow, occupied, *state,
+                            reading_stamp, cand_stamp, clock, last_gain, pair_g)
         flips.append(int(n_flips))
         objective.append(_objective(index.const, index.w, s, occupied, cand_cell, l_prior))
         if progress:
@@ -327,6 +353,6 @@ def run_em(
     if flips and flips[-1] == 0:
         residual = _residual_from_gains(cand_cell, occupied, last_gain, l_prior)
     else:  # stopped by max_sweeps: score every candidate once more
-        residual = _residual(cand_cell, cand_ptr, pair_t, pair_e, index.ptr, index.g, index.const, index.w, p_hit,
-                             l_prior, qpow, occupied, obs_pos, pre, nobs, s)
+        residual = _residual(cand_cell, cand_ptr, pair_t, pair_e, index.ptr, pair_g, index.const, index.w, p_hit,
+                             l_prior, qpow, occupied, *state)
     return EMResult(len(flips), flips, [float(v) for v in objective], cand_cell, residual)

@@ -10,8 +10,10 @@ g(d) = N(z; d, sigma^2), G0 = N(z; z_max, sigma^2):
     p(z | m) = C + w * S,   C = p_rand / z_max + p_max * G0,   w = 1 - p_rand - p_max,
     S = sum_k q^(k-1) p_hit g(d_k) + q^K G0.
 
-A cone is truncated ``window`` sigmas beyond z (obstacles farther away change p(z | m) by a
-factor of exp(-window^2 / 2) or less); a max-range reading keeps its whole cone up to z_max.
+The Gaussian is truncated at ``window`` sigmas (g = 0 beyond; the mass left out is below
+exp(-window^2 / 2) of the peak), and so is a cone beyond z; a max-range reading keeps its
+whole cone up to z_max. Cells before a reading's window then change it only through the
+detection factor q, which EM scores in O(1) per reading.
 """
 
 from __future__ import annotations
@@ -128,7 +130,7 @@ def log_likelihoods(index: ForwardIndex, occupied_flat: np.ndarray) -> np.ndarra
 
 
 @numba.njit(cache=True)
-def _fill_index(tpl, height, width, rows, cols, bins, limits, z, sigma, mask, out_cell, out_g, counts):
+def _fill_index(tpl, height, width, rows, cols, bins, limits, z, sigma, window, mask, out_cell, out_g, counts):
     """Cone cells (flat ids) and Gaussians of every reading, packed reading after reading.
 
     With a non-empty ``mask`` (flat bool), a reading none of whose cells is in the mask gets
@@ -154,7 +156,7 @@ def _fill_index(tpl, height, width, rows, cols, bins, limits, z, sigma, mask, ou
         for i in range(n):
             out_cell[pos + i] = scratch_cell[i]
             u = (z[t] - scratch_range[i]) / sigma
-            out_g[pos + i] = norm * math.exp(-0.5 * u * u)
+            out_g[pos + i] = norm * math.exp(-0.5 * u * u) if abs(u) <= window else 0.0
         counts[t] = n
         pos += n
     return pos
@@ -199,7 +201,7 @@ def build_forward_index(
     counts = np.zeros(len(z), dtype=np.int64)
     mask = np.zeros(0, dtype=np.bool_) if mask is None else np.ascontiguousarray(mask, dtype=np.bool_).reshape(-1)
     n = _fill_index(templates.kernel_arrays, grid.height, grid.width, rows, cols, bins, limits, z_eff,
-                    config.sigma, mask, out_cell, out_g, counts)
+                    config.sigma, config.window, mask, out_cell, out_g, counts)
     ptr = np.zeros(len(z) + 1, dtype=np.int64)
     np.cumsum(counts, out=ptr[1:])
     g0, const, w = reading_constants(z, z_max, config)

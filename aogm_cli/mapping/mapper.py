@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -132,15 +133,44 @@ def map_standard(path: str | Path, params: MapParams, progress: Progress | None 
     )
 
 
-def readings_of(reader: LogReader, grid: GridSpec, templates):
-    """All readings of a log as flat arrays: sensor cell rows, cols, heading bins, and ranges
-    shifted into template ranges: ``echo_ranges`` plus the sensor's offset from its cell's
-    centre along the beam (``cone.reading_geometry``)."""
-    pose = reader.poses()
-    ranges = np.concatenate([r for _, _, _, r in reader.chunks()]) if reader.n_scans else np.zeros((0, reader.sensor.count))
-    rows, cols, bins, valid, offset = reading_geometry(pose, reader.sensor, grid, templates)
+def readings_of(pose: np.ndarray, ranges: np.ndarray, sensor: SensorSpec, grid: GridSpec, templates):
+    """All readings as flat arrays: sensor cell rows, cols, heading bins, and ranges shifted
+    into template ranges: ``echo_ranges`` plus the sensor's offset from its cell's centre
+    along the beam (``cone.reading_geometry``)."""
+    rows, cols, bins, valid, offset = reading_geometry(pose, sensor, grid, templates)
     z = np.where(valid, echo_ranges(ranges, grid), np.nan) + offset
     return rows.reshape(-1), cols.reshape(-1), bins.reshape(-1), z.reshape(-1)
+
+
+@dataclass
+class _EMInputs:
+    """What EM and adaptive mapping read from a log before their own work starts."""
+
+    grid: GridSpec
+    sensor: SensorSpec
+    log_odds: np.ndarray
+    observed: np.ndarray
+    t_standard: float
+    templates: object
+    ranges: np.ndarray  # (T, S) as logged
+    rows: np.ndarray
+    cols: np.ndarray
+    bins: np.ndarray
+    z: np.ndarray
+
+
+def _em_inputs(path: str | Path, params: MapParams) -> _EMInputs:
+    """Read the log, compile, run the (timed) standard pass, and lay out every reading."""
+    with LogReader(path) as reader:
+        grid = log_grid(reader, params.resolution)
+        sensor = reader.sensor
+        warm_up(sensor, params, em=True)
+        log_odds, observed, t_standard = standard_pass(reader, grid, params)
+        pose = reader.poses()
+        ranges = np.concatenate([r for _, _, _, r in reader.chunks()]) if reader.n_scans else np.zeros((0, sensor.count))
+    templates = em_forward_templates(grid, sensor)
+    rows, cols, bins, z = readings_of(pose, ranges, sensor, grid, templates)
+    return _EMInputs(grid, sensor, log_odds, observed, t_standard, templates, ranges, rows, cols, bins, z)
 
 
 def em_forward_templates(grid: GridSpec, sensor: SensorSpec):
@@ -151,13 +181,9 @@ def em_forward_templates(grid: GridSpec, sensor: SensorSpec):
 def map_em(path: str | Path, params: MapParams, progress: Progress | None = None) -> OccupancyMap:
     """Thrun's EM map of the log at ``path``: every observed cell is a candidate."""
     config = params.em
-    with LogReader(path) as reader:
-        grid = log_grid(reader, params.resolution)
-        sensor = reader.sensor
-        warm_up(sensor, params, em=True)
-        log_odds, observed, t_standard = standard_pass(reader, grid, params)
-        templates = em_forward_templates(grid, sensor)
-        rows, cols, bins, z = readings_of(reader, grid, templates)
+    run = _em_inputs(path, params)
+    grid, sensor, log_odds, observed, t_standard = run.grid, run.sensor, run.log_odds, run.observed, run.t_standard
+    templates, rows, cols, bins, z = run.templates, run.rows, run.cols, run.bins, run.z
     t0 = time.perf_counter()
     index = build_forward_index(rows, cols, bins, z, grid, templates, sensor.max_range, config.forward)
     t_index = time.perf_counter() - t0
@@ -226,14 +252,9 @@ def map_adaptive(path: str | Path, params: MapParams, detector_path: str | None 
 
     detector = load_detector(detector_path or default_detector_path())
     config = params.em
-    with LogReader(path) as reader:
-        grid = log_grid(reader, params.resolution)
-        sensor = reader.sensor
-        warm_up(sensor, params, em=True)
-        log_odds, observed, t_standard = standard_pass(reader, grid, params)
-        templates = em_forward_templates(grid, sensor)
-        rows, cols, bins, z = readings_of(reader, grid, templates)
-        ranges = np.concatenate([r for _, _, _, r in reader.chunks()]) if reader.n_scans else np.zeros((0, sensor.count))
+    run = _em_inputs(path, params)
+    grid, sensor, log_odds, observed, t_standard = run.grid, run.sensor, run.log_odds, run.observed, run.t_standard
+    templates, rows, cols, bins, z, ranges = run.templates, run.rows, run.cols, run.bins, run.z, run.ranges
     max_model = sensor.max_range + 0.5 * grid.resolution
 
     t0 = time.perf_counter()
