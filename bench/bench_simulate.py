@@ -1,8 +1,9 @@
 """Benchmark of the sonar simulator: simulated readings per second against a compiled ceiling.
 
-Run as ``python bench/bench_simulate.py [--poses N] [--bucket-size M]``. Worlds: a corridor
-with doors and smooth walls, and a generated office floor of about 100 m x 100 m (a grid of
-rooms with doors, desks and pillars). The ceiling is a kernel doing the least possible work
+Run as ``python bench/bench_simulate.py [--poses N] [--bucket-size M]``. Worlds: the bundled
+corridor_door.yaml (its path resampled to N poses), a corridor with doors and smooth walls,
+and a generated office floor of about 100 m x 100 m (a grid of rooms with doors, desks and
+pillars). The ceiling is a kernel doing the least possible work
 per sub-ray (one ray-segment intersection) for the same readings.
 """
 
@@ -19,6 +20,26 @@ from aogm_cli.simulation.raycast import geometry
 from aogm_cli.simulation.sonar import BLOCK_SCANS, echo_block, simulate, sub_ray_offsets
 from aogm_cli.world.geometry import build_scene, trajectory_poses, truth_occupancy
 from aogm_cli.world.loader import parse_world
+
+
+def bundled_world(name: str, n_poses: int = 20000):
+    """A bundled world with its waypoint path resampled to ``n_poses`` explicit poses."""
+    from pathlib import Path
+
+    import yaml
+
+    path = Path(__file__).resolve().parents[1] / "worlds" / f"{name}.yaml"
+    raw = yaml.safe_load(path.read_text())
+    pts = np.array(raw["trajectory"]["waypoints"], dtype=float)
+    seg = np.diff(pts, axis=0)
+    length = np.concatenate([[0.0], np.cumsum(np.hypot(seg[:, 0], seg[:, 1]))])
+    s = np.linspace(0.0, length[-1], n_poses)
+    leg = np.clip(np.searchsorted(length, s, side="right") - 1, 0, len(seg) - 1)
+    frac = (s - length[leg]) / np.maximum(length[leg + 1] - length[leg], 1e-12)
+    xy = pts[leg] + frac[:, None] * seg[leg]
+    yaw = np.degrees(np.arctan2(seg[leg, 1], seg[leg, 0]))
+    raw["trajectory"] = {"poses": [[float(x), float(y), float(a)] for (x, y), a in zip(xy, yaw, strict=True)]}
+    return parse_world(raw, file=str(path))
 
 
 def office_world(rooms: int = 20, room: float = 5.0, n_poses: int = 20000):
@@ -148,7 +169,7 @@ def main() -> None:
     simulate(tiny, seed=0)
     run_kernel(tiny, bucket)
 
-    for world in (corridor_world(args.poses), office_world(n_poses=args.poses)):
+    for world in (bundled_world("corridor_door", args.poses), corridor_world(args.poses), office_world(n_poses=args.poses)):
         start = time.perf_counter()
         scene = build_scene(world, bucket_size=bucket)
         t_scene = time.perf_counter() - start
