@@ -37,5 +37,19 @@ bench: $(STAMP)
 lint: $(STAMP)
 	$(BIN)/ruff check .
 
+# The packaged detector: simulate every bundled world except the two test worlds of the paper's
+# figures, hold out two (a specular corridor and a furnished room) for validation, train (seeded).
+DETECTOR_WORLDS     := $(filter-out worlds/corridor_door.yaml worlds/corridor_specular.yaml,$(WORLDS))
+DETECTOR_VALIDATION := l_corridor furnished_room
+.PHONY: detector
+detector: $(STAMP)
+	@mkdir -p $(OUT)/detector
+	@for w in $(DETECTOR_WORLDS); do \
+	  $(BIN)/aogm simulate $$w -o $(OUT)/detector/$$(basename $$w .yaml).h5 --seed $(SEED) --quiet || exit 1; \
+	done
+	$(BIN)/aogm train $(patsubst worlds/%.yaml,$(OUT)/detector/%.h5,$(DETECTOR_WORLDS)) \
+	  $(foreach n,$(DETECTOR_VALIDATION),--validation-logs $(OUT)/detector/$(n).h5) \
+	  -o aogm_cli/data/detector.h5 --seed $(SEED) --quiet
+
 clean:
 	rm -rf $(OUT) .pytest_cache

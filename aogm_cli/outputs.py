@@ -29,6 +29,7 @@ def atomic_output(path: str | Path, inputs: tuple[str | Path, ...] = ()) -> Iter
         raise InputError(f"the output folder {str(folder)!r} does not exist", file=str(path))
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
     os.close(fd)
+    os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; outputs get the usual permissions
     tmp_path = Path(tmp)
     try:
         yield tmp_path
@@ -37,3 +38,9 @@ def atomic_output(path: str | Path, inputs: tuple[str | Path, ...] = ()) -> Iter
         with contextlib.suppress(OSError):
             tmp_path.unlink()
         raise
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask

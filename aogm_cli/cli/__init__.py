@@ -61,6 +61,7 @@ def _register() -> None:
     for module, name in (
         ("simulate", "simulate"),
         ("map_log", "map_log"),
+        ("train", "train"),
         ("render", "render"),
         ("export", "export"),
         ("import_log", "import_log"),

@@ -18,7 +18,6 @@ straddles a depth edge of the truth map near the robot. Pure functions on arrays
 
 from __future__ import annotations
 
-import json
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -63,8 +62,9 @@ class LabelDefinition:
             f"{self.edge_reach:g} m (door frames, gaps between objects, openings narrower than the cone's arc)."
         )
 
-    def to_json(self) -> str:
-        return json.dumps(asdict(self) | {"definition": self.describe()})
+    def as_dict(self) -> dict:
+        """The parameters and the rule in words (JSON-able)."""
+        return asdict(self) | {"definition": self.describe()}
 
 
 def erroneous(ranges: np.ndarray, cause: np.ndarray, ideal_range: np.ndarray, tolerance: float) -> np.ndarray:
