@@ -42,3 +42,35 @@ def label_clusters(region: np.ndarray) -> tuple[np.ndarray, int]:
     """8-connected components of ``region``: (int32 ids, 0 outside; number of clusters)."""
     labels, n = ndimage.label(region, structure=np.ones((3, 3), dtype=int))
     return labels.astype(np.int32), int(n)
+
+
+@numba.njit(cache=True)
+def _contacts(ptr, entry_cluster):
+    n_read = ptr.shape[0] - 1
+    out_c = np.empty(entry_cluster.shape[0], dtype=np.int64)
+    out_t = np.empty(entry_cluster.shape[0], dtype=np.int64)
+    n = 0
+    for t in range(n_read):
+        start = n
+        for e in range(ptr[t], ptr[t + 1]):
+            k = entry_cluster[e]
+            if k <= 0:
+                continue
+            seen = False
+            for j in range(start, n):
+                if out_c[j] == k:
+                    seen = True
+                    break
+            if not seen:
+                out_c[n] = k
+                out_t[n] = t
+                n += 1
+    return out_c[:n], out_t[:n]
+
+
+def cluster_contacts(ptr: np.ndarray, entry_cluster: np.ndarray) -> np.ndarray:
+    """(2, P) array of every distinct (cluster id, reading position) contact of an index whose
+    entries lie in clusters ``entry_cluster`` (0 = none), sorted by cluster then reading."""
+    c, t = _contacts(ptr, np.ascontiguousarray(entry_cluster, dtype=np.int64))
+    order = np.lexsort((t, c))
+    return np.stack([c[order], t[order]])

@@ -86,6 +86,11 @@ def warm_up(sensor: SensorSpec, params: MapParams, em: bool = False) -> None:
         index = build_forward_index(rows, cols, bins, ranges, grid, templates, 1.0, params.em.forward)
         occupied = np.zeros(grid.height * grid.width, dtype=bool)
         run_em(index, occupied, np.unique(index.cell), EMConfig(params.em.forward, max_sweeps=1))
+        from aogm_cli.mapping.cluster import cluster_contacts, swept_region
+
+        region = swept_region(grid, templates, rows.reshape(-1), cols.reshape(-1), bins.reshape(-1),
+                              ranges.reshape(-1).astype(np.float64), 1.0, 0.1)
+        cluster_contacts(index.ptr, region.reshape(-1)[index.cell].astype(np.int64))
 
 
 def standard_pass(reader: LogReader, grid: GridSpec, params: MapParams, chunk: int = 4096):
@@ -242,13 +247,30 @@ def readings_near_clusters(clusters, rows, cols, z, grid: GridSpec, z_max: float
     return np.flatnonzero(near)
 
 
+def coupled_groups(pairs: np.ndarray, n_clusters: int) -> np.ndarray:
+    """Group id (0..G-1) of each cluster 1..n: clusters joined by a common reading share one.
+
+    ``pairs`` is (2, P): cluster id and reading position of every (cluster, reading) contact.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    n_readings = int(pairs[1].max()) + 1 if pairs.size else 0
+    # a bipartite graph: clusters 0..n-1, readings n..n+R-1
+    graph = coo_matrix((np.ones(pairs.shape[1]), (pairs[0] - 1, n_clusters + pairs[1])),
+                       shape=(n_clusters + n_readings, n_clusters + n_readings))
+    _, labels = connected_components(graph, directed=False)
+    _, group = np.unique(labels[:n_clusters], return_inverse=True)
+    return group
+
+
 def map_adaptive(path: str | Path, params: MapParams, detector_path: str | None = None,
                  progress: Progress | None = None) -> OccupancyMap:
     """The paper's adaptive map: standard log-odds everywhere, then EM inside each cluster
     (cells outside the cluster held at the thresholded standard map); a cluster's cells get
     EM's residual probability."""
     from aogm_cli.detector.network import default_detector_path, load_detector
-    from aogm_cli.mapping.cluster import label_clusters, swept_region
+    from aogm_cli.mapping.cluster import cluster_contacts, label_clusters, swept_region
 
     detector = load_detector(detector_path or default_detector_path())
     config = params.em
@@ -264,7 +286,7 @@ def map_adaptive(path: str | Path, params: MapParams, detector_path: str | None 
     t0 = time.perf_counter()
     region = swept_region(grid, templates, rows[flags], cols[flags], bins[flags], z[flags], max_model,
                           params.inverse_model.alpha)
-    region &= observed
+    region &= observed & (log_odds > params.inverse_model.clamp_min)
     clusters, n_clusters = label_clusters(region)
     t_cluster = time.perf_counter() - t0
 
@@ -280,17 +302,18 @@ def map_adaptive(path: str | Path, params: MapParams, detector_path: str | None 
         near = readings_near_clusters(clusters, rows, cols, z, grid, sensor.max_range, config.forward)
         index = build_forward_index(rows[near], cols[near], bins[near], z[near], grid, templates, sensor.max_range,
                                     config.forward, mask=flat_clusters > 0)
-        entry_cluster = flat_clusters[index.cell]
-        reading_of_entry = np.repeat(np.arange(index.n_readings), np.diff(index.ptr))
-        touching = entry_cluster > 0
-        pairs = np.unique(np.stack([entry_cluster[touching], reading_of_entry[touching]]), axis=1)
-        bounds = np.searchsorted(pairs[0], np.arange(1, n_clusters + 2))
-        cells_by_cluster = np.split(np.argsort(flat_clusters, kind="stable"),
-                                    np.cumsum(np.bincount(flat_clusters, minlength=n_clusters + 1)))[1:-1]
-        # ... then EM cluster by cluster, on the readings that touch it
-        for k in range(1, n_clusters + 1):
-            cells = cells_by_cluster[k - 1]
-            sub = select_readings(index, pairs[1, bounds[k - 1]:bounds[k]])
+        pairs = cluster_contacts(index.ptr, flat_clusters[index.cell])
+        # ... clusters that share a reading are coupled through it: EM runs once per group of
+        # coupled clusters (clusters that share none are independent, as the paper has them)
+        group = coupled_groups(pairs, n_clusters)
+        group_of_reading = np.zeros(index.n_readings, dtype=np.int64)
+        group_of_reading[pairs[1]] = group[pairs[0] - 1]
+        cell_group = np.where(flat_clusters > 0, group[np.maximum(flat_clusters, 1) - 1], -1)
+        n_groups = int(group.max()) + 1
+        for k in range(n_groups):
+            cells = np.flatnonzero(cell_group == k)
+            readings = np.flatnonzero((group_of_reading == k) & (np.diff(index.ptr) > 0))
+            sub = select_readings(index, readings)
             if config.start == "empty":
                 occupied[cells] = False
             result = run_em(sub, occupied, cells, config)
@@ -298,7 +321,7 @@ def map_adaptive(path: str | Path, params: MapParams, detector_path: str | None 
             sweeps.append(result.sweeps)
             flips.append(int(sum(result.flips)))
             if progress:
-                progress("cluster", k, n_clusters)
+                progress("cluster group", k + 1, n_groups)
     t_em = time.perf_counter() - t0
     probability = probability.reshape(grid.shape)
     probability[~observed] = 0.5
@@ -308,8 +331,9 @@ def map_adaptive(path: str | Path, params: MapParams, detector_path: str | None 
         "observed_cells": int(observed.sum()),
         "flagged_readings": int(flags.sum()),
         "readings": int(flags.size),
-        "em_sweeps_per_cluster": sweeps,
-        "em_flips_per_cluster": flips,
+        "cluster_groups": len(sweeps),
+        "em_sweeps_per_group": sweeps,
+        "em_flips_per_group": flips,
         "phase_seconds": {"standard": t_standard, "detector": t_detect, "clusters": t_cluster, "em": t_em},
         "detector": str(detector_path or "packaged"),
     }

@@ -1,0 +1,117 @@
+"""The adaptive mapper: standard outside clusters, EM inside, clusters from flagged readings."""
+
+import dataclasses
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from aogm_cli.cli import main
+from aogm_cli.detector.network import load_detector, save_detector
+from aogm_cli.grid import GridSpec
+from aogm_cli.mapfile import read_map_file
+from aogm_cli.mapping import mapper
+from aogm_cli.mapping.cluster import cluster_contacts, label_clusters
+from aogm_cli.mapping.params import resolve_params
+
+WORLDS = Path(__file__).resolve().parents[1] / "worlds"
+
+
+@pytest.fixture(scope="module")
+def door_log(tmp_path_factory):
+    out = tmp_path_factory.mktemp("logs") / "door.h5"
+    result = CliRunner().invoke(main, ["simulate", str(WORLDS / "corridor_door.yaml"), "-o", str(out), "--seed", "1", "-q"])
+    assert result.exit_code == 0, result.output
+    return out
+
+
+def detector_with_threshold(tmp_path, threshold):
+    path = tmp_path / f"det_{threshold}.h5"
+    save_detector(path, dataclasses.replace(load_detector(), threshold=threshold))
+    return path
+
+
+def test_no_flagged_reading_gives_the_standard_map(door_log, tmp_path):
+    params = resolve_params()
+    never = detector_with_threshold(tmp_path, 1.0)  # p(y = 1) stays below 1 on these readings
+    adaptive = mapper.map_adaptive(door_log, params, str(never))
+    standard = mapper.map_standard(door_log, params)
+    assert adaptive.stats["clusters"] == 0 and adaptive.stats["flagged_readings"] == 0
+    assert not adaptive.clusters.any()
+    assert np.array_equal(adaptive.probability, standard.probability)
+    assert np.array_equal(adaptive.observed, standard.observed)
+    assert np.array_equal(adaptive.occupied, (standard.log_odds > 0) & standard.observed)
+
+
+def test_em_changes_nothing_outside_the_clusters(door_log):
+    params = resolve_params()
+    adaptive = mapper.map_adaptive(door_log, params)
+    standard = mapper.map_standard(door_log, params)
+    outside = adaptive.clusters == 0
+    assert adaptive.stats["clusters"] > 0
+    assert np.array_equal(adaptive.probability[outside], standard.probability[outside])
+    assert np.array_equal(adaptive.occupied[outside], ((standard.log_odds > 0) & standard.observed)[outside])
+    # clusters lie in observed cells that the standard map does not hold at its free clamp
+    inside = adaptive.clusters > 0
+    assert np.all(adaptive.observed[inside])
+    assert np.all(standard.log_odds[inside] > params.inverse_model.clamp_min)
+
+
+def test_adaptive_cli_writes_clusters_and_stats(door_log, tmp_path):
+    out = tmp_path / "ad.h5"
+    result = CliRunner().invoke(main, ["map", str(door_log), "--mode", "adaptive", "-o", str(out), "-q",
+                                       "--png", str(tmp_path / "ad.png")])
+    assert result.exit_code == 0, result.output
+    with h5py.File(out) as f:
+        assert f.attrs["mode"] == "adaptive"
+        for name in ("probability", "observed", "log_odds", "occupied", "clusters"):
+            assert name in f["map"], name
+        assert f["map/clusters"].dtype == np.int32
+        for key in ("clusters", "cells_in_clusters", "phase_seconds"):
+            assert key in f["stats"].attrs
+    m = read_map_file(out)
+    assert m.stats["clusters"] == int(m.clusters.max())
+
+
+def test_bad_detector_file_exits_2(door_log, tmp_path):
+    bad = tmp_path / "bad.h5"
+    with h5py.File(bad, "w") as f:
+        f.attrs["format"] = "aogm-detector"
+    out = tmp_path / "ad.h5"
+    result = CliRunner().invoke(main, ["map", str(door_log), "--mode", "adaptive", "--detector", str(bad), "-o", str(out), "-q"])
+    assert result.exit_code == 2 and str(bad) in result.output
+    assert not out.exists()
+
+
+def test_label_clusters_is_8_connected():
+    region = np.zeros((5, 6), dtype=bool)
+    region[0, 0] = region[1, 1] = True  # diagonal neighbours: one cluster
+    region[3, 4] = region[4, 5] = region[3, 5] = True
+    labels, n = label_clusters(region)
+    assert n == 2
+    assert labels[0, 0] == labels[1, 1] != labels[3, 4]
+    assert labels.dtype == np.int32 and labels[2, 2] == 0
+
+
+def test_cluster_contacts_and_coupled_groups():
+    ptr = np.array([0, 3, 5, 7])
+    entry_cluster = np.array([1, 1, 0, 0, 2, 3, 3])  # reading 0 touches 1; 1 touches 2; 2 touches 3
+    pairs = cluster_contacts(ptr, entry_cluster)
+    assert pairs.tolist() == [[1, 2, 3], [0, 1, 2]]
+    assert mapper.coupled_groups(pairs, 3).tolist() == [0, 1, 2]
+    joined = np.array([[1, 2, 3], [0, 0, 2]])  # one reading touches clusters 1 and 2
+    group = mapper.coupled_groups(joined, 3)
+    assert group[0] == group[1] != group[2]
+
+
+def test_readings_near_clusters_uses_the_cone_reach():
+    grid = GridSpec(0.0, 0.0, 0.1, 50, 50)
+    clusters = np.zeros(grid.shape, dtype=np.int32)
+    clusters[40:42, 40:42] = 1
+    rows, cols = np.array([5, 5, 38]), np.array([5, 5, 38])
+    z = np.array([1.0, np.inf, 0.3])
+    forward = resolve_params().em.forward
+    near = mapper.readings_near_clusters(clusters, rows, cols, z, grid, 5.0, forward)
+    assert near.tolist() == [1, 2]  # a 1 m reading from (5, 5) cannot reach row 40; 5 m can
