@@ -33,6 +33,7 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python bench/bench_simulate.py
 	$(BIN)/python bench/bench_standard.py
+	$(BIN)/python bench/bench_em.py
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

@@ -59,6 +59,14 @@ def map_log(log_file, mode, output, png, detector, params_file, resolution, quie
     em        Thrun's EM with forward sensor models over every observed cell
     adaptive  standard everywhere; EM only inside the clusters the detector flags
 
+    Adaptive mode: the detector (--detector, or the one packaged with aogm; see
+    `aogm train --help` for its inputs and labels) flags readings from neighbouring
+    sonar ranges; each flagged reading sweeps its cone up to its range plus alpha; swept
+    cells that are observed and not held at the standard map's free clamp form clusters
+    (8-connected). EM runs over each group of clusters that share a reading, with every
+    other cell held at the standard map thresholded at p = 0.5; cluster cells get EM's
+    residual probability, all others keep the standard map's.
+
     Maps of a simulated log use its truth grid; other logs get the poses' bounds plus the
     sensor's max range at --resolution. Every parameter used is written into the map file.
 
