@@ -24,8 +24,11 @@ from aogm_cli.cli.options import output_option, progress_bar, quiet_option, seed
               help="Sonars on each side of a reading in the same ring reading.")
 @click.option("--time-neighbours", type=click.IntRange(min=0), default=1, show_default=True,
               help="Scans before and after a reading, same sonar.")
+@click.option("--arc-wrong-min", type=click.IntRange(min=0), default=3, show_default=True,
+              help="Label rule (c): wrong standard-map cells on a reading's occupied arc that make y = 1 (0 = rule off).")
 @quiet_option
-def train(log_files, output, seed, validation_logs, hidden, activation, beta, ring_neighbours, time_neighbours, quiet) -> None:
+def train(log_files, output, seed, validation_logs, hidden, activation, beta, ring_neighbours, time_neighbours,
+          arc_wrong_min, quiet) -> None:
     """Train the cluster detector on simulated logs and write it to a detector file.
 
     \b
@@ -39,7 +42,11 @@ def train(log_files, output, seed, validation_logs, hidden, activation, beta, ri
     the ideal range by more than 0.3 m -- or when its cone straddles a depth edge of the
     truth map within 2.5 m: two adjacent of 31 sub-rays whose first hits differ by more than
     1.2 x nearer + 0.3 m (door frames, gaps between objects, openings narrower than the
-    cone's arc).
+    cone's arc) -- or when the standard map of the same log (default parameters, computed
+    during training) is wrong against the truth on at least --arc-wrong-min cells of the
+    reading's occupied arc (its cone's cells within alpha/2 of the range; wrong: p > 0.5 on
+    a free cell or p < 0.5 on an occupied one): the oblique cones that draw walls too thick
+    towards the robot, close openings or miss surfaces, where EM should decide instead.
     \b
     Network: one hidden layer (--hidden units, --activation), logistic output, fitted by
     scikit-learn's MLPClassifier with random_state = --seed. Validation is by world: whole
@@ -66,7 +73,8 @@ def train(log_files, output, seed, validation_logs, hidden, activation, beta, ri
     with progress_bar(len(train_paths) + len(validation_paths) + 1, "train", quiet, unit="step") as advance:
         train_logs = [(p, read_log(p)) for p in train_paths]
         validation_logs_read = [(p, read_log(p)) for p in validation_paths]
-        detector = train_detector(train_logs, validation_logs_read, spec, LabelDefinition(), config, advance)
+        detector = train_detector(train_logs, validation_logs_read, spec, LabelDefinition(arc_wrong_min=arc_wrong_min), config,
+                                  advance)
     save_detector(output, detector, inputs=tuple(train_paths) + tuple(validation_paths))
     click.echo(format_metrics(detector.metrics))
     if not quiet:

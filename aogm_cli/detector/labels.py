@@ -1,7 +1,8 @@
 """Training labels from simulation truth: y = 1 where the region a reading sweeps is erroneous or cluttered.
 
-A reading (scan t, sonar j) gets y = 1 when (a) the reading is wrong, or (b) its cone
-straddles a depth edge of the truth map near the robot. Pure functions on arrays.
+A reading (scan t, sonar j) gets y = 1 when (a) the reading is wrong, (b) its cone
+straddles a depth edge of the truth map near the robot, or (c) the standard map of the same
+log disagrees with the truth on the reading's occupied arc. Pure functions on arrays.
 
 (a) erroneous: its truth cause is random (2) or specular/multipath (3); or it has no echo (1)
     although a surface lies in the cone (finite ideal range); or its range differs from the
@@ -14,6 +15,15 @@ straddles a depth edge of the truth map near the robot. Pure functions on arrays
     a door frame, a gap between objects, an opening narrower than the cone's arc. There the
     standard inverse model smears the near hit across the whole arc and closes openings.
     Smooth walls seen obliquely change depth gradually from ray to ray and are not edges.
+(c) standard map wrong: the log's own standard log-odds map (``mapper.standard_pass`` with the
+    default parameters, ``resolve_params()``) is compared with the truth grid; a cell is wrong
+    when p > 0.5 on a truth-free cell or p < 0.5 on a truth-occupied one (observed cells only).
+    The reading's occupied arc is the cells of its cone (the standard mapper's templates) whose
+    range lies within alpha/2 of the reading, in template ranges as the standard mapper uses
+    them (``mapper.readings_of``). y = 1 when at least ``arc_wrong_min`` arc cells are wrong:
+    these are the readings whose arcs draw walls too thick towards the robot (oblique cones),
+    close openings or miss surfaces -- where EM should decide instead. ``arc_wrong_min = 0``
+    turns the rule off. Max-range and invalid readings have no arc.
 """
 
 from __future__ import annotations
@@ -22,6 +32,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from aogm_cli.detector.region import cone_bands
 from aogm_cli.errors import InputError
 from aogm_cli.frames import sensor_poses
 from aogm_cli.grid import GridSpec
@@ -39,6 +50,7 @@ class LabelDefinition:
     edge_factor: float = 1.2  # adjacent rays form an edge when far > edge_factor * near + edge_margin
     edge_margin: float = 0.3  # m
     edge_reach: float = 2.5  # m: only edges whose near side is this close count
+    arc_wrong_min: int = 3  # rule (c): wrong standard-map cells on the occupied arc that flag a reading (0 = off)
 
     def __post_init__(self):
         if not self.range_tolerance > 0:
@@ -51,6 +63,8 @@ class LabelDefinition:
             raise InputError(f"expected a non-negative number, got {self.edge_margin!r}", key="labels.edge_margin")
         if not self.edge_reach > 0:
             raise InputError(f"expected a positive number, got {self.edge_reach!r}", key="labels.edge_reach")
+        if isinstance(self.arc_wrong_min, bool) or not isinstance(self.arc_wrong_min, int) or self.arc_wrong_min < 0:
+            raise InputError(f"expected a non-negative integer, got {self.arc_wrong_min!r}", key="labels.arc_wrong_min")
 
     def describe(self) -> str:
         """One paragraph, for the detector file and ``aogm train --help``."""
@@ -59,7 +73,14 @@ class LabelDefinition:
             f"surface is in the cone; or |range - ideal_range| > {self.range_tolerance:g} m) or when its cone "
             f"straddles a depth edge of the truth map: two adjacent of {self.sub_rays} sub-rays whose first hits "
             f"differ by more than {self.edge_factor:g} x nearer + {self.edge_margin:g} m, the nearer within "
-            f"{self.edge_reach:g} m (door frames, gaps between objects, openings narrower than the cone's arc)."
+            f"{self.edge_reach:g} m (door frames, gaps between objects, openings narrower than the cone's arc)"
+            + (
+                f"; or when the standard map of the same log (default parameters) is wrong against the truth on at "
+                f"least {self.arc_wrong_min} cell(s) of the reading's occupied arc (its cone's cells within alpha/2 "
+                "of the range; wrong: p > 0.5 on a free cell or p < 0.5 on an occupied one)."
+                if self.arc_wrong_min
+                else "."
+            )
         )
 
     def as_dict(self) -> dict:
@@ -126,8 +147,37 @@ def depth_edge(depths: np.ndarray, factor: float, margin: float, reach: float) -
         return ((far > factor * near + margin) & (near <= reach)).any(axis=-1)
 
 
+def standard_wrong(probability: np.ndarray, observed: np.ndarray, truth_occupancy: np.ndarray) -> np.ndarray:
+    """(H, W) bool: observed cells where a map disagrees with the truth (p > 0.5 on a free cell,
+    p < 0.5 on an occupied one; p = 0.5 counts as neither)."""
+    p = np.asarray(probability, dtype=np.float64)
+    occ = np.asarray(truth_occupancy) > 0
+    return np.asarray(observed, dtype=bool) & (((p > 0.5) & ~occ) | ((p < 0.5) & occ))
+
+
+def standard_map_wrong_arcs(log: Log, min_wrong: int) -> np.ndarray:
+    """(T, S) bool, rule (c): the log's standard map (default parameters, truth grid) is wrong on
+    at least ``min_wrong`` cells of the reading's occupied arc."""
+    from aogm_cli.mapping.mapper import echo_ranges, readings_of
+    from aogm_cli.mapping.params import resolve_params
+    from aogm_cli.mapping.standard import probability_from_log_odds, standard_map, standard_templates
+
+    params = resolve_params()
+    truth = log.truth
+    grid, sensor = truth.grid, log.sensor
+    templates = standard_templates(grid, sensor)
+    ranges = np.asarray(log.ranges, dtype=np.float32)
+    chunk = (0, log.time, log.pose, echo_ranges(ranges, grid).astype(np.float32))
+    log_odds, observed = standard_map([chunk], sensor, grid, params.inverse_model, templates=templates)
+    wrong = standard_wrong(probability_from_log_odds(log_odds, observed), observed, truth.occupancy)
+    rows, cols, bins, z = readings_of(log.pose, ranges, sensor, grid, templates)
+    half = 0.5 * params.inverse_model.alpha
+    _, counts = cone_bands(grid, templates, rows, cols, bins, z, half, half, wrong)
+    return (counts >= min_wrong).reshape(ranges.shape)
+
+
 def labels(log: Log, definition: LabelDefinition | None = None, file: str | None = None) -> np.ndarray:
-    """(T, S) bool labels y of a simulated log (rules (a) or (b) of the module docstring)."""
+    """(T, S) bool labels y of a simulated log (rules (a), (b) or (c) of the module docstring)."""
     definition = definition or LabelDefinition()
     if log.truth is None:
         raise InputError("no /truth group: training needs a simulated log with its truth", file=file, key="/truth")
@@ -136,4 +186,7 @@ def labels(log: Log, definition: LabelDefinition | None = None, file: str | None
     poses = sensor_poses(log.pose, log.sensor.mount)
     depths = sub_ray_depths(truth.occupancy, truth.grid, poses, log.sensor.beam_width, log.sensor.max_range, definition.sub_rays)
     edge = depth_edge(depths, definition.edge_factor, definition.edge_margin, definition.edge_reach)
-    return wrong | edge
+    y = wrong | edge
+    if definition.arc_wrong_min:
+        y |= standard_map_wrong_arcs(log, definition.arc_wrong_min)
+    return y

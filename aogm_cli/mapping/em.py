@@ -64,20 +64,27 @@ class EMResult:
 
 
 # ---------------------------------------------------------------------------------------
-# compiled state: per reading its obstacles (entry positions, in range order), the prefix
-# sums of their terms, and S_t.  Capacity per reading = its number of entries (+1 for pre).
+# compiled state, per reading t:
+#   nfar[t]  obstacles before the reading's window (g = 0; they only scale S_t by q each);
+#   obs_pos  the obstacles inside the window (entry positions, in range order), nobs[t] many;
+#   pre      prefix sums of their terms without the q^nfar factor (capacity: entries + 1);
+#   s[t]     S_t = q^nfar (pre[nobs] + q^nobs G0);  far_gain: see _set_sum.
+# Far obstacles all come before the window's (entries are in range order), so the window's
+# obstacle of rank r is the (nfar + r)-th obstacle of the reading.
 # ---------------------------------------------------------------------------------------
 
 
 @numba.njit(cache=True)
-def _set_sum(t, value, p_hit, const, w, s, far_gain):
-    """Store S_t and the gains of adding / removing an obstacle before the reading's window.
+def _set_sum(t, ptr, g0, p_hit, qpow, pre, nobs, nfar, const, w, s, far_gain):
+    """Recompute S_t from the state, and the gains of adding / removing a far obstacle.
 
-    Such a cell has g = 0 and so have all obstacles before it (they are nearer), so adding
+    A far cell has g = 0 and so have all obstacles before it (they are nearer), so adding
     it makes S_t -> q S_t and removing it S_t -> S_t / q, whatever its rank: one value per
     reading instead of a search per (cell, reading) pair.
     """
     q = 1.0 - p_hit
+    n = nobs[t]
+    value = qpow[nfar[t]] * (pre[ptr[t] + t + n] + qpow[n] * g0[t])
     s[t] = value
     base = const[t] + w * value
     far_gain[2 * t] = math.log((const[t] + w * q * value) / base)
@@ -85,23 +92,25 @@ def _set_sum(t, value, p_hit, const, w, s, far_gain):
 
 
 @numba.njit(cache=True)
-def _rebuild_reading(t, ptr, cell, g, g0, p_hit, occupied, obs_pos, pre, nobs, s, const, w, far_gain):
-    q = 1.0 - p_hit
+def _rebuild_reading(t, ptr, cell, g, g0, p_hit, qpow, occupied, obs_pos, pre, nobs, nfar, s, const, w, far_gain):
     base = ptr[t]
     pbase = ptr[t] + t
     k = 0
+    far = 0
     acc = 0.0
-    qk = 1.0
     pre[pbase] = 0.0
     for e in range(ptr[t], ptr[t + 1]):
         if occupied[cell[e]]:
+            if g[e] == 0.0:
+                far += 1
+                continue
             obs_pos[base + k] = e
-            acc += qk * p_hit * g[e]
-            qk *= q
+            acc += qpow[k] * p_hit * g[e]
             k += 1
             pre[pbase + k] = acc
     nobs[t] = k
-    _set_sum(t, acc + qk * g0[t], p_hit, const, w, s, far_gain)
+    nfar[t] = far
+    _set_sum(t, ptr, g0, p_hit, qpow, pre, nobs, nfar, const, w, s, far_gain)
 
 
 @numba.njit(cache=True)
@@ -118,9 +127,13 @@ def _rank(obs_pos, lo, hi, e):
 
 
 @numba.njit(cache=True)
-def _update_reading(t, e, adding, ptr, g, g0, p_hit, qpow, obs_pos, pre, nobs, s, const, w, far_gain):
-    """Insert (or remove) entry ``e`` into reading t's obstacle list and redo its prefix sums
-    from that rank on: O(obstacles) instead of O(cone cells)."""
+def _update_reading(t, e, adding, ptr, g, g0, p_hit, qpow, obs_pos, pre, nobs, nfar, s, const, w, far_gain):
+    """Add (or remove) the obstacle at entry ``e`` of reading t: O(1) before the window,
+    else an insertion into the window's list and its prefix sums from that rank on."""
+    if g[e] == 0.0:
+        nfar[t] += 1 if adding else -1
+        _set_sum(t, ptr, g0, p_hit, qpow, pre, nobs, nfar, const, w, s, far_gain)
+        return
     base = ptr[t]
     pbase = ptr[t] + t
     n = nobs[t]
@@ -139,43 +152,44 @@ def _update_reading(t, e, adding, ptr, g, g0, p_hit, qpow, obs_pos, pre, nobs, s
     for k in range(r, n):
         acc += qpow[k] * p_hit * g[obs_pos[base + k]]
         pre[pbase + k + 1] = acc
-    _set_sum(t, acc + qpow[n] * g0[t], p_hit, const, w, s, far_gain)
+    _set_sum(t, ptr, g0, p_hit, qpow, pre, nobs, nfar, const, w, s, far_gain)
 
 
 @numba.njit(cache=True)
-def _init_state(ptr, cell, g, g0, const, w, p_hit, occupied):
+def _init_state(ptr, cell, g, g0, const, w, p_hit, qpow, occupied):
     n = ptr.shape[0] - 1
     obs_pos = np.empty(ptr[n], dtype=np.int64)
     pre = np.empty(ptr[n] + n, dtype=np.float64)
     nobs = np.zeros(n, dtype=np.int64)
+    nfar = np.zeros(n, dtype=np.int64)
     s = np.empty(n, dtype=np.float64)
     far_gain = np.empty(2 * n, dtype=np.float64)
     for t in range(n):
-        _rebuild_reading(t, ptr, cell, g, g0, p_hit, occupied, obs_pos, pre, nobs, s, const, w, far_gain)
-    return obs_pos, pre, nobs, s, far_gain
+        _rebuild_reading(t, ptr, cell, g, g0, p_hit, qpow, occupied, obs_pos, pre, nobs, nfar, s, const, w, far_gain)
+    return obs_pos, pre, nobs, nfar, s, far_gain
 
 
 @numba.njit(cache=True)
 def _flip_gain(c, cand_cell, cand_ptr, pair_t, pair_e, ptr, pair_g, const, w, p_hit, qpow, occupied, obs_pos, pre,
-               nobs, s, far_gain):
+               nobs, nfar, s, far_gain):
     """Exact change of sum_t log p(z_t | m) when candidate c flips (data part only).
 
     ``pair_g`` holds each pair's Gaussian (index.g of its entry), stored along the pairs so
     that the hot loop reads it sequentially."""
     q = 1.0 - p_hit
     adding = not occupied[cand_cell[c]]
-    delta = 0.0
     far = 0 if adding else 1
+    delta = 0.0
     for p in range(cand_ptr[c], cand_ptr[c + 1]):
         t = pair_t[p]
         if pair_g[p] == 0.0:  # before the reading's window: see _set_sum
             delta += far_gain[2 * t + far]
             continue
-        e = pair_e[p]
-        # r = obstacles of reading t before entry e (binary search in its sorted positions)
-        r = _rank(obs_pos, ptr[t], ptr[t] + nobs[t], e)
-        a = pre[ptr[t] + t + r]
-        term = qpow[r] * p_hit * pair_g[p]
+        # r = window obstacles of reading t before entry e (binary search in their positions)
+        r = _rank(obs_pos, ptr[t], ptr[t] + nobs[t], pair_e[p])
+        qf = qpow[nfar[t]]
+        a = qf * pre[ptr[t] + t + r]
+        term = qf * qpow[r] * p_hit * pair_g[p]
         st = s[t]
         if adding:
             s_new = a + term + q * (st - a)
@@ -190,7 +204,7 @@ def _flip_gain(c, cand_cell, cand_ptr, pair_t, pair_e, ptr, pair_g, const, w, p_
 
 @numba.njit(cache=True)
 def _sweep(cand_cell, cand_ptr, pair_t, pair_e, ptr, cell, g, g0, const, w, p_hit, l_prior, qpow,
-           occupied, obs_pos, pre, nobs, s, far_gain, reading_stamp, cand_stamp, clock, last_gain, pair_g):
+           occupied, obs_pos, pre, nobs, nfar, s, far_gain, reading_stamp, cand_stamp, clock, last_gain, pair_g):
     """One pass over the candidates in order; a flip is kept when it raises the objective.
 
     A candidate none of whose readings changed since it was last scored keeps its (non-
@@ -213,7 +227,7 @@ def _sweep(cand_cell, cand_ptr, pair_t, pair_e, ptr, cell, g, g0, const, w, p_hi
                 continue
         evaluated += 1
         d = _flip_gain(c, cand_cell, cand_ptr, pair_t, pair_e, ptr, pair_g, const, w, p_hit, qpow,
-                       occupied, obs_pos, pre, nobs, s, far_gain)
+                       occupied, obs_pos, pre, nobs, nfar, s, far_gain)
         last_gain[c] = d
         x = cand_cell[c]
         d += -l_prior if occupied[x] else l_prior
@@ -224,8 +238,8 @@ def _sweep(cand_cell, cand_ptr, pair_t, pair_e, ptr, cell, g, g0, const, w, p_hi
             clock[0] += 1
             adding = occupied[x]
             for p in range(cand_ptr[c], cand_ptr[c + 1]):
-                _update_reading(pair_t[p], pair_e[p], adding, ptr, g, g0, p_hit, qpow, obs_pos, pre, nobs, s,
-                                const, w, far_gain)
+                _update_reading(pair_t[p], pair_e[p], adding, ptr, g, g0, p_hit, qpow, obs_pos, pre, nobs, nfar,
+                                s, const, w, far_gain)
                 reading_stamp[pair_t[p]] = clock[0]
         cand_stamp[c] = clock[0]
     return flips, evaluated
@@ -258,12 +272,12 @@ def _residual_from_gains(cand_cell, occupied, last_gain, l_prior):
 
 @numba.njit(cache=True)
 def _residual(cand_cell, cand_ptr, pair_t, pair_e, ptr, pair_g, const, w, p_hit, l_prior, qpow,
-              occupied, obs_pos, pre, nobs, s, far_gain):
+              occupied, obs_pos, pre, nobs, nfar, s, far_gain):
     """p(m_x = 1 | Z, m*) of each candidate with every other cell held at m*."""
     out = np.empty(cand_cell.shape[0])
     for c in range(cand_cell.shape[0]):
         d = _flip_gain(c, cand_cell, cand_ptr, pair_t, pair_e, ptr, pair_g, const, w, p_hit, qpow,
-                       occupied, obs_pos, pre, nobs, s, far_gain)
+                       occupied, obs_pos, pre, nobs, nfar, s, far_gain)
         ratio = (-d if occupied[cand_cell[c]] else d) + l_prior
         if ratio >= 0:
             out[c] = 1.0 / (1.0 + math.exp(-ratio))
@@ -332,8 +346,8 @@ def run_em(
     pair_g = index.g[pair_e]
     max_entries = int(np.max(np.diff(index.ptr))) if index.n_readings else 0
     qpow = (1.0 - p_hit) ** np.arange(max_entries + 1, dtype=np.float64)
-    state = _init_state(index.ptr, index.cell, index.g, index.g0, index.const, index.w, p_hit, occupied)
-    s = state[3]
+    state = _init_state(index.ptr, index.cell, index.g, index.g0, index.const, index.w, p_hit, qpow, occupied)
+    s = state[4]
     objective = [_objective(index.const, index.w, s, occupied, cand_cell, l_prior)]
     flips: list[int] = []
     reading_stamp = np.zeros(index.n_readings, dtype=np.int64)

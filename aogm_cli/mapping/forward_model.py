@@ -48,8 +48,8 @@ class ForwardModelConfig:
 
         if not self.sigma > 0:
             raise bad("sigma", f"expected a positive number, got {self.sigma:g}")
-        if not 0 <= self.p_rand < 1:
-            raise bad("p_rand", f"expected a probability in [0, 1), got {self.p_rand:g}")
+        if not 0 < self.p_rand < 1:  # > 0: every reading keeps a finite likelihood
+            raise bad("p_rand", f"expected a probability in (0, 1), got {self.p_rand:g}")
         if not 0 < self.p_hit <= 1:
             raise bad("p_hit", f"expected a probability in (0, 1], got {self.p_hit:g}")
         if not 0 <= self.p_max < 1 or self.p_rand + self.p_max >= 1:

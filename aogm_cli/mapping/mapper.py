@@ -270,23 +270,26 @@ def map_adaptive(path: str | Path, params: MapParams, detector_path: str | None 
     (cells outside the cluster held at the thresholded standard map); a cluster's cells get
     EM's residual probability."""
     from aogm_cli.detector.network import default_detector_path, load_detector
-    from aogm_cli.mapping.cluster import cluster_contacts, label_clusters, swept_region
+    from aogm_cli.detector.region import BAND_BELOW, NEAR_OCCUPIED, cone_bands, near_occupied
+    from aogm_cli.mapping.cluster import cluster_contacts, label_clusters
 
     detector = load_detector(detector_path or default_detector_path())
     config = params.em
     run = _em_inputs(path, params)
     grid, sensor, log_odds, observed, t_standard = run.grid, run.sensor, run.log_odds, run.observed, run.t_standard
     templates, rows, cols, bins, z, ranges = run.templates, run.rows, run.cols, run.bins, run.z, run.ranges
-    max_model = sensor.max_range + 0.5 * grid.resolution
 
     t0 = time.perf_counter()
     flags = detector.flag(ranges, sensor.max_range).reshape(-1)
     t_detect = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    region = swept_region(grid, templates, rows[flags], cols[flags], bins[flags], z[flags], max_model,
-                          params.inverse_model.alpha)
-    region &= observed & (log_odds > params.inverse_model.clamp_min)
+    # a flagged cone's cluster is its band near the range, z - BAND_BELOW .. z + alpha (where the
+    # standard map thickens walls towards the robot), next to cells the standard map holds
+    # occupied, minus cells it holds at its free clamp (detector.region)
+    region, _ = cone_bands(grid, templates, rows[flags], cols[flags], bins[flags], z[flags],
+                           BAND_BELOW, params.inverse_model.alpha)
+    region &= observed & (log_odds > params.inverse_model.clamp_min) & near_occupied(log_odds, NEAR_OCCUPIED)
     clusters, n_clusters = label_clusters(region)
     t_cluster = time.perf_counter() - t0
 
