@@ -13,7 +13,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 from aogm_cli.cli import main
 from aogm_cli.detector.features import FeatureSpec, features, neighbour_ranges
-from aogm_cli.detector.labels import LabelDefinition, depth_edge, erroneous, labels, sub_ray_depths
+from aogm_cli.detector.labels import LabelDefinition, depth_edge, erroneous, labels, standard_wrong, sub_ray_depths
 from aogm_cli.detector.network import Detector, Layer, default_detector_path, load_detector, save_detector
 from aogm_cli.detector.train import (
     Dataset,
@@ -26,7 +26,10 @@ from aogm_cli.detector.train import (
 )
 from aogm_cli.errors import InputError
 from aogm_cli.grid import GridSpec
-from aogm_cli.logfile import Log, SensorSpec, write_log
+from aogm_cli.logfile import Log, SensorSpec, Truth, write_log
+from aogm_cli.mapping.cluster import cone_bands, near_occupied
+from aogm_cli.mapping.mapper import readings_of
+from aogm_cli.mapping.standard import standard_templates
 from aogm_cli.simulation.sonar import simulate
 from aogm_cli.world.loader import parse_world
 
@@ -122,6 +125,64 @@ def test_sub_ray_depths_walk_the_truth_grid():
     wide = sub_ray_depths(occ, grid, poses[:, 1:2], beam_width=math.radians(40), max_range=1.9, sub_rays=3)
     assert np.isfinite(wide[0, 0, 0]) and np.isinf(wide[0, 0, 1]) and np.isfinite(wide[0, 0, 2])
     assert depth_edge(wide, 1.2, 0.3, 2.5)[0, 0]  # the gap is narrower than the cone's arc
+
+
+def test_standard_wrong_compares_the_map_with_the_truth():
+    p = np.array([[0.9, 0.1, 0.5], [0.6, 0.4, 0.9]])
+    truth = np.array([[0, 0, 1], [1, 1, 1]], dtype=np.uint8)
+    observed = np.array([[True, True, True], [True, True, False]])
+    # (0,0) occupied on free; (0,1) right; (0,2) p = 0.5 is neither; (1,0) right; (1,1) free on
+    # occupied; (1,2) unobserved
+    assert_array_equal(standard_wrong(p, observed, truth), [[True, False, False], [False, True, False]])
+
+
+def _one_sonar(grid, z):
+    sensor = SensorSpec(np.zeros((1, 3)), beam_width=math.radians(30), min_range=0.0, max_range=2.0)
+    pose = np.array([[0.525, 1.025, 0.0]])  # the centre of cell (row 20, col 10), facing +x
+    templates = standard_templates(grid, sensor)
+    rows, cols, bins, zm = readings_of(pose, np.array([[z]], np.float32), sensor, grid, templates)
+    return sensor, pose, templates, rows, cols, bins, zm
+
+
+def test_cone_bands_sweep_near_the_range_and_count_a_mask():
+    grid = GridSpec(0.0, 0.0, 0.05, 60, 41)
+    _, _, templates, rows, cols, bins, zm = _one_sonar(grid, 1.0)
+    band, counts = cone_bands(grid, templates, rows, cols, bins, zm, 0.2, 0.05, np.ones(grid.shape, bool))
+    r, c = np.nonzero(band)
+    d = np.hypot(r - 20, c - 10) * 0.05
+    assert band.sum() == counts[0] > 0
+    assert d.min() >= zm[0] - 0.2 - 1e-9 and d.max() <= zm[0] + 0.05 + 1e-9  # only the band near the range
+    assert np.all(np.abs(np.arctan2(r - 20, c - 10)) <= math.radians(15) + 1e-9)  # inside the cone
+    half = cone_bands(grid, templates, rows, cols, bins, zm, 0.2, 0.05, np.arange(41 * 60).reshape(grid.shape) % 2 == 0)[1]
+    assert half[0] == np.count_nonzero(band.reshape(-1)[::2])
+    none, zero = cone_bands(grid, templates, rows, cols, bins, np.array([INF]), 0.2, 0.05)
+    assert not none.any() and zero[0] == 0  # a max-range reading has no band
+
+
+def test_near_occupied_grows_the_occupied_cells():
+    lo = np.full((5, 5), -1.0)
+    lo[2, 2] = 0.5
+    assert near_occupied(lo, 0).sum() == 1
+    assert_array_equal(near_occupied(lo, 1), np.pad(np.ones((3, 3), bool), 1))
+
+
+def test_labels_flag_arcs_where_the_standard_map_is_wrong():
+    grid = GridSpec(0.0, 0.0, 0.05, 60, 41)
+    occupancy = np.zeros(grid.shape, np.uint8)
+    occupancy[:, 30:32] = 1  # a wall across the beam at x = 1.5 m, 1 m ahead of the sensor
+    sensor, pose, *_ = _one_sonar(grid, 1.0)
+    ranges = np.array([[0.975], [INF]], np.float32)  # an echo of the wall; a no-echo reading
+    poses = np.vstack([pose, pose + [0.0, 0.0, math.pi]])  # the second faces away, nothing in range
+    truth = Truth(grid, occupancy, np.array([[0], [1]], np.int8), np.array([[0.975], [INF]], np.float32))
+    log = Log(np.arange(2.0), poses, ranges, sensor, "test", truth)
+    # the arc is curved, the wall straight: the arc's ends lie in front of the wall, on free
+    # cells the standard map believes occupied; the reading itself is right and no edge is near
+    off = labels(log, LabelDefinition(arc_wrong_min=0))
+    assert_array_equal(off, [[False], [False]])
+    assert_array_equal(labels(log, LabelDefinition(arc_wrong_min=1)), [[True], [False]])
+    assert_array_equal(labels(log, LabelDefinition(arc_wrong_min=10_000)), [[False], [False]])
+    with pytest.raises(InputError):
+        LabelDefinition(arc_wrong_min=-1)
 
 
 def test_labels_need_truth():
@@ -321,5 +382,5 @@ def test_train_command_bad_input_exits_2_without_output(tiny_logs, tmp_path):
 def test_train_help_documents_features_and_labels():
     result = CliRunner().invoke(main, ["train", "--help"])
     assert result.exit_code == 0
-    for phrase in ("R = 7", "specular", "depth edge", "held out", "Example"):
+    for phrase in ("R = 7", "specular", "depth edge", "held out", "Example", "standard map", "--arc-wrong-min"):
         assert phrase in result.output

@@ -32,11 +32,11 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from aogm_cli.detector.region import cone_bands
 from aogm_cli.errors import InputError
 from aogm_cli.frames import sensor_poses
 from aogm_cli.grid import GridSpec
 from aogm_cli.logfile import CAUSE_ECHO, CAUSE_NO_ECHO, Log
+from aogm_cli.mapping.cluster import cone_bands
 
 SCANS_PER_BLOCK = 16  # scans per block of sub-ray sampling (bounds the memory of sub_ray_depths)
 

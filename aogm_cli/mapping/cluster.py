@@ -1,8 +1,9 @@
-"""Clusters: the regions swept by the readings the detector flags, as connected components.
+"""Clusters: where the readings the detector flags disagree with the standard map, grouped.
 
-A flagged reading sweeps the cells of its cone up to its range plus the obstacle thickness
-(up to max range for a max-range reading); 8-connected components of the union are the
-clusters, numbered 1..K (0 outside every cluster).
+A flagged reading's cluster cells are the band of its cone near its range (z - 0.2 m to
+z + alpha; none for a max-range reading), kept where the standard map is observed, not at
+its free clamp, and within a cell of a cell it holds occupied; 8-connected components of the
+union are the clusters, numbered 1..K (0 outside every cluster).
 """
 
 from __future__ import annotations
@@ -14,28 +15,61 @@ from scipy import ndimage
 from aogm_cli.grid import GridSpec
 from aogm_cli.mapping.cone import cone_cells
 
+BAND_BELOW = 0.2  # m: a flagged cone's cluster starts this far before its range (z - 0.2 m) ...
+# ... and ends at z + alpha (the obstacle thickness); a max-range reading has no band.
+NEAR_OCCUPIED = 1  # cells: the band is kept within this many cells (8-connected) of a cell the standard map holds occupied
+
 
 @numba.njit(cache=True)
-def _sweep_cones(tpl, height, width, rows, cols, bins, limits, mask):
+def _band(tpl, height, width, rows, cols, bins, lower, upper, cell_mask, counts, swept):
     offsets = tpl[0]
     scratch_cell = np.empty(offsets[-1], dtype=np.int64)
     scratch_range = np.empty(offsets[-1], dtype=np.float64)
     for t in range(rows.shape[0]):
-        n = cone_cells(tpl, height, width, rows[t], cols[t], bins[t], limits[t], scratch_cell, scratch_range)
+        if not upper[t] >= 0.0:  # no band (max-range or invalid reading)
+            continue
+        n = cone_cells(tpl, height, width, rows[t], cols[t], bins[t], upper[t], scratch_cell, scratch_range)
+        count = 0
         for i in range(n):
-            mask[scratch_cell[i]] = True
+            if scratch_range[i] >= lower[t]:
+                cell = scratch_cell[i]
+                swept[cell] = True
+                if cell_mask[cell]:
+                    count += 1
+        counts[t] = count
 
 
-def swept_region(grid: GridSpec, templates, rows, cols, bins, z_model, max_range_model, alpha: float) -> np.ndarray:
-    """(H, W) bool: cells in the cones of the given readings up to z + alpha (z in template
-    ranges, see ``mapper.range_shift``), or ``max_range_model`` for max-range readings."""
-    z = np.asarray(z_model, dtype=np.float64)
-    keep = ~np.isnan(z)
-    limits = np.where(np.isfinite(z[keep]), np.minimum(z[keep] + alpha, max_range_model), max_range_model)
-    mask = np.zeros(grid.height * grid.width, dtype=np.bool_)
-    _sweep_cones(templates.kernel_arrays, grid.height, grid.width, np.asarray(rows)[keep], np.asarray(cols)[keep],
-                 np.asarray(bins)[keep], limits, mask)
-    return mask.reshape(grid.shape)
+def cone_bands(grid: GridSpec, templates, rows, cols, bins, z_model, below: float, above: float,
+               cell_mask: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Each reading's band, the cells of its cone with template range in [z - below, z + above].
+
+    ``rows, cols, bins, z_model`` as ``mapper.readings_of`` gives them (z in template ranges); a
+    non-finite z has no band. Returns ((H, W) bool union of the bands, (N,) int64 cells of
+    ``cell_mask`` (H, W) on each reading's band; zeros without a mask).
+    """
+    z = np.asarray(z_model, dtype=np.float64).reshape(-1)
+    finite = np.isfinite(z)
+    lower = np.where(finite, z - below, np.inf)
+    upper = np.where(finite, z + above, -1.0)
+    if cell_mask is None:
+        mask = np.zeros(grid.height * grid.width, dtype=np.bool_)
+    else:
+        mask = np.ascontiguousarray(np.asarray(cell_mask, dtype=np.bool_).reshape(-1))
+    counts = np.zeros(z.shape[0], dtype=np.int64)
+    swept = np.zeros(grid.height * grid.width, dtype=np.bool_)
+    _band(templates.kernel_arrays, grid.height, grid.width, np.asarray(rows, np.int64).reshape(-1),
+          np.asarray(cols, np.int64).reshape(-1), np.asarray(bins, np.int64).reshape(-1), lower, upper, mask, counts, swept)
+    return swept.reshape(grid.shape), counts
+
+
+def near_occupied(log_odds: np.ndarray, cells: int = NEAR_OCCUPIED) -> np.ndarray:
+    """(H, W) bool: cells within ``cells`` steps (8-connected) of a cell with log-odds > 0."""
+    from scipy import ndimage
+
+    occupied = np.asarray(log_odds) > 0
+    if cells <= 0:
+        return occupied
+    return ndimage.binary_dilation(occupied, structure=np.ones((3, 3), dtype=bool), iterations=cells)
 
 
 def label_clusters(region: np.ndarray) -> tuple[np.ndarray, int]:

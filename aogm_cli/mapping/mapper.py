@@ -86,10 +86,10 @@ def warm_up(sensor: SensorSpec, params: MapParams, em: bool = False) -> None:
         index = build_forward_index(rows, cols, bins, ranges, grid, templates, 1.0, params.em.forward)
         occupied = np.zeros(grid.height * grid.width, dtype=bool)
         run_em(index, occupied, np.unique(index.cell), EMConfig(params.em.forward, max_sweeps=1))
-        from aogm_cli.mapping.cluster import cluster_contacts, swept_region
+        from aogm_cli.mapping.cluster import cluster_contacts, cone_bands
 
-        region = swept_region(grid, templates, rows.reshape(-1), cols.reshape(-1), bins.reshape(-1),
-                              ranges.reshape(-1).astype(np.float64), 1.0, 0.1)
+        region, _ = cone_bands(grid, templates, rows.reshape(-1), cols.reshape(-1), bins.reshape(-1),
+                               ranges.reshape(-1).astype(np.float64), 0.2, 0.1, np.ones(grid.shape, dtype=bool))
         cluster_contacts(index.ptr, region.reshape(-1)[index.cell].astype(np.int64))
 
 
@@ -270,8 +270,14 @@ def map_adaptive(path: str | Path, params: MapParams, detector_path: str | None 
     (cells outside the cluster held at the thresholded standard map); a cluster's cells get
     EM's residual probability."""
     from aogm_cli.detector.network import default_detector_path, load_detector
-    from aogm_cli.detector.region import BAND_BELOW, NEAR_OCCUPIED, cone_bands, near_occupied
-    from aogm_cli.mapping.cluster import cluster_contacts, label_clusters
+    from aogm_cli.mapping.cluster import (
+        BAND_BELOW,
+        NEAR_OCCUPIED,
+        cluster_contacts,
+        cone_bands,
+        label_clusters,
+        near_occupied,
+    )
 
     detector = load_detector(detector_path or default_detector_path())
     config = params.em
@@ -286,7 +292,7 @@ def map_adaptive(path: str | Path, params: MapParams, detector_path: str | None 
     t0 = time.perf_counter()
     # a flagged cone's cluster is its band near the range, z - BAND_BELOW .. z + alpha (where the
     # standard map thickens walls towards the robot), next to cells the standard map holds
-    # occupied, minus cells it holds at its free clamp (detector.region)
+    # occupied, minus cells it holds at its free clamp (mapping.cluster)
     region, _ = cone_bands(grid, templates, rows[flags], cols[flags], bins[flags], z[flags],
                            BAND_BELOW, params.inverse_model.alpha)
     region &= observed & (log_odds > params.inverse_model.clamp_min) & near_occupied(log_odds, NEAR_OCCUPIED)
