@@ -257,16 +257,20 @@ def _objective(const, w, s, occupied, cand_cell, l_prior):
 
 
 @numba.njit(cache=True)
+def _logistic(x):
+    """1 / (1 + exp(-x)) without overflow."""
+    if x >= 0:
+        return 1.0 / (1.0 + math.exp(-x))
+    ex = math.exp(x)
+    return ex / (1.0 + ex)
+
+
+@numba.njit(cache=True)
 def _residual_from_gains(cand_cell, occupied, last_gain, l_prior):
     """p(m_x = 1 | Z, m*) from each candidate's current data gain of flipping."""
     out = np.empty(cand_cell.shape[0])
     for c in range(cand_cell.shape[0]):
-        ratio = (-last_gain[c] if occupied[cand_cell[c]] else last_gain[c]) + l_prior
-        if ratio >= 0:
-            out[c] = 1.0 / (1.0 + math.exp(-ratio))
-        else:
-            er = math.exp(ratio)
-            out[c] = er / (1.0 + er)
+        out[c] = _logistic((-last_gain[c] if occupied[cand_cell[c]] else last_gain[c]) + l_prior)
     return out
 
 
@@ -278,12 +282,7 @@ def _residual(cand_cell, cand_ptr, pair_t, pair_e, ptr, pair_g, const, w, p_hit,
     for c in range(cand_cell.shape[0]):
         d = _flip_gain(c, cand_cell, cand_ptr, pair_t, pair_e, ptr, pair_g, const, w, p_hit, qpow,
                        occupied, obs_pos, pre, nobs, nfar, s, far_gain)
-        ratio = (-d if occupied[cand_cell[c]] else d) + l_prior
-        if ratio >= 0:
-            out[c] = 1.0 / (1.0 + math.exp(-ratio))
-        else:
-            er = math.exp(ratio)
-            out[c] = er / (1.0 + er)
+        out[c] = _logistic((-d if occupied[cand_cell[c]] else d) + l_prior)
     return out
 
 
