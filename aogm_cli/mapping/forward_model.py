@@ -32,7 +32,7 @@ from aogm_cli.mapping.cone import cone_cells as _cone_cells
 class ForwardModelConfig:
     """Parameters of the forward model; see the module docstring for their meaning."""
 
-    # Defaults measured on the nine bundled worlds (seed 1; see the EM issue's note):
+    # Defaults measured on the nine bundled worlds (seed 1; python bench/params_sweep.py em):
     # sigma 0.03 / 0.05 and p_hit 0.3 / 0.5 / 0.7 and p_max 0 / 0.1 / 0.2 were compared; the
     # smaller sigma and the larger p_hit gave the best mean accuracy and occupied F1, and
     # p_max 0.1 kept smooth walls (a specular dropout no longer erases them).

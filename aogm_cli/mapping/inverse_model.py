@@ -29,7 +29,7 @@ The sensor's blind zone (d < min_range) gets no evidence in either model.
 alpha, the obstacle thickness (Elfes' range band 2 epsilon), defaults to 0.05 m: the
 Polaroid ranging module is accurate to about 1% of the reading, +/-2.5 cm at a typical 2.5 m,
 and 0.05 m is one cell of the default grid. Measured on the bundled worlds (seed 1, the
-command in the issue notes), 0.1 m arcs thicken every wall by a cell towards the robot and
+command python bench/params_sweep.py standard), 0.1 m arcs thicken every wall by a cell towards the robot and
 cost 3-5 points of accuracy; arcs thinner than a cell's diagonal can leave single-cell holes
 along diagonal walls, which the many overlapping sonar cones fill. On coarser grids choose
 alpha of about the resolution.
