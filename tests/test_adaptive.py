@@ -12,7 +12,7 @@ from aogm_cli.cli import main
 from aogm_cli.detector.network import load_detector, save_detector
 from aogm_cli.grid import GridSpec
 from aogm_cli.mapfile import read_map_file
-from aogm_cli.mapping import mapper
+from aogm_cli.mapping import cluster, mapper
 from aogm_cli.mapping.cluster import cluster_contacts, label_clusters
 from aogm_cli.mapping.params import resolve_params
 
@@ -100,9 +100,9 @@ def test_cluster_contacts_and_coupled_groups():
     entry_cluster = np.array([1, 1, 0, 0, 2, 3, 3])  # reading 0 touches 1; 1 touches 2; 2 touches 3
     pairs = cluster_contacts(ptr, entry_cluster)
     assert pairs.tolist() == [[1, 2, 3], [0, 1, 2]]
-    assert mapper.coupled_groups(pairs, 3).tolist() == [0, 1, 2]
+    assert cluster.coupled_groups(pairs, 3).tolist() == [0, 1, 2]
     joined = np.array([[1, 2, 3], [0, 0, 2]])  # one reading touches clusters 1 and 2
-    group = mapper.coupled_groups(joined, 3)
+    group = cluster.coupled_groups(joined, 3)
     assert group[0] == group[1] != group[2]
 
 
@@ -113,5 +113,5 @@ def test_readings_near_clusters_uses_the_cone_reach():
     rows, cols = np.array([5, 5, 38]), np.array([5, 5, 38])
     z = np.array([1.0, np.inf, 0.3])
     forward = resolve_params().em.forward
-    near = mapper.readings_near_clusters(clusters, rows, cols, z, grid, 5.0, forward)
+    near = cluster.readings_near_clusters(clusters, rows, cols, z, grid, 5.0, forward)
     assert near.tolist() == [1, 2]  # a 1 m reading from (5, 5) cannot reach row 40; 5 m can

@@ -83,7 +83,7 @@ def _source(r) -> str:
               help="Comma-separated modes to compare.  [default: standard,em,adaptive; with map files only, their modes]")
 @click.option("--detector", type=click.Path(dir_okay=False), help="Detector file for adaptive mode (default: the packaged one).")
 @click.option("--params", "params_file", type=click.Path(dir_okay=False),
-              help="YAML with sections inverse_model:, em: and key resolution:, used by every mapping.")
+              help="YAML with sections inverse_model:, em:, adaptive: and key resolution:, used by every mapping.")
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), help="Write the results as JSON (CONTRACT.md shape).")
 @click.option("--figure", "figure_out", type=click.Path(dir_okay=False),
               help="Write a PNG: one row per log; truth and each mode's map, titled with accuracy and runtime.")

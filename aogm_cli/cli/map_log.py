@@ -47,7 +47,7 @@ def parameter_options(f):
 @output_option("Map file to write (HDF5).")
 @click.option("--png", type=click.Path(dir_okay=False), help="Also render the map into this PNG.")
 @click.option("--detector", type=click.Path(dir_okay=False), help="Detector file for --mode adaptive (default: the packaged one).")
-@click.option("--params", "params_file", type=click.Path(dir_okay=False), help="YAML with sections inverse_model:, em: and key resolution:.")
+@click.option("--params", "params_file", type=click.Path(dir_okay=False), help="YAML with sections inverse_model:, em:, adaptive: and key resolution:.")
 @click.option("--resolution", type=float, help="Cell size (m) for logs without truth.  [default: 0.05]")
 @parameter_options
 @quiet_option

@@ -8,16 +8,35 @@ union are the clusters, numbered 1..K (0 outside every cluster).
 
 from __future__ import annotations
 
+from dataclasses import asdict, dataclass
+
 import numba
 import numpy as np
 from scipy import ndimage
 
+from aogm_cli.errors import InputError
 from aogm_cli.grid import GridSpec
 from aogm_cli.mapping.cone import cone_cells
 
-BAND_BELOW = 0.2  # m: a flagged cone's cluster starts this far before its range (z - 0.2 m) ...
-# ... and ends at z + alpha (the obstacle thickness); a max-range reading has no band.
-NEAR_OCCUPIED = 1  # cells: the band is kept within this many cells (8-connected) of a cell the standard map holds occupied
+
+@dataclass(frozen=True)
+class AdaptiveConfig:
+    """Where a flagged reading's cluster cells lie: its cone from ``band_below`` metres before
+    its range to alpha beyond it (a max-range reading has no band), within ``near_occupied``
+    cells (8-connected) of a cell the standard map holds occupied."""
+
+    band_below: float = 0.2
+    near_occupied: int = 1
+
+    def validate(self) -> AdaptiveConfig:
+        if not self.band_below >= 0:
+            raise InputError(f"expected a number >= 0 (m), got {self.band_below!r}", key="band_below")
+        if isinstance(self.near_occupied, bool) or not isinstance(self.near_occupied, int) or self.near_occupied < 0:
+            raise InputError(f"expected a whole number >= 0, got {self.near_occupied!r}", key="near_occupied")
+        return self
+
+    def as_dict(self) -> dict:
+        return asdict(self)
 
 
 @numba.njit(cache=True)
@@ -62,10 +81,8 @@ def cone_bands(grid: GridSpec, templates, rows, cols, bins, z_model, below: floa
     return swept.reshape(grid.shape), counts
 
 
-def near_occupied(log_odds: np.ndarray, cells: int = NEAR_OCCUPIED) -> np.ndarray:
+def near_occupied(log_odds: np.ndarray, cells: int = 1) -> np.ndarray:
     """(H, W) bool: cells within ``cells`` steps (8-connected) of a cell with log-odds > 0."""
-    from scipy import ndimage
-
     occupied = np.asarray(log_odds) > 0
     if cells <= 0:
         return occupied
@@ -108,3 +125,37 @@ def cluster_contacts(ptr: np.ndarray, entry_cluster: np.ndarray) -> np.ndarray:
     c, t = _contacts(ptr, np.ascontiguousarray(entry_cluster, dtype=np.int64))
     order = np.lexsort((t, c))
     return np.stack([c[order], t[order]])
+
+
+def readings_near_clusters(clusters, rows, cols, z, grid: GridSpec, z_max: float, forward) -> np.ndarray:
+    """Positions of the readings whose forward cone could reach a cluster: the square of the
+    cone's reach around the sensor's cell overlaps the cluster's bounding box."""
+    reach = np.where(np.isfinite(z), np.minimum(z + forward.window * forward.sigma, z_max), z_max)
+    reach = np.where(np.isnan(z), -1.0, reach)
+    r = np.ceil(reach / grid.resolution).astype(np.int64) + 1
+    boxes = ndimage.find_objects(clusters)
+    near = np.zeros(len(z), dtype=bool)
+    for box in boxes:
+        if box is None:
+            continue
+        rs, cs = box
+        near |= (rows + r >= rs.start) & (rows - r < rs.stop) & (cols + r >= cs.start) & (cols - r < cs.stop)
+    near &= reach >= 0
+    return np.flatnonzero(near)
+
+
+def coupled_groups(pairs: np.ndarray, n_clusters: int) -> np.ndarray:
+    """Group id (0..G-1) of each cluster 1..n: clusters joined by a common reading share one.
+
+    ``pairs`` is (2, P): cluster id and reading position of every (cluster, reading) contact.
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    n_readings = int(pairs[1].max()) + 1 if pairs.size else 0
+    # a bipartite graph: clusters 0..n-1, readings n..n+R-1
+    graph = coo_matrix((np.ones(pairs.shape[1]), (pairs[0] - 1, n_clusters + pairs[1])),
+                       shape=(n_clusters + n_readings, n_clusters + n_readings))
+    _, labels = connected_components(graph, directed=False)
+    _, group = np.unique(labels[:n_clusters], return_inverse=True)
+    return group

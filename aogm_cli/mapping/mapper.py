@@ -228,42 +228,6 @@ def map_em(path: str | Path, params: MapParams, progress: Progress | None = None
     )
 
 
-def readings_near_clusters(clusters, rows, cols, z, grid: GridSpec, z_max: float, forward) -> np.ndarray:
-    """Positions of the readings whose forward cone could reach a cluster: the square of the
-    cone's reach around the sensor's cell overlaps the cluster's bounding box."""
-    from scipy import ndimage
-
-    reach = np.where(np.isfinite(z), np.minimum(z + forward.window * forward.sigma, z_max), z_max)
-    reach = np.where(np.isnan(z), -1.0, reach)
-    r = np.ceil(reach / grid.resolution).astype(np.int64) + 1
-    boxes = ndimage.find_objects(clusters)
-    near = np.zeros(len(z), dtype=bool)
-    for box in boxes:
-        if box is None:
-            continue
-        rs, cs = box
-        near |= (rows + r >= rs.start) & (rows - r < rs.stop) & (cols + r >= cs.start) & (cols - r < cs.stop)
-    near &= reach >= 0
-    return np.flatnonzero(near)
-
-
-def coupled_groups(pairs: np.ndarray, n_clusters: int) -> np.ndarray:
-    """Group id (0..G-1) of each cluster 1..n: clusters joined by a common reading share one.
-
-    ``pairs`` is (2, P): cluster id and reading position of every (cluster, reading) contact.
-    """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    n_readings = int(pairs[1].max()) + 1 if pairs.size else 0
-    # a bipartite graph: clusters 0..n-1, readings n..n+R-1
-    graph = coo_matrix((np.ones(pairs.shape[1]), (pairs[0] - 1, n_clusters + pairs[1])),
-                       shape=(n_clusters + n_readings, n_clusters + n_readings))
-    _, labels = connected_components(graph, directed=False)
-    _, group = np.unique(labels[:n_clusters], return_inverse=True)
-    return group
-
-
 def map_adaptive(path: str | Path, params: MapParams, detector_path: str | None = None,
                  progress: Progress | None = None) -> OccupancyMap:
     """The paper's adaptive map: standard log-odds everywhere, then EM inside each cluster
@@ -271,12 +235,12 @@ def map_adaptive(path: str | Path, params: MapParams, detector_path: str | None 
     EM's residual probability."""
     from aogm_cli.detector.network import default_detector_path, load_detector
     from aogm_cli.mapping.cluster import (
-        BAND_BELOW,
-        NEAR_OCCUPIED,
         cluster_contacts,
         cone_bands,
+        coupled_groups,
         label_clusters,
         near_occupied,
+        readings_near_clusters,
     )
 
     detector = load_detector(detector_path or default_detector_path())
@@ -290,12 +254,13 @@ def map_adaptive(path: str | Path, params: MapParams, detector_path: str | None 
     t_detect = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    # a flagged cone's cluster is its band near the range, z - BAND_BELOW .. z + alpha (where the
+    # a flagged cone's cluster is its band near the range, z - band_below .. z + alpha (where the
     # standard map thickens walls towards the robot), next to cells the standard map holds
     # occupied, minus cells it holds at its free clamp (mapping.cluster)
     region, _ = cone_bands(grid, templates, rows[flags], cols[flags], bins[flags], z[flags],
-                           BAND_BELOW, params.inverse_model.alpha)
-    region &= observed & (log_odds > params.inverse_model.clamp_min) & near_occupied(log_odds, NEAR_OCCUPIED)
+                           params.adaptive.band_below, params.inverse_model.alpha)
+    region &= observed & (log_odds > params.inverse_model.clamp_min)
+    region &= near_occupied(log_odds, params.adaptive.near_occupied)
     clusters, n_clusters = label_clusters(region)
     t_cluster = time.perf_counter() - t0
 

@@ -13,6 +13,7 @@ from typing import Any
 import yaml
 
 from aogm_cli.errors import InputError
+from aogm_cli.mapping.cluster import AdaptiveConfig
 from aogm_cli.mapping.em import EMConfig
 from aogm_cli.mapping.forward_model import ForwardModelConfig
 from aogm_cli.mapping.inverse_model import InverseModelConfig
@@ -20,20 +21,23 @@ from aogm_cli.mapping.inverse_model import InverseModelConfig
 
 @dataclass(frozen=True)
 class MapParams:
-    """Parameters of all mappers: grid resolution (logs without truth), inverse model, EM."""
+    """Parameters of all mappers: grid resolution (logs without truth), inverse model, EM, clusters."""
 
     resolution: float = 0.05
     inverse_model: InverseModelConfig = field(default_factory=InverseModelConfig)
     em: EMConfig = field(default_factory=EMConfig)
+    adaptive: AdaptiveConfig = field(default_factory=AdaptiveConfig)
 
     def as_dict(self) -> dict:
-        return {"resolution": self.resolution, "inverse_model": self.inverse_model.as_dict(), "em": self.em.as_dict()}
+        return {"resolution": self.resolution, "inverse_model": self.inverse_model.as_dict(), "em": self.em.as_dict(),
+                "adaptive": self.adaptive.as_dict()}
 
 
 SECTIONS = {
     "inverse_model": {f.name for f in dataclasses.fields(InverseModelConfig)},
     "em": {f.name for f in dataclasses.fields(EMConfig) if f.name != "forward"}
     | {f.name for f in dataclasses.fields(ForwardModelConfig)},
+    "adaptive": {f.name for f in dataclasses.fields(AdaptiveConfig)},
 }
 
 
@@ -50,7 +54,7 @@ def resolve_params(params_file: str | None = None, overrides: dict[str, dict[str
         except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
             raise InputError(f"not a readable YAML file: {exc}", file=file) from None
         if not isinstance(raw, dict):
-            raise InputError("expected a mapping with sections inverse_model, em and key resolution", file=file)
+            raise InputError("expected a mapping with sections inverse_model, em, adaptive and key resolution", file=file)
     for key in raw:
         if key not in SECTIONS and key != "resolution":
             raise InputError(f"unknown key; expected resolution, {', '.join(SECTIONS)}", file=file, key=str(key))
@@ -90,6 +94,7 @@ def resolve_params(params_file: str | None = None, overrides: dict[str, dict[str
             **{k: x for k, x in v.items() if k not in forward_keys},
         ).validate(),
     )
+    adaptive = build("adaptive", lambda v: AdaptiveConfig(**v).validate())
     if isinstance(resolution, bool) or not isinstance(resolution, (int, float)) or not resolution > 0:
         raise InputError(f"expected a positive number (m per cell), got {resolution!r}", file=file, key="resolution")
-    return MapParams(float(resolution), inverse, em)
+    return MapParams(float(resolution), inverse, em, adaptive)
