@@ -40,7 +40,7 @@ import numpy as np
 from aogm_cli.frames import sensor_poses
 from aogm_cli.grid import GridSpec
 from aogm_cli.logfile import SensorSpec
-from aogm_cli.mapping.inverse_model import InverseModelConfig
+from aogm_cli.mapping.inverse_model import InverseModelConfig, update_scalars
 
 # a ray that stays in a cell for at most this many cells' length only touches it (a corner,
 # up to rounding) and leaves it alone
@@ -93,20 +93,7 @@ class BeamMapper:
         self.sensor = sensor
         self.grid = grid
         self.config = config
-        self.scalars = np.array(
-            [
-                0.5 * config.alpha,
-                sensor.min_range,
-                sensor.max_range,
-                config.l_free - config.l0,
-                config.l_occ - config.l0,
-                config.clamp_min,
-                config.clamp_max,
-                config.l0,
-                grid.resolution,
-            ],
-            dtype=np.float64,
-        )
+        self.scalars = update_scalars(config, sensor, grid.resolution)
         self.state = np.full(grid.shape, self.UNOBSERVED, dtype=np.float32)
         self._hit_scan = np.full(grid.height * grid.width, -1, dtype=np.int32)
         self.scans_done = 0

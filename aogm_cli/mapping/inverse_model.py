@@ -149,3 +149,22 @@ def inverse_model(d, theta, z, config: InverseModelConfig, *, beam_width: float,
     out = np.where(in_cone & free_region, config.l0 + w_free * (config.l_free - config.l0), out)
     out = np.where(in_cone & arc, config.l0 + w_angle * (config.l_occ - config.l0), out)
     return out
+
+
+def update_scalars(config: InverseModelConfig, sensor, *extra: float) -> np.ndarray:
+    """The per-map constants the compiled update kernels read, in their order: alpha/2,
+    min_range, max_range, l_free - l0, l_occ - l0, clamp_min, clamp_max, l0, then ``extra``."""
+    return np.array(
+        [
+            0.5 * config.alpha,
+            sensor.min_range,
+            sensor.max_range,
+            config.l_free - config.l0,
+            config.l_occ - config.l0,
+            config.clamp_min,
+            config.clamp_max,
+            config.l0,
+            *extra,
+        ],
+        dtype=np.float64,
+    )

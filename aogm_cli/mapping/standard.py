@@ -54,7 +54,7 @@ from aogm_cli.grid import GridSpec
 from aogm_cli.logfile import SensorSpec
 from aogm_cli.mapping.beam import BeamMapper, is_narrow_beam
 from aogm_cli.mapping.cone import ConeTemplates, build_cone_templates, range_search, reading_geometry
-from aogm_cli.mapping.inverse_model import InverseModelConfig, angular_profile
+from aogm_cli.mapping.inverse_model import InverseModelConfig, angular_profile, update_scalars
 
 
 def probability_from_log_odds(log_odds, observed=None) -> np.ndarray:
@@ -151,21 +151,7 @@ class StandardMapper:
         self.config = config
         self.templates = templates
         self.weights, self.ranges32 = _entry_tables(templates, config.model, float(sensor.beam_width))
-        self.scalars = np.array(
-            [
-                0.5 * config.alpha,
-                sensor.min_range,
-                sensor.max_range,
-                config.l_free - config.l0,
-                config.l_occ - config.l0,
-                config.clamp_min,
-                config.clamp_max,
-                config.l0,
-                1.0 if config.model == "elfes" else 0.0,
-                templates.resolution,
-            ],
-            dtype=np.float64,
-        )
+        self.scalars = update_scalars(config, sensor, 1.0 if config.model == "elfes" else 0.0, templates.resolution)
         # the state is padded by the templates' extent on every side, so that the cone of any
         # sensor inside the grid lies wholly inside the padded state: no bounds checks
         self.pad = int(templates.extent)
