@@ -117,8 +117,9 @@ def test_residual_from_the_last_sweep_equals_a_fresh_pass():
     assert result.flips[-1] == 0
     cand_cell, cand_ptr, pair_t, pair_e = E.pair_index(index, result.candidates)
     qpow = (1 - FORWARD.p_hit) ** np.arange(np.max(np.diff(index.ptr)) + 1)
-    state = E._init_state(index.ptr, index.cell, index.g, index.g0, index.const, index.w, FORWARD.p_hit, qpow, occupied)
-    fresh = E._residual(cand_cell, cand_ptr, pair_t, pair_e, index.ptr, index.g[pair_e], index.const, index.w,
+    nptr, *state = E._init_state(index.ptr, index.cell, index.g, index.g0, index.const, index.w, FORWARD.p_hit, qpow,
+                                 occupied)
+    fresh = E._residual(cand_cell, cand_ptr, pair_t, pair_e, nptr, index.g[pair_e], index.const, index.w,
                         FORWARD.p_hit, CONFIG.l_prior, qpow, occupied, *state)
     assert np.allclose(result.residual, fresh, rtol=1e-9, atol=1e-12)
 

@@ -66,8 +66,10 @@ class EMResult:
 # ---------------------------------------------------------------------------------------
 # compiled state, per reading t:
 #   nfar[t]  obstacles before the reading's window (g = 0; they only scale S_t by q each);
-#   obs_pos  the obstacles inside the window (entry positions, in range order), nobs[t] many;
-#   pre      prefix sums of their terms without the q^nfar factor (capacity: entries + 1);
+#   obs_pos  the obstacles inside the window (entry positions, in range order), nobs[t] many,
+#            from nptr[t] (room for the reading's window entries);
+#   pre      prefix sums of their terms without the q^nfar factor, from nptr[t] + t;
+# The kernels below that only touch this state take nptr in the place of ptr.
 #   s[t]     S_t = q^nfar (pre[nobs] + q^nobs G0);  far_gain: see _set_sum.
 # Far obstacles all come before the window's (entries are in range order), so the window's
 # obstacle of rank r is the (nfar + r)-th obstacle of the reading.
@@ -92,9 +94,10 @@ def _set_sum(t, ptr, g0, p_hit, qpow, pre, nobs, nfar, const, w, s, far_gain):
 
 
 @numba.njit(cache=True)
-def _rebuild_reading(t, ptr, cell, g, g0, p_hit, qpow, occupied, obs_pos, pre, nobs, nfar, s, const, w, far_gain):
-    base = ptr[t]
-    pbase = ptr[t] + t
+def _rebuild_reading(t, ptr, nptr, cell, g, g0, p_hit, qpow, occupied, obs_pos, pre, nobs, nfar, s, const, w,
+                     far_gain):
+    base = nptr[t]
+    pbase = nptr[t] + t
     k = 0
     far = 0
     acc = 0.0
@@ -110,7 +113,7 @@ def _rebuild_reading(t, ptr, cell, g, g0, p_hit, qpow, occupied, obs_pos, pre, n
             pre[pbase + k] = acc
     nobs[t] = k
     nfar[t] = far
-    _set_sum(t, ptr, g0, p_hit, qpow, pre, nobs, nfar, const, w, s, far_gain)
+    _set_sum(t, nptr, g0, p_hit, qpow, pre, nobs, nfar, const, w, s, far_gain)
 
 
 @numba.njit(cache=True)
@@ -157,16 +160,26 @@ def _update_reading(t, e, adding, ptr, g, g0, p_hit, qpow, obs_pos, pre, nobs, n
 
 @numba.njit(cache=True)
 def _init_state(ptr, cell, g, g0, const, w, p_hit, qpow, occupied):
+    """The state of every reading; ``nptr`` delimits each reading's room for window obstacles
+    (its entries with g > 0), so that the arrays the sweeps touch stay small."""
     n = ptr.shape[0] - 1
-    obs_pos = np.empty(ptr[n], dtype=np.int64)
-    pre = np.empty(ptr[n] + n, dtype=np.float64)
+    nptr = np.zeros(n + 1, dtype=np.int64)
+    for t in range(n):
+        room = 0
+        for e in range(ptr[t], ptr[t + 1]):
+            if g[e] != 0.0:
+                room += 1
+        nptr[t + 1] = nptr[t] + room
+    obs_pos = np.empty(nptr[n], dtype=np.int64)
+    pre = np.empty(nptr[n] + n, dtype=np.float64)
     nobs = np.zeros(n, dtype=np.int64)
     nfar = np.zeros(n, dtype=np.int64)
     s = np.empty(n, dtype=np.float64)
     far_gain = np.empty(2 * n, dtype=np.float64)
     for t in range(n):
-        _rebuild_reading(t, ptr, cell, g, g0, p_hit, qpow, occupied, obs_pos, pre, nobs, nfar, s, const, w, far_gain)
-    return obs_pos, pre, nobs, nfar, s, far_gain
+        _rebuild_reading(t, ptr, nptr, cell, g, g0, p_hit, qpow, occupied, obs_pos, pre, nobs, nfar, s, const, w,
+                         far_gain)
+    return nptr, obs_pos, pre, nobs, nfar, s, far_gain
 
 
 @numba.njit(cache=True)
@@ -345,7 +358,7 @@ def run_em(
     pair_g = index.g[pair_e]
     max_entries = int(np.max(np.diff(index.ptr))) if index.n_readings else 0
     qpow = (1.0 - p_hit) ** np.arange(max_entries + 1, dtype=np.float64)
-    state = _init_state(index.ptr, index.cell, index.g, index.g0, index.const, index.w, p_hit, qpow, occupied)
+    nptr, *state = _init_state(index.ptr, index.cell, index.g, index.g0, index.const, index.w, p_hit, qpow, occupied)
     s = state[4]
     objective = [_objective(index.const, index.w, s, occupied, cand_cell, l_prior)]
     flips: list[int] = []
@@ -354,7 +367,7 @@ def run_em(
     clock = np.zeros(1, dtype=np.int64)
     last_gain = np.zeros(cand_cell.shape[0], dtype=np.float64)
     for sweep in range(1, config.max_sweeps + 1):
-        n_flips, _ = _sweep(cand_cell, cand_ptr, pair_t, pair_e, index.ptr, index.cell, index.g, index.g0,
+        n_flips, _ = _sweep(cand_cell, cand_ptr, pair_t, pair_e, nptr, index.cell, index.g, index.g0,
                             index.const, index.w, p_hit, l_prior, qpow, occupied, *state,
                             reading_stamp, cand_stamp, clock, last_gain, pair_g)
         flips.append(int(n_flips))
@@ -366,6 +379,6 @@ def run_em(
     if flips and flips[-1] == 0:
         residual = _residual_from_gains(cand_cell, occupied, last_gain, l_prior)
     else:  # stopped by max_sweeps: score every candidate once more
-        residual = _residual(cand_cell, cand_ptr, pair_t, pair_e, index.ptr, pair_g, index.const, index.w, p_hit,
+        residual = _residual(cand_cell, cand_ptr, pair_t, pair_e, nptr, pair_g, index.const, index.w, p_hit,
                              l_prior, qpow, occupied, *state)
     return EMResult(len(flips), flips, [float(v) for v in objective], cand_cell, residual)
