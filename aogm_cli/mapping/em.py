@@ -70,15 +70,15 @@ class EMResult:
 #            from nptr[t] (room for the reading's window entries);
 #   pre      prefix sums of their terms without the q^nfar factor, from nptr[t] + t;
 # The kernels below that only touch this state take nptr in the place of ptr.
-#   s[t]     S_t = q^nfar (pre[nobs] + q^nobs G0);  far_gain: see _set_sum.
+#   s[t]     S_t = q^nfar (pre[nobs] + q^nobs G0);  far_ratio (ratios): see _set_sum.
 # Far obstacles all come before the window's (entries are in range order), so the window's
 # obstacle of rank r is the (nfar + r)-th obstacle of the reading.
 # ---------------------------------------------------------------------------------------
 
 
 @numba.njit(cache=True)
-def _set_sum(t, ptr, g0, p_hit, qpow, pre, nobs, nfar, const, w, s, far_gain):
-    """Recompute S_t from the state, and the gains of adding / removing a far obstacle.
+def _set_sum(t, ptr, g0, p_hit, qpow, pre, nobs, nfar, const, w, s, far_ratio):
+    """Recompute S_t from the state, and the likelihood ratios of adding / removing a far obstacle.
 
     A far cell has g = 0 and so have all obstacles before it (they are nearer), so adding
     it makes S_t -> q S_t and removing it S_t -> S_t / q, whatever its rank: one value per
@@ -89,13 +89,13 @@ def _set_sum(t, ptr, g0, p_hit, qpow, pre, nobs, nfar, const, w, s, far_gain):
     value = qpow[nfar[t]] * (pre[ptr[t] + t + n] + qpow[n] * g0[t])
     s[t] = value
     base = const[t] + w * value
-    far_gain[2 * t] = math.log((const[t] + w * q * value) / base)
-    far_gain[2 * t + 1] = math.log((const[t] + w * value / q) / base)
+    far_ratio[2 * t] = (const[t] + w * q * value) / base  # likelihood ratio of adding one
+    far_ratio[2 * t + 1] = (const[t] + w * value / q) / base  # ... and of removing one
 
 
 @numba.njit(cache=True)
 def _rebuild_reading(t, ptr, nptr, cell, g, g0, p_hit, qpow, occupied, obs_pos, pre, nobs, nfar, s, const, w,
-                     far_gain):
+                     far_ratio):
     base = nptr[t]
     pbase = nptr[t] + t
     k = 0
@@ -113,7 +113,7 @@ def _rebuild_reading(t, ptr, nptr, cell, g, g0, p_hit, qpow, occupied, obs_pos, 
             pre[pbase + k] = acc
     nobs[t] = k
     nfar[t] = far
-    _set_sum(t, nptr, g0, p_hit, qpow, pre, nobs, nfar, const, w, s, far_gain)
+    _set_sum(t, nptr, g0, p_hit, qpow, pre, nobs, nfar, const, w, s, far_ratio)
 
 
 @numba.njit(cache=True)
@@ -130,12 +130,12 @@ def _rank(obs_pos, lo, hi, e):
 
 
 @numba.njit(cache=True)
-def _update_reading(t, e, adding, ptr, g, g0, p_hit, qpow, obs_pos, pre, nobs, nfar, s, const, w, far_gain):
+def _update_reading(t, e, adding, ptr, g, g0, p_hit, qpow, obs_pos, pre, nobs, nfar, s, const, w, far_ratio):
     """Add (or remove) the obstacle at entry ``e`` of reading t: O(1) before the window,
     else an insertion into the window's list and its prefix sums from that rank on."""
     if g[e] == 0.0:
         nfar[t] += 1 if adding else -1
-        _set_sum(t, ptr, g0, p_hit, qpow, pre, nobs, nfar, const, w, s, far_gain)
+        _set_sum(t, ptr, g0, p_hit, qpow, pre, nobs, nfar, const, w, s, far_ratio)
         return
     base = ptr[t]
     pbase = ptr[t] + t
@@ -155,7 +155,7 @@ def _update_reading(t, e, adding, ptr, g, g0, p_hit, qpow, obs_pos, pre, nobs, n
     for k in range(r, n):
         acc += qpow[k] * p_hit * g[obs_pos[base + k]]
         pre[pbase + k + 1] = acc
-    _set_sum(t, ptr, g0, p_hit, qpow, pre, nobs, nfar, const, w, s, far_gain)
+    _set_sum(t, ptr, g0, p_hit, qpow, pre, nobs, nfar, const, w, s, far_ratio)
 
 
 @numba.njit(cache=True)
@@ -175,16 +175,16 @@ def _init_state(ptr, cell, g, g0, const, w, p_hit, qpow, occupied):
     nobs = np.zeros(n, dtype=np.int64)
     nfar = np.zeros(n, dtype=np.int64)
     s = np.empty(n, dtype=np.float64)
-    far_gain = np.empty(2 * n, dtype=np.float64)
+    far_ratio = np.empty(2 * n, dtype=np.float64)
     for t in range(n):
         _rebuild_reading(t, ptr, nptr, cell, g, g0, p_hit, qpow, occupied, obs_pos, pre, nobs, nfar, s, const, w,
-                         far_gain)
-    return nptr, obs_pos, pre, nobs, nfar, s, far_gain
+                         far_ratio)
+    return nptr, obs_pos, pre, nobs, nfar, s, far_ratio
 
 
 @numba.njit(cache=True)
 def _flip_gain(c, cand_cell, cand_ptr, pair_t, pair_e, ptr, pair_g, const, w, p_hit, qpow, occupied, obs_pos, pre,
-               nobs, nfar, s, far_gain):
+               nobs, nfar, s, far_ratio):
     """Exact change of sum_t log p(z_t | m) when candidate c flips (data part only).
 
     ``pair_g`` holds each pair's Gaussian (index.g of its entry), stored along the pairs so
@@ -193,10 +193,14 @@ def _flip_gain(c, cand_cell, cand_ptr, pair_t, pair_e, ptr, pair_g, const, w, p_
     adding = not occupied[cand_cell[c]]
     far = 0 if adding else 1
     delta = 0.0
+    ratio = 1.0
     for p in range(cand_ptr[c], cand_ptr[c + 1]):
         t = pair_t[p]
         if pair_g[p] == 0.0:  # before the reading's window: see _set_sum
-            delta += far_gain[2 * t + far]
+            ratio *= far_ratio[2 * t + far]
+            if ratio > 1e100 or ratio < 1e-100:
+                delta += math.log(ratio)
+                ratio = 1.0
             continue
         # r = window obstacles of reading t before entry e (binary search in their positions)
         r = _rank(obs_pos, ptr[t], ptr[t] + nobs[t], pair_e[p])
@@ -211,13 +215,18 @@ def _flip_gain(c, cand_cell, cand_ptr, pair_t, pair_e, ptr, pair_g, const, w, p_
             if rest < 0.0:
                 rest = 0.0
             s_new = a + rest / q
-        delta += math.log((const[t] + w * s_new) / (const[t] + w * st))
-    return delta
+        # one log per candidate instead of one per pair: multiply the ratios, taking the log
+        # only when the product leaves a safe range
+        ratio *= (const[t] + w * s_new) / (const[t] + w * st)
+        if ratio > 1e100 or ratio < 1e-100:
+            delta += math.log(ratio)
+            ratio = 1.0
+    return delta + math.log(ratio)
 
 
 @numba.njit(cache=True)
 def _sweep(cand_cell, cand_ptr, pair_t, pair_e, ptr, cell, g, g0, const, w, p_hit, l_prior, qpow,
-           occupied, obs_pos, pre, nobs, nfar, s, far_gain, reading_stamp, cand_stamp, clock, last_gain, pair_g):
+           occupied, obs_pos, pre, nobs, nfar, s, far_ratio, reading_stamp, cand_stamp, clock, last_gain, pair_g):
     """One pass over the candidates in order; a flip is kept when it raises the objective.
 
     A candidate none of whose readings changed since it was last scored keeps its (non-
@@ -240,7 +249,7 @@ def _sweep(cand_cell, cand_ptr, pair_t, pair_e, ptr, cell, g, g0, const, w, p_hi
                 continue
         evaluated += 1
         d = _flip_gain(c, cand_cell, cand_ptr, pair_t, pair_e, ptr, pair_g, const, w, p_hit, qpow,
-                       occupied, obs_pos, pre, nobs, nfar, s, far_gain)
+                       occupied, obs_pos, pre, nobs, nfar, s, far_ratio)
         last_gain[c] = d
         x = cand_cell[c]
         d += -l_prior if occupied[x] else l_prior
@@ -252,7 +261,7 @@ def _sweep(cand_cell, cand_ptr, pair_t, pair_e, ptr, cell, g, g0, const, w, p_hi
             adding = occupied[x]
             for p in range(cand_ptr[c], cand_ptr[c + 1]):
                 _update_reading(pair_t[p], pair_e[p], adding, ptr, g, g0, p_hit, qpow, obs_pos, pre, nobs, nfar,
-                                s, const, w, far_gain)
+                                s, const, w, far_ratio)
                 reading_stamp[pair_t[p]] = clock[0]
         cand_stamp[c] = clock[0]
     return flips, evaluated
@@ -289,12 +298,12 @@ def _residual_from_gains(cand_cell, occupied, last_gain, l_prior):
 
 @numba.njit(cache=True)
 def _residual(cand_cell, cand_ptr, pair_t, pair_e, ptr, pair_g, const, w, p_hit, l_prior, qpow,
-              occupied, obs_pos, pre, nobs, nfar, s, far_gain):
+              occupied, obs_pos, pre, nobs, nfar, s, far_ratio):
     """p(m_x = 1 | Z, m*) of each candidate with every other cell held at m*."""
     out = np.empty(cand_cell.shape[0])
     for c in range(cand_cell.shape[0]):
         d = _flip_gain(c, cand_cell, cand_ptr, pair_t, pair_e, ptr, pair_g, const, w, p_hit, qpow,
-                       occupied, obs_pos, pre, nobs, nfar, s, far_gain)
+                       occupied, obs_pos, pre, nobs, nfar, s, far_ratio)
         out[c] = _logistic((-d if occupied[cand_cell[c]] else d) + l_prior)
     return out
 
