@@ -54,20 +54,27 @@ def bench(world_name: str, folder: Path) -> None:
     pair_g = index.g[pair_e]
     t_pairs = time.perf_counter() - t0
     qpow = (1.0 - p_hit) ** np.arange(int(np.max(np.diff(index.ptr))) + 1)
-    t0 = time.perf_counter()
-    nptr, *state = E._init_state(index.ptr, index.cell, index.g, index.g0, index.const, index.w, p_hit, qpow, occupied)
-    t_init = time.perf_counter() - t0
-    stamps = (np.zeros(index.n_readings, np.int64), np.full(cand_cell.size, -1, np.int64), np.zeros(1, np.int64),
-              np.zeros(cand_cell.size))
-    sweep_times, flips = [], []
-    for _ in range(config.max_sweeps):  # exactly run_em's loop, each sweep timed on its own
+    runs = []
+    for _ in range(3):  # best of three, as the standard pass is best of five
+        occupied = np.ascontiguousarray((log_odds > 0).reshape(-1))
         t0 = time.perf_counter()
-        n, _ = E._sweep(cand_cell, cand_ptr, pair_t, pair_e, nptr, index.cell, index.g, index.g0, index.const,
-                        index.w, p_hit, l_prior, qpow, occupied, *state, *stamps, pair_g)
-        sweep_times.append(time.perf_counter() - t0)
-        flips.append(int(n))
-        if n == 0:
-            break
+        nptr, *state = E._init_state(index.ptr, index.cell, index.g, index.g0, index.const, index.w, p_hit, qpow,
+                                     occupied)
+        t_init = time.perf_counter() - t0
+        stamps = (np.zeros(index.n_readings, np.int64), np.full(cand_cell.size, -1, np.int64), np.zeros(1, np.int64),
+                  np.zeros(cand_cell.size))
+        sweep_times, flips = [], []
+        for _ in range(config.max_sweeps):  # exactly run_em's loop, each sweep timed on its own
+            t0 = time.perf_counter()
+            n, _ = E._sweep(cand_cell, cand_ptr, pair_t, pair_e, nptr, index.cell, index.g, index.g0, index.const,
+                            index.w, p_hit, l_prior, qpow, occupied, *state, *stamps, pair_g)
+            sweep_times.append(time.perf_counter() - t0)
+            flips.append(int(n))
+            if n == 0:
+                break
+        runs.append((t_init, sweep_times))
+    t_init = min(r[0] for r in runs)
+    sweep_times = np.min([r[1] for r in runs], axis=0)
     t0 = time.perf_counter()
     E._residual_from_gains(cand_cell, occupied, stamps[3], l_prior)
     t_res = time.perf_counter() - t0

@@ -76,7 +76,7 @@ class EMResult:
 # ---------------------------------------------------------------------------------------
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _set_sum(t, ptr, g0, p_hit, qpow, pre, nobs, nfar, const, w, s, far_ratio):
     """Recompute S_t from the state, and the likelihood ratios of adding / removing a far obstacle.
 
@@ -116,7 +116,7 @@ def _rebuild_reading(t, ptr, nptr, cell, g, g0, p_hit, qpow, occupied, obs_pos, 
     _set_sum(t, nptr, g0, p_hit, qpow, pre, nobs, nfar, const, w, s, far_ratio)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _rank(obs_pos, lo, hi, e):
     """How many of the sorted entry positions obs_pos[lo:hi] lie before entry ``e``."""
     start = lo
@@ -129,7 +129,7 @@ def _rank(obs_pos, lo, hi, e):
     return lo - start
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _update_reading(t, e, adding, ptr, g, g0, p_hit, qpow, obs_pos, pre, nobs, nfar, s, const, w, far_ratio):
     """Add (or remove) the obstacle at entry ``e`` of reading t: O(1) before the window,
     else an insertion into the window's list and its prefix sums from that rank on."""
@@ -141,20 +141,23 @@ def _update_reading(t, e, adding, ptr, g, g0, p_hit, qpow, obs_pos, pre, nobs, n
     pbase = ptr[t] + t
     n = nobs[t]
     r = _rank(obs_pos, base, base + n, e)
+    acc = pre[pbase + r]
     if adding:
         for k in range(n, r, -1):
             obs_pos[base + k] = obs_pos[base + k - 1]
         obs_pos[base + r] = e
         n += 1
-    else:
-        for k in range(r, n - 1):
-            obs_pos[base + k] = obs_pos[base + k + 1]
+        for k in range(r, n):
+            acc += qpow[k] * p_hit * g[obs_pos[base + k]]
+            pre[pbase + k + 1] = acc
+    else:  # shift down and redo the prefix sums in one pass
         n -= 1
+        for k in range(r, n):
+            moved = obs_pos[base + k + 1]
+            obs_pos[base + k] = moved
+            acc += qpow[k] * p_hit * g[moved]
+            pre[pbase + k + 1] = acc
     nobs[t] = n
-    acc = pre[pbase + r]
-    for k in range(r, n):
-        acc += qpow[k] * p_hit * g[obs_pos[base + k]]
-        pre[pbase + k + 1] = acc
     _set_sum(t, ptr, g0, p_hit, qpow, pre, nobs, nfar, const, w, s, far_ratio)
 
 
@@ -182,7 +185,7 @@ def _init_state(ptr, cell, g, g0, const, w, p_hit, qpow, occupied):
     return nptr, obs_pos, pre, nobs, nfar, s, far_ratio
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _flip_gain(c, cand_cell, cand_ptr, pair_t, pair_e, ptr, pair_g, const, w, p_hit, qpow, occupied, obs_pos, pre,
                nobs, nfar, s, far_ratio):
     """Exact change of sum_t log p(z_t | m) when candidate c flips (data part only).
@@ -224,7 +227,10 @@ def _flip_gain(c, cand_cell, cand_ptr, pair_t, pair_e, ptr, pair_g, const, w, p_
     return delta + math.log(ratio)
 
 
-@numba.njit(cache=True)
+# _nrt=False: the sweep allocates nothing, and without numba's reference-counting runtime
+# the arrays it hands to the inlined helpers cost nothing per call (as in simulation.raycast;
+# _nrt is a private numba option)
+@numba.njit(cache=True, _nrt=False)
 def _sweep(cand_cell, cand_ptr, pair_t, pair_e, ptr, cell, g, g0, const, w, p_hit, l_prior, qpow,
            occupied, obs_pos, pre, nobs, nfar, s, far_ratio, reading_stamp, cand_stamp, clock, last_gain, pair_g):
     """One pass over the candidates in order; a flip is kept when it raises the objective.
