@@ -50,8 +50,7 @@ def bench(world_name: str, folder: Path) -> None:
     occupied = np.ascontiguousarray((log_odds > 0).reshape(-1))
     p_hit, l_prior = config.forward.p_hit, config.l_prior
     t0 = time.perf_counter()
-    cand_cell, cand_ptr, pair_t, pair_e = E.pair_index(index, candidates)
-    pair_g = index.g[pair_e]
+    cand_cell, cand_ptr, pair_t, pair_e, pair_g = E.pair_index(index, candidates)
     t_pairs = time.perf_counter() - t0
     qpow = (1.0 - p_hit) ** np.arange(int(np.max(np.diff(index.ptr))) + 1)
     runs = []

@@ -315,7 +315,7 @@ def _residual(cand_cell, cand_ptr, pair_t, pair_e, ptr, pair_g, const, w, p_hit,
 
 
 @numba.njit(cache=True)
-def _pair_index(ptr, cell, lookup, lo, n_cand):
+def _pair_index(ptr, cell, g, lookup, lo, n_cand):
     n_read = ptr.shape[0] - 1
     counts = np.zeros(n_cand + 1, dtype=np.int64)
     for e in range(cell.shape[0]):
@@ -326,6 +326,7 @@ def _pair_index(ptr, cell, lookup, lo, n_cand):
     fill = cand_ptr[:-1].copy()
     pair_t = np.empty(cand_ptr[-1], dtype=np.int64)
     pair_e = np.empty(cand_ptr[-1], dtype=np.int64)
+    pair_g = np.empty(cand_ptr[-1], dtype=np.float64)
     for t in range(n_read):
         for e in range(ptr[t], ptr[t + 1]):
             k = cell[e] - lo
@@ -333,26 +334,30 @@ def _pair_index(ptr, cell, lookup, lo, n_cand):
                 j = fill[lookup[k]]
                 pair_t[j] = t
                 pair_e[j] = e
+                pair_g[j] = g[e]
                 fill[lookup[k]] += 1
-    return cand_ptr, pair_t, pair_e
+    return cand_ptr, pair_t, pair_e, pair_g
 
 
 def pair_index(index: ForwardIndex, candidates: np.ndarray):
-    """Cell -> readings index for ``candidates``: (cand_cell, cand_ptr, pair_t, pair_e).
+    """Cell -> readings index for ``candidates``: (cand_cell, cand_ptr, pair_t, pair_e, pair_g).
 
-    Only the candidates appear (each with its (reading, entry) pairs in reading order); other
-    cells of the cones are held fixed by EM. The look-up table spans the candidates' range of
-    flat ids only, so a small cluster costs little.
+    Only the candidates appear (each with its (reading, entry) pairs in reading order, and
+    each pair's Gaussian, stored along the pairs for the sweeps); other cells of the cones
+    are held fixed by EM. The look-up table spans the candidates' range of flat ids only, so
+    a small cluster costs little.
     """
-    candidates = np.unique(np.asarray(candidates, dtype=np.int64))
+    candidates = np.asarray(candidates, dtype=np.int64)
+    if candidates.size > 1 and not np.all(candidates[1:] > candidates[:-1]):
+        candidates = np.unique(candidates)
     if candidates.size == 0:
         empty = np.zeros(0, dtype=np.int64)
-        return candidates, np.zeros(1, dtype=np.int64), empty, empty
+        return candidates, np.zeros(1, dtype=np.int64), empty, empty, np.zeros(0)
     lo = int(candidates[0])
     lookup = np.full(int(candidates[-1]) - lo + 1, -1, dtype=np.int64)
     lookup[candidates - lo] = np.arange(candidates.size)
-    cand_ptr, pair_t, pair_e = _pair_index(index.ptr, index.cell, lookup, lo, candidates.size)
-    return candidates, cand_ptr, pair_t, pair_e
+    cand_ptr, pair_t, pair_e, pair_g = _pair_index(index.ptr, index.cell, index.g, lookup, lo, candidates.size)
+    return candidates, cand_ptr, pair_t, pair_e, pair_g
 
 
 def run_em(
@@ -369,8 +374,7 @@ def run_em(
         raise ValueError("occupied must be a flat bool array")
     p_hit = config.forward.p_hit
     l_prior = config.l_prior
-    cand_cell, cand_ptr, pair_t, pair_e = pair_index(index, candidates)
-    pair_g = index.g[pair_e]
+    cand_cell, cand_ptr, pair_t, pair_e, pair_g = pair_index(index, candidates)
     max_entries = int(np.max(np.diff(index.ptr))) if index.n_readings else 0
     qpow = (1.0 - p_hit) ** np.arange(max_entries + 1, dtype=np.float64)
     nptr, *state = _init_state(index.ptr, index.cell, index.g, index.g0, index.const, index.w, p_hit, qpow, occupied)
