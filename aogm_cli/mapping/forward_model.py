@@ -205,7 +205,7 @@ def build_forward_index(
     ptr = np.zeros(len(z) + 1, dtype=np.int64)
     np.cumsum(counts, out=ptr[1:])
     g0, const, w = reading_constants(z, z_max, config)
-    return ForwardIndex(ptr, out_cell[:n].copy(), out_g[:n].copy(), g0, const, ids, w, config.p_hit)
+    return ForwardIndex(ptr, out_cell[:n], out_g[:n], g0, const, ids, w, config.p_hit)  # views: no copy
 
 
 def select_readings(index: ForwardIndex, readings: np.ndarray) -> ForwardIndex:

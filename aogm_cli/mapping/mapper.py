@@ -287,7 +287,8 @@ def map_adaptive(path: str | Path, params: MapParams, detector_path: str | None 
         for k in range(n_groups):
             cells = np.flatnonzero(cell_group == k)
             readings = np.flatnonzero((group_of_reading == k) & (np.diff(index.ptr) > 0))
-            sub = select_readings(index, readings)
+            # one group holding every reading of the index: use it as it is
+            sub = index if n_groups == 1 else select_readings(index, readings)
             if config.start == "empty":
                 occupied[cells] = False
             result = run_em(sub, occupied, cells, config)
