@@ -265,8 +265,7 @@ def map_adaptive(path: str | Path, params: MapParams, detector_path: str | None 
     t_cluster = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    start = np.ascontiguousarray((log_odds > 0).reshape(-1))
-    occupied = start.copy()
+    occupied = np.ascontiguousarray((log_odds > 0).reshape(-1))  # the thresholded standard map
     probability = probability_from_log_odds(log_odds, observed).reshape(-1)
     sweeps, flips = [], []
     if n_clusters:
