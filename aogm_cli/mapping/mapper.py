@@ -93,8 +93,9 @@ def warm_up(sensor: SensorSpec, params: MapParams, em: bool = False) -> None:
         cluster_contacts(index.ptr, region.reshape(-1)[index.cell].astype(np.int64))
 
 
-def standard_pass(reader: LogReader, grid: GridSpec, params: MapParams, chunk: int = 4096):
-    """(log_odds, observed, seconds of mapping work) for the whole log, streamed in chunks.
+def standard_pass(reader: LogReader, grid: GridSpec, params: MapParams, chunk: int = 4096, chunks=None):
+    """(log_odds, observed, seconds of mapping work) for the whole log, streamed in chunks
+    (``reader.chunks(chunk)``, or ``chunks`` when the caller already holds the scans).
 
     One-time set-up is done before the clock starts, like compilation: the cone templates
     and their per-grid-width tables are built (or found in their caches) by mapping no scans.
@@ -110,8 +111,8 @@ def standard_pass(reader: LogReader, grid: GridSpec, params: MapParams, chunk: i
     def prepared(r):  # the ranges as the mapper takes them
         return np.asarray(r, dtype=np.float32) if narrow else echo_ranges(r, grid).astype(np.float32)
 
-    chunks = ((s, t, p, prepared(r)) for s, t, p, r in reader.chunks(chunk))
-    timed = _Timed(chunks)
+    source = reader.chunks(chunk) if chunks is None else chunks
+    timed = _Timed((s, t, p, prepared(r)) for s, t, p, r in source)
     t0 = time.perf_counter()
     log_odds, observed = standard_map(timed, reader.sensor, grid, params.inverse_model, templates=templates)
     seconds = time.perf_counter() - t0 - timed.io_seconds
@@ -170,9 +171,9 @@ def _em_inputs(path: str | Path, params: MapParams) -> _EMInputs:
         grid = log_grid(reader, params.resolution)
         sensor = reader.sensor
         warm_up(sensor, params, em=True)
-        log_odds, observed, t_standard = standard_pass(reader, grid, params)
-        pose = reader.poses()
-        ranges = np.concatenate([r for _, _, _, r in reader.chunks()]) if reader.n_scans else np.zeros((0, sensor.count))
+        log = reader.read()  # EM needs every reading in memory: read the scans once
+        pose, ranges = log.pose, log.ranges
+        log_odds, observed, t_standard = standard_pass(reader, grid, params, chunks=[(0, log.time, pose, ranges)])
     templates = em_forward_templates(grid, sensor)
     rows, cols, bins, z = readings_of(pose, ranges, sensor, grid, templates)
     return _EMInputs(grid, sensor, log_odds, observed, t_standard, templates, ranges, rows, cols, bins, z)
