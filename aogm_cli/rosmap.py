@@ -20,6 +20,7 @@ from PIL import Image, UnidentifiedImageError
 
 from aogm_cli.errors import InputError
 from aogm_cli.grid import GridSpec
+from aogm_cli.yamlfile import read_yaml
 
 MODES = ("trinary", "scale", "raw")
 
@@ -94,21 +95,7 @@ def read_map_yaml(path: str | Path) -> RosMap:
     """
     path = Path(path)
     file = str(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError("file does not exist", file=file) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read the file: {exc}", file=file) from None
-    try:
-        doc = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        where = ""
-        mark = getattr(exc, "problem_mark", None)
-        if mark is not None:
-            where = f" at line {mark.line + 1}, column {mark.column + 1}"
-        problem = getattr(exc, "problem", None) or str(exc)
-        raise InputError(f"not valid YAML{where}: {problem}", file=file) from None
+    _, doc = read_yaml(path)
     if not isinstance(doc, dict):
         raise InputError(f"expected a mapping of map_server keys, got {_describe(doc)}", file=file)
 

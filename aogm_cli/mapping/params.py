@@ -7,16 +7,14 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
-
-import yaml
 
 from aogm_cli.errors import InputError
 from aogm_cli.mapping.cluster import AdaptiveConfig
 from aogm_cli.mapping.em import EMConfig
 from aogm_cli.mapping.forward_model import ForwardModelConfig
 from aogm_cli.mapping.inverse_model import InverseModelConfig
+from aogm_cli.yamlfile import read_yaml
 
 
 @dataclass(frozen=True)
@@ -47,12 +45,7 @@ def resolve_params(params_file: str | None = None, overrides: dict[str, dict[str
     raw: dict[str, Any] = {}
     file = params_file
     if params_file:
-        try:
-            raw = yaml.safe_load(Path(params_file).read_text(encoding="utf-8")) or {}
-        except FileNotFoundError:
-            raise InputError("no such file", file=file) from None
-        except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
-            raise InputError(f"not a readable YAML file: {exc}", file=file) from None
+        raw = read_yaml(params_file)[1] or {}
         if not isinstance(raw, dict):
             raise InputError("expected a mapping with sections inverse_model, em, adaptive and key resolution", file=file)
     for key in raw:

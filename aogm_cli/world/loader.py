@@ -10,8 +10,6 @@ import math
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from aogm_cli.errors import InputError
 from aogm_cli.world.config import (
     Box,
@@ -27,6 +25,7 @@ from aogm_cli.world.config import (
     Wall,
     World,
 )
+from aogm_cli.yamlfile import read_yaml
 
 ROUGH = Surface("rough", math.pi / 2)
 
@@ -155,21 +154,8 @@ TOP_KEYS = {
 def load_world(path: str | Path) -> World:
     """Read and validate the world file at ``path``; raise InputError naming file and key."""
     path = Path(path)
-    file = str(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError("no such file", file=file) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise InputError(f"cannot read: {exc}", file=file) from None
-    try:
-        raw = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark else ""
-        problem = getattr(exc, "problem", None) or str(exc)
-        raise InputError(f"{where}not valid YAML: {problem}", file=file) from None
-    return parse_world(raw, file=file, text=text, base_dir=path.parent)
+    text, raw = read_yaml(path)
+    return parse_world(raw, file=str(path), text=text, base_dir=path.parent)
 
 
 def parse_world(raw: Any, *, file: str, text: str = "", base_dir: Path = Path(".")) -> World:
