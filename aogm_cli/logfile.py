@@ -17,6 +17,7 @@ import numpy as np
 from aogm_cli import __version__
 from aogm_cli.errors import InputError
 from aogm_cli.grid import GridSpec
+from aogm_cli.h5file import open_input, text
 from aogm_cli.outputs import atomic_output
 
 FORMAT = "aogm-log"
@@ -121,12 +122,7 @@ class LogReader:
 
     def __init__(self, path: str | Path):
         self.path = str(path)
-        try:
-            self._f = h5py.File(self.path, "r")
-        except FileNotFoundError:
-            raise InputError("no such file", file=self.path) from None
-        except OSError as exc:
-            raise InputError(f"not an HDF5 file ({exc.__class__.__name__}); expected an aogm log", file=self.path) from None
+        self._f = open_input(self.path, FORMAT, FORMAT_VERSION)
         try:
             self._check()
         except BaseException:
@@ -138,14 +134,6 @@ class LogReader:
 
     def _check(self) -> None:
         f = self._f
-        fmt = f.attrs.get("format")
-        if isinstance(fmt, bytes):
-            fmt = fmt.decode()
-        if fmt != FORMAT:
-            raise self._error("format", f"expected {FORMAT!r}, got {fmt!r}")
-        version = f.attrs.get("format_version")
-        if version != FORMAT_VERSION:
-            raise self._error("format_version", f"expected {FORMAT_VERSION}, got {version!r}")
         for name in ("scans/time", "scans/pose", "scans/ranges", "sensors/mount"):
             if name not in f:
                 raise self._error("/" + name, "missing dataset")
@@ -178,7 +166,7 @@ class LogReader:
 
     @property
     def source(self) -> str:
-        return _text(self._f.attrs.get("source", ""))
+        return text(self._f.attrs.get("source", ""))
 
     @property
     def seed(self) -> int | None:
@@ -190,7 +178,7 @@ class LogReader:
         a = self._f["sensors"].attrs
         return SensorSpec(
             mount=self._f["sensors/mount"][...],
-            kind=_text(a["kind"]),
+            kind=text(a["kind"]),
             beam_width=float(a["beam_width"]),
             min_range=float(a["min_range"]),
             max_range=float(a["max_range"]),
@@ -215,7 +203,7 @@ class LogReader:
             return None
         g = self._f["truth"]
         try:
-            checks = tuple(json.loads(_text(g.attrs.get("checks", "[]"))))
+            checks = tuple(json.loads(text(g.attrs.get("checks", "[]"))))
         except json.JSONDecodeError:
             raise self._error("/truth.checks", "expected a JSON list") from None
         return Truth(
@@ -223,7 +211,7 @@ class LogReader:
             occupancy=g["occupancy"][...],
             cause=g["cause"][...],
             ideal_range=g["ideal_range"][...],
-            world=_text(g.attrs.get("world", "")),
+            world=text(g.attrs.get("world", "")),
             checks=checks,
         )
 
@@ -257,5 +245,3 @@ def read_log(path: str | Path) -> Log:
         return reader.read()
 
 
-def _text(v) -> str:
-    return v.decode() if isinstance(v, bytes) else str(v)

@@ -15,6 +15,7 @@ import numpy as np
 from aogm_cli import __version__
 from aogm_cli.errors import InputError
 from aogm_cli.grid import GridSpec
+from aogm_cli.h5file import open_input, text
 from aogm_cli.outputs import atomic_output
 
 FORMAT = "aogm-map"
@@ -69,18 +70,7 @@ def write_map_file(path: str | Path, m: OccupancyMap, inputs: tuple = ()) -> Non
 def read_map_file(path: str | Path) -> OccupancyMap:
     """Read and check a map file; InputError names the file and the missing or wrong item."""
     path = str(path)
-    try:
-        f = h5py.File(path, "r")
-    except FileNotFoundError:
-        raise InputError("no such file", file=path) from None
-    except OSError as exc:
-        raise InputError(f"not an HDF5 file ({exc.__class__.__name__}); expected an aogm map", file=path) from None
-    with f:
-        fmt = _text(f.attrs.get("format"))
-        if fmt != FORMAT:
-            raise InputError(f"expected {FORMAT!r}, got {fmt!r}", file=path, key="format")
-        if f.attrs.get("format_version") != FORMAT_VERSION:
-            raise InputError(f"expected {FORMAT_VERSION}, got {f.attrs.get('format_version')!r}", file=path, key="format_version")
+    with open_input(path, FORMAT, FORMAT_VERSION) as f:
         for name in ("map/probability", "map/observed"):
             if name not in f:
                 raise InputError("missing dataset", file=path, key="/" + name)
@@ -102,10 +92,10 @@ def read_map_file(path: str | Path) -> OccupancyMap:
             grid=grid,
             probability=prob,
             observed=g["observed"][...].astype(bool),
-            mode=_text(f.attrs.get("mode", "")),
-            params=json.loads(_text(f.attrs.get("params", "{}"))),
+            mode=text(f.attrs.get("mode", "")),
+            params=json.loads(text(f.attrs.get("params", "{}"))),
             runtime_s=float(f.attrs.get("runtime_s", 0.0)),
-            source_log=_text(f.attrs.get("source_log", "")),
+            source_log=text(f.attrs.get("source_log", "")),
             log_odds=optional("log_odds"),
             occupied=optional("occupied"),
             clusters=optional("clusters"),
@@ -117,18 +107,16 @@ def is_map_file(path: str | Path) -> bool:
     """True when ``path`` is an HDF5 file whose format attribute says aogm-map."""
     try:
         with h5py.File(path, "r") as f:
-            return _text(f.attrs.get("format")) == FORMAT
+            return text(f.attrs.get("format")) == FORMAT
     except OSError:
         return False
 
 
-def _text(v) -> str:
-    return v.decode() if isinstance(v, bytes) else ("" if v is None else str(v))
 
 
 def _stat(v):
     if isinstance(v, (bytes, str)):
-        s = _text(v)
+        s = text(v)
         try:
             return json.loads(s)
         except json.JSONDecodeError:

@@ -16,6 +16,7 @@ import numpy as np
 from aogm_cli import __version__
 from aogm_cli.detector.features import FeatureSpec, features
 from aogm_cli.errors import InputError
+from aogm_cli.h5file import open_input, text
 from aogm_cli.outputs import atomic_output
 
 FORMAT = "aogm-detector"
@@ -122,18 +123,10 @@ def save_detector(path: str | Path, detector: Detector, inputs: tuple[str | Path
 def load_detector(path: str | Path | None = None) -> Detector:
     """Read and check a detector file; ``None`` reads the packaged default detector."""
     path = str(default_detector_path() if path is None else path)
-    try:
-        f = h5py.File(path, "r")
-    except FileNotFoundError:
-        raise InputError("no such file", file=path) from None
-    except OSError as exc:
-        raise InputError(f"not an HDF5 file ({exc.__class__.__name__}); expected an aogm detector", file=path) from None
-    with f:
+    with open_input(path, FORMAT, FORMAT_VERSION) as f:
         return _read(f, path)
 
 
-def _text(v) -> str:
-    return v.decode() if isinstance(v, bytes) else str(v)
 
 
 def _json_attr(f: h5py.File, key: str, path: str, required: bool = True) -> dict:
@@ -142,7 +135,7 @@ def _json_attr(f: h5py.File, key: str, path: str, required: bool = True) -> dict
             raise InputError("missing attribute", file=path, key=key)
         return {}
     try:
-        value = json.loads(_text(f.attrs[key]))
+        value = json.loads(text(f.attrs[key]))
     except ValueError:
         raise InputError("expected JSON", file=path, key=key) from None
     if not isinstance(value, dict):
@@ -151,15 +144,9 @@ def _json_attr(f: h5py.File, key: str, path: str, required: bool = True) -> dict
 
 
 def _read(f: h5py.File, path: str) -> Detector:
-    fmt = _text(f.attrs["format"]) if "format" in f.attrs else None
-    if fmt != FORMAT:
-        raise InputError(f"expected {FORMAT!r}, got {fmt!r}", file=path, key="format")
-    version = f.attrs.get("format_version")
-    if version != FORMAT_VERSION:
-        raise InputError(f"expected {FORMAT_VERSION}, got {version!r}", file=path, key="format_version")
     if "features" not in f.attrs:
         raise InputError("missing attribute", file=path, key="features")
-    spec = FeatureSpec.from_json(_text(f.attrs["features"]), file=path)
+    spec = FeatureSpec.from_json(text(f.attrs["features"]), file=path)
     metrics = _json_attr(f, "metrics", path)
     labels = _json_attr(f, "labels", path, required=False)
     training = _json_attr(f, "training", path, required=False)
@@ -192,7 +179,7 @@ def _read(f: h5py.File, path: str) -> Detector:
             raise InputError(f"expected shape ({weight.shape[1]},), got {bias.shape}", file=path, key=f"{key}/bias")
         if not (np.all(np.isfinite(weight)) and np.all(np.isfinite(bias))):
             raise InputError("expected finite numbers", file=path, key=key)
-        activation = _text(g.attrs["activation"]) if "activation" in g.attrs else None
+        activation = text(g.attrs["activation"]) if "activation" in g.attrs else None
         if activation not in ACTIVATIONS:
             raise InputError(f"expected one of {sorted(ACTIVATIONS)}, got {activation!r}", file=path, key=f"{key}.activation")
         layers.append(Layer(weight, bias, activation))

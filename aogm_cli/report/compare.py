@@ -20,6 +20,7 @@ from aogm_cli import __version__
 from aogm_cli.consistency import map_consistency
 from aogm_cli.errors import InputError
 from aogm_cli.evaluation import evaluate
+from aogm_cli.h5file import text
 from aogm_cli.logfile import LogReader, Truth
 from aogm_cli.mapfile import MODES, OccupancyMap, is_map_file, read_map_file, write_map_file
 from aogm_cli.mapping.params import MapParams
@@ -94,8 +95,8 @@ def _map_header(path: str) -> tuple[str, str]:
         version = f.attrs.get("format_version")
         if version != 1:
             raise InputError(f"expected 1, got {version!r}", file=path, key="format_version")
-        mode = _text(f.attrs.get("mode"))
-        source = _text(f.attrs.get("source_log"))
+        mode = text(f.attrs.get("mode"))
+        source = text(f.attrs.get("source_log"))
     if mode not in MODES:
         raise InputError(f"expected one of {', '.join(MODES)}, got {mode!r}", file=path, key="mode")
     if not source:
@@ -103,8 +104,6 @@ def _map_header(path: str) -> tuple[str, str]:
     return mode, source
 
 
-def _text(v) -> str:
-    return v.decode() if isinstance(v, bytes) else ("" if v is None else str(v))
 
 
 def _find_log(source_log: str, map_path: str, given_logs: list[str]) -> str:
