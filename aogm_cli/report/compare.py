@@ -413,6 +413,6 @@ def results_json(results: list[ModeResult]) -> dict:
 
 def write_json(path: str | Path, results: list[ModeResult], inputs: tuple[str, ...] = ()) -> None:
     """Write ``results_json`` to ``path`` atomically."""
-    text = json.dumps(results_json(results), indent=2, allow_nan=False) + "\n"
+    payload = json.dumps(results_json(results), indent=2, allow_nan=False) + "\n"
     with atomic_output(path, inputs) as tmp:
-        Path(tmp).write_text(text, encoding="utf-8")
+        Path(tmp).write_text(payload, encoding="utf-8")

@@ -91,6 +91,29 @@ def _interval(o, d, lo, hi):
 
 
 @numba.njit(cache=True, inline="always", _nrt=False)
+def _dda_start(ox, oy, dx, dy, tmax, gx0, gy0, cell, nx, ny):
+    """Amanatides-Woo set-up for the ray o + t d over nx x ny cells of size ``cell`` from
+    (gx0, gy0): the span t0..t1 inside the grid (t0 > t1: the ray misses it), whether it enters
+    through an x face, the entry cell (ix, iy), the steps, the t of the next x and y faces and
+    the t per cell in x and y."""
+    tx_in, tx_out = _interval(ox, dx, gx0, gx0 + nx * cell)
+    ty_in, ty_out = _interval(oy, dy, gy0, gy0 + ny * cell)
+    t0 = max(0.0, tx_in, ty_in)
+    t1 = min(tmax, tx_out, ty_out)
+    if t0 > t1:
+        return t0, t1, False, 0, 0, 1, 1, np.inf, np.inf, np.inf, np.inf
+    ix = min(nx - 1, max(0, int(math.floor((ox + t0 * dx - gx0) / cell))))
+    iy = min(ny - 1, max(0, int(math.floor((oy + t0 * dy - gy0) / cell))))
+    sx = 1 if dx > 0.0 else -1
+    sy = 1 if dy > 0.0 else -1
+    tx = ((ix + (1 if dx > 0.0 else 0)) * cell + gx0 - ox) / dx if dx != 0.0 else np.inf
+    ty = ((iy + (1 if dy > 0.0 else 0)) * cell + gy0 - oy) / dy if dy != 0.0 else np.inf
+    tdx = cell / abs(dx) if dx != 0.0 else np.inf
+    tdy = cell / abs(dy) if dy != 0.0 else np.inf
+    return t0, t1, tx_in >= ty_in, ix, iy, sx, sy, tx, ty, tdx, tdy
+
+
+@numba.njit(cache=True, inline="always", _nrt=False)
 def _cast_shapes(ox, oy, dx, dy, tmax, geo):
     """First hit of the ray o + t d (d unit, 0 < t <= tmax) on segments and circles.
 
@@ -107,22 +130,9 @@ def _cast_shapes(ox, oy, dx, dy, tmax, geo):
     size = geo.bucket_f[2]
     nbx = geo.bucket_i[0]
     nby = geo.bucket_i[1]
-    tx_in, tx_out = _interval(ox, dx, gx0, gx0 + nbx * size)
-    ty_in, ty_out = _interval(oy, dy, gy0, gy0 + nby * size)
-    t0 = max(0.0, tx_in, ty_in)
-    t1 = min(tmax, tx_out, ty_out)
+    t0, t1, _, ix, iy, sx, sy, tx, ty, tdx, tdy = _dda_start(ox, oy, dx, dy, tmax, gx0, gy0, size, nbx, nby)
     if t0 > t1:
         return best, best_cos, best_thr, bnx, bny
-    px = ox + t0 * dx
-    py = oy + t0 * dy
-    ix = min(nbx - 1, max(0, int((px - gx0) / size)))
-    iy = min(nby - 1, max(0, int((py - gy0) / size)))
-    sx = 1 if dx > 0.0 else -1
-    sy = 1 if dy > 0.0 else -1
-    tx = ((ix + (1 if dx > 0.0 else 0)) * size + gx0 - ox) / dx if dx != 0.0 else np.inf
-    ty = ((iy + (1 if dy > 0.0 else 0)) * size + gy0 - oy) / dy if dy != 0.0 else np.inf
-    tdx = size / abs(dx) if dx != 0.0 else np.inf
-    tdy = size / abs(dy) if dy != 0.0 else np.inf
     seg = geo.seg
     circ = geo.circ
     best_kind = -1
@@ -202,25 +212,11 @@ def _cast_bitmap(ox, oy, dx, dy, tmax, bitmap, gx0, gy0, res):
     (t, cos_incidence, nx, ny) with n the normal of the face entered; t = inf for no hit.
     """
     h, w = bitmap.shape
-    tx_in, tx_out = _interval(ox, dx, gx0, gx0 + w * res)
-    ty_in, ty_out = _interval(oy, dy, gy0, gy0 + h * res)
-    t0 = max(0.0, tx_in, ty_in)
-    t1 = min(tmax, tx_out, ty_out)
+    t0, t1, x_face, ix, iy, sx, sy, tx, ty, tdx, tdy = _dda_start(ox, oy, dx, dy, tmax, gx0, gy0, res, w, h)
     if t0 > t1:
         return np.inf, 0.0, 0.0, 0.0
-    px = ox + t0 * dx
-    py = oy + t0 * dy
-    ix = min(w - 1, max(0, int(math.floor((px - gx0) / res))))
-    iy = min(h - 1, max(0, int(math.floor((py - gy0) / res))))
-    sx = 1 if dx > 0.0 else -1
-    sy = 1 if dy > 0.0 else -1
-    tx = ((ix + (1 if dx > 0.0 else 0)) * res + gx0 - ox) / dx if dx != 0.0 else np.inf
-    ty = ((iy + (1 if dy > 0.0 else 0)) * res + gy0 - oy) / dy if dy != 0.0 else np.inf
-    tdx = res / abs(dx) if dx != 0.0 else np.inf
-    tdy = res / abs(dy) if dy != 0.0 else np.inf
     # entering from outside the bitmap: the entry pixel is tested, through the face crossed
     test = t0 > 0.0
-    x_face = tx_in >= ty_in
     t_in = t0
     while True:
         if test and bitmap[iy, ix] != 0:
