@@ -34,6 +34,7 @@ bench: $(STAMP)
 	$(BIN)/python bench/bench_simulate.py
 	$(BIN)/python bench/bench_standard.py
 	$(BIN)/python bench/bench_em.py
+	$(BIN)/python bench/bench_adaptive.py
 
 lint: $(STAMP)
 	$(BIN)/ruff check .

@@ -8,7 +8,6 @@ the paper compares with), building the forward index, each EM sweep, and the res
 from __future__ import annotations
 
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -17,13 +16,13 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from aogm_cli.logfile import LogReader, write_log  # noqa: E402
+from seed_logs import for_each_seed_log  # noqa: E402
+
+from aogm_cli.logfile import LogReader  # noqa: E402
 from aogm_cli.mapping import em as E  # noqa: E402
 from aogm_cli.mapping import mapper  # noqa: E402
 from aogm_cli.mapping.forward_model import build_forward_index  # noqa: E402
 from aogm_cli.mapping.params import resolve_params  # noqa: E402
-from aogm_cli.simulation.sonar import simulate  # noqa: E402
-from aogm_cli.world.loader import load_world  # noqa: E402
 
 
 def best_of(fn, repeat=5):
@@ -35,9 +34,7 @@ def best_of(fn, repeat=5):
     return min(times), out
 
 
-def bench(world_name: str, folder: Path) -> None:
-    log_path = folder / f"{world_name}.h5"
-    write_log(log_path, simulate(load_world(ROOT / "worlds" / f"{world_name}.yaml"), seed=1))
+def bench(world_name: str, log_path: Path) -> None:
     params = resolve_params()
     run = mapper._em_inputs(log_path, params)
     grid, sensor, log_odds = run.grid, run.sensor, run.log_odds
@@ -95,9 +92,7 @@ def bench(world_name: str, folder: Path) -> None:
 
 def main() -> None:
     print("EM mapping benchmark (the ceiling is one standard pass over the same readings, same run)")
-    with tempfile.TemporaryDirectory() as folder:
-        for world in ("corridor_door", "corridor_specular"):
-            bench(world, Path(folder))
+    for_each_seed_log(bench)
 
 
 if __name__ == "__main__":

@@ -73,6 +73,10 @@ def test_adaptive_cli_writes_clusters_and_stats(door_log, tmp_path):
             assert key in f["stats"].attrs
     m = read_map_file(out)
     assert m.stats["clusters"] == int(m.clusters.max())
+    # the runtime is the sum of the phases, each recorded
+    phases = m.stats["phase_seconds"]
+    assert set(phases) == {"standard", "detector", "clusters", "index", "em"}
+    assert m.runtime_s == pytest.approx(sum(phases.values()), rel=1e-12)
 
 
 def test_bad_detector_file_exits_2(door_log, tmp_path):

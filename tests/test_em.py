@@ -132,3 +132,31 @@ def test_a_mask_keeps_only_the_readings_that_touch_it():
     mask[10 * GRID.width + 12] = True  # on the +x beam
     index = build_forward_index(rows, cols, bins, np.array([1.0, 1.0]), GRID, tpl, 4.0, FORWARD, mask=mask)
     assert np.diff(index.ptr).tolist()[1] == 0 and np.diff(index.ptr)[0] > 0
+
+
+def test_leaving_out_cells_held_free_changes_no_likelihood_and_no_flip():
+    # readings at two ranges, so that cones hold obstacles before and inside the windows
+    tpl = build_cone_templates(GRID.resolution, math.radians(20.0), 4.0)
+    ranges = np.array([1.0, 1.0, 1.5, 1.5, 0.8, np.inf])
+    rows, cols = np.full(6, 10), np.full(6, 5)
+    bins = tpl.heading_bin(np.array([0.0, 0.1, 0.0, -0.1, 0.05, 0.0]))
+    full = build_forward_index(rows, cols, bins, ranges, GRID, tpl, 4.0, FORWARD)
+    n = GRID.height * GRID.width
+    candidates = np.zeros(n, dtype=bool)
+    candidates[np.unique(full.cell)[::3]] = True  # a third of the cone cells may flip
+    fixed_occupied = np.zeros(n, dtype=bool)
+    fixed_occupied[10 * GRID.width + 12] = True  # an obstacle before the 1.0 m readings' windows
+    fixed_occupied[10 * GRID.width + 15] = True  # and one inside them
+    fixed_occupied &= ~candidates
+    held_free = ~(candidates | fixed_occupied)
+    small = build_forward_index(rows, cols, bins, ranges, GRID, tpl, 4.0, FORWARD, held_free=held_free)
+    assert small.cell.size < full.cell.size and not held_free[small.cell].any()
+    rng = np.random.default_rng(3)
+    for _ in range(5):  # any map that keeps the held-free cells free: the same likelihoods
+        m = fixed_occupied | (candidates & (rng.random(n) < 0.3))
+        assert np.array_equal(log_likelihoods(full, m), log_likelihoods(small, m))
+    a, b = fixed_occupied.copy(), fixed_occupied.copy()
+    ra = run_em(full, a, np.flatnonzero(candidates), EMConfig(forward=FORWARD))
+    rb = run_em(small, b, np.flatnonzero(candidates), EMConfig(forward=FORWARD))
+    assert np.array_equal(a, b) and ra.flips == rb.flips
+    assert np.array_equal(ra.residual, rb.residual)

@@ -13,6 +13,8 @@ from dataclasses import asdict, dataclass
 import numba
 import numpy as np
 from scipy import ndimage
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
 
 from aogm_cli.errors import InputError
 from aogm_cli.grid import GridSpec
@@ -149,9 +151,6 @@ def coupled_groups(pairs: np.ndarray, n_clusters: int) -> np.ndarray:
 
     ``pairs`` is (2, P): cluster id and reading position of every (cluster, reading) contact.
     """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
     n_readings = int(pairs[1].max()) + 1 if pairs.size else 0
     # a bipartite graph: clusters 0..n-1, readings n..n+R-1
     graph = coo_matrix((np.ones(pairs.shape[1]), (pairs[0] - 1, n_clusters + pairs[1])),

@@ -130,17 +130,20 @@ def log_likelihoods(index: ForwardIndex, occupied_flat: np.ndarray) -> np.ndarra
 
 
 @numba.njit(cache=True)
-def _fill_index(tpl, height, width, rows, cols, bins, limits, z, sigma, window, mask, out_cell, out_g, counts):
+def _fill_index(tpl, height, width, rows, cols, bins, limits, z, sigma, window, mask, held_free, out_cell, out_g,
+                counts):
     """Cone cells (flat ids) and Gaussians of every reading, packed reading after reading.
 
     With a non-empty ``mask`` (flat bool), a reading none of whose cells is in the mask gets
-    no entries (its Gaussians are never computed).
+    no entries (its Gaussians are never computed). With a non-empty ``held_free``, the cells
+    it marks are left out of every cone.
     """
     offsets = tpl[0]
     scratch_cell = np.empty(offsets[-1], dtype=np.int64)
     scratch_range = np.empty(offsets[-1], dtype=np.float64)
     norm = 1.0 / (math.sqrt(2.0 * math.pi) * sigma)
     use_mask = mask.shape[0] > 0
+    drop = held_free.shape[0] > 0
     pos = 0
     for t in range(rows.shape[0]):
         n = _cone_cells(tpl, height, width, rows[t], cols[t], bins[t], limits[t], scratch_cell, scratch_range)
@@ -153,12 +156,17 @@ def _fill_index(tpl, height, width, rows, cols, bins, limits, z, sigma, window, 
             if not touches:
                 counts[t] = 0
                 continue
+        k = 0
         for i in range(n):
-            out_cell[pos + i] = scratch_cell[i]
+            c = scratch_cell[i]
+            if drop and held_free[c]:
+                continue
+            out_cell[pos + k] = c
             u = (z[t] - scratch_range[i]) / sigma
-            out_g[pos + i] = norm * math.exp(-0.5 * u * u) if abs(u) <= window else 0.0
-        counts[t] = n
-        pos += n
+            out_g[pos + k] = norm * math.exp(-0.5 * u * u) if abs(u) <= window else 0.0
+            k += 1
+        counts[t] = k
+        pos += k
     return pos
 
 
@@ -173,6 +181,7 @@ def build_forward_index(
     config: ForwardModelConfig,
     reading_ids: np.ndarray | None = None,
     mask: np.ndarray | None = None,
+    held_free: np.ndarray | None = None,
 ) -> ForwardIndex:
     """The forward model's index for readings ``z`` taken from sensor cells (rows, cols) with
     heading bins ``bins`` (as ``cone.sensor_cells`` gives them; flat arrays of one length).
@@ -180,7 +189,10 @@ def build_forward_index(
     NaN readings are dropped; +inf is a max-range reading (cone up to z_max). Other cones end
     ``config.window`` sigmas beyond z. ``reading_ids`` name the readings (default 0..N-1).
     With ``mask`` (flat bool over the grid), only the readings whose cones touch it get
-    entries; the others stay in the index with none.
+    entries; the others stay in the index with none. ``held_free`` (flat bool) marks cells
+    that are free and stay free while the index is used (neither candidates of EM nor
+    occupied): a free cell adds nothing to any S_t, so leaving its entries out changes no
+    likelihood, and the index of a small cluster holds little more than the cluster's cells.
     """
     z = np.asarray(z, dtype=np.float64).reshape(-1)
     ids = np.arange(len(z)) if reading_ids is None else np.asarray(reading_ids).reshape(-1)
@@ -199,9 +211,10 @@ def build_forward_index(
     out_cell = np.empty(upper, dtype=np.int64)
     out_g = np.empty(upper, dtype=np.float64)
     counts = np.zeros(len(z), dtype=np.int64)
-    mask = np.zeros(0, dtype=np.bool_) if mask is None else np.ascontiguousarray(mask, dtype=np.bool_).reshape(-1)
+    mask, held_free = (np.zeros(0, dtype=np.bool_) if a is None else np.ascontiguousarray(a, dtype=np.bool_).reshape(-1)
+                       for a in (mask, held_free))
     n = _fill_index(templates.kernel_arrays, grid.height, grid.width, rows, cols, bins, limits, z_eff,
-                    config.sigma, config.window, mask, out_cell, out_g, counts)
+                    config.sigma, config.window, mask, held_free, out_cell, out_g, counts)
     ptr = np.zeros(len(z) + 1, dtype=np.int64)
     np.cumsum(counts, out=ptr[1:])
     g0, const, w = reading_constants(z, z_max, config)

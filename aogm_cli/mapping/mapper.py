@@ -269,13 +269,16 @@ def map_adaptive(path: str | Path, params: MapParams, detector_path: str | None 
     occupied = np.ascontiguousarray((log_odds > 0).reshape(-1))  # the thresholded standard map
     probability = probability_from_log_odds(log_odds, observed).reshape(-1)
     sweeps, flips = [], []
+    t_index = 0.0
     if n_clusters:
         # one index over the readings whose forward cones may reach a cluster (cone within
         # a square of its reach around the sensor cell, against each cluster's bounding box) ...
         flat_clusters = clusters.reshape(-1)
         near = readings_near_clusters(clusters, rows, cols, z, grid, sensor.max_range, config.forward)
+        # (cells outside every cluster that the standard map holds free stay free: left out)
+        in_cluster = flat_clusters > 0
         index = build_forward_index(rows[near], cols[near], bins[near], z[near], grid, templates, sensor.max_range,
-                                    config.forward, mask=flat_clusters > 0)
+                                    config.forward, mask=in_cluster, held_free=~(in_cluster | occupied))
         pairs = cluster_contacts(index.ptr, flat_clusters[index.cell])
         # ... clusters that share a reading are coupled through it: EM runs once per group of
         # coupled clusters (clusters that share none are independent, as the paper has them)
@@ -284,6 +287,7 @@ def map_adaptive(path: str | Path, params: MapParams, detector_path: str | None 
         group_of_reading[pairs[1]] = group[pairs[0] - 1]
         cell_group = np.where(flat_clusters > 0, group[np.maximum(flat_clusters, 1) - 1], -1)
         n_groups = int(group.max()) + 1
+        t_index = time.perf_counter() - t0
         for k in range(n_groups):
             cells = np.flatnonzero(cell_group == k)
             readings = np.flatnonzero((group_of_reading == k) & (np.diff(index.ptr) > 0))
@@ -297,7 +301,7 @@ def map_adaptive(path: str | Path, params: MapParams, detector_path: str | None 
             flips.append(int(sum(result.flips)))
             if progress:
                 progress("cluster group", k + 1, n_groups)
-    t_em = time.perf_counter() - t0
+    t_em = time.perf_counter() - t0 - t_index
     probability = probability.reshape(grid.shape)
     probability[~observed] = 0.5
     stats = {
@@ -309,7 +313,9 @@ def map_adaptive(path: str | Path, params: MapParams, detector_path: str | None 
         "cluster_groups": len(sweeps),
         "em_sweeps_per_group": sweeps,
         "em_flips_per_group": flips,
-        "phase_seconds": {"standard": t_standard, "detector": t_detect, "clusters": t_cluster, "em": t_em},
+        "index_entries": int(index.cell.size) if n_clusters else 0,
+        "phase_seconds": {"standard": t_standard, "detector": t_detect, "clusters": t_cluster, "index": t_index,
+                          "em": t_em},
         "detector": str(detector_path or "packaged"),
     }
     return OccupancyMap(
@@ -318,7 +324,7 @@ def map_adaptive(path: str | Path, params: MapParams, detector_path: str | None 
         observed=observed,
         mode="adaptive",
         params=_params_json(params, "adaptive") | {"detector": stats["detector"]},
-        runtime_s=t_standard + t_detect + t_cluster + t_em,
+        runtime_s=t_standard + t_detect + t_cluster + t_index + t_em,
         source_log=str(path),
         log_odds=log_odds,
         occupied=occupied.reshape(grid.shape) & observed,
