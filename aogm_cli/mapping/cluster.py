@@ -49,14 +49,14 @@ def _band(tpl, height, width, rows, cols, bins, lower, upper, cell_mask, counts,
     for t in range(rows.shape[0]):
         if not upper[t] >= 0.0:  # no band (max-range or invalid reading)
             continue
-        n = cone_cells(tpl, height, width, rows[t], cols[t], bins[t], upper[t], scratch_cell, scratch_range)
+        n = cone_cells(tpl, height, width, rows[t], cols[t], bins[t], upper[t], scratch_cell, scratch_range,
+                       lower[t])
         count = 0
         for i in range(n):
-            if scratch_range[i] >= lower[t]:
-                cell = scratch_cell[i]
-                swept[cell] = True
-                if cell_mask[cell]:
-                    count += 1
+            cell = scratch_cell[i]
+            swept[cell] = True
+            if cell_mask[cell]:
+                count += 1
         counts[t] = count
 
 

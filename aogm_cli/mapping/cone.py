@@ -169,8 +169,9 @@ def range_search(r, index_row, resolution, v, right):
 
 
 @numba.njit(cache=True)
-def cone_cells(tpl, height, width, row, col, k, limit, out_index, out_range):
-    """Compiled: write the grid cells of bin ``k``'s cone from cell (row, col), up to ``limit``.
+def cone_cells(tpl, height, width, row, col, k, limit, out_index, out_range, lower=-1.0):
+    """Compiled: write the grid cells of bin ``k``'s cone from cell (row, col), with range
+    from ``lower`` (default: all) up to ``limit``.
 
     ``tpl`` is ``ConeTemplates.kernel_arrays``. Cells are written in increasing range as flat
     indices (row * width + col) to ``out_index`` with their ranges to ``out_range``; cells
@@ -188,8 +189,17 @@ def cone_cells(tpl, height, width, row, col, k, limit, out_index, out_range):
     rng = ranges[s:e]
     dcs = dcol[s:e]
     drs = drow[s:e]
+    first = 0  # the template's first entry at range >= lower (ranges are sorted)
+    if lower > 0.0:
+        hi = e - s
+        while first < hi:
+            mid = (first + hi) >> 1
+            if rng[mid] < lower:
+                first = mid + 1
+            else:
+                hi = mid
     n = 0
-    for j in range(e - s):
+    for j in range(first, e - s):
         if rng[j] > limit:
             break
         dc = np.int64(dcs[j])

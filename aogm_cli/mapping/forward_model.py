@@ -139,32 +139,28 @@ def _fill_index(tpl, height, width, rows, cols, bins, limits, z, sigma, window, 
     it marks are left out of every cone.
     """
     offsets = tpl[0]
-    scratch_cell = np.empty(offsets[-1], dtype=np.int64)
     scratch_range = np.empty(offsets[-1], dtype=np.float64)
     norm = 1.0 / (math.sqrt(2.0 * math.pi) * sigma)
     use_mask = mask.shape[0] > 0
     drop = held_free.shape[0] > 0
     pos = 0
     for t in range(rows.shape[0]):
-        n = _cone_cells(tpl, height, width, rows[t], cols[t], bins[t], limits[t], scratch_cell, scratch_range)
-        if use_mask:
-            touches = False
-            for i in range(n):
-                if mask[scratch_cell[i]]:
-                    touches = True
-                    break
-            if not touches:
-                counts[t] = 0
-                continue
+        # the cone goes straight into the output and is compacted there
+        n = _cone_cells(tpl, height, width, rows[t], cols[t], bins[t], limits[t], out_cell[pos:], scratch_range)
+        touches = not use_mask
         k = 0
         for i in range(n):
-            c = scratch_cell[i]
+            c = out_cell[pos + i]
+            if use_mask and mask[c]:
+                touches = True
             if drop and held_free[c]:
                 continue
             out_cell[pos + k] = c
             u = (z[t] - scratch_range[i]) / sigma
             out_g[pos + k] = norm * math.exp(-0.5 * u * u) if abs(u) <= window else 0.0
             k += 1
+        if not touches:  # none of its cells in the mask: the reading keeps no entry
+            k = 0
         counts[t] = k
         pos += k
     return pos
