@@ -1,12 +1,17 @@
-"""The measurements behind the default parameters: standard and EM maps over a parameter grid.
+"""The measurements behind the default parameters: standard and EM maps over a parameter grid,
+and the adaptive mapper's trade-off between accuracy and runtime.
 
-Run as ``python bench/params_sweep.py [standard|em]``. Simulates every bundled world (seed 1)
-into a temporary folder, maps it with each parameter set and prints, per set, the accuracy and
-occupied F1 on every world (in file-name order) and how many world checks pass.
+Run as ``python bench/params_sweep.py [standard|em|adaptive]``. ``standard`` and ``em`` simulate
+every bundled world (seed 1) into a temporary folder, map it with each parameter set and print,
+per set, the accuracy and occupied F1 on every world (in file-name order) and how many world
+checks pass. ``adaptive`` maps the two seed worlds with narrower cluster rules and stricter
+detector thresholds and prints, per setting, accuracy (against EM's), the share of observed
+cells in clusters and the runtime relative to the standard map (each the best of three runs).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import sys
 import tempfile
@@ -15,6 +20,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from aogm_cli.detector.network import default_detector_path, load_detector, save_detector  # noqa: E402
 from aogm_cli.evaluation import evaluate  # noqa: E402
 from aogm_cli.logfile import read_log, write_log  # noqa: E402
 from aogm_cli.mapping import mapper  # noqa: E402
@@ -27,8 +33,52 @@ EM_GRID = [{"em": {"sigma": s, "p_hit": h, "p_max": m}}
            for s, h, m in itertools.product([0.03, 0.05], [0.3, 0.5, 0.7], [0.0, 0.1, 0.2])]
 
 
+ADAPTIVE_GRID = [({"adaptive": {"band_below": b, "near_occupied": n}}, threshold)
+                 for b, n, threshold in itertools.product([0.2, 0.1, 0.05], [1, 0], [None, 0.8, 0.9, 0.97])]
+
+
+def best_of_three(make, *args):
+    maps = [make(*args) for _ in range(3)]
+    return min(maps, key=lambda m: m.runtime_s)
+
+
+def adaptive_tradeoff(folder: Path) -> None:
+    """Accuracy against runtime for the adaptive mapper on the seed worlds."""
+    packaged = load_detector(default_detector_path())
+    logs = []
+    for name in ("corridor_door", "corridor_specular"):
+        path = folder / f"{name}.h5"
+        write_log(path, simulate(load_world(ROOT / "worlds" / f"{name}.yaml"), seed=1))
+        params = resolve_params()
+        truth = read_log(path).truth
+        standard = best_of_three(mapper.map_standard, path, params)
+        em = evaluate(mapper.map_em(path, params), truth)["accuracy"]
+        logs.append((name, path, truth, standard.runtime_s, em))
+        print(f"{name}: standard {evaluate(standard, truth)['accuracy']:.4f}, em {em:.4f} "
+              f"(the bar: adaptive >= {em - 0.005:.4f} at <= 1.5 x standard)")
+    for overrides, threshold in ADAPTIVE_GRID:
+        detector_path = None
+        if threshold is not None:
+            detector_path = str(folder / f"detector_{threshold}.h5")
+            save_detector(detector_path, dataclasses.replace(packaged, threshold=threshold))
+        params = resolve_params(None, overrides)
+        row = [f"{overrides['adaptive']} threshold {threshold or packaged.threshold:.2f}:"]
+        for name, path, truth, t_standard, em in logs:
+            m = best_of_three(mapper.map_adaptive, path, params, detector_path)
+            acc = evaluate(m, truth)["accuracy"]
+            cover = m.stats["cells_in_clusters"] / m.stats["observed_cells"]
+            flagged = m.stats["flagged_readings"] / m.stats["readings"]
+            row.append(f"{name} acc {acc:.4f} ({acc - em:+.4f} vs em) flagged {flagged:.0%} clusters {cover:.1%} "
+                       f"x{m.runtime_s / t_standard:.1f}")
+        print("  ".join(row), flush=True)
+
+
 def main() -> None:
     which = sys.argv[1] if len(sys.argv) > 1 else "em"
+    if which == "adaptive":
+        with tempfile.TemporaryDirectory() as folder:
+            adaptive_tradeoff(Path(folder))
+        return
     grid, make = (STANDARD_GRID, mapper.map_standard) if which == "standard" else (EM_GRID, mapper.map_em)
     worlds = sorted((ROOT / "worlds").glob("*.yaml"))
     print("worlds:", " ".join(w.stem for w in worlds))

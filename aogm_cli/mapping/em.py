@@ -119,14 +119,10 @@ def _rebuild_reading(t, ptr, nptr, cell, g, g0, p_hit, qpow, occupied, obs_pos, 
 @numba.njit(cache=True, inline="always")
 def _rank(obs_pos, lo, hi, e):
     """How many of the sorted entry positions obs_pos[lo:hi] lie before entry ``e``."""
-    start = lo
-    while lo < hi:
-        mid = (lo + hi) >> 1
-        if obs_pos[mid] < e:
-            lo = mid + 1
-        else:
-            hi = mid
-    return lo - start
+    k = lo
+    while k < hi and obs_pos[k] < e:  # a window holds few obstacles: a linear scan
+        k += 1
+    return k - lo
 
 
 @numba.njit(cache=True, inline="always")
