@@ -25,7 +25,7 @@ import numba
 import numpy as np
 
 from aogm_cli.errors import InputError
-from aogm_cli.mapping.cone import cone_cells as _cone_cells
+from aogm_cli.mapping.cone import cone_flat_cells, flat_offsets, range_search
 
 
 @dataclass(frozen=True)
@@ -130,39 +130,50 @@ def log_likelihoods(index: ForwardIndex, occupied_flat: np.ndarray) -> np.ndarra
 
 
 @numba.njit(cache=True)
-def _fill_index(tpl, height, width, rows, cols, bins, limits, z, sigma, window, mask, held_free, out_cell, out_g,
-                counts):
+def _fill_index(tpl, range_index, resolution, flat_offs, flat_sel, ext, height, width, rows, cols, bins, limits, z,
+                sigma, window, mask, held_free, out_cell, out_g, counts):
     """Cone cells (flat ids) and Gaussians of every reading, packed reading after reading.
 
-    With a non-empty ``mask`` (flat bool), a reading none of whose cells is in the mask gets
-    no entries (its Gaussians are never computed). With a non-empty ``held_free``, the cells
-    it marks are left out of every cone.
+    Each cone is the template's entries up to the reading's limit, in range order, with the
+    cells outside the grid left out (``cone.cone_flat_cells``, as the standard mapper walks
+    them). With a non-empty ``mask`` (flat bool), a reading none of whose cells is in the
+    mask gets no entries. With a non-empty ``held_free``, the cells it marks are left out.
     """
-    offsets = tpl[0]
-    scratch_range = np.empty(offsets[-1], dtype=np.float64)
+    offsets, _dcol, _drow, ranges, base_bin, _transform = tpl
+    ib = np.empty(offsets[-1], dtype=np.int32)
+    n_cells = height * width
     norm = 1.0 / (math.sqrt(2.0 * math.pi) * sigma)
     use_mask = mask.shape[0] > 0
     drop = held_free.shape[0] > 0
     pos = 0
     for t in range(rows.shape[0]):
-        # the cone goes straight into the output and is compacted there
-        n = _cone_cells(tpl, height, width, rows[t], cols[t], bins[t], limits[t], out_cell[pos:], scratch_range)
+        row0 = rows[t]
+        col0 = cols[t]
+        counts[t] = 0
+        if row0 + ext < 0 or row0 - ext >= height or col0 + ext < 0 or col0 - ext >= width:
+            continue  # the cone cannot touch the grid
+        k = bins[t]
+        b = base_bin[k]
+        r = ranges[offsets[b] : offsets[b + 1]]
+        m = range_search(r, range_index[b], resolution, limits[t], True)
+        cone_flat_cells(ib, tpl, flat_offs, flat_sel, k, m, row0, col0, height, width, ext)
         touches = not use_mask
-        k = 0
-        for i in range(n):
-            c = out_cell[pos + i]
+        n = 0
+        for j in range(m):
+            c = np.int64(ib[j])
+            if c >= n_cells:  # outside the grid
+                continue
             if use_mask and mask[c]:
                 touches = True
             if drop and held_free[c]:
                 continue
-            out_cell[pos + k] = c
-            u = (z[t] - scratch_range[i]) / sigma
-            out_g[pos + k] = norm * math.exp(-0.5 * u * u) if abs(u) <= window else 0.0
-            k += 1
-        if not touches:  # none of its cells in the mask: the reading keeps no entry
-            k = 0
-        counts[t] = k
-        pos += k
+            out_cell[pos + n] = c
+            u = (z[t] - r[j]) / sigma
+            out_g[pos + n] = norm * math.exp(-0.5 * u * u) if abs(u) <= window else 0.0
+            n += 1
+        if touches:  # else none of its cells is in the mask: the reading keeps no entry
+            counts[t] = n
+            pos += n
     return pos
 
 
@@ -209,8 +220,10 @@ def build_forward_index(
     counts = np.zeros(len(z), dtype=np.int64)
     mask, held_free = (np.zeros(0, dtype=np.bool_) if a is None else np.ascontiguousarray(a, dtype=np.bool_).reshape(-1)
                        for a in (mask, held_free))
-    n = _fill_index(templates.kernel_arrays, grid.height, grid.width, rows, cols, bins, limits, z_eff,
-                    config.sigma, config.window, mask, held_free, out_cell, out_g, counts)
+    flat_offs, flat_sel = flat_offsets(templates, grid.width)
+    n = _fill_index(templates.kernel_arrays, templates.range_index, templates.resolution, flat_offs, flat_sel,
+                    int(templates.extent), grid.height, grid.width, rows, cols, bins, limits, z_eff, config.sigma,
+                    config.window, mask, held_free, out_cell, out_g, counts)
     ptr = np.zeros(len(z) + 1, dtype=np.int64)
     np.cumsum(counts, out=ptr[1:])
     g0, const, w = reading_constants(z, z_max, config)

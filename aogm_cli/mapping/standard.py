@@ -53,7 +53,15 @@ import numpy as np
 from aogm_cli.grid import GridSpec
 from aogm_cli.logfile import SensorSpec
 from aogm_cli.mapping.beam import BeamMapper, is_narrow_beam
-from aogm_cli.mapping.cone import ConeTemplates, build_cone_templates, range_search, reading_geometry
+from aogm_cli.mapping.cone import (
+    SPARE_MASK,
+    ConeTemplates,
+    build_cone_templates,
+    cone_flat_cells,
+    flat_offsets,
+    range_search,
+    reading_geometry,
+)
 from aogm_cli.mapping.inverse_model import InverseModelConfig, angular_profile, update_scalars
 
 
@@ -89,33 +97,6 @@ def _entry_tables(templates: ConeTemplates, model: str, beam_width: float) -> tu
     weights.setflags(write=False)
     ranges32.setflags(write=False)
     return weights, ranges32
-
-
-@functools.lru_cache(maxsize=8)
-def flat_offsets(templates: ConeTemplates, width: int) -> tuple[np.ndarray, np.ndarray]:
-    """Template offsets as flat index offsets on a grid ``width`` cells wide, without multiplies.
-
-    Every lattice symmetry maps a stored offset (dc, dr) to +/- one of dr W + dc, dr W - dc,
-    dc W + dr, dc W - dr. Returns those four (4, E) int32 arrays and, per heading bin, which
-    one and the sign: (n_bins, 2) int64. Cached per (templates, width).
-    """
-    dc = templates.dcol.astype(np.int64)
-    dr = templates.drow.astype(np.int64)
-    offs = np.stack([dr * width + dc, dr * width - dc, dc * width + dr, dc * width - dr]).astype(np.int32)
-    # transform (a, b, c, d): dcol = a dc + b dr, drow = c dc + d dr; flat = drow W + dcol
-    a, b, c, d = templates.transform.T
-    from_dr = c == 0  # flat = d (dr W + (a/d) dc), else c (dc W + (b/c) dr)
-    which = np.where(from_dr, np.where(a == d, 0, 1), np.where(b == c, 2, 3))
-    sign = np.where(from_dr, d, c)
-    sel = np.stack([which, sign], axis=1).astype(np.int64)
-    offs.setflags(write=False)
-    sel.setflags(write=False)
-    return offs, sel
-
-
-# Cone cells outside the grid are sent to SPARE_MASK + 1 spare cells after it, in turn, so
-# that their dummy updates do not form one long chain through a single memory cell.
-SPARE_MASK = 255
 
 
 class StandardMapper:
@@ -259,7 +240,6 @@ def _standard_kernel(
     elfes = scalars[8] != 0.0
     resolution = scalars[9]
     zero = np.float32(0.0)
-    spare = height * width
     for t in range(z.size):
         zt = np.float64(z[t])
         if not zt >= 0.0:  # NaN or negative: no information
@@ -302,35 +282,8 @@ def _standard_kernel(
         c2 = inc_buf[f1:m]
         for j in range(m - f1):
             c2[j] = c_occ * w2[j]
-        # flat cell indices
         ib = idx_buf[:m]
-        base = row0 * width + col0
-        x_off = flat_offsets[flat_sel[k, 0], s : s + m]
-        positive = flat_sel[k, 1] > 0
-        if row0 - ext >= 0 and row0 + ext < height and col0 - ext >= 0 and col0 + ext < width:
-            if positive:
-                for j in range(m):
-                    ib[j] = np.int32(base + x_off[j])
-            else:
-                for j in range(m):
-                    ib[j] = np.int32(base - x_off[j])
-        else:  # near the border: cells outside the grid go to the spare cells
-            # the grid's bounds as bounds on the stored offsets (dc, dr): the transform
-            # (a, b, c, d) takes drow from c dc or d dr and dcol from a dc or b dr
-            r_lo, r_hi = -row0, height - 1 - row0
-            c_lo, c_hi = -col0, width - 1 - col0
-            if transform[k, 2] != 0:  # drow = c dc, dcol = b dr
-                dc_lo, dc_hi = (r_lo, r_hi) if transform[k, 2] > 0 else (-r_hi, -r_lo)
-                dr_lo, dr_hi = (c_lo, c_hi) if transform[k, 1] > 0 else (-c_hi, -c_lo)
-            else:  # drow = d dr, dcol = a dc
-                dr_lo, dr_hi = (r_lo, r_hi) if transform[k, 3] > 0 else (-r_hi, -r_lo)
-                dc_lo, dc_hi = (c_lo, c_hi) if transform[k, 0] > 0 else (-c_hi, -c_lo)
-            dc = dcol[s : s + m]
-            dr = drow[s : s + m]
-            sign = 1 if positive else -1
-            for j in range(m):
-                inside = (dc[j] >= dc_lo) & (dc[j] <= dc_hi) & (dr[j] >= dr_lo) & (dr[j] <= dr_hi)
-                ib[j] = np.int32(base + sign * x_off[j] if inside else spare + (j & SPARE_MASK))
+        cone_flat_cells(ib, tpl, flat_offsets, flat_sel, k, m, row0, col0, height, width, ext)
         # read-modify-write: the only loops that touch the grid
         i0 = ib[:f0]
         for j in range(f0):
