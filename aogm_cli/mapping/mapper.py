@@ -274,8 +274,8 @@ def map_adaptive(path: str | Path, params: MapParams, detector_path: str | None 
     sweeps, flips = [], []
     t_index = 0.0
     if n_clusters:
-        # one index over the readings whose forward cones may reach a cluster (cone within
-        # a square of its reach around the sensor cell, against each cluster's bounding box) ...
+        # one index over the readings whose forward cones may reach a cluster (a cluster cell
+        # within the square of the cone's reach around the sensor cell) ...
         flat_clusters = clusters.reshape(-1)
         near = readings_near_clusters(clusters, rows, cols, z, grid, sensor.max_range, config.forward)
         # (cells outside every cluster that the standard map holds free stay free: left out)
