@@ -20,7 +20,7 @@ from aogm_cli.mapfile import OccupancyMap
 from aogm_cli.mapping.beam import is_narrow_beam
 from aogm_cli.mapping.cone import build_cone_templates, flat_offsets, reading_geometry, sensor_cells
 from aogm_cli.mapping.em import EMConfig, run_em
-from aogm_cli.mapping.forward_model import build_forward_index, select_readings
+from aogm_cli.mapping.forward_model import ForwardIndex, build_forward_index, select_readings
 from aogm_cli.mapping.params import MapParams
 from aogm_cli.mapping.standard import probability_from_log_odds, standard_map, standard_templates
 
@@ -232,6 +232,18 @@ def map_em(path: str | Path, params: MapParams, progress: Progress | None = None
     )
 
 
+def cluster_forward_index(run: _EMInputs, clusters: np.ndarray, occupied: np.ndarray, forward) -> ForwardIndex:
+    """The forward index EM inside ``clusters`` (ids, 0 outside) uses: the readings whose cones
+    hold a cluster cell, each cone without the cells outside every cluster that the flat map
+    ``occupied`` holds free (they stay free, and a free cell changes no likelihood)."""
+    from aogm_cli.mapping.cluster import readings_near_clusters
+
+    near = readings_near_clusters(clusters, run.rows, run.cols, run.z, run.grid, run.sensor.max_range, forward)
+    in_cluster = clusters.reshape(-1) > 0
+    return build_forward_index(run.rows[near], run.cols[near], run.bins[near], run.z[near], run.grid, run.templates,
+                               run.sensor.max_range, forward, mask=in_cluster, held_free=~(in_cluster | occupied))
+
+
 def map_adaptive(path: str | Path, params: MapParams, detector_path: str | None = None,
                  progress: Progress | None = None) -> OccupancyMap:
     """The paper's adaptive map: standard log-odds everywhere, then EM inside each cluster
@@ -244,7 +256,6 @@ def map_adaptive(path: str | Path, params: MapParams, detector_path: str | None 
         coupled_groups,
         label_clusters,
         near_occupied,
-        readings_near_clusters,
     )
 
     detector = load_detector(detector_path or default_detector_path())
@@ -274,14 +285,9 @@ def map_adaptive(path: str | Path, params: MapParams, detector_path: str | None 
     sweeps, flips = [], []
     t_index = 0.0
     if n_clusters:
-        # one index over the readings whose forward cones may reach a cluster (a cluster cell
-        # within the square of the cone's reach around the sensor cell) ...
+        # one index over the readings whose cones hold a cluster cell ...
         flat_clusters = clusters.reshape(-1)
-        near = readings_near_clusters(clusters, rows, cols, z, grid, sensor.max_range, config.forward)
-        # (cells outside every cluster that the standard map holds free stay free: left out)
-        in_cluster = flat_clusters > 0
-        index = build_forward_index(rows[near], cols[near], bins[near], z[near], grid, templates, sensor.max_range,
-                                    config.forward, mask=in_cluster, held_free=~(in_cluster | occupied))
+        index = cluster_forward_index(run, clusters, occupied, config.forward)
         pairs = cluster_contacts(index.ptr, flat_clusters[index.cell])
         # ... clusters that share a reading are coupled through it: EM runs once per group of
         # coupled clusters (clusters that share none are independent, as the paper has them)
