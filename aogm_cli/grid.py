@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 
@@ -74,3 +75,19 @@ class GridSpec:
     def attrs(self) -> dict:
         """Attributes written beside a grid in every file: resolution and origin."""
         return {"resolution": self.resolution, "origin": np.array([self.origin_x, self.origin_y])}
+
+
+@numba.njit(cache=True, inline="always")
+def dda_steps(ix, iy, ox, oy, dx, dy, gx0, gy0, cell):
+    """Compiled Amanatides-Woo steps for the ray (ox, oy) + t (dx, dy) in column ix, row iy
+    of a grid of ``cell``-sized cells whose corner is (gx0, gy0): (step in x, step in y, t of
+    the next x face, t of the next y face, t per cell in x, t per cell in y); the t's are inf
+    along an axis the ray does not move on. Shared by the simulator, the truth raster and the
+    ray mapper, so that all three walk the grid's cells alike."""
+    sx = 1 if dx > 0.0 else -1
+    sy = 1 if dy > 0.0 else -1
+    tx = ((ix + (1 if dx > 0.0 else 0)) * cell + gx0 - ox) / dx if dx != 0.0 else np.inf
+    ty = ((iy + (1 if dy > 0.0 else 0)) * cell + gy0 - oy) / dy if dy != 0.0 else np.inf
+    tdx = cell / abs(dx) if dx != 0.0 else np.inf
+    tdy = cell / abs(dy) if dy != 0.0 else np.inf
+    return sx, sy, tx, ty, tdx, tdy

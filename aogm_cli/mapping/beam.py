@@ -38,7 +38,7 @@ import numba
 import numpy as np
 
 from aogm_cli.frames import sensor_poses
-from aogm_cli.grid import GridSpec
+from aogm_cli.grid import GridSpec, dda_steps
 from aogm_cli.logfile import SensorSpec
 from aogm_cli.mapping.inverse_model import InverseModelConfig, update_scalars
 
@@ -165,18 +165,8 @@ def _ray_start(px, py, ux, uy, begin, end, height, width, res):
     col = min(max(int(math.floor((px + ux * t_lo) / res)), 0), width - 1)
     row = min(max(int(math.floor((py + uy * t_lo) / res)), 0), height - 1)
     # t of the next column / row edge, from the sensor's own position (no drift)
-    if ux > 0.0:
-        step_col, t_max_col, t_delta_col = 1, ((col + 1) * res - px) / ux, res / ux
-    elif ux < 0.0:
-        step_col, t_max_col, t_delta_col = -1, (col * res - px) / ux, -res / ux
-    else:
-        step_col, t_max_col, t_delta_col = 0, inf, inf
-    if uy > 0.0:
-        step_row, t_max_row, t_delta_row = 1, ((row + 1) * res - py) / uy, res / uy
-    elif uy < 0.0:
-        step_row, t_max_row, t_delta_row = -1, (row * res - py) / uy, -res / uy
-    else:
-        step_row, t_max_row, t_delta_row = 0, inf, inf
+    step_col, step_row, t_max_col, t_max_row, t_delta_col, t_delta_row = dda_steps(col, row, px, py, ux, uy, 0.0,
+                                                                                   0.0, res)
     return row, col, t_lo, t_hi, t_max_row, t_max_col, t_delta_row, t_delta_col, step_row, step_col
 
 

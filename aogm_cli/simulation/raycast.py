@@ -13,6 +13,7 @@ from collections import namedtuple
 import numba
 import numpy as np
 
+from aogm_cli.grid import dda_steps
 from aogm_cli.world.geometry import Scene
 
 # The scene as the kernels take it (one argument). Thresholds are stored as cosines: a hit
@@ -104,12 +105,7 @@ def _dda_start(ox, oy, dx, dy, tmax, gx0, gy0, cell, nx, ny):
         return t0, t1, False, 0, 0, 1, 1, np.inf, np.inf, np.inf, np.inf
     ix = min(nx - 1, max(0, int(math.floor((ox + t0 * dx - gx0) / cell))))
     iy = min(ny - 1, max(0, int(math.floor((oy + t0 * dy - gy0) / cell))))
-    sx = 1 if dx > 0.0 else -1
-    sy = 1 if dy > 0.0 else -1
-    tx = ((ix + (1 if dx > 0.0 else 0)) * cell + gx0 - ox) / dx if dx != 0.0 else np.inf
-    ty = ((iy + (1 if dy > 0.0 else 0)) * cell + gy0 - oy) / dy if dy != 0.0 else np.inf
-    tdx = cell / abs(dx) if dx != 0.0 else np.inf
-    tdy = cell / abs(dy) if dy != 0.0 else np.inf
+    sx, sy, tx, ty, tdx, tdy = dda_steps(ix, iy, ox, oy, dx, dy, gx0, gy0, cell)
     return t0, t1, tx_in >= ty_in, ix, iy, sx, sy, tx, ty, tdx, tdy
 
 

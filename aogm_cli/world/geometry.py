@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from aogm_cli.grid import GridSpec
+from aogm_cli.grid import GridSpec, dda_steps
 from aogm_cli.world.config import Wall, World
 
 SQRT2 = math.sqrt(2.0)
@@ -422,12 +422,7 @@ def _mark_lines(occ, ox, oy, res, lines):
             ey = max(ey, iy)
         elif dy < 0:
             ey = min(ey, iy)
-        sx = 1 if dx > 0 else -1
-        sy = 1 if dy > 0 else -1
-        tx = ((ix + (1 if dx > 0 else 0)) * res + ox - x0) / dx if dx != 0 else np.inf
-        ty = ((iy + (1 if dy > 0 else 0)) * res + oy - y0) / dy if dy != 0 else np.inf
-        tdx = res / abs(dx) if dx != 0 else np.inf
-        tdy = res / abs(dy) if dy != 0 else np.inf
+        sx, sy, tx, ty, tdx, tdy = dda_steps(ix, iy, x0, y0, dx, dy, ox, oy, res)
         steps = abs(ex - ix) + abs(ey - iy)
         if 0 <= iy < h and 0 <= ix < w:
             occ[iy, ix] = 1
