@@ -34,7 +34,7 @@ EM_GRID = [{"em": {"sigma": s, "p_hit": h, "p_max": m}}
 
 
 ADAPTIVE_GRID = [({"adaptive": {"band_below": b, "near_occupied": n}}, threshold)
-                 for b, n, threshold in itertools.product([0.2, 0.1, 0.05], [1, 0], [None, 0.8, 0.9, 0.97])]
+                 for b, n, threshold in itertools.product([0.2, 0.1, 0.05], [1, 0], [None, 0.54, 0.8, 0.9, 0.97])]
 
 
 def best_of_three(make, *args):
