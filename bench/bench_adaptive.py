@@ -22,11 +22,11 @@ sys.path.insert(0, str(ROOT))
 
 from seed_logs import for_each_seed_log  # noqa: E402
 
-from aogm_cli.logfile import LogReader  # noqa: E402
+from aogm_cli.io.logfile import LogReader
 from aogm_cli.mapping import em as E  # noqa: E402
 from aogm_cli.mapping import mapper  # noqa: E402
-from aogm_cli.mapping.forward_model import build_forward_index  # noqa: E402
 from aogm_cli.mapping.params import resolve_params  # noqa: E402
+from aogm_cli.mapping.sensor_models.forward_model import build_forward_index  # noqa: E402
 
 
 def bench(world_name: str, log_path: Path) -> None:

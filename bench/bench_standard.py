@@ -16,11 +16,12 @@ import time
 import numba
 import numpy as np
 
-from aogm_cli.grid import GridSpec
-from aogm_cli.logfile import SensorSpec
-from aogm_cli.mapping.cone import cone_cells, reading_geometry
-from aogm_cli.mapping.inverse_model import InverseModelConfig
-from aogm_cli.mapping.standard import standard_map, standard_templates
+from aogm_cli.core.grid import GridSpec
+from aogm_cli.core.log import SensorSpec
+from aogm_cli.mapping.pipeline import cone_templates as standard_templates
+from aogm_cli.mapping.sensor_models.cone import cone_cells, reading_geometry
+from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig
+from aogm_cli.mapping.standard import standard_map
 
 CHUNK = 4096  # scans per chunk, as LogReader.chunks() yields them
 

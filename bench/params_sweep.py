@@ -20,9 +20,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from aogm_cli.detector.network import default_detector_path, load_detector, save_detector  # noqa: E402
-from aogm_cli.evaluation import evaluate  # noqa: E402
-from aogm_cli.logfile import read_log, write_log  # noqa: E402
+from aogm_cli.evaluation.metrics import evaluate  # noqa: E402
+from aogm_cli.io.detectorfile import default_detector_path, load_detector, save_detector
+from aogm_cli.io.logfile import read_log, write_log
 from aogm_cli.mapping import mapper  # noqa: E402
 from aogm_cli.mapping.params import resolve_params  # noqa: E402
 from aogm_cli.simulation.sonar import simulate  # noqa: E402

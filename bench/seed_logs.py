@@ -10,7 +10,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from aogm_cli.logfile import write_log  # noqa: E402
+from aogm_cli.io.logfile import write_log
 from aogm_cli.simulation.sonar import simulate  # noqa: E402
 from aogm_cli.world.loader import load_world  # noqa: E402
 

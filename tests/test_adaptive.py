@@ -9,11 +9,12 @@ import pytest
 from click.testing import CliRunner
 
 from aogm_cli.cli import main
-from aogm_cli.detector.network import load_detector, save_detector
-from aogm_cli.grid import GridSpec
-from aogm_cli.mapfile import read_map_file
-from aogm_cli.mapping import cluster, mapper
+from aogm_cli.core.grid import GridSpec
+from aogm_cli.io.detectorfile import load_detector, save_detector
+from aogm_cli.io.mapfile import read_map_file
+from aogm_cli.mapping import cluster
 from aogm_cli.mapping.cluster import cluster_contacts, label_clusters
+from aogm_cli.mapping.modes import map_file
 from aogm_cli.mapping.params import resolve_params
 
 WORLDS = Path(__file__).resolve().parents[1] / "worlds"
@@ -36,8 +37,8 @@ def detector_with_threshold(tmp_path, threshold):
 def test_no_flagged_reading_gives_the_standard_map(door_log, tmp_path):
     params = resolve_params()
     never = detector_with_threshold(tmp_path, 1.0)  # p(y = 1) stays below 1 on these readings
-    adaptive = mapper.map_adaptive(door_log, params, str(never))
-    standard = mapper.map_standard(door_log, params)
+    adaptive = map_file(door_log, "adaptive", params, str(never))
+    standard = map_file(door_log, "standard", params)
     assert adaptive.stats["clusters"] == 0 and adaptive.stats["flagged_readings"] == 0
     assert not adaptive.clusters.any()
     assert np.array_equal(adaptive.probability, standard.probability)
@@ -47,8 +48,8 @@ def test_no_flagged_reading_gives_the_standard_map(door_log, tmp_path):
 
 def test_em_changes_nothing_outside_the_clusters(door_log):
     params = resolve_params()
-    adaptive = mapper.map_adaptive(door_log, params)
-    standard = mapper.map_standard(door_log, params)
+    adaptive = map_file(door_log, "adaptive", params)
+    standard = map_file(door_log, "standard", params)
     outside = adaptive.clusters == 0
     assert adaptive.stats["clusters"] > 0
     assert np.array_equal(adaptive.probability[outside], standard.probability[outside])
@@ -75,7 +76,7 @@ def test_adaptive_cli_writes_clusters_and_stats(door_log, tmp_path):
     assert m.stats["clusters"] == int(m.clusters.max())
     # the runtime is the sum of the phases, each recorded
     phases = m.stats["phase_seconds"]
-    assert set(phases) == {"standard", "detector", "clusters", "index", "em"}
+    assert set(phases) == {"standard", "readings", "detector", "clusters", "index", "em"}
     assert m.runtime_s == pytest.approx(sum(phases.values()), rel=1e-12)
 
 

@@ -7,13 +7,14 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
-from aogm_cli.grid import GridSpec
-from aogm_cli.logfile import Log, SensorSpec, write_log
-from aogm_cli.mapping import mapper
+from aogm_cli.core.grid import GridSpec
+from aogm_cli.core.log import Log, SensorSpec
+from aogm_cli.io.logfile import write_log
 from aogm_cli.mapping.beam import BeamMapper, is_narrow_beam, ray_cells
-from aogm_cli.mapping.inverse_model import InverseModelConfig
+from aogm_cli.mapping.modes import map_file
 from aogm_cli.mapping.params import MapParams
-from aogm_cli.mapping.standard import StandardMapper, standard_map, standard_mapper
+from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig
+from aogm_cli.mapping.standard import StandardMapper, _mapper_for, standard_map
 
 S5 = math.sqrt(5.0)
 LASER = SensorSpec(mount=np.zeros((1, 3)), kind="laser", beam_width=math.radians(0.5), min_range=0.0, max_range=5.0)
@@ -181,8 +182,8 @@ def test_which_sensors_are_traced_as_rays():
     thin = SensorSpec(np.zeros((1, 3)), "sonar", math.radians(0.5), 0.0, 5.0)  # 4.4 cm wide at 5 m
     assert is_narrow_beam(thin, 0.05) and not is_narrow_beam(thin, 0.04)
     grid = GridSpec(0.0, 0.0, 0.05, 10, 10)
-    assert isinstance(standard_mapper(LASER, grid, CONFIG), BeamMapper)
-    assert isinstance(standard_mapper(sonar, grid, CONFIG), StandardMapper)
+    assert isinstance(_mapper_for(LASER, grid, CONFIG, None), BeamMapper)
+    assert isinstance(_mapper_for(sonar, grid, CONFIG, None), StandardMapper)
 
 
 def test_map_standard_of_a_laser_log_puts_each_endpoint_on_an_occupied_cell(tmp_path):
@@ -194,7 +195,7 @@ def test_map_standard_of_a_laser_log_puts_each_endpoint_on_an_occupied_cell(tmp_
     ranges = np.array([[1.0 / math.cos(a - p[2]) - p[0] / math.cos(a - p[2]) for a in mount[:, 2]] for p in pose])
     path = tmp_path / "laser.h5"
     write_log(path, Log(np.arange(2.0), pose, ranges.astype(np.float32), sensor, source="test"))
-    m = mapper.map_standard(path, MapParams(resolution=0.05))
+    m = map_file(path, "standard", MapParams(resolution=0.05))
     assert m.grid.origin_x == pytest.approx(-4.0) and m.grid.width >= 80  # the poses' bounds plus 4 m
     for p, row in zip(pose, ranges, strict=True):
         for a, z in zip(mount[:, 2], row, strict=True):

@@ -9,10 +9,10 @@ import pytest
 from click.testing import CliRunner
 
 from aogm_cli.cli import main
-from aogm_cli.evaluation import evaluate
-from aogm_cli.logfile import read_log
-from aogm_cli.mapfile import read_map_file
-from aogm_cli.rosmap import read_map_yaml
+from aogm_cli.evaluation.metrics import evaluate
+from aogm_cli.io.logfile import read_log
+from aogm_cli.io.map_server import read_map_yaml
+from aogm_cli.io.mapfile import read_map_file
 
 WORLDS = Path(__file__).resolve().parents[1] / "worlds"
 

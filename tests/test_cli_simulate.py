@@ -8,7 +8,8 @@ import pytest
 from click.testing import CliRunner
 
 from aogm_cli.cli import main
-from aogm_cli.logfile import CAUSE_RANDOM, CAUSE_SPECULAR, read_log
+from aogm_cli.core.log import CAUSE_RANDOM, CAUSE_SPECULAR
+from aogm_cli.io.logfile import read_log
 
 WORLDS = Path(__file__).resolve().parents[1] / "worlds"
 

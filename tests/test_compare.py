@@ -11,10 +11,10 @@ import yaml
 from click.testing import CliRunner
 
 from aogm_cli.cli import main
-from aogm_cli.evaluation import map_metrics, run_checks
-from aogm_cli.grid import GridSpec
-from aogm_cli.logfile import read_log, write_log
-from aogm_cli.mapping import mapper
+from aogm_cli.core.grid import GridSpec
+from aogm_cli.evaluation.metrics import map_metrics, run_checks
+from aogm_cli.io.logfile import read_log, write_log
+from aogm_cli.mapping import modes
 from aogm_cli.simulation.sonar import simulate
 from aogm_cli.world.loader import parse_world
 
@@ -123,8 +123,7 @@ def test_map_files_give_the_same_numbers_without_mapping(logs, compared, monkeyp
     def no_mapping(*args, **kwargs):
         raise AssertionError("a map was computed again")
 
-    monkeypatch.setattr(mapper, "map_standard", no_mapping)
-    monkeypatch.setattr(mapper, "map_em", no_mapping)
+    monkeypatch.setattr(modes, "map_file", no_mapping)
     maps = sorted((out / "maps").glob("*.h5"))
     assert len(maps) == 4
     result = run("compare", *maps, "--json", tmp_path / "again.json", "-q")  # modes from the map files
@@ -184,8 +183,7 @@ def test_malformed_gates_exit_2_before_mapping(logs, tmp_path, monkeypatch, args
     def no_mapping(*a, **k):
         raise AssertionError("mapping started")
 
-    monkeypatch.setattr(mapper, "map_standard", no_mapping)
-    monkeypatch.setattr(mapper, "map_em", no_mapping)
+    monkeypatch.setattr(modes, "map_file", no_mapping)
     result = run("compare", logs[0], *args, "--json", tmp_path / "r.json", "-q")
     assert result.exit_code == 2, result.output
     assert words in result.output and "Traceback" not in result.output
@@ -199,14 +197,6 @@ def test_figure_is_a_png(compared, tmp_path):
     data = (tmp_path / "cmp.png").read_bytes()
     assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000
     assert not list(tmp_path.glob(".*.tmp"))
-
-
-def test_adaptive_unavailable_fails_clearly_before_mapping(logs, monkeypatch):
-    monkeypatch.delattr(mapper, "map_adaptive", raising=False)
-    monkeypatch.setattr(mapper, "map_standard", lambda *a, **k: pytest.fail("mapping started"))
-    result = run("compare", logs[0], "--modes", "standard,adaptive", "-q")
-    assert result.exit_code == 1
-    assert "adaptive mapper is not available" in result.output and "--modes standard,em" in result.output
 
 
 def test_a_map_whose_log_is_missing_exits_2(compared, tmp_path):
@@ -244,24 +234,15 @@ def test_params_reach_every_mapping(logs, tmp_path):
         assert np.isfinite(f["map/probability"][...]).all()
 
 
-def test_adaptive_mode_is_wired_to_map_adaptive(logs, monkeypatch, tmp_path):
-    """A stand-in adaptive mapper: compare passes the detector, reports the mode and draws clusters."""
-    seen = {}
-    real_standard = mapper.map_standard
-
-    def fake_adaptive(path, params, detector_path=None, progress=None):
-        seen["detector"] = detector_path
-        m = real_standard(path, params)
-        clusters = np.zeros(m.grid.shape, dtype=np.int32)
-        clusters[15:25, 30:40] = 1
-        return dataclasses.replace(m, mode="adaptive", clusters=clusters, runtime_s=m.runtime_s + 10.0)
-
-    monkeypatch.setattr(mapper, "map_adaptive", fake_adaptive, raising=False)
-    result = run("compare", logs[0], "--modes", "standard,adaptive", "--detector", "det.h5", "--json", tmp_path / "r.json",
-                 "--figure", tmp_path / "f.png", "--require", "adaptive.runtime <= 1.5 * standard.runtime", "-q")
-    assert seen["detector"] == "det.h5"
-    assert result.exit_code == 1  # 10 s slower than any standard map here
-    assert "FAILED tiny_door: adaptive.runtime <= 1.5 * standard.runtime  (" in result.output
-    modes = [r["mode"] for r in json.loads((tmp_path / "r.json").read_text())["results"]]
-    assert modes == ["standard", "adaptive"]
+def test_adaptive_mode_takes_the_detector_and_draws_clusters(logs, tmp_path):
+    """compare passes --detector to the adaptive mapper (here the flag-every-reading baseline),
+    records it in the map and the JSON, and reports the mode beside standard."""
+    result = run("compare", logs[0], "--modes", "standard,adaptive", "--detector", "all", "--json", tmp_path / "r.json",
+                 "--figure", tmp_path / "f.png", "--maps-dir", tmp_path / "m", "-q")
+    assert result.exit_code == 0, result.output
+    rows = json.loads((tmp_path / "r.json").read_text())["results"]
+    assert [r["mode"] for r in rows] == ["standard", "adaptive"]
+    with h5py.File(tmp_path / "m" / "door_1_adaptive.h5") as f:
+        assert json.loads(f.attrs["params"])["detector"] == "all"
+        assert f.attrs["mode"] == "adaptive" and f["map/clusters"][...].max() > 0
     assert (tmp_path / "f.png").read_bytes()[:4] == b"\x89PNG"

@@ -5,10 +5,10 @@ import math
 import numpy as np
 import pytest
 
-from aogm_cli.errors import InputError
-from aogm_cli.grid import GridSpec
-from aogm_cli.logfile import SensorSpec
-from aogm_cli.mapping.cone import (
+from aogm_cli.core.errors import InputError
+from aogm_cli.core.grid import GridSpec
+from aogm_cli.core.log import SensorSpec
+from aogm_cli.mapping.sensor_models.cone import (
     build_cone_templates,
     cone_cells,
     heading_bins_for,

@@ -10,7 +10,9 @@ from click.testing import CliRunner
 from numpy.testing import assert_array_equal
 
 from aogm_cli.cli import main
-from aogm_cli.consistency import (
+from aogm_cli.core.grid import GridSpec
+from aogm_cli.core.log import Log, SensorSpec
+from aogm_cli.evaluation.consistency import (
     AGREES,
     CONTRADICTS,
     NOT_COUNTED,
@@ -24,9 +26,9 @@ from aogm_cli.consistency import (
     summarize,
     with_neighbours,
 )
-from aogm_cli.grid import GridSpec
-from aogm_cli.logfile import Log, LogReader, SensorSpec, write_log
-from aogm_cli.mapping.standard import standard_map, standard_templates
+from aogm_cli.io.logfile import LogReader, write_log
+from aogm_cli.mapping.pipeline import cone_templates as standard_templates
+from aogm_cli.mapping.standard import standard_map
 
 LASER = SensorSpec(np.array([[0.1, 0.0, 0.0]]), "laser", math.radians(0.5), 0.0, 4.0, 0.01)
 GRID = GridSpec(0.0, 0.0, 0.1, 6, 8)
@@ -77,9 +79,9 @@ def test_nothing_counted_gives_null_shares():
 
 
 # the sonar case of test_standard: a 30 deg cone from the centre of cell (5, 2) of an 11 x 11
-# grid at 0.1 m, pointing +x; a reading of 0.5 m (as the mapper gets it) with alpha 0.1 marks
-# cells (5, 7), (4, 7), (6, 7) occupied. Re-cast from the log, a logged 0.45 m is shifted by
-# half a cell (mapper.echo_ranges) to the same 0.5 m.
+# grid at 0.1 m, pointing +x; a logged 0.45 m (0.5 m after the half-cell shift of
+# pipeline.echo_ranges, which standard_map and the re-cast both apply) with alpha 0.1 marks
+# cells (5, 7), (4, 7), (6, 7) occupied.
 SONAR = SensorSpec(np.zeros((1, 3)), "sonar", math.radians(30.0), 0.05, 5.0)
 SONAR_GRID = GridSpec(0.0, 0.0, 0.1, 11, 11)
 ARC = [(5, 7), (4, 7), (6, 7)]
@@ -94,9 +96,9 @@ def sonar_status(occupied, free, z=0.45):
 
 
 def test_sonar_arc_is_the_standard_mappers_occupied_arc():
-    from aogm_cli.mapping.inverse_model import InverseModelConfig
+    from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig
 
-    log_odds, _ = standard_map([(0, None, np.array([[0.25, 0.55, 0.0]]), np.array([[0.5]], np.float32))],
+    log_odds, _ = standard_map([(0, None, np.array([[0.25, 0.55, 0.0]]), np.array([[0.45]], np.float32))],
                                SONAR, SONAR_GRID, InverseModelConfig(alpha=0.1, model="constant"))
     assert {(int(r), int(c)) for r, c in zip(*np.nonzero(log_odds > 0), strict=True)} == set(ARC)
 

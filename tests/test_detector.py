@@ -12,10 +12,18 @@ from click.testing import CliRunner
 from numpy.testing import assert_allclose, assert_array_equal
 
 from aogm_cli.cli import main
+from aogm_cli.core.errors import InputError
+from aogm_cli.core.grid import GridSpec
+from aogm_cli.core.log import Log, SensorSpec, Truth
 from aogm_cli.detector.features import FeatureSpec, features, neighbour_ranges
-from aogm_cli.detector.labels import LabelDefinition, depth_edge, erroneous, labels, standard_wrong, sub_ray_depths
-from aogm_cli.detector.network import Detector, Layer, default_detector_path, load_detector, save_detector
-from aogm_cli.detector.train import (
+from aogm_cli.detector.network import Detector, Layer
+from aogm_cli.io.detectorfile import default_detector_path, load_detector, save_detector
+from aogm_cli.io.logfile import write_log
+from aogm_cli.mapping.cluster import cone_bands, near_occupied
+from aogm_cli.mapping.pipeline import cone_templates as standard_templates
+from aogm_cli.mapping.pipeline import readings_of
+from aogm_cli.simulation.sonar import simulate
+from aogm_cli.training.fit import (
     Dataset,
     TrainingConfig,
     choose_threshold,
@@ -24,13 +32,7 @@ from aogm_cli.detector.train import (
     scores,
     split_by_world,
 )
-from aogm_cli.errors import InputError
-from aogm_cli.grid import GridSpec
-from aogm_cli.logfile import Log, SensorSpec, Truth, write_log
-from aogm_cli.mapping.cluster import cone_bands, near_occupied
-from aogm_cli.mapping.mapper import readings_of
-from aogm_cli.mapping.standard import standard_templates
-from aogm_cli.simulation.sonar import simulate
+from aogm_cli.training.labels import LabelDefinition, depth_edge, erroneous, labels, standard_wrong, sub_ray_depths
 from aogm_cli.world.loader import parse_world
 
 INF, NAN = np.inf, np.nan

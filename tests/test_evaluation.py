@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from aogm_cli.evaluation import map_metrics, passable, run_checks
-from aogm_cli.grid import GridSpec
+from aogm_cli.core.grid import GridSpec
+from aogm_cli.evaluation.metrics import map_metrics, passable, run_checks
 
 
 def test_metrics_on_a_hand_made_map():

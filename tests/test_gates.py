@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from aogm_cli.errors import InputError
+from aogm_cli.core.errors import InputError
 from aogm_cli.report.gates import (
     check_gate_modes,
     evaluate_gates,

@@ -12,9 +12,9 @@ from click.testing import CliRunner
 from numpy.testing import assert_allclose, assert_array_equal
 
 from aogm_cli.cli import main
-from aogm_cli.errors import InputError
-from aogm_cli.importers import clean_ranges, interpolate_poses
-from aogm_cli.importers.carmen import (
+from aogm_cli.core.errors import InputError
+from aogm_cli.io.importers import clean_ranges, interpolate_poses
+from aogm_cli.io.importers.carmen import (
     CarmenOptions,
     guess_angular_res,
     import_carmen,
@@ -22,7 +22,7 @@ from aogm_cli.importers.carmen import (
     parse_pose_line,
     parse_scan_line,
 )
-from aogm_cli.logfile import read_log
+from aogm_cli.io.logfile import read_log
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 INTEL = DATA / "carmen" / "intel-corrected.log.gz"

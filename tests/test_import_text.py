@@ -10,8 +10,8 @@ from click.testing import CliRunner
 from numpy.testing import assert_allclose, assert_array_equal
 
 from aogm_cli.cli import main
-from aogm_cli.errors import InputError
-from aogm_cli.importers.text import (
+from aogm_cli.core.errors import InputError
+from aogm_cli.io.importers.text import (
     TextOptions,
     build_text_log,
     import_text,
@@ -19,7 +19,7 @@ from aogm_cli.importers.text import (
     parse_table,
     resolve_columns,
 )
-from aogm_cli.logfile import read_log
+from aogm_cli.io.logfile import read_log
 
 HALF_PI = math.pi / 2
 LAB_CSV = [

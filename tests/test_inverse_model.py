@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from aogm_cli.errors import InputError
-from aogm_cli.mapping.inverse_model import (
+from aogm_cli.core.errors import InputError
+from aogm_cli.mapping.sensor_models.inverse_model import (
     InverseModelConfig,
     angular_profile,
     inverse_model,

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from aogm_cli.grid import GridSpec
+from aogm_cli.core.grid import GridSpec
 from aogm_cli.simulation.raycast import cast_ray, first_hit, geometry, trace_sub_ray
 from aogm_cli.world.geometry import build_scene
 from aogm_cli.world.loader import parse_world

@@ -9,9 +9,9 @@ import pytest
 from click.testing import CliRunner
 
 from aogm_cli.cli import main
-from aogm_cli.consistency import log_consistency
-from aogm_cli.logfile import LogReader
-from aogm_cli.mapfile import read_map_file
+from aogm_cli.evaluation.consistency import log_consistency
+from aogm_cli.io.logfile import LogReader
+from aogm_cli.io.mapfile import read_map_file
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 INTEL = DATA / "carmen" / "intel-corrected.log.gz"

@@ -11,9 +11,10 @@ import pytest
 from numpy.testing import assert_array_equal
 from PIL import Image
 
-from aogm_cli.errors import InputError
-from aogm_cli.grid import GridSpec
-from aogm_cli.rosmap import RosMap, pixels_to_occupancy, read_map_yaml, write_map
+from aogm_cli.core.errors import InputError
+from aogm_cli.core.grid import GridSpec
+from aogm_cli.io.map_saver import write_map
+from aogm_cli.io.map_server import RosMap, pixels_to_occupancy, read_map_yaml
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
 TESTMAPS = DATA / "ros_map_server_testmaps"
@@ -267,18 +268,18 @@ def test_write_map_leaves_nothing_on_failure(tmp_path, monkeypatch):
     assert err.value.key == "probability"
     assert list(tmp_path.iterdir()) == []
 
-    import aogm_cli.rosmap as rosmap
+    import aogm_cli.io.atomic as atomic
 
-    real = rosmap._write_temp
+    real = atomic._temporary_beside
     calls = []
 
-    def failing(target, content):
+    def failing(target):
         calls.append(target)
         if len(calls) == 3:
             raise OSError("disk full")
-        return real(target, content)
+        return real(target)
 
-    monkeypatch.setattr(rosmap, "_write_temp", failing)
+    monkeypatch.setattr(atomic, "_temporary_beside", failing)
     with pytest.raises(InputError, match="disk full"):
         write_map(tmp_path / "out", PROB, OBSERVED, 0.25, (0.0, 0.0))
     assert list(tmp_path.iterdir()) == []

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 from numpy.testing import assert_array_equal
 
-from aogm_cli.logfile import CAUSE_ECHO, CAUSE_NO_ECHO, CAUSE_RANDOM, CAUSE_SPECULAR, read_log, write_log
+from aogm_cli.core.log import CAUSE_ECHO, CAUSE_NO_ECHO, CAUSE_RANDOM, CAUSE_SPECULAR
+from aogm_cli.io.logfile import read_log, write_log
 from aogm_cli.simulation.sonar import readings_from_echoes, simulate, sub_ray_offsets
 from aogm_cli.world.config import Sonar
 from aogm_cli.world.loader import parse_world

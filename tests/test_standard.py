@@ -5,20 +5,23 @@ import math
 import numpy as np
 import pytest
 
-from aogm_cli.grid import GridSpec
-from aogm_cli.logfile import SensorSpec
-from aogm_cli.mapping.cone import build_cone_templates
-from aogm_cli.mapping.inverse_model import InverseModelConfig, inverse_model
-from aogm_cli.mapping.standard import (
-    StandardMapper,
-    flat_offsets,
-    probability_from_log_odds,
-    standard_map,
-    standard_templates,
-)
+from aogm_cli.core.grid import GridSpec
+from aogm_cli.core.log import SensorSpec
+from aogm_cli.mapping.pipeline import cone_templates as standard_templates
+from aogm_cli.mapping.sensor_models.cone import build_cone_templates
+from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig, inverse_model
+from aogm_cli.mapping.standard import StandardMapper, flat_offsets, probability_from_log_odds, standard_map
 
 BEAM = math.radians(30.0)
 ONE_SONAR = SensorSpec(mount=np.zeros((1, 3)), beam_width=BEAM, min_range=0.05, max_range=5.0)
+
+
+def kernel_map(chunks, sensor, grid, config, templates=None):
+    """The cone kernel on ranges as given (no range convention): what the hand computations assume."""
+    mapper = StandardMapper(sensor, grid, config, templates=templates)
+    for _start, _time, pose, ranges in chunks:
+        mapper.update(pose, ranges)
+    return mapper.result()
 
 
 def run(pose, ranges, sensor=ONE_SONAR, grid=None, config=None, chunk=None):
@@ -31,7 +34,7 @@ def run(pose, ranges, sensor=ONE_SONAR, grid=None, config=None, chunk=None):
         (s, np.zeros(min(chunk, len(pose) - s)), pose[s : s + chunk], ranges[s : s + chunk])
         for s in range(0, len(pose), chunk)
     ]
-    return standard_map(chunks, sensor, grid, config)
+    return kernel_map(chunks, sensor, grid, config)
 
 
 # the sensor at the centre of cell (row 5, col 2) of an 11 x 11 grid at 0.1 m, pointing +x
@@ -85,7 +88,7 @@ def test_kernel_agrees_with_the_inverse_model_function(model, octant, z):
     k = int(templates.n_bins * (octant + 0.37) / 8)  # a heading bin in every octant
     yaw = float(templates.bin_heading(k))
     pose = [5.55, 5.45, yaw]  # the centre of cell (54, 55)
-    log_odds, observed = standard_map([(0, None, np.array([pose]), np.array([[z]], np.float32))],
+    log_odds, observed = kernel_map([(0, None, np.array([pose]), np.array([[z]], np.float32))],
                                       ONE_SONAR, grid, config, templates=templates)
     drow, dcol, rng, bearing = templates.cells(k)
     want = inverse_model(rng, bearing, z, config, beam_width=BEAM, min_range=0.05, max_range=5.0)
@@ -244,3 +247,16 @@ def test_incremental_mapper_and_template_checks():
         StandardMapper(sensor, grid, InverseModelConfig(alpha=0.1), templates=build_cone_templates(0.1, BEAM, 5.0))
     with pytest.raises(ValueError):
         StandardMapper(sensor, grid, InverseModelConfig(alpha=0.1), templates=build_cone_templates(0.05, BEAM, 2.0))
+
+
+def test_standard_map_takes_logged_ranges_half_a_cell_long():
+    """The public entry point applies the range convention: a cone reading z maps as the kernel's z + res/2."""
+    pose, ranges, sensor = random_log(30)
+    grid = GridSpec(0.0, 0.0, 0.05, 200, 200)
+    config = InverseModelConfig(alpha=0.1)
+    logged = standard_map([(0, None, pose, ranges)], sensor, grid, config)
+    shifted = kernel_map([(0, None, pose, (ranges.astype(np.float64) + 0.025).astype(np.float32))], sensor, grid, config)
+    np.testing.assert_array_equal(logged[0], shifted[0])
+    np.testing.assert_array_equal(logged[1], shifted[1])
+    unshifted = kernel_map([(0, None, pose, ranges)], sensor, grid, config)
+    assert not np.array_equal(logged[0], unshifted[0])

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from aogm_cli.errors import InputError
+from aogm_cli.core.errors import InputError
 from aogm_cli.world.loader import load_world, parse_world
 
 WORLDS = sorted((Path(__file__).resolve().parents[1] / "worlds").glob("*.yaml"))

@@ -12,7 +12,7 @@ import traceback
 import click
 
 from aogm_cli import __version__
-from aogm_cli.errors import InputError
+from aogm_cli.core.errors import InputError
 
 
 class AogmGroup(click.Group):

@@ -13,7 +13,7 @@ MODE_NAMES = ("standard", "em", "adaptive")
 
 
 def _check_output_folder(path: str | None, option: str) -> None:
-    from aogm_cli.errors import InputError
+    from aogm_cli.core.errors import InputError
 
     if path is None:
         return
@@ -140,13 +140,13 @@ def compare(inputs, modes_text, detector, params_file, json_out, figure_out, map
     check_gate_modes(gates, modes)
     for mode in require_checks:
         if mode not in modes:
-            from aogm_cli.errors import InputError
+            from aogm_cli.core.errors import InputError
 
             raise InputError(f"mode {mode!r} is not among the modes compared ({', '.join(modes)})", key="--require-checks")
     _check_output_folder(json_out, "--json")
     _check_output_folder(figure_out, "--figure")
     if maps_dir and Path(maps_dir).exists() and not Path(maps_dir).is_dir():
-        from aogm_cli.errors import InputError
+        from aogm_cli.core.errors import InputError
 
         raise InputError("exists and is not a folder", file=maps_dir, key="--maps-dir")
 

@@ -23,9 +23,9 @@ def export(map_file: str, fmt: str, prefix: str, occupied_thresh: float, free_th
       aogm export door_map.h5 --format ros -o door_map
       rosrun map_server map_server door_map.yaml
     """
-    from aogm_cli.errors import InputError
-    from aogm_cli.mapfile import read_map_file
-    from aogm_cli.rosmap import write_map
+    from aogm_cli.core.errors import InputError
+    from aogm_cli.io.map_saver import write_map
+    from aogm_cli.io.mapfile import read_map_file
 
     if free_thresh > occupied_thresh:
         raise InputError(f"expected free-thresh <= occupied-thresh ({occupied_thresh:g}), got {free_thresh:g}", key="--free-thresh")

@@ -13,9 +13,9 @@ from pathlib import Path
 import click
 
 from aogm_cli.cli.options import output_option, progress_bar, quiet_option
-from aogm_cli.errors import InputError
-from aogm_cli.importers.carmen import POSE_SOURCES, SCAN_MESSAGES
-from aogm_cli.importers.text import ANGLE_UNITS, DELIMITERS, LENGTH_UNITS, TIME_UNITS
+from aogm_cli.core.errors import InputError
+from aogm_cli.io.importers.carmen import POSE_SOURCES, SCAN_MESSAGES
+from aogm_cli.io.importers.text import ANGLE_UNITS, DELIMITERS, LENGTH_UNITS, TIME_UNITS
 
 _positive = click.FloatRange(min=0, min_open=True)
 _non_negative = click.FloatRange(min=0)
@@ -137,9 +137,9 @@ def carmen(
       aogm import carmen intel-corrected.log.gz -o intel.h5
       aogm import carmen robot.log --message SONAR --pose-from odom --max-range 4.5 -o sonar.h5
     """
-    from aogm_cli.importers import file_kilobytes
-    from aogm_cli.importers.carmen import CarmenOptions, import_carmen
-    from aogm_cli.logfile import write_log
+    from aogm_cli.io.importers import file_kilobytes
+    from aogm_cli.io.importers.carmen import CarmenOptions, import_carmen
+    from aogm_cli.io.logfile import write_log
 
     options = CarmenOptions(
         message=message,
@@ -284,9 +284,9 @@ def text(
       aogm import text --ranges lab.txt --position-unit mm --range-unit mm --angle-unit deg \\
           --no-echo 5000 --max-range 4.9 --sensor-radius 0.2 -o lab.h5
     """
-    from aogm_cli.importers import file_kilobytes
-    from aogm_cli.importers.text import TextOptions, import_text
-    from aogm_cli.logfile import write_log
+    from aogm_cli.io.importers import file_kilobytes
+    from aogm_cli.io.importers.text import TextOptions, import_text
+    from aogm_cli.io.logfile import write_log
 
     if mounts_file and bearings:
         raise click.UsageError("give --bearings or --mounts, not both")

@@ -5,9 +5,9 @@ from __future__ import annotations
 import click
 
 from aogm_cli.cli.options import output_option, progress_bar, quiet_option
-from aogm_cli.mapping.em import EMConfig
-from aogm_cli.mapping.forward_model import ForwardModelConfig
-from aogm_cli.mapping.inverse_model import InverseModelConfig
+from aogm_cli.mapping.params import EMConfig
+from aogm_cli.mapping.sensor_models.forward_model import ForwardModelConfig
+from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig
 
 # (option, section, key, type, help); defaults are read from the config dataclasses
 PARAMETER_OPTIONS = (
@@ -75,8 +75,8 @@ def map_log(log_file, mode, output, png, detector, params_file, resolution, quie
     Example:
       aogm map door.h5 --mode standard -o door_map.h5 --png door_map.png
     """
-    from aogm_cli.mapfile import write_map_file
-    from aogm_cli.mapping import mapper
+    from aogm_cli.io.mapfile import write_map_file
+    from aogm_cli.mapping.modes import map_file
     from aogm_cli.mapping.params import resolve_params
 
     overrides: dict = {"resolution": resolution, "inverse_model": {}, "em": {}}
@@ -88,15 +88,10 @@ def map_log(log_file, mode, output, png, detector, params_file, resolution, quie
         def progress(phase, done, total):
             advance(1)
 
-        if mode == "standard":
-            result = mapper.map_standard(log_file, params, progress)
-        elif mode == "em":
-            result = mapper.map_em(log_file, params, progress)
-        else:
-            result = mapper.map_adaptive(log_file, params, detector, progress)
+        result = map_file(log_file, mode, params, detector, progress)
     write_map_file(output, result, inputs=(log_file,))
     if png:
-        from aogm_cli.render import render_map
+        from aogm_cli.report.picture import render_map
 
         render_map(png, result.grid, result.probability, result.observed, result.clusters,
                    title=f"{mode} map of {log_file} ({result.runtime_s:.2f} s)")

@@ -19,8 +19,8 @@ def render(map_file: str, output: str, title: str | None) -> None:
     Example:
       aogm render door_map.h5 -o door_map.png
     """
-    from aogm_cli.mapfile import read_map_file
-    from aogm_cli.render import render_map
+    from aogm_cli.io.mapfile import read_map_file
+    from aogm_cli.report.picture import render_map
 
     m = read_map_file(map_file)
     render_map(output, m.grid, m.probability, m.observed, m.clusters,

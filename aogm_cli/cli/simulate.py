@@ -23,7 +23,7 @@ def simulate(world_file: str, output: str, seed: int, png: str | None, quiet: bo
     Example:
       aogm simulate worlds/corridor_door.yaml -o door.h5 --seed 1 --png door_truth.png
     """
-    from aogm_cli.logfile import write_log
+    from aogm_cli.io.logfile import write_log
     from aogm_cli.simulation.sonar import simulate as run_simulation
     from aogm_cli.world.geometry import trajectory_poses
     from aogm_cli.world.loader import load_world
@@ -33,7 +33,7 @@ def simulate(world_file: str, output: str, seed: int, png: str | None, quiet: bo
     with progress_bar(n_scans, "simulate", quiet, unit="scan") as advance:
         log = run_simulation(world, seed=seed, progress=advance)
     if png:
-        from aogm_cli.render import render_truth
+        from aogm_cli.report.picture import render_truth
 
         render_truth(log, png, title=world.name)
     write_log(output, log)

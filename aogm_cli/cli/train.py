@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 
 from aogm_cli.cli.options import output_option, progress_bar, quiet_option, seed_option
-from aogm_cli.detector.config import TrainingConfig
+from aogm_cli.training.config import TrainingConfig
 
 
 @click.command()
@@ -61,12 +61,12 @@ def train(log_files, output, seed, validation_logs, hidden, activation, beta, ri
     Example:
       aogm train out/lab.h5 out/hall.h5 out/office.h5 --validation-logs out/office.h5 -o detector.h5 --seed 1
     """
+    from aogm_cli.core.errors import InputError
     from aogm_cli.detector.features import FeatureSpec
-    from aogm_cli.detector.labels import LabelDefinition
-    from aogm_cli.detector.network import save_detector
-    from aogm_cli.detector.train import split_by_world, train_detector
-    from aogm_cli.errors import InputError
-    from aogm_cli.logfile import read_log
+    from aogm_cli.io.detectorfile import save_detector
+    from aogm_cli.io.logfile import read_log
+    from aogm_cli.training.fit import split_by_world, train_detector
+    from aogm_cli.training.labels import LabelDefinition
 
     folder = Path(output).parent
     if not folder.is_dir():

@@ -18,7 +18,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from aogm_cli.errors import InputError
+from aogm_cli.core.errors import InputError
 
 NORMALISATION = "range / max_range clipped to [0, 1]; +inf (no echo) and NaN (invalid) -> 1.0"
 

@@ -1,26 +1,17 @@
-"""The detector file (HDF5) of CONTRACT.md and the network's inference in numpy.
+"""The cluster detector in memory and its inference in numpy (no file I/O, no scikit-learn).
 
-``load_detector`` reads and checks a file, ``save_detector`` writes one atomically, and
-``Detector.flag`` turns a (T, S) range array into the paper's y (which readings make clusters).
+``Detector.flag`` turns a (T, S) range array into the paper's y (which readings make clusters);
+``aogm_cli.io.detectorfile`` reads and writes detector files.
 """
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
-from pathlib import Path
 
-import h5py
 import numpy as np
 
-from aogm_cli import __version__
 from aogm_cli.detector.features import FeatureSpec, features
-from aogm_cli.errors import InputError
-from aogm_cli.h5file import open_input, text
-from aogm_cli.outputs import atomic_output
 
-FORMAT = "aogm-detector"
-FORMAT_VERSION = 1
 LAYOUT = "y = activation(x @ weight + bias); weight has shape (inputs, outputs); the last layer's one output is p(y = 1)"
 
 
@@ -95,99 +86,17 @@ class Detector:
         return self.flag_features(features(ranges, max_range, self.feature_spec)).reshape(ranges.shape)
 
 
-def default_detector_path() -> Path:
-    """The detector that ships inside the package (rebuilt by ``make detector``)."""
-    return Path(__file__).resolve().parent.parent / "data" / "detector.h5"
+@dataclass(frozen=True)
+class ConstantDetector:
+    """A baseline in the place of a trained detector: flags every reading or none."""
 
+    flags: bool
+    path: str | None = None
 
-def save_detector(path: str | Path, detector: Detector, inputs: tuple[str | Path, ...] = ()) -> None:
-    """Write ``detector`` to ``path`` in the format of CONTRACT.md (atomically)."""
-    with atomic_output(path, inputs=inputs) as tmp, h5py.File(tmp, "w") as f:
-        f.attrs["format"] = FORMAT
-        f.attrs["format_version"] = FORMAT_VERSION
-        f.attrs["aogm_version"] = __version__
-        f.attrs["features"] = detector.feature_spec.to_json()
-        f.attrs["metrics"] = json.dumps(detector.metrics)
-        f.attrs["threshold"] = float(detector.threshold)
-        f.attrs["labels"] = json.dumps(detector.labels)
-        f.attrs["training"] = json.dumps(detector.training)
-        group = f.create_group("layers")
-        group.attrs["layout"] = LAYOUT
-        for i, layer in enumerate(detector.layers):
-            g = group.create_group(str(i))
-            g.create_dataset("weight", data=np.asarray(layer.weight, dtype=np.float64))
-            g.create_dataset("bias", data=np.asarray(layer.bias, dtype=np.float64))
-            g.attrs["activation"] = layer.activation
+    @property
+    def name(self) -> str:
+        return "all" if self.flags else "none"
 
-
-def load_detector(path: str | Path | None = None) -> Detector:
-    """Read and check a detector file; ``None`` reads the packaged default detector."""
-    path = str(default_detector_path() if path is None else path)
-    with open_input(path, FORMAT, FORMAT_VERSION) as f:
-        return _read(f, path)
-
-
-
-
-def _json_attr(f: h5py.File, key: str, path: str, required: bool = True) -> dict:
-    if key not in f.attrs:
-        if required:
-            raise InputError("missing attribute", file=path, key=key)
-        return {}
-    try:
-        value = json.loads(text(f.attrs[key]))
-    except ValueError:
-        raise InputError("expected JSON", file=path, key=key) from None
-    if not isinstance(value, dict):
-        raise InputError(f"expected a JSON object, got {type(value).__name__}", file=path, key=key)
-    return value
-
-
-def _read(f: h5py.File, path: str) -> Detector:
-    if "features" not in f.attrs:
-        raise InputError("missing attribute", file=path, key="features")
-    spec = FeatureSpec.from_json(text(f.attrs["features"]), file=path)
-    metrics = _json_attr(f, "metrics", path)
-    labels = _json_attr(f, "labels", path, required=False)
-    training = _json_attr(f, "training", path, required=False)
-    if "threshold" not in f.attrs:
-        raise InputError("missing attribute", file=path, key="threshold")
-    try:
-        threshold = float(f.attrs["threshold"])
-    except (TypeError, ValueError):
-        raise InputError(f"expected a number, got {f.attrs['threshold']!r}", file=path, key="threshold") from None
-    if not 0.0 <= threshold <= 1.0:
-        raise InputError(f"expected a probability in [0, 1], got {threshold}", file=path, key="threshold")
-    if "layers" not in f or not isinstance(f["layers"], h5py.Group) or len(f["layers"]) == 0:
-        raise InputError("missing group (the network's weights)", file=path, key="/layers")
-    names = sorted(f["layers"].keys(), key=lambda k: int(k) if k.isdigit() else -1)
-    if names != [str(i) for i in range(len(names))]:
-        raise InputError(f"expected layers named 0..{len(names) - 1}, got {sorted(f['layers'].keys())}", file=path, key="/layers")
-    layers = []
-    inputs = spec.n_features
-    for name in names:
-        g = f["layers"][name]
-        key = f"/layers/{name}"
-        for part in ("weight", "bias"):
-            if part not in g or not isinstance(g[part], h5py.Dataset):
-                raise InputError("missing dataset", file=path, key=f"{key}/{part}")
-        weight = g["weight"][...].astype(np.float64)
-        bias = g["bias"][...].astype(np.float64)
-        if weight.ndim != 2 or weight.shape[0] != inputs:
-            raise InputError(f"expected shape ({inputs}, outputs), got {weight.shape}", file=path, key=f"{key}/weight")
-        if bias.shape != (weight.shape[1],):
-            raise InputError(f"expected shape ({weight.shape[1]},), got {bias.shape}", file=path, key=f"{key}/bias")
-        if not (np.all(np.isfinite(weight)) and np.all(np.isfinite(bias))):
-            raise InputError("expected finite numbers", file=path, key=key)
-        activation = text(g.attrs["activation"]) if "activation" in g.attrs else None
-        if activation not in ACTIVATIONS:
-            raise InputError(f"expected one of {sorted(ACTIVATIONS)}, got {activation!r}", file=path, key=f"{key}.activation")
-        layers.append(Layer(weight, bias, activation))
-        inputs = weight.shape[1]
-    if inputs != 1 or layers[-1].activation != "logistic":
-        raise InputError(
-            f"expected the last layer to have 1 logistic output, got {inputs} {layers[-1].activation}",
-            file=path,
-            key=f"/layers/{names[-1]}",
-        )
-    return Detector(tuple(layers), spec, threshold, labels, metrics, training, path)
+    def flag(self, ranges: np.ndarray, max_range: float) -> np.ndarray:
+        """(T, S) bool, all ``flags``."""
+        return np.full(np.shape(ranges), self.flags, dtype=bool)

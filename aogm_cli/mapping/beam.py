@@ -37,10 +37,10 @@ import math
 import numba
 import numpy as np
 
-from aogm_cli.frames import sensor_poses
-from aogm_cli.grid import GridSpec, dda_steps
-from aogm_cli.logfile import SensorSpec
-from aogm_cli.mapping.inverse_model import InverseModelConfig, update_scalars
+from aogm_cli.core.frames import sensor_poses
+from aogm_cli.core.grid import GridSpec, dda_steps
+from aogm_cli.core.log import SensorSpec
+from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig, update_scalars
 
 # a ray that stays in a cell for at most this many cells' length only touches it (a corner,
 # up to rounding) and leaves it alone

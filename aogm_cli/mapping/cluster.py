@@ -9,38 +9,12 @@ of one it holds occupied); 8-connected components of the union are the clusters,
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
-
 import numba
 import numpy as np
 from scipy import ndimage
 
-from aogm_cli.errors import InputError
-from aogm_cli.grid import GridSpec
-from aogm_cli.mapping.cone import cone_cells
-
-
-@dataclass(frozen=True)
-class AdaptiveConfig:
-    """Where a flagged reading's cluster cells lie: its cone from ``band_below`` metres before
-    its range to alpha beyond it (a max-range reading has no band), within ``near_occupied``
-    cells (8-connected) of a cell the standard map holds occupied."""
-
-    band_below: float = 0.2
-    # 0: only cells the standard map holds occupied (where it draws walls too thick, closes
-    # openings); measured against 1 on the nine bundled worlds (bench/params_sweep.py
-    # adaptive): as accurate or more on each, clusters 35-45% smaller, 10-20% faster
-    near_occupied: int = 0
-
-    def validate(self) -> AdaptiveConfig:
-        if not self.band_below >= 0:
-            raise InputError(f"expected a number >= 0 (m), got {self.band_below!r}", key="band_below")
-        if isinstance(self.near_occupied, bool) or not isinstance(self.near_occupied, int) or self.near_occupied < 0:
-            raise InputError(f"expected a whole number >= 0, got {self.near_occupied!r}", key="near_occupied")
-        return self
-
-    def as_dict(self) -> dict:
-        return asdict(self)
+from aogm_cli.core.grid import GridSpec
+from aogm_cli.mapping.sensor_models.cone import cone_cells
 
 
 @numba.njit(cache=True)

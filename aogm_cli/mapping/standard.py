@@ -21,7 +21,7 @@ Choices (documented)
 * Arithmetic on the grid is float32 in a fixed order, so a map made chunk by chunk equals,
   bit for bit, the map made in one pass.
 * Narrow beams (lasers, or a cone under a cell wide at max range: ``beam.is_narrow_beam``)
-  are traced as rays by ``beam.BeamMapper`` instead (``standard_mapper`` chooses); cone
+  are traced as rays by ``beam.BeamMapper`` instead (``standard_map`` chooses); cone
   templates of an 80 m laser would be enormous and a ray is the laser's own model.
 
 Speed (``bench/bench_standard.py``: about 0.7 G cone-cell updates/s, 60% of a plain
@@ -45,24 +45,27 @@ compiled scatter-add over the same cells, on one core of the development machine
 from __future__ import annotations
 
 import functools
+import time
 from collections.abc import Iterable
 
 import numba
 import numpy as np
 
-from aogm_cli.grid import GridSpec
-from aogm_cli.logfile import SensorSpec
+from aogm_cli.core.grid import GridSpec
+from aogm_cli.core.log import SensorSpec
+from aogm_cli.core.occupancy_map import OccupancyMap
 from aogm_cli.mapping.beam import BeamMapper, is_narrow_beam
-from aogm_cli.mapping.cone import (
+from aogm_cli.mapping.params import MapParams
+from aogm_cli.mapping.pipeline import Progress, Timed, cone_templates, echo_ranges, log_grid, params_json
+from aogm_cli.mapping.sensor_models.cone import (
     SPARE_MASK,
     ConeTemplates,
-    build_cone_templates,
     cone_flat_cells,
     flat_offsets,
     range_search,
     reading_geometry,
 )
-from aogm_cli.mapping.inverse_model import InverseModelConfig, angular_profile, update_scalars
+from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig, angular_profile, update_scalars
 
 
 def probability_from_log_odds(log_odds, observed=None) -> np.ndarray:
@@ -73,12 +76,6 @@ def probability_from_log_odds(log_odds, observed=None) -> np.ndarray:
     if observed is not None:
         p = np.where(np.asarray(observed, dtype=bool), p, 0.5)
     return p.astype(np.float32)
-
-
-def standard_templates(grid: GridSpec, sensor: SensorSpec) -> ConeTemplates:
-    """The cone templates the standard mapper uses: reach max_range plus one cell (for the
-    axis-offset correction)."""
-    return build_cone_templates(grid.resolution, sensor.beam_width, sensor.max_range, margin=grid.resolution)
 
 
 def angular_weights(templates: ConeTemplates, config: InverseModelConfig, beam_width: float) -> np.ndarray:
@@ -122,7 +119,7 @@ class StandardMapper:
     ):
         config.validate()
         if templates is None:
-            templates = standard_templates(grid, sensor)
+            templates = cone_templates(grid, sensor)
         if templates.resolution != grid.resolution or templates.beam_width != sensor.beam_width:
             raise ValueError("cone templates do not match the grid resolution and the sensor's beam width")
         if templates.reach < sensor.max_range:
@@ -182,11 +179,9 @@ class StandardMapper:
         return log_odds, observed
 
 
-def standard_mapper(
-    sensor: SensorSpec, grid: GridSpec, config: InverseModelConfig, *, templates: ConeTemplates | None = None
-) -> StandardMapper | BeamMapper:
-    """The standard mapper for ``sensor``: rays (``beam.BeamMapper``) when ``beam.is_narrow_beam``,
-    else cone templates (``StandardMapper``; ``templates`` is ignored for rays)."""
+def _mapper_for(sensor: SensorSpec, grid: GridSpec, config: InverseModelConfig, templates: ConeTemplates | None):
+    """Rays (``beam.BeamMapper``) when ``beam.is_narrow_beam``, else cone templates
+    (``StandardMapper``; ``templates`` is ignored for rays)."""
     if is_narrow_beam(sensor, grid.resolution):
         return BeamMapper(sensor, grid, config)
     return StandardMapper(sensor, grid, config, templates=templates)
@@ -200,17 +195,56 @@ def standard_map(
     *,
     templates: ConeTemplates | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Standard log-odds map of the scans in ``chunks``: (log_odds float32 (H, W), observed bool (H, W)).
+    """Standard log-odds map of logged scans: (log_odds float32 (H, W), observed bool (H, W)).
 
-    ``chunks`` yields (start, time, pose (T, 3), ranges (T, S)) like ``LogReader.chunks()``;
-    memory is the grid, the templates and one chunk. Unobserved cells hold the prior l0.
-    ``templates`` defaults to ``standard_templates(grid, sensor)``; narrow beams are traced as
-    rays and need none (see ``standard_mapper``).
+    ``chunks`` yields (start, time, pose (T, 3), ranges (T, S)) with ranges as logged, like
+    ``LogReader.chunks()``; the range convention is applied here: cones take
+    ``pipeline.echo_ranges``, narrow beams (rays) the logged range, whose hit is the cell
+    holding the endpoint (OctoMap's convention; on the intel log 0.892 of endpoints land on
+    occupied cells this way, 0.819 with the half-cell shift). Memory is the grid, the
+    templates and one chunk. Unobserved cells hold the prior l0. ``templates`` defaults to
+    ``pipeline.cone_templates(grid, sensor)``; rays need none.
     """
-    mapper = standard_mapper(sensor, grid, config, templates=templates)
+    narrow = is_narrow_beam(sensor, grid.resolution)
+    mapper = _mapper_for(sensor, grid, config, templates)
     for _start, _time, pose, ranges in chunks:
-        mapper.update(pose, ranges)
+        z = np.asarray(ranges, dtype=np.float32) if narrow else echo_ranges(ranges, grid).astype(np.float32)
+        mapper.update(pose, z)
     return mapper.result()
+
+
+def standard_pass(log, grid: GridSpec, params: MapParams, chunk: int = 4096, chunks=None):
+    """(log_odds, observed, seconds of mapping work) for a whole log source, streamed in chunks
+    (``log.chunks(chunk)``, or ``chunks`` when the caller already holds the scans).
+
+    One-time set-up is done before the clock starts, like compilation: the cone templates
+    and their per-grid-width tables are built (or found in their caches) by mapping no scans.
+    """
+    narrow = is_narrow_beam(log.sensor, grid.resolution)
+    templates = None if narrow else cone_templates(grid, log.sensor)
+    standard_map([], log.sensor, grid, params.inverse_model, templates=templates)
+    timed = Timed(log.chunks(chunk) if chunks is None else chunks)
+    t0 = time.perf_counter()
+    log_odds, observed = standard_map(timed, log.sensor, grid, params.inverse_model, templates=templates)
+    seconds = time.perf_counter() - t0 - timed.io_seconds
+    return log_odds, observed, seconds
+
+
+def map_standard(log, params: MapParams, progress: Progress | None = None) -> OccupancyMap:
+    """The standard mode: the log-odds map of a log source (``pipeline``), streamed."""
+    grid = log_grid(log, params.resolution)
+    log_odds, observed, seconds = standard_pass(log, grid, params)
+    return OccupancyMap(
+        grid=grid,
+        probability=probability_from_log_odds(log_odds, observed),
+        observed=observed,
+        mode="standard",
+        params=params_json(params, "standard"),
+        runtime_s=seconds,
+        source_log=log.path,
+        log_odds=log_odds,
+        stats={"scans": log.n_scans, "phase_seconds": {"standard": seconds}},
+    )
 
 
 @numba.njit(cache=True)

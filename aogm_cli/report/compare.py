@@ -17,20 +17,18 @@ import h5py
 import yaml
 
 from aogm_cli import __version__
-from aogm_cli.consistency import map_consistency
-from aogm_cli.errors import InputError
-from aogm_cli.evaluation import evaluate
-from aogm_cli.h5file import text
-from aogm_cli.logfile import LogReader, Truth
-from aogm_cli.mapfile import MODES, OccupancyMap, is_map_file, read_map_file, write_map_file
+from aogm_cli.core.errors import InputError
+from aogm_cli.core.log import Truth
+from aogm_cli.core.occupancy_map import MODES, OccupancyMap
+from aogm_cli.evaluation.consistency import map_consistency
+from aogm_cli.evaluation.metrics import evaluate
+from aogm_cli.io.atomic import atomic_output
+from aogm_cli.io.h5file import text
+from aogm_cli.io.logfile import LogReader
+from aogm_cli.io.mapfile import is_map_file, read_map_file, write_map_file
 from aogm_cli.mapping.params import MapParams
-from aogm_cli.outputs import atomic_output
 
 METRIC_KEYS = ("accuracy", "occupied_precision", "occupied_recall", "occupied_f1", "brier")
-
-
-class ModeUnavailable(RuntimeError):
-    """A mapping mode that this build cannot run (the adaptive mapper is not there yet)."""
 
 
 @dataclass
@@ -165,31 +163,12 @@ def default_modes(entries: list[LogEntry]) -> tuple[str, ...]:
     return tuple(m for m in MODES if m in present)
 
 
-def adaptive_available() -> bool:
-    from aogm_cli.mapping import mapper
-
-    return hasattr(mapper, "map_adaptive")
-
-
 def map_one(path: str, mode: str, params: MapParams, detector: str | None = None) -> OccupancyMap:
     """Map one log in one mode. A top-level function, so that worker processes can run it; the
     mapper measures ``runtime_s`` around the mapping work only, inside the process that maps."""
-    from aogm_cli.mapping import mapper
+    from aogm_cli.mapping.modes import map_file
 
-    if mode == "standard":
-        return mapper.map_standard(path, params)
-    if mode == "em":
-        return mapper.map_em(path, params)
-    if mode == "adaptive":
-        if not hasattr(mapper, "map_adaptive"):
-            raise ModeUnavailable("the adaptive mapper is not available in this build; use --modes standard,em")
-        try:
-            return mapper.map_adaptive(path, params, detector)
-        except ModuleNotFoundError as exc:
-            if not (exc.name or "").startswith("aogm_cli"):
-                raise
-            raise ModeUnavailable(f"the adaptive mapper is incomplete in this build ({exc}); use --modes standard,em") from None
-    raise ValueError(f"unknown mode {mode!r}")
+    return map_file(path, mode, params, detector)
 
 
 def maps_dir_targets(entries: list[LogEntry], modes: tuple[str, ...], maps_dir: str) -> dict[tuple[int, str], Path]:
@@ -303,8 +282,6 @@ def run_comparison(
     """Every log in every mode: given maps reused, the others computed (and written to
     ``maps_dir`` as DIR/<logstem>_<mode>.h5 when set); results per log, then per mode."""
     tasks = [(i, mode) for i, e in enumerate(entries) for mode in modes if mode not in e.maps]
-    if any(mode == "adaptive" for _, mode in tasks) and not adaptive_available():
-        raise ModeUnavailable("the adaptive mapper is not available in this build; use --modes standard,em")
     targets = maps_dir_targets(entries, modes, maps_dir) if maps_dir else {}
     if targets:
         Path(maps_dir).mkdir(parents=True, exist_ok=True)

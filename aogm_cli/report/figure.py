@@ -6,9 +6,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from aogm_cli.logfile import LogReader
-from aogm_cli.render import draw_map, draw_truth, save_figure
+from aogm_cli.io.logfile import LogReader
 from aogm_cli.report.compare import LogEntry, ModeResult
+from aogm_cli.report.picture import draw_map, draw_truth, save_figure
 
 PANEL_WIDTH = 4.0  # inches
 

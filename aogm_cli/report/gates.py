@@ -11,7 +11,7 @@ import re
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from aogm_cli.errors import InputError
+from aogm_cli.core.errors import InputError
 
 MODES = ("standard", "em", "adaptive")
 # metric names of a gate -> what they mean; runtime is runtime_s, checks_passed a fraction

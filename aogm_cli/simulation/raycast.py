@@ -13,7 +13,7 @@ from collections import namedtuple
 import numba
 import numpy as np
 
-from aogm_cli.grid import dda_steps
+from aogm_cli.core.grid import dda_steps
 from aogm_cli.world.geometry import Scene
 
 # The scene as the kernels take it (one argument). Thresholds are stored as cosines: a hit

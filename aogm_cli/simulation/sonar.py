@@ -13,8 +13,8 @@ from collections.abc import Callable
 import numba
 import numpy as np
 
-from aogm_cli.errors import InputError
-from aogm_cli.logfile import CAUSE_ECHO, CAUSE_NO_ECHO, CAUSE_RANDOM, CAUSE_SPECULAR, Log, SensorSpec, Truth
+from aogm_cli.core.errors import InputError
+from aogm_cli.core.log import CAUSE_ECHO, CAUSE_NO_ECHO, CAUSE_RANDOM, CAUSE_SPECULAR, Log, SensorSpec, Truth
 from aogm_cli.simulation.raycast import geometry, trace_sub_ray
 from aogm_cli.world.config import Sonar, World
 from aogm_cli.world.geometry import build_scene, trajectory_poses, truth_occupancy

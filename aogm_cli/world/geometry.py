@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from aogm_cli.grid import GridSpec, dda_steps
+from aogm_cli.core.grid import GridSpec, dda_steps
 from aogm_cli.world.config import Wall, World
 
 SQRT2 = math.sqrt(2.0)
@@ -205,7 +205,7 @@ def build_scene(world: World, bucket_size: float = DEFAULT_BUCKET_SIZE) -> Scene
     bitmap_grid = None
     bitmap_thr = math.pi / 2
     if world.floorplan is not None:
-        from aogm_cli.rosmap import read_map_yaml
+        from aogm_cli.io.map_server import read_map_yaml
 
         rosmap = read_map_yaml(world.floorplan.map)
         bitmap = np.ascontiguousarray(np.asarray(rosmap.data) == 100, dtype=np.uint8)
@@ -458,7 +458,7 @@ def truth_occupancy(world: World) -> tuple[GridSpec, np.ndarray]:
     if len(solids.centre_lines):
         _mark_lines(occ, ox, oy, res, solids.centre_lines)
     if world.floorplan is not None:
-        from aogm_cli.rosmap import read_map_yaml
+        from aogm_cli.io.map_server import read_map_yaml
 
         rosmap = read_map_yaml(world.floorplan.map)
         _mark_bitmap(occ, grid, np.asarray(rosmap.data) == 100, rosmap.grid_spec())

@@ -10,7 +10,8 @@ import math
 from pathlib import Path
 from typing import Any
 
-from aogm_cli.errors import InputError
+from aogm_cli.core.errors import InputError
+from aogm_cli.io.yamlfile import read_yaml
 from aogm_cli.world.config import (
     Box,
     Circle,
@@ -25,7 +26,6 @@ from aogm_cli.world.config import (
     Wall,
     World,
 )
-from aogm_cli.yamlfile import read_yaml
 
 ROUGH = Surface("rough", math.pi / 2)
 
@@ -234,7 +234,7 @@ def parse_world(raw: Any, *, file: str, text: str = "", base_dir: Path = Path(".
     if top.has("floorplan"):
         n = top.child("floorplan").mapping({"map", "surface"}, required={"map"})
         map_path = (base_dir / n.child("map").string()).resolve()
-        from aogm_cli.rosmap import read_map_yaml
+        from aogm_cli.io.map_server import read_map_yaml
 
         try:
             read_map_yaml(map_path)

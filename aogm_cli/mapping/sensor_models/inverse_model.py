@@ -42,7 +42,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from aogm_cli.errors import InputError
+from aogm_cli.core.errors import InputError
 
 MODELS = ("elfes", "constant")
 

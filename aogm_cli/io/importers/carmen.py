@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from aogm_cli.errors import InputError
-from aogm_cli.importers import Progress, clean_ranges, interpolate_poses, read_lines, wrap_angle
-from aogm_cli.logfile import Log, SensorSpec
+from aogm_cli.core.errors import InputError
+from aogm_cli.core.log import Log, SensorSpec
+from aogm_cli.io.importers import Progress, clean_ranges, interpolate_poses, read_lines, wrap_angle
 
 LASER_MESSAGES = (
     "FLASER",

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from aogm_cli.errors import InputError
+from aogm_cli.core.errors import InputError
 
 
 @dataclass(frozen=True)

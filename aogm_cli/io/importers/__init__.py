@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from aogm_cli.errors import InputError
+from aogm_cli.core.errors import InputError
 
 Progress = Callable[[int], object]
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from aogm_cli.grid import GridSpec
+from aogm_cli.core.grid import GridSpec
 
 
 def map_metrics(probability: np.ndarray, observed: np.ndarray, truth: np.ndarray) -> dict:

@@ -1,26 +1,24 @@
-"""ROS map_server maps: reads a map YAML and its image as ROS1 map_server does, and writes what
-map_saver writes (trinary PGM + YAML), plus a "scale" PNG + YAML that keeps the probabilities.
-Grids here follow the OccupancyGrid convention of aogm_cli.grid: row 0 is the lowest y.
+"""ROS map_server maps in: reads a map YAML and its image as ROS1 map_server does.
+
+Grids here follow the OccupancyGrid convention of aogm_cli.core.grid: row 0 is the lowest y;
+``aogm_cli.io.map_saver`` writes what map_saver writes.
 """
 
 from __future__ import annotations
 
-import io
 import math
 import os
 import re
-import secrets
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 from PIL import Image, UnidentifiedImageError
 
-from aogm_cli.errors import InputError
-from aogm_cli.grid import GridSpec
-from aogm_cli.yamlfile import read_yaml
+from aogm_cli.core.errors import InputError
+from aogm_cli.core.grid import GridSpec
+from aogm_cli.io.yamlfile import read_yaml
 
 MODES = ("trinary", "scale", "raw")
 
@@ -229,10 +227,10 @@ def _number(doc: dict, key: str, file: str) -> float:
     """A finite number; numeric strings are accepted, as yaml-cpp's ``as<double>`` does."""
     if key not in doc:
         raise InputError("missing key (map_server requires it)", file=file, key=key)
-    return _finite(doc[key], key, file)
+    return finite_number(doc[key], key, file)
 
 
-def _finite(value: Any, key: str, file: str | None) -> float:
+def finite_number(value: Any, key: str, file: str | None) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, str)):
         raise InputError(f"expected a number, got {_describe(value)}", file=file, key=key)
     try:
@@ -273,7 +271,7 @@ def _origin(doc: dict, file: str) -> tuple[float, float, float]:
     value = doc["origin"]
     if not isinstance(value, list) or len(value) != 3:
         raise InputError(f"expected [x, y, yaw], got {_describe(value)}", file=file, key="origin")
-    x, y, yaw = (_finite(v, f"origin[{i}]", file) for i, v in enumerate(value))
+    x, y, yaw = (finite_number(v, f"origin[{i}]", file) for i, v in enumerate(value))
     return (x, y, yaw)
 
 
@@ -420,194 +418,3 @@ def _sdl_keeps_palette(trns: bytes) -> bool:
         elif value != 255:
             return False
     return True
-
-
-# --------------------------------------------------------------------------------------------
-# Writing
-
-
-def write_map(
-    prefix: str | Path,
-    probability: np.ndarray,
-    observed: np.ndarray,
-    resolution: float,
-    origin,
-    occupied_thresh: float = 0.65,
-    free_thresh: float = 0.196,
-) -> list[Path]:
-    """Write a probability map as map_saver does, plus a "scale" PNG that keeps probabilities.
-
-    Files (returned in this order):
-
-    * ``PREFIX.pgm``: binary P5, top image row = highest y; 0 where p > occupied_thresh,
-      254 where p < free_thresh, 205 elsewhere and wherever not observed.
-    * ``PREFIX.yaml``: image, resolution, origin [x, y, yaw], negate 0, mode trinary, and
-      map_saver's fixed thresholds 0.65 / 0.196 — the PGM is already thresholded, and these
-      read 0 / 254 / 205 back as 100 / 0 / -1 whatever thresholds classified the map (a
-      comment in the file records the ones used).
-    * ``PREFIX.png``: 8-bit grey + alpha, pixel = round(255 * (1 - p)), alpha 255 where
-      observed; unobserved pixels have alpha 0 and a grey level between the thresholds.
-    * ``PREFIX_scale.yaml``: the PNG with ``mode: scale`` and the given thresholds, so
-      map_server gives 0 / 100 outside the thresholds, 1..99 between them and -1 where
-      unobserved; read back with ``read_map_yaml`` its occupancy_probability is within
-      0.5/255 of p in observed cells.
-
-    Parameters
-    ----------
-    prefix : output path without extension; its folder must exist.
-    probability : (H, W) occupancy probability in [0, 1], row 0 = lowest y.
-    observed : (H, W) bool.
-    resolution : metres per cell.
-    origin : (x, y) or (x, y, yaw) of the lower-left corner of cell [0, 0].
-
-    Every file is first written under a temporary name in the target folder and renamed at
-    the end, so a failure leaves no partial output.
-    """
-    prefix = Path(prefix)
-    folder = prefix.parent
-    if not prefix.name:
-        raise InputError("expected an output prefix (a path without extension)", file=str(prefix))
-    if not folder.is_dir():
-        raise InputError("output folder does not exist", file=str(folder))
-
-    p = np.asarray(probability, dtype=np.float64)
-    obs = np.asarray(observed)
-    if p.ndim != 2 or p.size == 0:
-        raise InputError(f"expected a non-empty (H, W) array, got shape {p.shape}", key="probability")
-    if obs.shape != p.shape:
-        raise InputError(f"expected shape {p.shape} like probability, got {obs.shape}", key="observed")
-    obs = obs.astype(bool)
-    seen = p[obs]
-    if not np.all(np.isfinite(seen)) or np.any(seen < 0.0) or np.any(seen > 1.0):
-        raise InputError("expected values in [0, 1] in every observed cell", key="probability")
-    resolution = _finite(resolution, "resolution", None)
-    if resolution <= 0:
-        raise InputError(f"expected a positive number, got {resolution!r}", key="resolution")
-    origin = list(origin)
-    if len(origin) not in (2, 3):
-        raise InputError(f"expected (x, y) or (x, y, yaw), got {origin!r}", key="origin")
-    ox, oy, oyaw = (_finite(v, f"origin[{i}]", None) for i, v in enumerate([*origin, 0.0][:3]))
-    occupied_thresh = _finite(occupied_thresh, "occupied_thresh", None)
-    free_thresh = _finite(free_thresh, "free_thresh", None)
-    if not 0.0 <= free_thresh <= occupied_thresh <= 1.0:
-        raise InputError(
-            f"expected 0 <= free_thresh <= occupied_thresh <= 1, got {free_thresh!r} and {occupied_thresh!r}",
-            key="free_thresh",
-        )
-
-    height, width = p.shape
-    pgm_path = folder / f"{prefix.name}.pgm"
-    yaml_path = folder / f"{prefix.name}.yaml"
-    png_path = folder / f"{prefix.name}.png"
-    scale_yaml_path = folder / f"{prefix.name}_scale.yaml"
-
-    trinary = np.full(p.shape, PGM_UNKNOWN, dtype=np.uint8)
-    trinary[obs & (p > occupied_thresh)] = PGM_OCCUPIED
-    trinary[obs & (p < free_thresh)] = PGM_FREE
-    header = f"P5\n# CREATOR: aogm {resolution:.3f} m/pix\n{width} {height}\n255\n".encode("ascii")
-    pgm_bytes = header + np.ascontiguousarray(trinary[::-1]).tobytes()
-
-    grey = np.full(p.shape, _unknown_grey(occupied_thresh, free_thresh), dtype=np.uint8)
-    grey[obs] = np.clip(np.rint(255.0 * (1.0 - seen)), 0, 255).astype(np.uint8)
-    alpha = np.where(obs, 255, 0).astype(np.uint8)
-    buffer = io.BytesIO()
-    Image.fromarray(np.ascontiguousarray(np.stack([grey, alpha], axis=2)[::-1])).save(buffer, format="PNG")
-    png_bytes = buffer.getvalue()
-
-    common = f"resolution: {_yaml_float(resolution)}\norigin: [{_yaml_float(ox)}, {_yaml_float(oy)}, {_yaml_float(oyaw)}]\nnegate: 0\n"
-    yaml_text = (
-        f"image: {_yaml_str(pgm_path.name)}\n{common}"
-        f"occupied_thresh: {_yaml_float(MAP_SAVER_OCCUPIED_THRESH)}\n"
-        f"free_thresh: {_yaml_float(MAP_SAVER_FREE_THRESH)}\n"
-        "mode: trinary\n"
-        f"# classified with occupied_thresh {_yaml_float(occupied_thresh)}, free_thresh {_yaml_float(free_thresh)}\n"
-    )
-    scale_text = (
-        f"image: {_yaml_str(png_path.name)}\n{common}"
-        f"occupied_thresh: {_yaml_float(occupied_thresh)}\n"
-        f"free_thresh: {_yaml_float(free_thresh)}\n"
-        "mode: scale\n"
-    )
-    outputs = [
-        (pgm_path, pgm_bytes),
-        (yaml_path, yaml_text.encode("utf-8")),
-        (png_path, png_bytes),
-        (scale_yaml_path, scale_text.encode("utf-8")),
-    ]
-    _write_all_atomically(outputs)
-    return [target for target, _ in outputs]
-
-
-def _unknown_grey(occupied_thresh: float, free_thresh: float) -> int:
-    """A grey level that map_server reads as between the thresholds (so alpha 0 gives -1):
-    128 (p about 0.5) when it fits, else the level nearest the middle of the band."""
-    levels = np.arange(256)
-    occ = (255 - levels.astype(np.float64)) / 255.0
-    fits = levels[(occ >= free_thresh) & (occ <= occupied_thresh)]
-    if fits.size == 0:
-        raise InputError(
-            f"no grey level lies between free_thresh {free_thresh!r} and occupied_thresh {occupied_thresh!r} "
-            "to mark unobserved cells in the scale PNG; widen the gap to at least 1/255",
-            key="free_thresh",
-        )
-    if 128 in fits:
-        return 128
-    middle = 255.0 * (1.0 - 0.5 * (occupied_thresh + free_thresh))
-    return int(fits[np.argmin(np.abs(fits - middle))])
-
-
-def _yaml_float(value: float) -> str:
-    """repr of a float in a form that YAML 1.1 readers (PyYAML) also read as a float."""
-    text = repr(float(value))
-    if "e" in text:
-        mantissa, exponent = text.split("e")
-        if "." not in mantissa:
-            mantissa += ".0"
-        if exponent[0] not in "+-":
-            exponent = "+" + exponent
-        text = f"{mantissa}e{exponent}"
-    return text
-
-
-def _yaml_str(name: str) -> str:
-    """``name`` bare when YAML reads it back as that same string, else double-quoted."""
-    if re.fullmatch(r"[A-Za-z0-9_][A-Za-z0-9_.+-]*", name) and yaml.safe_load(name) == name:
-        return name
-    return '"' + name.replace("\\", "\\\\").replace('"', '\\"') + '"'
-
-
-def _write_all_atomically(outputs: list[tuple[Path, bytes]]) -> None:
-    """Write every file under a temporary name in its folder, then rename them all."""
-    temps: list[tuple[Path, Path]] = []
-    try:
-        for target, content in outputs:
-            temps.append((_write_temp(target, content), target))
-        while temps:
-            temp, target = temps[0]
-            os.replace(temp, target)
-            temps.pop(0)
-    except OSError as exc:
-        raise InputError(f"cannot write the output: {exc}", file=str(outputs[0][0].parent)) from None
-    finally:
-        for temp, _ in temps:
-            try:
-                os.unlink(temp)
-            except OSError:
-                pass
-
-
-def _write_temp(target: Path, content: bytes) -> Path:
-    temp = target.parent / f".{target.name}.{secrets.token_hex(6)}.tmp"
-    fd = os.open(temp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(content)
-            fh.flush()
-            os.fsync(fh.fileno())
-    except BaseException:
-        try:
-            os.unlink(temp)
-        except OSError:
-            pass
-        raise
-    return temp

@@ -24,8 +24,8 @@ from dataclasses import asdict, dataclass
 import numba
 import numpy as np
 
-from aogm_cli.errors import InputError
-from aogm_cli.mapping.cone import cone_flat_cells, flat_offsets, range_search
+from aogm_cli.core.errors import InputError
+from aogm_cli.mapping.sensor_models.cone import cone_flat_cells, flat_offsets, range_search
 
 
 @dataclass(frozen=True)

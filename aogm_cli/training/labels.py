@@ -32,10 +32,10 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from aogm_cli.errors import InputError
-from aogm_cli.frames import sensor_poses
-from aogm_cli.grid import GridSpec
-from aogm_cli.logfile import CAUSE_ECHO, CAUSE_NO_ECHO, Log
+from aogm_cli.core.errors import InputError
+from aogm_cli.core.frames import sensor_poses
+from aogm_cli.core.grid import GridSpec
+from aogm_cli.core.log import CAUSE_ECHO, CAUSE_NO_ECHO, Log
 from aogm_cli.mapping.cluster import cone_bands
 
 SCANS_PER_BLOCK = 16  # scans per block of sub-ray sampling (bounds the memory of sub_ray_depths)
@@ -158,17 +158,17 @@ def standard_wrong(probability: np.ndarray, observed: np.ndarray, truth_occupanc
 def standard_map_wrong_arcs(log: Log, min_wrong: int) -> np.ndarray:
     """(T, S) bool, rule (c): the log's standard map (default parameters, truth grid) is wrong on
     at least ``min_wrong`` cells of the reading's occupied arc."""
-    from aogm_cli.mapping.mapper import echo_ranges, readings_of
     from aogm_cli.mapping.params import resolve_params
-    from aogm_cli.mapping.standard import probability_from_log_odds, standard_map, standard_templates
+    from aogm_cli.mapping.pipeline import cone_templates, readings_of
+    from aogm_cli.mapping.standard import probability_from_log_odds, standard_map
 
     params = resolve_params()
     truth = log.truth
     grid, sensor = truth.grid, log.sensor
-    templates = standard_templates(grid, sensor)
+    templates = cone_templates(grid, sensor)
     ranges = np.asarray(log.ranges, dtype=np.float32)
-    chunk = (0, log.time, log.pose, echo_ranges(ranges, grid).astype(np.float32))
-    log_odds, observed = standard_map([chunk], sensor, grid, params.inverse_model, templates=templates)
+    log_odds, observed = standard_map([(0, log.time, log.pose, ranges)], sensor, grid, params.inverse_model,
+                                      templates=templates)
     wrong = standard_wrong(probability_from_log_odds(log_odds, observed), observed, truth.occupancy)
     rows, cols, bins, z = readings_of(log.pose, ranges, sensor, grid, templates)
     half = 0.5 * params.inverse_model.alpha

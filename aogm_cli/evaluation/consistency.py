@@ -32,12 +32,14 @@ import numba
 import numpy as np
 from scipy import ndimage
 
-from aogm_cli.frames import sensor_poses
-from aogm_cli.grid import GridSpec
-from aogm_cli.logfile import LogReader, SensorSpec
+from aogm_cli.core.frames import sensor_poses
+from aogm_cli.core.grid import GridSpec
+from aogm_cli.core.log import SensorSpec
+from aogm_cli.io.logfile import LogReader
 from aogm_cli.mapping.beam import is_narrow_beam
-from aogm_cli.mapping.cone import ConeTemplates, range_search, reading_geometry
-from aogm_cli.mapping.inverse_model import InverseModelConfig
+from aogm_cli.mapping.pipeline import cone_templates, echo_ranges
+from aogm_cli.mapping.sensor_models.cone import ConeTemplates, range_search, reading_geometry
+from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig
 
 # per-reading status
 NOT_COUNTED = -1  # not in range (no echo, NaN, negative) or no finite pose
@@ -114,14 +116,14 @@ def arc_status(
     """Status (int8 (T, S)) of each reading's occupied arc: AGREES when some arc cell is
     believed occupied, CONTRADICTS when every arc cell in the grid is believed free, else
     UNKNOWN; NOT_COUNTED for readings out of range. The arc is the standard mapper's: template
-    cells within alpha/2 of the reading shifted by ``mapper.echo_ranges`` and the sensor's axis
+    cells within alpha/2 of the reading shifted by ``pipeline.echo_ranges`` and the sensor's axis
     offset. When ``contradicted`` (bool (H, W)) is given, the believed-free arc cells of
     readings with no believed-occupied arc cell are set in it.
     """
     rows, cols, bins, valid, offset = reading_geometry(pose, sensor, grid, templates)
     z = np.asarray(ranges, dtype=np.float64).reshape(rows.shape)
     counted = in_range(z, sensor) & valid
-    zt = np.where(counted, z + 0.5 * grid.resolution, np.nan)  # as mapper.echo_ranges
+    zt = np.where(counted, echo_ranges(z, grid), np.nan)
     if contradicted is None:
         contradicted = np.zeros(grid.shape, dtype=bool)
     status = np.empty(z.size, dtype=np.int8)
@@ -230,9 +232,7 @@ def log_consistency(reader: LogReader, grid: GridSpec, probability, observed, al
     contradicted = np.zeros(grid.shape, dtype=bool)
     narrow = is_narrow_beam(sensor, grid.resolution)
     if not narrow:
-        from aogm_cli.mapping.standard import standard_templates
-
-        templates = standard_templates(grid, sensor)
+        templates = cone_templates(grid, sensor)
         alpha = InverseModelConfig().alpha if alpha is None else float(alpha)
     statuses, statuses_8 = [], []
     for _start, _time, pose, ranges in reader.chunks(chunk):

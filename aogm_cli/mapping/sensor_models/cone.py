@@ -39,9 +39,9 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from aogm_cli.errors import InputError
-from aogm_cli.frames import sensor_poses
-from aogm_cli.grid import GridSpec
+from aogm_cli.core.errors import InputError
+from aogm_cli.core.frames import sensor_poses
+from aogm_cli.core.grid import GridSpec
 
 TWO_PI = 2.0 * math.pi
 _TOL = 1e-9  # slack of the inclusion tests, so that cells exactly on the cone's edge are kept

@@ -8,80 +8,20 @@ from __future__ import annotations
 
 import json
 from collections.abc import Iterator
-from dataclasses import dataclass
 from pathlib import Path
 
 import h5py
 import numpy as np
 
 from aogm_cli import __version__
-from aogm_cli.errors import InputError
-from aogm_cli.grid import GridSpec
-from aogm_cli.h5file import open_input, text
-from aogm_cli.outputs import atomic_output
+from aogm_cli.core.errors import InputError
+from aogm_cli.core.grid import GridSpec
+from aogm_cli.core.log import Log, SensorSpec, Truth
+from aogm_cli.io.atomic import atomic_output
+from aogm_cli.io.h5file import open_input, text
 
 FORMAT = "aogm-log"
 FORMAT_VERSION = 1
-
-CAUSE_ECHO = 0  # echo of the nearest surface in the cone
-CAUSE_NO_ECHO = 1  # no echo: a max-range reading
-CAUSE_RANDOM = 2  # a random reading
-CAUSE_SPECULAR = 3  # specular reflection or multipath: a reading too long
-
-
-@dataclass(frozen=True)
-class SensorSpec:
-    """The range sensors of a log: mounts (S, 3) in the robot frame and the beam's properties."""
-
-    mount: np.ndarray
-    kind: str = "sonar"
-    beam_width: float = np.radians(30.0)
-    min_range: float = 0.15
-    max_range: float = 5.0
-    noise_sigma: float = 0.02
-
-    @property
-    def count(self) -> int:
-        return int(self.mount.shape[0])
-
-    def as_dict(self) -> dict:
-        return {
-            "kind": self.kind,
-            "beam_width": float(self.beam_width),
-            "min_range": float(self.min_range),
-            "max_range": float(self.max_range),
-            "noise_sigma": float(self.noise_sigma),
-        }
-
-
-@dataclass(frozen=True)
-class Truth:
-    """Ground truth of a simulated log: occupancy on ``grid``, and per reading its cause and ideal range."""
-
-    grid: GridSpec
-    occupancy: np.ndarray  # (H, W) uint8
-    cause: np.ndarray  # (T, S) int8
-    ideal_range: np.ndarray  # (T, S) float32
-    world: str = ""  # the world file's text
-    checks: tuple[dict, ...] = ()  # JSON-able checks, as in the world file
-
-
-@dataclass(frozen=True)
-class Log:
-    """A whole log in memory: scan times (T,), poses (T, 3), ranges (T, S) and the sensor."""
-
-    time: np.ndarray
-    pose: np.ndarray
-    ranges: np.ndarray
-    sensor: SensorSpec
-    source: str
-    truth: Truth | None = None
-    seed: int | None = None
-
-    @property
-    def n_scans(self) -> int:
-        return int(self.time.shape[0])
-
 
 def write_log(path: str | Path, log: Log) -> None:
     """Write ``log`` to ``path`` in the format of CONTRACT.md (atomically)."""

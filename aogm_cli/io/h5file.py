@@ -10,7 +10,7 @@ from pathlib import Path
 
 import h5py
 
-from aogm_cli.errors import InputError
+from aogm_cli.core.errors import InputError
 
 
 def text(value) -> str:

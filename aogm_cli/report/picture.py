@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from aogm_cli.grid import GridSpec
-from aogm_cli.outputs import atomic_output
+from aogm_cli.core.grid import GridSpec
+from aogm_cli.io.atomic import atomic_output
 
 UNKNOWN_RGB = (0.80, 0.87, 0.96)
 CLUSTER_COLOUR = "#ff7f0e"

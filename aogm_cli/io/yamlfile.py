@@ -10,7 +10,7 @@ from typing import Any
 
 import yaml
 
-from aogm_cli.errors import InputError
+from aogm_cli.core.errors import InputError
 
 
 def read_yaml(path: str | Path) -> tuple[str, Any]:

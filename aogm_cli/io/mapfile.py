@@ -6,40 +6,20 @@
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import h5py
 import numpy as np
 
 from aogm_cli import __version__
-from aogm_cli.errors import InputError
-from aogm_cli.grid import GridSpec
-from aogm_cli.h5file import open_input, text
-from aogm_cli.outputs import atomic_output
+from aogm_cli.core.errors import InputError
+from aogm_cli.core.grid import GridSpec
+from aogm_cli.core.occupancy_map import OccupancyMap
+from aogm_cli.io.atomic import atomic_output
+from aogm_cli.io.h5file import open_input, text
 
 FORMAT = "aogm-map"
 FORMAT_VERSION = 1
-MODES = ("standard", "em", "adaptive")
-
-
-@dataclass
-class OccupancyMap:
-    """A finished map: probabilities and observed mask on ``grid``, plus mode-specific layers."""
-
-    grid: GridSpec
-    probability: np.ndarray  # (H, W) float32, 0.5 where unobserved
-    observed: np.ndarray  # (H, W) bool
-    mode: str
-    params: dict = field(default_factory=dict)
-    runtime_s: float = 0.0
-    source_log: str = ""
-    log_odds: np.ndarray | None = None  # standard, adaptive
-    occupied: np.ndarray | None = None  # em, adaptive
-    clusters: np.ndarray | None = None  # adaptive
-    stats: dict = field(default_factory=dict)
-
-
 def write_map_file(path: str | Path, m: OccupancyMap, inputs: tuple = ()) -> None:
     """Write ``m`` to ``path`` (atomically; refuses to overwrite one of ``inputs``)."""
     with atomic_output(path, inputs) as tmp, h5py.File(tmp, "w") as f:

@@ -15,9 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from aogm_cli.errors import InputError
-from aogm_cli.importers import Progress, clean_ranges, interpolate_poses, read_lines, wrap_angle
-from aogm_cli.logfile import Log, SensorSpec
+from aogm_cli.core.errors import InputError
+from aogm_cli.core.log import Log, SensorSpec
+from aogm_cli.io.importers import Progress, clean_ranges, interpolate_poses, read_lines, wrap_angle
 
 LENGTH_UNITS = {"mm": 0.001, "cm": 0.01, "m": 1.0}
 ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180, "ddeg": math.pi / 1800}  # ddeg: tenths of a degree

@@ -12,12 +12,12 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from aogm_cli.detector.config import TrainingConfig
+from aogm_cli.core.errors import InputError
+from aogm_cli.core.log import Log
 from aogm_cli.detector.features import FeatureSpec, features
-from aogm_cli.detector.labels import LabelDefinition, labels
 from aogm_cli.detector.network import Detector, Layer
-from aogm_cli.errors import InputError
-from aogm_cli.logfile import Log
+from aogm_cli.training.config import TrainingConfig
+from aogm_cli.training.labels import LabelDefinition, labels
 
 THRESHOLDS = np.round(np.arange(0.05, 0.951, 0.01), 2)  # candidate flag thresholds
 

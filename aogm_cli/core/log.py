@@ -1,0 +1,89 @@
+"""A log in memory: the range sensors, the scans and, for simulated logs, the truth.
+
+Domain types only (no file I/O); ``aogm_cli.io.logfile`` reads and writes them as HDF5.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from aogm_cli.core.grid import GridSpec
+
+CAUSE_ECHO = 0  # echo of the nearest surface in the cone
+CAUSE_NO_ECHO = 1  # no echo: a max-range reading
+CAUSE_RANDOM = 2  # a random reading
+CAUSE_SPECULAR = 3  # specular reflection or multipath: a reading too long
+
+
+@dataclass(frozen=True)
+class SensorSpec:
+    """The range sensors of a log: mounts (S, 3) in the robot frame and the beam's properties."""
+
+    mount: np.ndarray
+    kind: str = "sonar"
+    beam_width: float = np.radians(30.0)
+    min_range: float = 0.15
+    max_range: float = 5.0
+    noise_sigma: float = 0.02
+
+    @property
+    def count(self) -> int:
+        return int(self.mount.shape[0])
+
+    def as_dict(self) -> dict:
+        return {
+            "kind": self.kind,
+            "beam_width": float(self.beam_width),
+            "min_range": float(self.min_range),
+            "max_range": float(self.max_range),
+            "noise_sigma": float(self.noise_sigma),
+        }
+
+
+@dataclass(frozen=True)
+class Truth:
+    """Ground truth of a simulated log: occupancy on ``grid``, and per reading its cause and ideal range."""
+
+    grid: GridSpec
+    occupancy: np.ndarray  # (H, W) uint8
+    cause: np.ndarray  # (T, S) int8
+    ideal_range: np.ndarray  # (T, S) float32
+    world: str = ""  # the world file's text
+    checks: tuple[dict, ...] = ()  # JSON-able checks, as in the world file
+
+
+@dataclass(frozen=True)
+class Log:
+    """A whole log in memory: scan times (T,), poses (T, 3), ranges (T, S) and the sensor."""
+
+    time: np.ndarray
+    pose: np.ndarray
+    ranges: np.ndarray
+    sensor: SensorSpec
+    source: str
+    truth: Truth | None = None
+    seed: int | None = None
+
+    path = ""  # an in-memory log has no file (a log source, like ``io.logfile.LogReader``)
+
+    @property
+    def n_scans(self) -> int:
+        return int(self.time.shape[0])
+
+    def truth_grid(self) -> GridSpec | None:
+        return None if self.truth is None else self.truth.grid
+
+    def poses(self) -> np.ndarray:
+        return self.pose
+
+    def chunks(self, size: int = 4096) -> Iterator[tuple[int, np.ndarray, np.ndarray, np.ndarray]]:
+        """(first scan index, time, pose, ranges) for consecutive chunks of ``size`` scans."""
+        for start in range(0, self.n_scans, size):
+            stop = min(self.n_scans, start + size)
+            yield start, self.time[start:stop], self.pose[start:stop], self.ranges[start:stop]
+
+    def read(self) -> Log:
+        return self
