@@ -93,7 +93,8 @@ def test_json_follows_the_contract_and_matches_the_map_files(logs, compared):
         (str(logs[0]), "standard"), (str(logs[0]), "em"), (str(logs[1]), "standard"), (str(logs[1]), "em")
     ]
     for r in data["results"]:
-        assert set(r) == {"log", "world", "mode", "runtime_s", "metrics"}
+        assert set(r) == {"log", "world", "mode", "runtime_s", "metrics", "params", "detector"}
+        assert r["params"]["mode"] == r["mode"] and r["detector"] is None  # no adaptive map here
         assert r["world"] == "tiny_door"
         assert set(r["metrics"]) == set(METRICS) | {"checks"}
         stem = r["log"].rsplit("/", 1)[-1][:-3]

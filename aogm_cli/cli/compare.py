@@ -7,19 +7,30 @@ from pathlib import Path
 
 import click
 
-from aogm_cli.cli.options import progress_bar, quiet_option
+from aogm_cli.cli.options import (
+    detector_file,
+    detector_option,
+    mode_choice,
+    modes_option,
+    params_option,
+    progress_bar,
+    quiet_option,
+)
+from aogm_cli.io.outputs import resolve_outputs
 
-MODE_NAMES = ("standard", "em", "adaptive")
 
+def _check_outputs(inputs, entries, modes, params_file, detector, json_out, figure_out, maps_dir) -> None:
+    """Every output (--json, --figure, the --maps-dir maps to write) against every input: the
+    arguments, the logs that map files name, --params and --detector."""
+    from aogm_cli.report.compare import maps_dir_targets
 
-def _check_output_folder(path: str | None, option: str) -> None:
-    from aogm_cli.core.errors import InputError
-
-    if path is None:
-        return
-    folder = Path(path).parent
-    if not folder.is_dir():
-        raise InputError(f"the output folder {str(folder)!r} does not exist", file=path, key=option)
+    targets = maps_dir_targets(entries, modes, maps_dir) if maps_dir else {}
+    sources = [e.path for e in entries]
+    resolve_outputs(
+        [*inputs, *sources, params_file, detector_file(detector, modes)],
+        [("--json", json_out), ("--figure", figure_out), *(("--maps-dir", t) for t in targets.values())],
+        [("--maps-dir", maps_dir)],
+    )
 
 
 def _print_table(results, labels, quiet: bool) -> None:
@@ -79,11 +90,9 @@ def _source(r) -> str:
 
 @click.command("compare")
 @click.argument("inputs", nargs=-1, required=True, metavar="LOG.h5|MAP.h5 ...", type=click.Path(dir_okay=False))
-@click.option("--modes", "modes_text",
-              help="Comma-separated modes to compare.  [default: standard,em,adaptive; with map files only, their modes]")
-@click.option("--detector", type=click.Path(dir_okay=False), help="Detector file for adaptive mode (default: the packaged one).")
-@click.option("--params", "params_file", type=click.Path(dir_okay=False),
-              help="YAML with sections inverse_model:, em:, adaptive: and key resolution:, used by every mapping.")
+@modes_option
+@detector_option
+@params_option
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), help="Write the results as JSON (CONTRACT.md shape).")
 @click.option("--figure", "figure_out", type=click.Path(dir_okay=False),
               help="Write a PNG: one row per log; truth and each mode's map, titled with accuracy and runtime.")
@@ -91,7 +100,7 @@ def _source(r) -> str:
               help="Also write every map computed here as DIR/<logstem>_<mode>.h5, to pass back in later.")
 @click.option("--require", "requires", multiple=True, metavar="EXPR",
               help="Gate, evaluated per log, e.g. 'adaptive.accuracy >= em.accuracy - 0.005'. Repeatable.")
-@click.option("--require-checks", multiple=True, type=click.Choice(MODE_NAMES),
+@click.option("--require-checks", multiple=True, type=mode_choice,
               help="Gate: every world check of every log passes in this mode. Repeatable.")
 @click.option("--jobs", "-j", type=click.IntRange(min=1), default=1, show_default=True,
               help="Map in this many worker processes (see Timings above).")
@@ -131,7 +140,7 @@ def compare(inputs, modes_text, detector, params_file, json_out, figure_out, map
     """
     from aogm_cli.mapping.params import resolve_params
     from aogm_cli.report import compare as lib
-    from aogm_cli.report.gates import check_gate_modes, evaluate_gates, evaluate_required_checks, parse_gate
+    from aogm_cli.report.gates import check_gate_modes, parse_gate
 
     gates = [parse_gate(text) for text in requires]  # malformed -> exit 2 before any work
     params = resolve_params(params_file)
@@ -143,17 +152,12 @@ def compare(inputs, modes_text, detector, params_file, json_out, figure_out, map
             from aogm_cli.core.errors import InputError
 
             raise InputError(f"mode {mode!r} is not among the modes compared ({', '.join(modes)})", key="--require-checks")
-    _check_output_folder(json_out, "--json")
-    _check_output_folder(figure_out, "--figure")
-    if maps_dir and Path(maps_dir).exists() and not Path(maps_dir).is_dir():
-        from aogm_cli.core.errors import InputError
-
-        raise InputError("exists and is not a folder", file=maps_dir, key="--maps-dir")
+    _check_outputs(inputs, entries, modes, params_file, detector, json_out, figure_out, maps_dir)
 
     n_tasks = sum(mode not in e.maps for e in entries for mode in modes)
     with progress_bar(n_tasks, "compare", quiet, unit="map") as advance:
         results = lib.run_comparison(
-            entries, modes, params, detector=detector, jobs=jobs, maps_dir=maps_dir, inputs=tuple(inputs),
+            entries, modes, params, detector=detector, jobs=jobs, maps_dir=maps_dir,
             on_map=lambda i, mode, m: advance(1),
         )
 
@@ -165,7 +169,7 @@ def compare(inputs, modes_text, detector, params_file, json_out, figure_out, map
     labels = lib.log_labels(entries)
     _print_table(results, labels, quiet)
     if json_out:
-        lib.write_json(json_out, results, inputs=tuple(inputs))
+        lib.write_json(json_out, results)
     if figure_out:
         from aogm_cli.report.figure import write_comparison_figure
 
@@ -174,8 +178,16 @@ def compare(inputs, modes_text, detector, params_file, json_out, figure_out, map
         for path in (json_out, figure_out):
             if path:
                 click.echo(f"wrote {path}", err=True)
+    _report_gates(gates, require_checks, results, labels)
 
-    per_log = [(labels[log], values) for log, values in lib.gate_values(results)]
+
+def _report_gates(gates, require_checks, results, labels) -> None:
+    """Evaluate --require and --require-checks per log, print each failure and the count; exit 1
+    when one fails."""
+    from aogm_cli.report.compare import gate_values
+    from aogm_cli.report.gates import evaluate_gates, evaluate_required_checks
+
+    per_log = [(labels[log], values) for log, values in gate_values(results)]
     n_gates, failures = evaluate_gates(gates, per_log)
     checks_by_log: dict[str, dict] = {}
     for r in results:

@@ -6,7 +6,6 @@ Thin: the options become ``CarmenOptions`` / ``TextOptions``; parsing lives in `
 from __future__ import annotations
 
 import math
-import os
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -14,8 +13,9 @@ import click
 
 from aogm_cli.cli.options import output_option, progress_bar, quiet_option
 from aogm_cli.core.errors import InputError
-from aogm_cli.io.importers.carmen import POSE_SOURCES, SCAN_MESSAGES
-from aogm_cli.io.importers.text import ANGLE_UNITS, DELIMITERS, LENGTH_UNITS, TIME_UNITS
+from aogm_cli.io.importers.carmen import POSE_SOURCES, SCAN_MESSAGES, CarmenOptions
+from aogm_cli.io.importers.text import ANGLE_UNITS, DELIMITERS, LENGTH_UNITS, TIME_UNITS, TextOptions
+from aogm_cli.io.outputs import resolve_outputs
 
 _positive = click.FloatRange(min=0, min_open=True)
 _non_negative = click.FloatRange(min=0)
@@ -43,10 +43,9 @@ def _option_names(names: tuple[str, ...]):
         raise
 
 
-def _refuse_overwriting(output: str, *inputs: str | None) -> None:
-    for inp in inputs:
-        if inp and Path(inp).exists() and Path(output).exists() and os.path.samefile(inp, output):
-            raise InputError("refusing to overwrite an input file; choose another output", file=output)
+def _degrees(radians: float) -> float:
+    """A default angle of the options (radians) as the command line shows and takes it."""
+    return round(math.degrees(radians), 9)
 
 
 def _report(output: str, log, what: str, origin: str, extra: list[str]) -> None:
@@ -67,7 +66,7 @@ def _report(output: str, log, what: str, origin: str, extra: list[str]) -> None:
 @click.option(
     "--pose-from",
     type=click.Choice(POSE_SOURCES),
-    default="auto",
+    default=CarmenOptions.pose_from,
     show_default=True,
     help="line: the pose in the scan line (FLASER/RLASER laser pose, ROBOTLASER robot pose); odom/truepos: "
     "interpolated by time from ODOM/TRUEPOS lines; auto: line where there is one, else TRUEPOS if present, else ODOM.",
@@ -75,7 +74,7 @@ def _report(output: str, log, what: str, origin: str, extra: list[str]) -> None:
 @click.option(
     "--start-angle",
     type=float,
-    default=-90.0,
+    default=_degrees(CarmenOptions.start_angle),
     show_default=True,
     help="First beam's bearing (deg) of FLASER/RLASER, whose lines do not store it.",
 )
@@ -138,7 +137,7 @@ def carmen(
       aogm import carmen robot.log --message SONAR --pose-from odom --max-range 4.5 -o sonar.h5
     """
     from aogm_cli.io.importers import file_kilobytes
-    from aogm_cli.io.importers.carmen import CarmenOptions, import_carmen
+    from aogm_cli.io.importers.carmen import import_carmen
     from aogm_cli.io.logfile import write_log
 
     options = CarmenOptions(
@@ -152,7 +151,7 @@ def carmen(
         noise_sigma=noise_sigma,
         mount=None if mount is None else (mount[0], mount[1], math.radians(mount[2])),
     )
-    _refuse_overwriting(output, log_file)
+    resolve_outputs([log_file], [("-o", output)])
     with (
         _option_names(("mount", "pose_from", "message")),
         progress_bar(file_kilobytes(log_file), "import", quiet, unit="kB") as advance,
@@ -186,31 +185,31 @@ def carmen(
     "--range-columns",
     help="Reading columns: 1-based numbers, ranges (4-19, 4-) or header names. Default: every column not used for pose or time.",
 )
-@click.option("--pose-columns", default="1,2,3", show_default=True, help="The x, y, yaw columns of the pose table.")
+@click.option("--pose-columns", default=TextOptions.pose_columns, show_default=True, help="The x, y, yaw columns of the pose table.")
 @click.option("--range-time-column", help="Time column of the ranges table. Without one, scan k is at k * --period.")
 @click.option(
     "--pose-time-column",
     help="Time column of the pose table; with --range-time-column, poses are interpolated by time instead of paired row by row.",
 )
 @click.option(
-    "--range-unit", type=click.Choice(list(LENGTH_UNITS)), default="m", show_default=True, help="Unit of the readings."
+    "--range-unit", type=click.Choice(list(LENGTH_UNITS)), default=TextOptions.range_unit, show_default=True, help="Unit of the readings."
 )
 @click.option(
     "--position-unit",
     type=click.Choice(list(LENGTH_UNITS)),
-    default="m",
+    default=TextOptions.position_unit,
     show_default=True,
     help="Unit of pose x, y (and of --mounts).",
 )
 @click.option(
     "--angle-unit",
     type=click.Choice(list(ANGLE_UNITS)),
-    default="rad",
+    default=TextOptions.angle_unit,
     show_default=True,
     help="Unit of pose yaw (ddeg = tenths of a degree).",
 )
 @click.option(
-    "--time-unit", type=click.Choice(list(TIME_UNITS)), default="s", show_default=True, help="Unit of the time columns."
+    "--time-unit", type=click.Choice(list(TIME_UNITS)), default=TextOptions.time_unit, show_default=True, help="Unit of the time columns."
 )
 @click.option(
     "--no-echo",
@@ -220,19 +219,20 @@ def carmen(
 )
 @click.option(
     "--bearings",
-    help="Sensor bearings: 'ring' (evenly spaced from 0), 'ring:N[:START[:STEP]]' or a list such as 90,50,30,10,-10,-30,-50,-90. [default: ring]",
+    help="Sensor bearings: 'ring' (evenly spaced from 0), 'ring:N[:START[:STEP]]' or a list such as 90,50,30,10,-10,-30,-50,-90. "
+    f"[default: {TextOptions.bearings}]",
 )
 @click.option(
     "--bearing-unit",
     type=click.Choice(list(ANGLE_UNITS)),
-    default="deg",
+    default=TextOptions.bearing_unit,
     show_default=True,
     help="Unit of --bearings and of the yaw in --mounts.",
 )
 @click.option(
     "--sensor-radius",
     type=_non_negative,
-    default=0.0,
+    default=TextOptions.sensor_radius,
     show_default=True,
     help="Distance (m) of each sensor from the robot centre along its bearing.",
 )
@@ -242,27 +242,28 @@ def carmen(
     type=click.Path(dir_okay=False),
     help="Table of sensor mounts x y yaw (one row per range column) instead of --bearings.",
 )
-@click.option("--kind", type=click.Choice(["sonar", "laser"]), default="sonar", show_default=True)
-@click.option("--beam-width", type=_angle_deg, default=30.0, show_default=True, help="Beam (cone) width in degrees.")
-@click.option("--min-range", type=_non_negative, default=0.15, show_default=True, help="Min range (m).")
+@click.option("--kind", type=click.Choice(["sonar", "laser"]), default=TextOptions.kind, show_default=True)
+@click.option("--beam-width", type=_angle_deg, default=_degrees(TextOptions.beam_width), show_default=True,
+              help="Beam (cone) width in degrees.")
+@click.option("--min-range", type=_non_negative, default=TextOptions.min_range, show_default=True, help="Min range (m).")
 @click.option(
     "--max-range",
     type=_positive,
-    default=5.0,
+    default=TextOptions.max_range,
     show_default=True,
     help="Max range (m); readings at or beyond it become +inf.",
 )
 @click.option(
-    "--noise-sigma", type=_non_negative, default=0.02, show_default=True, help="Range noise (m) recorded in the log."
+    "--noise-sigma", type=_non_negative, default=TextOptions.noise_sigma, show_default=True, help="Range noise (m) recorded in the log."
 )
 @click.option(
     "--period",
     type=_positive,
-    default=1.0,
+    default=TextOptions.period,
     show_default=True,
     help="Seconds between scans when there is no time column.",
 )
-@click.option("--delimiter", type=click.Choice(list(DELIMITERS)), default="auto", show_default=True)
+@click.option("--delimiter", type=click.Choice(list(DELIMITERS)), default=TextOptions.delimiter, show_default=True)
 @quiet_option
 def text(
     ranges_file: str,
@@ -285,14 +286,14 @@ def text(
           --no-echo 5000 --max-range 4.9 --sensor-radius 0.2 -o lab.h5
     """
     from aogm_cli.io.importers import file_kilobytes
-    from aogm_cli.io.importers.text import TextOptions, import_text
+    from aogm_cli.io.importers.text import import_text
     from aogm_cli.io.logfile import write_log
 
     if mounts_file and bearings:
         raise click.UsageError("give --bearings or --mounts, not both")
     columns["no_echo"] = tuple(columns["no_echo"])
-    options = TextOptions(bearings=bearings or "ring", beam_width=math.radians(beam_width), **columns)
-    _refuse_overwriting(output, ranges_file, poses_file, mounts_file)
+    options = TextOptions(bearings=bearings or TextOptions.bearings, beam_width=math.radians(beam_width), **columns)
+    resolve_outputs([ranges_file, poses_file, mounts_file], [("-o", output)])
     names = tuple(TextOptions.__dataclass_fields__) + ("poses", "mounts")
     with _option_names(names), progress_bar(file_kilobytes(ranges_file), "import", quiet, unit="kB") as advance:
         result = import_text(ranges_file, poses_file, options, mounts_path=mounts_file, progress=advance)

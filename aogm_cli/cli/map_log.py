@@ -4,7 +4,18 @@ from __future__ import annotations
 
 import click
 
-from aogm_cli.cli.options import output_option, progress_bar, quiet_option
+from aogm_cli.cli.options import (
+    detector_file,
+    detector_option,
+    mode_option,
+    output_option,
+    params_option,
+    png_option,
+    progress_bar,
+    quiet_option,
+    resolution_option,
+)
+from aogm_cli.io.outputs import resolve_outputs
 from aogm_cli.mapping.params import EMConfig
 from aogm_cli.mapping.sensor_models.forward_model import ForwardModelConfig
 from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig
@@ -43,12 +54,12 @@ def parameter_options(f):
 
 @click.command("map")
 @click.argument("log_file", metavar="LOG.h5", type=click.Path(dir_okay=False))
-@click.option("--mode", type=click.Choice(["standard", "em", "adaptive"]), required=True, help="Which mapper.")
+@mode_option
 @output_option("Map file to write (HDF5).")
-@click.option("--png", type=click.Path(dir_okay=False), help="Also render the map into this PNG.")
-@click.option("--detector", type=click.Path(dir_okay=False), help="Detector file for --mode adaptive (default: the packaged one).")
-@click.option("--params", "params_file", type=click.Path(dir_okay=False), help="YAML with sections inverse_model:, em:, adaptive: and key resolution:.")
-@click.option("--resolution", type=float, help="Cell size (m) for logs without truth.  [default: 0.05]")
+@png_option("Also render the map into this PNG.")
+@detector_option
+@params_option
+@resolution_option
 @parameter_options
 @quiet_option
 def map_log(log_file, mode, output, png, detector, params_file, resolution, quiet, **options) -> None:
@@ -79,6 +90,8 @@ def map_log(log_file, mode, output, png, detector, params_file, resolution, quie
     from aogm_cli.mapping.modes import map_file
     from aogm_cli.mapping.params import resolve_params
 
+    inputs = (log_file, params_file, detector_file(detector, (mode,)))
+    resolve_outputs(inputs, [("-o", output), ("--png", png)])
     overrides: dict = {"resolution": resolution, "inverse_model": {}, "em": {}}
     for name, value in options.items():
         section, key = name.split("__")
@@ -89,7 +102,7 @@ def map_log(log_file, mode, output, png, detector, params_file, resolution, quie
             advance(1)
 
         result = map_file(log_file, mode, params, detector, progress)
-    write_map_file(output, result, inputs=(log_file,))
+    write_map_file(output, result)
     if png:
         from aogm_cli.report.picture import render_map
 

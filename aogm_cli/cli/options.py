@@ -1,6 +1,15 @@
-"""Option decorators and helpers shared by the subcommands (quiet, seed, progress bars).
+"""The registry of options that more than one command takes, each defined once here (defaults
+read from the config dataclasses), and the progress bar. Every command checks its outputs
+with ``io.outputs.resolve_outputs`` before any work.
 
-Used by: simulate (quiet, seed), map (quiet), train (quiet, seed), compare (quiet).
+Option                 commands
+-o/--output            simulate, map, train, render, export (a PREFIX), import carmen, import text
+-q/--quiet             simulate, map, train, render, export, compare, import carmen, import text
+--seed                 simulate, train
+--png                  simulate, map
+--mode / --modes       map / compare (choices from core.occupancy_map.MODES; also --require-checks)
+--params, --detector   map, compare
+--resolution           map
 """
 
 from __future__ import annotations
@@ -10,14 +19,83 @@ from contextlib import contextmanager
 
 import click
 
-quiet_option = click.option("--quiet", "-q", is_flag=True, help="No progress bar.")
+from aogm_cli.core.occupancy_map import MODES
+from aogm_cli.mapping.params import MapParams
+
+quiet_option = click.option("--quiet", "-q", is_flag=True, help="No progress bar and no summary on stderr.")
 seed_option = click.option(
     "--seed", type=click.IntRange(min=0), default=0, show_default=True, help="Random seed; the same seed gives identical outputs."
 )
+mode_choice = click.Choice(MODES)
+mode_option = click.option("--mode", type=mode_choice, required=True, help="Which mapper.")
+modes_option = click.option(
+    "--modes", "modes_text",
+    help=f"Comma-separated modes to compare.  [default: {','.join(MODES)}; with map files only, their modes]",
+)
+params_option = click.option(
+    "--params", "params_file", type=click.Path(dir_okay=False),
+    help="YAML with sections inverse_model:, em:, adaptive: and key resolution:, used by every map made.",
+)
+resolution_option = click.option(
+    "--resolution", type=float, help=f"Cell size (m) for logs without truth.  [default: {MapParams().resolution}]"
+)
 
 
-def output_option(help_text: str):
-    return click.option("-o", "--output", "output", required=True, type=click.Path(dir_okay=False), help=help_text)
+class LazyDefault(click.Option):
+    """An option whose ``default`` is a function called when first needed (a run that leaves the
+    option out, or --help, which shows the value): defaults of modules too slow to load at start."""
+
+    def get_default(self, ctx, call=True):
+        return super().get_default(ctx, call=True)
+
+
+def output_option(help_text: str, prefix: bool = False):
+    """``-o/--output`` (required): a file, or with ``prefix`` a path that the command extends."""
+    kind = click.Path() if prefix else click.Path(dir_okay=False)
+    return click.option("-o", "--output", "output", required=True, type=kind, metavar="PREFIX" if prefix else None,
+                        help=help_text)
+
+
+def png_option(help_text: str):
+    return click.option("--png", type=click.Path(dir_okay=False), help=help_text)
+
+
+class DetectorParam(click.ParamType):
+    """A detector file, or the name of a baseline of ``mapping.modes.BASELINE_DETECTORS`` (read
+    only when needed: that module loads every mapper)."""
+
+    name = "detector"
+
+    def get_metavar(self, param, ctx=None):
+        from aogm_cli.mapping.modes import BASELINE_DETECTORS
+
+        return "|".join(("DETECTOR.h5", *BASELINE_DETECTORS))
+
+    def convert(self, value, param, ctx):
+        from aogm_cli.mapping.modes import BASELINE_DETECTORS
+
+        if value in BASELINE_DETECTORS:
+            return value
+        return click.Path(dir_okay=False).convert(value, param, ctx)
+
+
+detector_option = click.option(
+    "--detector", type=DetectorParam(),
+    help="Detector file for adaptive mode, or a baseline that flags every reading or none.  [default: the packaged one]",
+)
+
+
+def detector_file(detector: str | None, modes) -> str | None:
+    """The file that ``--detector`` makes an input of a run over ``modes`` (None for a baseline;
+    the packaged detector when adaptive runs without one)."""
+    if "adaptive" not in modes:
+        return None
+    from aogm_cli.io.detectorfile import default_detector_path
+    from aogm_cli.mapping.modes import BASELINE_DETECTORS
+
+    if detector is None:
+        return str(default_detector_path())
+    return None if detector in BASELINE_DETECTORS else detector
 
 
 @contextmanager

@@ -4,14 +4,25 @@ from __future__ import annotations
 
 import click
 
-from aogm_cli.cli.options import output_option, progress_bar, quiet_option, seed_option
+from aogm_cli.cli.options import output_option, png_option, progress_bar, quiet_option, seed_option
+from aogm_cli.io.outputs import resolve_outputs
+
+
+def world_inputs(world_file: str, world) -> list[str]:
+    """The files a world is read from: its YAML, and a floor plan's map_server YAML and image."""
+    files = [world_file]
+    if world.floorplan is not None:
+        from aogm_cli.io.map_server import read_map_yaml
+
+        files += [world.floorplan.map, read_map_yaml(world.floorplan.map).image]
+    return files
 
 
 @click.command()
 @click.argument("world_file", metavar="WORLD.yaml", type=click.Path(dir_okay=False))
 @output_option("Log file to write (HDF5).")
 @seed_option
-@click.option("--png", type=click.Path(dir_okay=False), help="Also draw the truth and the trajectory into this PNG.")
+@png_option("Also draw the truth and the trajectory into this PNG.")
 @quiet_option
 def simulate(world_file: str, output: str, seed: int, png: str | None, quiet: bool) -> None:
     """Simulate a sonar ring driving through WORLD.yaml and write the log with its truth.
@@ -29,6 +40,7 @@ def simulate(world_file: str, output: str, seed: int, png: str | None, quiet: bo
     from aogm_cli.world.loader import load_world
 
     world = load_world(world_file)
+    resolve_outputs(world_inputs(world_file, world), [("-o", output), ("--png", png)])
     n_scans = len(trajectory_poses(world)[0])
     with progress_bar(n_scans, "simulate", quiet, unit="scan") as advance:
         log = run_simulation(world, seed=seed, progress=advance)

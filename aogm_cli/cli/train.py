@@ -6,7 +6,9 @@ from pathlib import Path
 
 import click
 
-from aogm_cli.cli.options import output_option, progress_bar, quiet_option, seed_option
+from aogm_cli.cli.options import LazyDefault, output_option, progress_bar, quiet_option, seed_option
+from aogm_cli.detector.features import FeatureSpec
+from aogm_cli.io.outputs import resolve_outputs
 from aogm_cli.training.config import TrainingConfig
 
 
@@ -22,11 +24,12 @@ from aogm_cli.training.config import TrainingConfig
               help="Activation of the hidden layer.")
 @click.option("--beta", type=click.FloatRange(min=0, min_open=True), default=TrainingConfig.beta, show_default=True,
               help="The flag threshold maximises F_beta on the training data; beta < 1 favours precision.")
-@click.option("--ring-neighbours", type=click.IntRange(min=0), default=2, show_default=True,
+@click.option("--ring-neighbours", type=click.IntRange(min=0), default=FeatureSpec.ring_neighbours, show_default=True,
               help="Sonars on each side of a reading in the same ring reading.")
-@click.option("--time-neighbours", type=click.IntRange(min=0), default=1, show_default=True,
+@click.option("--time-neighbours", type=click.IntRange(min=0), default=FeatureSpec.time_neighbours, show_default=True,
               help="Scans before and after a reading, same sonar.")
-@click.option("--arc-wrong-min", type=click.IntRange(min=0), default=3, show_default=True,
+@click.option("--arc-wrong-min", type=click.IntRange(min=0), cls=LazyDefault, default=lambda: _labels().arc_wrong_min,
+              show_default=True,
               help="Label rule (c): wrong standard-map cells on a reading's occupied arc that make y = 1 (0 = rule off).")
 @quiet_option
 def train(log_files, output, seed, validation_logs, hidden, activation, beta, ring_neighbours, time_neighbours,
@@ -61,16 +64,12 @@ def train(log_files, output, seed, validation_logs, hidden, activation, beta, ri
     Example:
       aogm train out/lab.h5 out/hall.h5 out/office.h5 --validation-logs out/office.h5 -o detector.h5 --seed 1
     """
-    from aogm_cli.core.errors import InputError
-    from aogm_cli.detector.features import FeatureSpec
     from aogm_cli.io.detectorfile import save_detector
     from aogm_cli.io.logfile import read_log
     from aogm_cli.training.fit import split_by_world, train_detector
     from aogm_cli.training.labels import LabelDefinition
 
-    folder = Path(output).parent
-    if not folder.is_dir():
-        raise InputError(f"the output folder {str(folder)!r} does not exist", file=output)
+    resolve_outputs([*log_files, *validation_logs], [("-o", output)])
     spec = FeatureSpec(ring_neighbours, time_neighbours)
     config = TrainingConfig(hidden=hidden, activation=activation, seed=seed, beta=beta)
     train_paths, validation_paths = split_by_world(log_files, validation_logs)
@@ -79,10 +78,17 @@ def train(log_files, output, seed, validation_logs, hidden, activation, beta, ri
         validation_logs_read = [(p, read_log(p)) for p in validation_paths]
         detector = train_detector(train_logs, validation_logs_read, spec, LabelDefinition(arc_wrong_min=arc_wrong_min), config,
                                   advance)
-    save_detector(output, detector, inputs=tuple(train_paths) + tuple(validation_paths))
+    save_detector(output, detector)
     click.echo(format_metrics(detector.metrics))
     if not quiet:
         click.echo(f"{output}: detector {detector.training['network']}, threshold {detector.threshold:.2f}", err=True)
+
+
+def _labels():
+    """The label rule's defaults (its module loads scipy: read only when needed)."""
+    from aogm_cli.training.labels import LabelDefinition
+
+    return LabelDefinition()
 
 
 def format_metrics(metrics: dict) -> str:

@@ -13,21 +13,17 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from aogm_cli.core.errors import InputError
+from aogm_cli.io.outputs import resolve_outputs
 
 
 @contextlib.contextmanager
 def atomic_output(path: str | Path, inputs: tuple[str | Path, ...] = ()) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; on success rename it to ``path``, else delete it.
 
-    ``inputs`` are files the command reads: writing over one of them is refused.
+    ``path`` is checked by ``outputs.resolve_outputs`` against ``inputs`` (files the command
+    reads); commands run that check on all their outputs before any work, this is the last guard.
     """
-    path = Path(path)
-    for inp in inputs:
-        if Path(inp).exists() and path.exists() and os.path.samefile(inp, path):
-            raise InputError("refusing to overwrite an input file; choose another output", file=str(path))
-    folder = path.parent if str(path.parent) else Path(".")
-    if not folder.is_dir():
-        raise InputError(f"the output folder {str(folder)!r} does not exist", file=str(path))
+    path = resolve_outputs(inputs, [(None, path)])[0]
     tmp_path = _temporary_beside(path)
     try:
         yield tmp_path
@@ -56,6 +52,7 @@ def _temporary_beside(path: Path) -> Path:
 def write_files_atomically(outputs: list[tuple[Path, bytes]]) -> None:
     """Write every (path, content) under a temporary name in its folder, then rename them all;
     on any failure no temporary file is left and no output is renamed into place."""
+    resolve_outputs((), [(None, target) for target, _ in outputs])
     temps: list[tuple[Path, Path]] = []
     try:
         for target, content in outputs:

@@ -30,12 +30,12 @@ def write_map(
     observed: np.ndarray,
     resolution: float,
     origin,
-    occupied_thresh: float = 0.65,
-    free_thresh: float = 0.196,
+    occupied_thresh: float = MAP_SAVER_OCCUPIED_THRESH,
+    free_thresh: float = MAP_SAVER_FREE_THRESH,
 ) -> list[Path]:
     """Write a probability map as map_saver does, plus a "scale" PNG that keeps probabilities.
 
-    Files (returned in this order):
+    Files (returned in this order, as ``export_paths`` names them):
 
     * ``PREFIX.pgm``: binary P5, top image row = highest y; 0 where p > occupied_thresh,
       254 where p < free_thresh, 205 elsewhere and wherever not observed.
@@ -61,23 +61,8 @@ def write_map(
     Every file is first written under a temporary name in the target folder and renamed at
     the end, so a failure leaves no partial output.
     """
-    prefix = Path(prefix)
-    folder = prefix.parent
-    if not prefix.name:
-        raise InputError("expected an output prefix (a path without extension)", file=str(prefix))
-    if not folder.is_dir():
-        raise InputError("output folder does not exist", file=str(folder))
-
-    p = np.asarray(probability, dtype=np.float64)
-    obs = np.asarray(observed)
-    if p.ndim != 2 or p.size == 0:
-        raise InputError(f"expected a non-empty (H, W) array, got shape {p.shape}", key="probability")
-    if obs.shape != p.shape:
-        raise InputError(f"expected shape {p.shape} like probability, got {obs.shape}", key="observed")
-    obs = obs.astype(bool)
-    seen = p[obs]
-    if not np.all(np.isfinite(seen)) or np.any(seen < 0.0) or np.any(seen > 1.0):
-        raise InputError("expected values in [0, 1] in every observed cell", key="probability")
+    pgm_path, yaml_path, png_path, scale_yaml_path = export_paths(prefix)
+    p, obs = _checked_grids(probability, observed)
     resolution = finite_number(resolution, "resolution", None)
     if resolution <= 0:
         raise InputError(f"expected a positive number, got {resolution!r}", key="resolution")
@@ -92,26 +77,8 @@ def write_map(
             f"expected 0 <= free_thresh <= occupied_thresh <= 1, got {free_thresh!r} and {occupied_thresh!r}",
             key="free_thresh",
         )
-
-    height, width = p.shape
-    pgm_path = folder / f"{prefix.name}.pgm"
-    yaml_path = folder / f"{prefix.name}.yaml"
-    png_path = folder / f"{prefix.name}.png"
-    scale_yaml_path = folder / f"{prefix.name}_scale.yaml"
-
-    trinary = np.full(p.shape, PGM_UNKNOWN, dtype=np.uint8)
-    trinary[obs & (p > occupied_thresh)] = PGM_OCCUPIED
-    trinary[obs & (p < free_thresh)] = PGM_FREE
-    header = f"P5\n# CREATOR: aogm {resolution:.3f} m/pix\n{width} {height}\n255\n".encode("ascii")
-    pgm_bytes = header + np.ascontiguousarray(trinary[::-1]).tobytes()
-
-    grey = np.full(p.shape, _unknown_grey(occupied_thresh, free_thresh), dtype=np.uint8)
-    grey[obs] = np.clip(np.rint(255.0 * (1.0 - seen)), 0, 255).astype(np.uint8)
-    alpha = np.where(obs, 255, 0).astype(np.uint8)
-    buffer = io.BytesIO()
-    Image.fromarray(np.ascontiguousarray(np.stack([grey, alpha], axis=2)[::-1])).save(buffer, format="PNG")
-    png_bytes = buffer.getvalue()
-
+    pgm_bytes = _pgm_bytes(p, obs, resolution, occupied_thresh, free_thresh)
+    png_bytes = _png_bytes(p, obs, occupied_thresh, free_thresh)
     common = f"resolution: {_yaml_float(resolution)}\norigin: [{_yaml_float(ox)}, {_yaml_float(oy)}, {_yaml_float(oyaw)}]\nnegate: 0\n"
     yaml_text = (
         f"image: {_yaml_str(pgm_path.name)}\n{common}"
@@ -134,6 +101,49 @@ def write_map(
     ]
     write_files_atomically(outputs)
     return [target for target, _ in outputs]
+
+
+def _checked_grids(probability, observed) -> tuple[np.ndarray, np.ndarray]:
+    """(probability as float64, observed as bool), after checking shapes and observed values."""
+    p = np.asarray(probability, dtype=np.float64)
+    obs = np.asarray(observed)
+    if p.ndim != 2 or p.size == 0:
+        raise InputError(f"expected a non-empty (H, W) array, got shape {p.shape}", key="probability")
+    if obs.shape != p.shape:
+        raise InputError(f"expected shape {p.shape} like probability, got {obs.shape}", key="observed")
+    obs = obs.astype(bool)
+    seen = p[obs]
+    if not np.all(np.isfinite(seen)) or np.any(seen < 0.0) or np.any(seen > 1.0):
+        raise InputError("expected values in [0, 1] in every observed cell", key="probability")
+    return p, obs
+
+
+def _pgm_bytes(p: np.ndarray, obs: np.ndarray, resolution: float, occupied_thresh: float, free_thresh: float) -> bytes:
+    """The trinary P5 PGM, top image row = highest y."""
+    height, width = p.shape
+    trinary = np.full(p.shape, PGM_UNKNOWN, dtype=np.uint8)
+    trinary[obs & (p > occupied_thresh)] = PGM_OCCUPIED
+    trinary[obs & (p < free_thresh)] = PGM_FREE
+    header = f"P5\n# CREATOR: aogm {resolution:.3f} m/pix\n{width} {height}\n255\n".encode("ascii")
+    return header + np.ascontiguousarray(trinary[::-1]).tobytes()
+
+
+def _png_bytes(p: np.ndarray, obs: np.ndarray, occupied_thresh: float, free_thresh: float) -> bytes:
+    """The scale PNG: grey + alpha, grey = round(255 * (1 - p)), unobserved transparent."""
+    grey = np.full(p.shape, _unknown_grey(occupied_thresh, free_thresh), dtype=np.uint8)
+    grey[obs] = np.clip(np.rint(255.0 * (1.0 - p[obs])), 0, 255).astype(np.uint8)
+    alpha = np.where(obs, 255, 0).astype(np.uint8)
+    buffer = io.BytesIO()
+    Image.fromarray(np.ascontiguousarray(np.stack([grey, alpha], axis=2)[::-1])).save(buffer, format="PNG")
+    return buffer.getvalue()
+
+
+def export_paths(prefix: str | Path) -> list[Path]:
+    """The files ``write_map`` writes for ``prefix``: PREFIX.pgm, .yaml, .png and _scale.yaml."""
+    prefix = Path(prefix)
+    if not prefix.name:
+        raise InputError("expected an output prefix (a path without extension)", file=str(prefix))
+    return [prefix.parent / f"{prefix.name}{suffix}" for suffix in (".pgm", ".yaml", ".png", "_scale.yaml")]
 
 
 def _unknown_grey(occupied_thresh: float, free_thresh: float) -> int:

@@ -1,11 +1,13 @@
 """The map file (HDF5) of CONTRACT.md: what ``aogm map`` writes and every later step reads.
 
-``OccupancyMap`` holds a map in memory; ``write_map_file`` / ``read_map_file`` convert it.
+``OccupancyMap`` holds a map in memory; ``write_map_file`` / ``read_map_file`` convert it;
+``read_map_header`` reads the root attributes only (mode, source_log, params, runtime).
 """
 
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
 
 import h5py
@@ -14,15 +16,27 @@ import numpy as np
 from aogm_cli import __version__
 from aogm_cli.core.errors import InputError
 from aogm_cli.core.grid import GridSpec
-from aogm_cli.core.occupancy_map import OccupancyMap
+from aogm_cli.core.occupancy_map import MODES, OccupancyMap
 from aogm_cli.io.atomic import atomic_output
 from aogm_cli.io.h5file import open_input, text
 
 FORMAT = "aogm-map"
 FORMAT_VERSION = 1
-def write_map_file(path: str | Path, m: OccupancyMap, inputs: tuple = ()) -> None:
-    """Write ``m`` to ``path`` (atomically; refuses to overwrite one of ``inputs``)."""
-    with atomic_output(path, inputs) as tmp, h5py.File(tmp, "w") as f:
+
+
+@dataclass(frozen=True)
+class MapHeader:
+    """A map file's root attributes: what made it and from which log."""
+
+    mode: str
+    source_log: str
+    params: dict
+    runtime_s: float
+
+
+def write_map_file(path: str | Path, m: OccupancyMap) -> None:
+    """Write ``m`` to ``path`` (atomically)."""
+    with atomic_output(path) as tmp, h5py.File(tmp, "w") as f:
         f.attrs["format"] = FORMAT
         f.attrs["format_version"] = FORMAT_VERSION
         f.attrs["mode"] = m.mode
@@ -47,10 +61,29 @@ def write_map_file(path: str | Path, m: OccupancyMap, inputs: tuple = ()) -> Non
             s.attrs[k] = json.dumps(v) if isinstance(v, (dict, list, tuple)) else v
 
 
+def _header(f: h5py.File, path: str) -> MapHeader:
+    mode = text(f.attrs.get("mode"))
+    if mode not in MODES:
+        raise InputError(f"expected one of {', '.join(MODES)}, got {mode!r}", file=path, key="mode")
+    try:
+        params = json.loads(text(f.attrs.get("params", "{}")))
+    except json.JSONDecodeError as exc:
+        raise InputError(f"expected JSON: {exc}", file=path, key="params") from None
+    return MapHeader(mode, text(f.attrs.get("source_log", "")), params, float(f.attrs.get("runtime_s", 0.0)))
+
+
+def read_map_header(path: str | Path) -> MapHeader:
+    """Check a map file's format and read its root attributes, without its grids."""
+    path = str(path)
+    with open_input(path, FORMAT, FORMAT_VERSION) as f:
+        return _header(f, path)
+
+
 def read_map_file(path: str | Path) -> OccupancyMap:
     """Read and check a map file; InputError names the file and the missing or wrong item."""
     path = str(path)
     with open_input(path, FORMAT, FORMAT_VERSION) as f:
+        header = _header(f, path)
         for name in ("map/probability", "map/observed"):
             if name not in f:
                 raise InputError("missing dataset", file=path, key="/" + name)
@@ -72,10 +105,10 @@ def read_map_file(path: str | Path) -> OccupancyMap:
             grid=grid,
             probability=prob,
             observed=g["observed"][...].astype(bool),
-            mode=text(f.attrs.get("mode", "")),
-            params=json.loads(text(f.attrs.get("params", "{}"))),
-            runtime_s=float(f.attrs.get("runtime_s", 0.0)),
-            source_log=text(f.attrs.get("source_log", "")),
+            mode=header.mode,
+            params=header.params,
+            runtime_s=header.runtime_s,
+            source_log=header.source_log,
             log_odds=optional("log_odds"),
             occupied=optional("occupied"),
             clusters=optional("clusters"),
@@ -90,8 +123,6 @@ def is_map_file(path: str | Path) -> bool:
             return text(f.attrs.get("format")) == FORMAT
     except OSError:
         return False
-
-
 
 
 def _stat(v):

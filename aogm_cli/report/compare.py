@@ -6,6 +6,7 @@ the log instead (``aogm_cli.consistency``).
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import os
@@ -13,7 +14,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import h5py
 import yaml
 
 from aogm_cli import __version__
@@ -23,9 +23,9 @@ from aogm_cli.core.occupancy_map import MODES, OccupancyMap
 from aogm_cli.evaluation.consistency import map_consistency
 from aogm_cli.evaluation.metrics import evaluate
 from aogm_cli.io.atomic import atomic_output
-from aogm_cli.io.h5file import text
+from aogm_cli.io.detectorfile import default_detector_path
 from aogm_cli.io.logfile import LogReader
-from aogm_cli.io.mapfile import is_map_file, read_map_file, write_map_file
+from aogm_cli.io.mapfile import is_map_file, read_map_file, read_map_header, write_map_file
 from aogm_cli.mapping.params import MapParams
 
 METRIC_KEYS = ("accuracy", "occupied_precision", "occupied_recall", "occupied_f1", "brier")
@@ -60,6 +60,7 @@ class ModeResult:
     map_file: str | None = None  # the map file given, or the one written to --maps-dir
     reused: bool = False
     consistency: dict | None = None  # logs without truth only
+    detector: dict | None = None  # adaptive only: {"path", "sha256"} of the detector used
 
 
 def parse_modes(text: str) -> tuple[str, ...]:
@@ -87,26 +88,11 @@ def world_name(truth: Truth | None, log_path: str) -> str:
     return Path(log_path).stem
 
 
-def _map_header(path: str) -> tuple[str, str]:
-    """(mode, source_log) of a map file, read from its attributes only."""
-    with h5py.File(path, "r") as f:
-        version = f.attrs.get("format_version")
-        if version != 1:
-            raise InputError(f"expected 1, got {version!r}", file=path, key="format_version")
-        mode = text(f.attrs.get("mode"))
-        source = text(f.attrs.get("source_log"))
-    if mode not in MODES:
-        raise InputError(f"expected one of {', '.join(MODES)}, got {mode!r}", file=path, key="mode")
-    if not source:
-        raise InputError("empty; the map does not name the log it was made from", file=path, key="source_log")
-    return mode, source
-
-
-
-
 def _find_log(source_log: str, map_path: str, given_logs: list[str]) -> str:
     """The log a map was made from: its source_log as a path (from here, then from the map's
     folder), else the file of that name in the map's folder or among the logs given."""
+    if not source_log:
+        raise InputError("empty; the map does not name the log it was made from", file=map_path, key="source_log")
     folder = Path(map_path).parent
     name = Path(source_log).name
     for candidate in (Path(source_log), folder / source_log, folder / name):
@@ -141,8 +127,9 @@ def collect_inputs(paths: list[str]) -> list[LogEntry]:
 
     for path, is_map in kinds:
         if is_map:
-            mode, source = _map_header(path)
-            entry = entry_for(_find_log(source, path, given_logs))
+            header = read_map_header(path)
+            mode = header.mode
+            entry = entry_for(_find_log(header.source_log, path, given_logs))
             other = entry.maps.get(mode)
             if other is not None and os.path.realpath(other) != os.path.realpath(path):
                 raise InputError(f"a second {mode} map of the log {entry.path}; the first was {other}", file=path)
@@ -255,8 +242,45 @@ def compute_maps(
     return done
 
 
-def evaluate_result(entry: LogEntry, mode: str, m: OccupancyMap, map_file: str | None, reused: bool) -> ModeResult:
-    """Metrics against the truth; without truth, the map's consistency with its log instead."""
+def _sha256(path: str | Path) -> str | None:
+    """The file's sha256 (hex); None when there is no such file (any more)."""
+    if not Path(path).is_file():
+        return None
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def detector_identity(spec: str | None) -> dict:
+    """``{"path", "sha256"}`` of the detector that ``spec`` names (``--detector``, or a map's
+    recorded ``params["detector"]``): None / "packaged" is the file inside the package (its path
+    there), "all" / "none" a baseline (its name, sha256 null), anything else a detector file."""
+    from aogm_cli.mapping.modes import BASELINE_DETECTORS
+
+    if spec in BASELINE_DETECTORS:
+        return {"path": spec, "sha256": None}
+    if spec is None or spec == "packaged":
+        path = default_detector_path()
+        return {"path": path.relative_to(path.parents[2]).as_posix(), "sha256": _sha256(path)}
+    return {"path": str(spec), "sha256": _sha256(spec)}
+
+
+def _map_detector(m: OccupancyMap, reused: bool, identity: dict | None) -> dict | None:
+    """The detector behind an adaptive map: this run's for a map made here, else the one its
+    parameters record (hashed as the file is now)."""
+    if m.mode != "adaptive":
+        return None
+    if not reused:
+        return identity
+    return detector_identity(m.params["detector"]) if "detector" in m.params else None
+
+
+def evaluate_result(entry: LogEntry, mode: str, m: OccupancyMap, map_file: str | None, reused: bool,
+                    detector: dict | None = None) -> ModeResult:
+    """Metrics against the truth; without truth, the map's consistency with its log instead.
+    ``detector``: this run's detector identity (``detector_identity``)."""
     metrics = None
     consistency = None
     if entry.truth is not None:
@@ -266,7 +290,8 @@ def evaluate_result(entry: LogEntry, mode: str, m: OccupancyMap, map_file: str |
             raise InputError(str(exc), file=map_file or entry.path) from None
     else:
         consistency = map_consistency(entry.path, m)
-    return ModeResult(entry.path, entry.world, mode, float(m.runtime_s), metrics, m, map_file, reused, consistency)
+    return ModeResult(entry.path, entry.world, mode, float(m.runtime_s), metrics, m, map_file, reused, consistency,
+                      _map_detector(m, reused, detector))
 
 
 def run_comparison(
@@ -276,7 +301,6 @@ def run_comparison(
     detector: str | None = None,
     jobs: int = 1,
     maps_dir: str | None = None,
-    inputs: tuple[str, ...] = (),
     on_map: Callable[[int, str, OccupancyMap], None] | None = None,
 ) -> list[ModeResult]:
     """Every log in every mode: given maps reused, the others computed (and written to
@@ -290,11 +314,12 @@ def run_comparison(
 
     def finished(i: int, mode: str, m: OccupancyMap) -> None:
         if (i, mode) in targets:
-            write_map_file(targets[(i, mode)], m, inputs=inputs)
+            write_map_file(targets[(i, mode)], m)
             written[(i, mode)] = str(targets[(i, mode)])
         if on_map:
             on_map(i, mode, m)
 
+    identity = detector_identity(detector) if any(mode == "adaptive" for _, mode in tasks) else None
     computed = compute_maps(entries, tasks, params, detector, jobs, finished)
     results = []
     for i, e in enumerate(entries):
@@ -302,7 +327,7 @@ def run_comparison(
             if (i, mode) in given:
                 results.append(evaluate_result(e, mode, given[(i, mode)], e.maps[mode], True))
             else:
-                results.append(evaluate_result(e, mode, computed[(i, mode)], written.get((i, mode)), False))
+                results.append(evaluate_result(e, mode, computed[(i, mode)], written.get((i, mode)), False, identity))
     return results
 
 
@@ -372,7 +397,9 @@ def consistency_json(consistency: dict | None) -> dict | None:
 
 
 def results_json(results: list[ModeResult]) -> dict:
-    """``{"aogm_version", "results": [{log, world, mode, runtime_s, metrics}]}`` as in CONTRACT.md.
+    """``{"aogm_version", "results": [{log, world, mode, runtime_s, metrics}]}`` as in CONTRACT.md,
+    each result also with ``params`` (the parameters the map records) and ``detector``
+    (``{"path", "sha256"}`` for an adaptive map, else null).
 
     A result of a log without truth has ``metrics`` null and a ``consistency`` object beside
     it (``aogm_cli.consistency``: method, readings, endpoint_occupied, endpoint_occupied_8,
@@ -381,15 +408,15 @@ def results_json(results: list[ModeResult]) -> dict:
     out = []
     for r in results:
         item = {"log": r.log, "world": r.world, "mode": r.mode, "runtime_s": _finite(float(r.runtime_s)),
-                "metrics": metrics_json(r.metrics)}
+                "metrics": metrics_json(r.metrics), "params": r.map.params, "detector": r.detector}
         if r.consistency is not None:
             item["consistency"] = consistency_json(r.consistency)
         out.append(item)
     return {"aogm_version": __version__, "results": out}
 
 
-def write_json(path: str | Path, results: list[ModeResult], inputs: tuple[str, ...] = ()) -> None:
+def write_json(path: str | Path, results: list[ModeResult]) -> None:
     """Write ``results_json`` to ``path`` atomically."""
     payload = json.dumps(results_json(results), indent=2, allow_nan=False) + "\n"
-    with atomic_output(path, inputs) as tmp:
+    with atomic_output(path) as tmp:
         Path(tmp).write_text(payload, encoding="utf-8")
