@@ -1,6 +1,6 @@
 """``aogm import carmen`` and ``aogm import text``: real range logs -> an aogm log (HDF5).
 
-Thin: the options become ``CarmenOptions`` / ``TextOptions``; parsing lives in ``aogm_cli.importers``.
+Thin: the options become ``CarmenOptions`` / ``TextOptions``; parsing lives in ``aogm_cli.io.importers``.
 """
 
 from __future__ import annotations
