@@ -11,8 +11,11 @@ from PIL import Image
 from scipy import ndimage
 
 from aogm_cli.world.config import Opening, Wall
-from aogm_cli.world.geometry import build_scene, trajectory_poses, truth_occupancy, wall_pieces
 from aogm_cli.world.loader import parse_world
+from aogm_cli.world.scene import build_scene
+from aogm_cli.world.solids import wall_pieces
+from aogm_cli.world.trajectory import trajectory_poses
+from aogm_cli.world.truth import truth_occupancy
 
 
 def world(**geometry):

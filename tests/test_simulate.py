@@ -248,7 +248,7 @@ def test_echo_block_matches_unpruned_sub_ray_tracing():
     """The kernel bounds each sub-ray's search by the best echo so far; that must not change results."""
     from aogm_cli.simulation.raycast import geometry, trace_sub_ray
     from aogm_cli.simulation.sonar import echo_block
-    from aogm_cli.world.geometry import build_scene
+    from aogm_cli.world.scene import build_scene
 
     rng = np.random.default_rng(12)
     walls = [
