@@ -8,6 +8,7 @@ import shutil
 from pathlib import Path
 
 import h5py
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -236,3 +237,16 @@ def test_report_json_names_the_packaged_detector_and_baselines(files, tmp_path, 
         assert row["params"]["detector"] == "packaged"
     else:
         assert row["detector"] == {"path": "none", "sha256": None}
+
+
+@pytest.mark.parametrize("target", ["plan.yaml", "plan.pgm"])
+def test_simulate_refuses_to_write_over_a_floorplan(tmp_path, target):
+    from PIL import Image
+
+    Image.fromarray(np.full((4, 4), 254, np.uint8)).save(tmp_path / "plan.pgm")
+    (tmp_path / "plan.yaml").write_text("image: plan.pgm\nresolution: 0.5\norigin: [0.0, 0.0, 0.0]\nnegate: 0\n"
+                                        "occupied_thresh: 0.65\nfree_thresh: 0.196\n")
+    (tmp_path / "w.yaml").write_text("bounds: [0, 0, 2, 2]\nfloorplan: {map: plan.yaml}\n"
+                                     "trajectory: {poses: [[1.0, 1.0, 0]]}\n")
+    assert_refused(tmp_path, ["simulate", str(tmp_path / "w.yaml"), "-o", str(tmp_path / target)], str(tmp_path / target),
+                   "is also the input")

@@ -86,12 +86,12 @@ def map_log(log_file, mode, output, png, detector, params_file, resolution, quie
     Example:
       aogm map door.h5 --mode standard -o door_map.h5 --png door_map.png
     """
+    inputs = (log_file, params_file, detector_file(detector, (mode,)))
+    resolve_outputs(inputs, [("-o", output), ("--png", png)])  # before loading the mappers
     from aogm_cli.io.mapfile import write_map_file
     from aogm_cli.mapping.modes import map_file
     from aogm_cli.mapping.params import resolve_params
 
-    inputs = (log_file, params_file, detector_file(detector, (mode,)))
-    resolve_outputs(inputs, [("-o", output), ("--png", png)])
     overrides: dict = {"resolution": resolution, "inverse_model": {}, "em": {}}
     for name, value in options.items():
         section, key = name.split("__")

@@ -21,10 +21,10 @@ def render(map_file: str, output: str, title: str | None, quiet: bool) -> None:
     Example:
       aogm render door_map.h5 -o door_map.png
     """
+    resolve_outputs([map_file], [("-o", output)])
     from aogm_cli.io.mapfile import read_map_file
     from aogm_cli.report.picture import render_map
 
-    resolve_outputs([map_file], [("-o", output)])
     m = read_map_file(map_file)
     render_map(output, m.grid, m.probability, m.observed, m.clusters,
                title=title or f"{m.mode} map of {m.source_log} ({m.runtime_s:.2f} s)")

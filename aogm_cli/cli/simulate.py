@@ -34,13 +34,14 @@ def simulate(world_file: str, output: str, seed: int, png: str | None, quiet: bo
     Example:
       aogm simulate worlds/corridor_door.yaml -o door.h5 --seed 1 --png door_truth.png
     """
-    from aogm_cli.io.logfile import write_log
-    from aogm_cli.simulation.sonar import simulate as run_simulation
-    from aogm_cli.world.geometry import trajectory_poses
     from aogm_cli.world.loader import load_world
 
     world = load_world(world_file)
     resolve_outputs(world_inputs(world_file, world), [("-o", output), ("--png", png)])
+    from aogm_cli.io.logfile import write_log
+    from aogm_cli.simulation.sonar import simulate as run_simulation
+    from aogm_cli.world.geometry import trajectory_poses
+
     n_scans = len(trajectory_poses(world)[0])
     with progress_bar(n_scans, "simulate", quiet, unit="scan") as advance:
         log = run_simulation(world, seed=seed, progress=advance)

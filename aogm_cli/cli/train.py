@@ -64,12 +64,12 @@ def train(log_files, output, seed, validation_logs, hidden, activation, beta, ri
     Example:
       aogm train out/lab.h5 out/hall.h5 out/office.h5 --validation-logs out/office.h5 -o detector.h5 --seed 1
     """
+    resolve_outputs([*log_files, *validation_logs], [("-o", output)])  # before loading scikit-learn
     from aogm_cli.io.detectorfile import save_detector
     from aogm_cli.io.logfile import read_log
     from aogm_cli.training.fit import split_by_world, train_detector
     from aogm_cli.training.labels import LabelDefinition
 
-    resolve_outputs([*log_files, *validation_logs], [("-o", output)])
     spec = FeatureSpec(ring_neighbours, time_neighbours)
     config = TrainingConfig(hidden=hidden, activation=activation, seed=seed, beta=beta)
     train_paths, validation_paths = split_by_world(log_files, validation_logs)

@@ -12,8 +12,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from aogm_cli.core.errors import InputError
+from aogm_cli.core.occupancy_map import MODES
 
-MODES = ("standard", "em", "adaptive")
 # metric names of a gate -> what they mean; runtime is runtime_s, checks_passed a fraction
 METRICS = ("accuracy", "occupied_precision", "occupied_recall", "occupied_f1", "brier", "runtime", "checks_passed")
 COMPARISONS = ("<=", ">=", "==", "!=", "<", ">")
