@@ -245,8 +245,9 @@ def test_floorplan_world_simulates(tmp_path):
 
 
 def test_echo_block_matches_unpruned_sub_ray_tracing():
-    """The kernel bounds each sub-ray's search by the best echo so far; that must not change results."""
-    from aogm_cli.simulation.raycast import geometry, trace_sub_ray
+    """The kernel bounds each sub-ray's search by the best echo so far; that must not change results:
+    the same kernel given one sub-ray at a time traces each up to max_range."""
+    from aogm_cli.simulation.raycast import geometry
     from aogm_cli.simulation.sonar import echo_block
     from aogm_cli.world.scene import build_scene
 
@@ -274,17 +275,15 @@ def test_echo_block_matches_unpruned_sub_ray_tracing():
     co, so = np.cos(off), np.sin(off)
     echo, ideal, multi = np.empty((300, 24)), np.empty((300, 24)), np.empty((300, 24), dtype=bool)
     echo_block(pose, mount, co, so, 5.0, 2, geo, echo, ideal, multi)
-    for i in range(0, 300, 7):
-        c, s = math.cos(pose[i, 2]), math.sin(pose[i, 2])
-        for j in range(24):
-            sx = pose[i, 0] + c * mount[j, 0] - s * mount[j, 1]
-            sy = pose[i, 1] + s * mount[j, 0] + c * mount[j, 1]
-            yaw = pose[i, 2] + mount[j, 2]
-            ca, sa = math.cos(yaw), math.sin(yaw)
-            traced = [trace_sub_ray(sx, sy, ca * co[r] - sa * so[r], sa * co[r] + ca * so[r], 5.0, 2, geo) for r in range(len(co))]
-            first = min(t[0] for t in traced)
-            best = min(traced, key=lambda t: (t[1], t[2]))
-            assert ideal[i, j] == first
-            assert echo[i, j] == best[1]
-            assert multi[i, j] == (best[2] > 0 and np.isfinite(best[1]))
+    # per sub-ray r, unpruned: (first hit, echo path, echo after a bounce) of every reading
+    traced = np.empty((len(co), 3, 300, 24))
+    for r in range(len(co)):
+        one = np.empty((300, 24)), np.empty((300, 24)), np.empty((300, 24), dtype=bool)
+        echo_block(pose, mount, co[r : r + 1], so[r : r + 1], 5.0, 2, geo, *one)
+        traced[r] = one[1], one[0], one[2]
+    assert_array_equal(ideal, traced[:, 0].min(axis=0))
+    assert_array_equal(echo, traced[:, 1].min(axis=0))
+    # after a bounce: the nearest echo, unless some sub-ray echoes as near without one
+    direct = (traced[:, 1] == echo) & (traced[:, 2] == 0)
+    assert_array_equal(multi, np.isfinite(echo) & ~direct.any(axis=0))
     assert multi.any() and np.isinf(echo).any()

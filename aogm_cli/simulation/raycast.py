@@ -3,6 +3,9 @@
 Compiled kernels only: exact ray-segment and ray-circle intersection over the scene's bucket
 grid (a grid traversal that stops at the first bucket holding a hit), and an Amanatides-Woo
 traversal of the floor-plan bitmap. Both give the distance, the surface normal and threshold.
+The kernels are inlined into their one entry point, ``sonar.echo_block`` (through
+``trace_sub_ray``); none is called from Python, so none is compiled on its own (the tests, too,
+go through ``echo_block``).
 """
 
 from __future__ import annotations
@@ -253,26 +256,6 @@ def first_hit(ox, oy, dx, dy, tmax, geo):
         if tb < t:
             return tb, cb, geo.bitmap_cos_threshold, bnx, bny
     return t, c, thr, nx, ny
-
-
-@numba.njit(cache=True, _nrt=False)
-def cast_ray(ox, oy, dx, dy, tmax, geo):
-    """First hit of a ray, with everything a bounce needs.
-
-    Returns (t, incidence, threshold, hx, hy, mx, my): distance (inf if none), incidence angle
-    from the surface normal in [0, pi/2], the surface's specular threshold (rad), the hit point
-    and the mirror direction. ``dx, dy`` need not be unit; t is in units of their length 1.
-    """
-    norm = math.sqrt(dx * dx + dy * dy)
-    dx /= norm
-    dy /= norm
-    t, c, cthr, nx, ny = first_hit(ox, oy, dx, dy, tmax, geo)
-    if t == np.inf:
-        return np.inf, 0.0, 0.0, np.nan, np.nan, np.nan, np.nan
-    incidence = math.acos(min(1.0, c))
-    threshold = math.pi / 2 if cthr <= -1.0 else math.acos(cthr)
-    dn = dx * nx + dy * ny
-    return t, incidence, threshold, ox + t * dx, oy + t * dy, dx - 2.0 * dn * nx, dy - 2.0 * dn * ny
 
 
 @numba.njit(cache=True, inline="always", _nrt=False)
