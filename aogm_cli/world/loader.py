@@ -164,14 +164,77 @@ def parse_world(raw: Any, *, file: str, text: str = "", base_dir: Path = Path(".
 
     name = top.child("name").string() if top.has("name") else Path(file).stem
     description = top.child("description").string() if top.has("description") else ""
-    b = top.child("bounds").vector(4, "[x_min, y_min, x_max, y_max]")
-    if not (b[2] > b[0] and b[3] > b[1]):
-        raise top.child("bounds").error(f"expected x_max > x_min and y_max > y_min, got {list(b)}")
-    bounds = (b[0], b[1], b[2], b[3])
-    truth_resolution = top.get_number("truth_resolution", 0.05, positive=True)
-    if (b[2] - b[0]) * (b[3] - b[1]) / truth_resolution**2 > 2.5e8:
-        raise top.child("truth_resolution").error("the truth grid would exceed 250 million cells; expected a coarser resolution")
+    bounds = _bounds(top.child("bounds"))
+    truth_resolution = _truth_resolution(top, bounds)
+    surfaces = _surfaces(top)
+    walls = _walls(top, surfaces) if top.has("walls") else []
+    boxes = _boxes(top, surfaces) if top.has("boxes") else []
+    polygons = _polygons(top, surfaces) if top.has("polygons") else []
+    circles = _circles(top, surfaces) if top.has("circles") else []
+    floorplan = _floorplan(top.child("floorplan"), surfaces, base_dir) if top.has("floorplan") else None
+    robot = _robot(top.child("robot")) if top.has("robot") else Robot()
+    trajectory = _trajectory(top.child("trajectory"), bounds)
+    sonar = _sonar(top.child("sonar") if top.has("sonar") else Node({}, "sonar", file), robot)
+    checks = _checks(top.child("checks"), bounds, robot) if top.has("checks") else []
 
+    if not (walls or boxes or polygons or circles or floorplan):
+        raise top.error("the world has no geometry; expected walls, boxes, polygons, circles or a floorplan")
+
+    return World(
+        name=name,
+        source=file,
+        text=text,
+        bounds=bounds,
+        truth_resolution=truth_resolution,
+        surfaces=surfaces.by_name,
+        walls=tuple(walls),
+        boxes=tuple(boxes),
+        polygons=tuple(polygons),
+        circles=tuple(circles),
+        floorplan=floorplan,
+        robot=robot,
+        trajectory=trajectory,
+        sonar=sonar,
+        checks=tuple(checks),
+        description=description,
+    )
+
+
+# -- sections of the world, in the order they are checked ----------------------------------
+
+
+def _bounds(n: Node) -> tuple[float, float, float, float]:
+    b = n.vector(4, "[x_min, y_min, x_max, y_max]")
+    if not (b[2] > b[0] and b[3] > b[1]):
+        raise n.error(f"expected x_max > x_min and y_max > y_min, got {list(b)}")
+    return (b[0], b[1], b[2], b[3])
+
+
+def _truth_resolution(top: Node, bounds: tuple[float, float, float, float]) -> float:
+    truth_resolution = top.get_number("truth_resolution", 0.05, positive=True)
+    if (bounds[2] - bounds[0]) * (bounds[3] - bounds[1]) / truth_resolution**2 > 2.5e8:
+        raise top.child("truth_resolution").error("the truth grid would exceed 250 million cells; expected a coarser resolution")
+    return truth_resolution
+
+
+class Surfaces:
+    """The world's surfaces by name (always "rough") and the one a solid without ``surface`` gets."""
+
+    def __init__(self, by_name: dict[str, Surface], default: str):
+        self.by_name = by_name
+        self.default = default
+
+    def of(self, n: Node) -> str:
+        """The surface named under ``n.surface``, checked, or the default."""
+        if not n.has("surface"):
+            return self.default
+        s = n.child("surface").string()
+        if s not in self.by_name:
+            raise n.child("surface").error(f"unknown surface {s!r}; expected one of {sorted(self.by_name)}")
+        return s
+
+
+def _surfaces(top: Node) -> Surfaces:
     surfaces = {"rough": ROUGH}
     if top.has("surfaces"):
         s_node = top.child("surfaces")
@@ -184,111 +247,89 @@ def parse_world(raw: Any, *, file: str, text: str = "", base_dir: Path = Path(".
     default_surface = top.child("default_surface").string() if top.has("default_surface") else "rough"
     if default_surface not in surfaces:
         raise top.child("default_surface").error(f"unknown surface {default_surface!r}; expected one of {sorted(surfaces)}")
+    return Surfaces(surfaces, default_surface)
 
-    def surface_of(n: Node) -> str:
-        if not n.has("surface"):
-            return default_surface
-        s = n.child("surface").string()
-        if s not in surfaces:
-            raise n.child("surface").error(f"unknown surface {s!r}; expected one of {sorted(surfaces)}")
-        return s
 
+def _walls(top: Node, surfaces: Surfaces) -> list[Wall]:
     walls = []
-    if top.has("walls"):
-        for w in top.child("walls").items():
-            w.mapping({"points", "thickness", "surface", "openings"}, required={"points"})
-            pts = w.child("points").points(2)
-            thickness = w.get_number("thickness", 0.1, positive=True)
-            length = sum(math.dist(pts[i], pts[i + 1]) for i in range(len(pts) - 1))
-            openings = []
-            if w.has("openings"):
-                for o in w.child("openings").items():
-                    o.mapping({"at", "width"}, required={"at", "width"})
-                    at = o.child("at").number(minimum=0.0, maximum=length)
-                    width = o.child("width").number(positive=True)
-                    openings.append(Opening(at, width))
-            walls.append(Wall(pts, thickness, surface_of(w), tuple(openings)))
+    for w in top.child("walls").items():
+        w.mapping({"points", "thickness", "surface", "openings"}, required={"points"})
+        pts = w.child("points").points(2)
+        thickness = w.get_number("thickness", 0.1, positive=True)
+        length = sum(math.dist(pts[i], pts[i + 1]) for i in range(len(pts) - 1))
+        openings = []
+        if w.has("openings"):
+            for o in w.child("openings").items():
+                o.mapping({"at", "width"}, required={"at", "width"})
+                at = o.child("at").number(minimum=0.0, maximum=length)
+                width = o.child("width").number(positive=True)
+                openings.append(Opening(at, width))
+        walls.append(Wall(pts, thickness, surfaces.of(w), tuple(openings)))
+    return walls
 
+
+def _boxes(top: Node, surfaces: Surfaces) -> list[Box]:
     boxes = []
-    if top.has("boxes"):
-        for n in top.child("boxes").items():
-            n.mapping({"center", "size", "yaw_deg", "surface"}, required={"center", "size"})
-            size = n.child("size").vector(2, "[width, depth]")
-            if not (size[0] > 0 and size[1] > 0):
-                raise n.child("size").error(f"expected positive [width, depth], got {list(size)}")
-            boxes.append(Box(n.child("center").vector(2), size, n.get_angle("yaw_deg", 0.0), surface_of(n)))
+    for n in top.child("boxes").items():
+        n.mapping({"center", "size", "yaw_deg", "surface"}, required={"center", "size"})
+        size = n.child("size").vector(2, "[width, depth]")
+        if not (size[0] > 0 and size[1] > 0):
+            raise n.child("size").error(f"expected positive [width, depth], got {list(size)}")
+        boxes.append(Box(n.child("center").vector(2), size, n.get_angle("yaw_deg", 0.0), surfaces.of(n)))
+    return boxes
 
+
+def _polygons(top: Node, surfaces: Surfaces) -> list[Polygon]:
     polygons = []
-    if top.has("polygons"):
-        for n in top.child("polygons").items():
-            n.mapping({"points", "surface"}, required={"points"})
-            polygons.append(Polygon(n.child("points").points(3), surface_of(n)))
+    for n in top.child("polygons").items():
+        n.mapping({"points", "surface"}, required={"points"})
+        polygons.append(Polygon(n.child("points").points(3), surfaces.of(n)))
+    return polygons
 
+
+def _circles(top: Node, surfaces: Surfaces) -> list[Circle]:
     circles = []
-    if top.has("circles"):
-        for n in top.child("circles").items():
-            n.mapping({"center", "radius", "surface"}, required={"center", "radius"})
-            circles.append(Circle(n.child("center").vector(2), n.child("radius").number(positive=True), surface_of(n)))
+    for n in top.child("circles").items():
+        n.mapping({"center", "radius", "surface"}, required={"center", "radius"})
+        circles.append(Circle(n.child("center").vector(2), n.child("radius").number(positive=True), surfaces.of(n)))
+    return circles
 
-    floorplan = None
-    if top.has("floorplan"):
-        n = top.child("floorplan").mapping({"map", "surface"}, required={"map"})
-        map_path = (base_dir / n.child("map").string()).resolve()
-        from aogm_cli.io.map_server import read_map_yaml
 
-        try:
-            read_map_yaml(map_path)
-        except InputError as exc:
-            raise n.child("map").error(f"cannot load the map_server YAML: {exc}") from None
-        floorplan = Floorplan(str(map_path), surface_of(n))
+def _floorplan(n: Node, surfaces: Surfaces, base_dir: Path) -> Floorplan:
+    n.mapping({"map", "surface"}, required={"map"})
+    map_path = (base_dir / n.child("map").string()).resolve()
+    from aogm_cli.io.map_server import read_map_yaml
 
-    robot = Robot()
-    if top.has("robot"):
-        n = top.child("robot").mapping({"radius"})
-        robot = Robot(n.get_number("radius", 0.25, positive=True))
+    try:
+        read_map_yaml(map_path)
+    except InputError as exc:
+        raise n.child("map").error(f"cannot load the map_server YAML: {exc}") from None
+    return Floorplan(str(map_path), surfaces.of(n))
 
-    trajectory = _trajectory(top.child("trajectory"), bounds)
-    sonar = _sonar(top.child("sonar") if top.has("sonar") else Node({}, "sonar", file), robot)
 
-    checks = []
-    if top.has("checks"):
-        names = set()
-        for n in top.child("checks").items():
-            n.mapping({"name", "passable"}, required={"name", "passable"})
-            cname = n.child("name").string()
-            if cname in names:
-                raise n.child("name").error(f"duplicate check name {cname!r}")
-            names.add(cname)
-            p = n.child("passable").mapping({"from", "to", "robot_radius"}, required={"from", "to"})
-            start = p.child("from").vector(2)
-            goal = p.child("to").vector(2)
-            for key, pt in (("from", start), ("to", goal)):
-                if not _inside(pt, bounds):
-                    raise p.child(key).error(f"expected a point inside bounds {list(bounds)}, got {list(pt)}")
-            radius = p.get_number("robot_radius", robot.radius, minimum=0.0)
-            checks.append(PassableCheck(cname, start, goal, radius))
+def _robot(n: Node) -> Robot:
+    n.mapping({"radius"})
+    return Robot(n.get_number("radius", Robot.radius, positive=True))
 
-    if not (walls or boxes or polygons or circles or floorplan):
-        raise top.error("the world has no geometry; expected walls, boxes, polygons, circles or a floorplan")
 
-    return World(
-        name=name,
-        source=file,
-        text=text,
-        bounds=bounds,
-        truth_resolution=truth_resolution,
-        surfaces=surfaces,
-        walls=tuple(walls),
-        boxes=tuple(boxes),
-        polygons=tuple(polygons),
-        circles=tuple(circles),
-        floorplan=floorplan,
-        robot=robot,
-        trajectory=trajectory,
-        sonar=sonar,
-        checks=tuple(checks),
-        description=description,
-    )
+def _checks(checks: Node, bounds, robot: Robot) -> list[PassableCheck]:
+    out = []
+    names = set()
+    for n in checks.items():
+        n.mapping({"name", "passable"}, required={"name", "passable"})
+        cname = n.child("name").string()
+        if cname in names:
+            raise n.child("name").error(f"duplicate check name {cname!r}")
+        names.add(cname)
+        p = n.child("passable").mapping({"from", "to", "robot_radius"}, required={"from", "to"})
+        start = p.child("from").vector(2)
+        goal = p.child("to").vector(2)
+        for key, pt in (("from", start), ("to", goal)):
+            if not _inside(pt, bounds):
+                raise p.child(key).error(f"expected a point inside bounds {list(bounds)}, got {list(pt)}")
+        radius = p.get_number("robot_radius", robot.radius, minimum=0.0)
+        out.append(PassableCheck(cname, start, goal, radius))
+    return out
 
 
 def _inside(pt, bounds) -> bool:
