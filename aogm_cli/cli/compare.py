@@ -162,7 +162,7 @@ def compare(inputs, modes_text, detector, params_file, json_out, figure_out, map
         )
 
     for r in results:
-        differs = lib.params_differences(r.map.params, params) if r.reused else []
+        differs = lib.params_differences(r.map.params, params, r.metrics is not None) if r.reused else []
         if differs:
             click.echo(f"aogm: note: {r.map_file} was made with other {', '.join(differs)} parameters than "
                        "this comparison's; it is reported as it is", err=True)

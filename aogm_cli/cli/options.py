@@ -67,12 +67,12 @@ class DetectorParam(click.ParamType):
     name = "detector"
 
     def get_metavar(self, param, ctx=None):
-        from aogm_cli.mapping.modes import BASELINE_DETECTORS
+        from aogm_cli.io.detectorfile import BASELINE_DETECTORS
 
         return "|".join(("DETECTOR.h5", *BASELINE_DETECTORS))
 
     def convert(self, value, param, ctx):
-        from aogm_cli.mapping.modes import BASELINE_DETECTORS
+        from aogm_cli.io.detectorfile import BASELINE_DETECTORS
 
         if value in BASELINE_DETECTORS:
             return value
@@ -91,7 +91,7 @@ def detector_file(detector: str | None, modes) -> str | None:
     if "adaptive" not in modes:
         return None
     from aogm_cli.io.detectorfile import default_detector_path
-    from aogm_cli.mapping.modes import BASELINE_DETECTORS
+    from aogm_cli.io.detectorfile import BASELINE_DETECTORS
 
     if detector is None:
         return str(default_detector_path())

@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 from pathlib import Path
 
@@ -19,6 +20,7 @@ from aogm_cli.io.h5file import open_input, text
 
 FORMAT = "aogm-detector"
 FORMAT_VERSION = 1
+BASELINE_DETECTORS = ("all", "none")  # --detector all|none: flag every reading, or none
 
 
 def default_detector_path() -> Path:
@@ -117,3 +119,26 @@ def _read(f: h5py.File, path: str) -> Detector:
             key=f"/layers/{names[-1]}",
         )
     return Detector(tuple(layers), spec, threshold, labels, metrics, training, path)
+
+
+def file_sha256(path: str | Path) -> str | None:
+    """The file's sha256 (hex); None when there is no such file (any more)."""
+    if not Path(path).is_file():
+        return None
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def detector_identity(spec: str | None) -> dict:
+    """``{"path", "sha256"}`` of the detector that ``spec`` names (``--detector``, or a map's
+    recorded ``params["detector"]``): None / "packaged" is the file inside the package (its path
+    there), "all" / "none" a baseline (its name, sha256 null), anything else a detector file."""
+    if spec in BASELINE_DETECTORS:
+        return {"path": spec, "sha256": None}
+    if spec is None or spec == "packaged":
+        path = default_detector_path()
+        return {"path": path.relative_to(path.parents[2]).as_posix(), "sha256": file_sha256(path)}
+    return {"path": str(spec), "sha256": file_sha256(spec)}

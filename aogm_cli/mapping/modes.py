@@ -14,7 +14,7 @@ import numpy as np
 from aogm_cli.core.log import Log, SensorSpec
 from aogm_cli.core.occupancy_map import MODES, OccupancyMap
 from aogm_cli.detector.network import ConstantDetector
-from aogm_cli.io.detectorfile import load_detector
+from aogm_cli.io.detectorfile import BASELINE_DETECTORS, file_sha256, load_detector
 from aogm_cli.io.logfile import LogReader
 from aogm_cli.mapping.adaptive import map_adaptive
 from aogm_cli.mapping.em import map_em
@@ -22,17 +22,16 @@ from aogm_cli.mapping.params import MapParams
 from aogm_cli.mapping.pipeline import Progress, log_grid
 from aogm_cli.mapping.standard import map_standard
 
-BASELINE_DETECTORS = ("all", "none")  # --detector all|none: flag every reading, or none
+__all__ = ["BASELINE_DETECTORS", "map_file", "map_log", "resolve_detector", "warm_up"]
 
 
 def resolve_detector(spec: str | None):
     """(detector, name): the packaged detector for None, a baseline for "all" / "none", else
     the detector file at ``spec`` (checked by ``io.detectorfile.load_detector``)."""
-    if spec is None:
-        return load_detector(None), "packaged"
     if spec in BASELINE_DETECTORS:
         return ConstantDetector(spec == "all"), spec
-    return load_detector(spec), str(spec)
+    detector = load_detector(spec)
+    return detector, "packaged" if spec is None else str(spec)
 
 
 def map_log(log, mode: str, params: MapParams, detector=None, detector_name: str = "packaged",
@@ -46,6 +45,8 @@ def map_log(log, mode: str, params: MapParams, detector=None, detector_name: str
         m = map_adaptive(log, params, detector, detector_name, progress)
     else:
         raise ValueError(f"unknown mode {mode!r}; expected one of {', '.join(MODES)}")
+    if mode == "adaptive" and getattr(detector, "path", None):  # the detector file's identity, as it was used
+        m.params["detector_sha256"] = file_sha256(detector.path)
     # the grid is derived (the truth's, or the poses' bounds): recorded with the parameters
     m.params["grid"] = {"origin": [m.grid.origin_x, m.grid.origin_y], "resolution": m.grid.resolution,
                         "shape": [m.grid.height, m.grid.width]}

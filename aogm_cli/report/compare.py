@@ -6,7 +6,6 @@ the log instead (``aogm_cli.consistency``).
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import os
@@ -23,7 +22,7 @@ from aogm_cli.core.occupancy_map import MODES, OccupancyMap
 from aogm_cli.evaluation.consistency import map_consistency
 from aogm_cli.evaluation.metrics import evaluate
 from aogm_cli.io.atomic import atomic_output
-from aogm_cli.io.detectorfile import default_detector_path
+from aogm_cli.io.detectorfile import detector_identity
 from aogm_cli.io.logfile import LogReader
 from aogm_cli.io.mapfile import is_map_file, read_map_file, read_map_header, write_map_file
 from aogm_cli.mapping.params import MapParams
@@ -174,10 +173,12 @@ def maps_dir_targets(entries: list[LogEntry], modes: tuple[str, ...], maps_dir: 
     return targets
 
 
-def params_differences(map_params: dict, params: MapParams) -> list[str]:
+def params_differences(map_params: dict, params: MapParams, has_truth: bool = False) -> list[str]:
     """The parameter sections (resolution, inverse_model, em) in which a map's recorded
-    parameters differ from ``params``."""
+    parameters differ from ``params``; a log with truth decides its maps' resolution itself."""
     wanted = json.loads(json.dumps(params.as_dict()))
+    if has_truth:
+        wanted.pop("resolution")
     return [k for k, v in wanted.items() if k in map_params and map_params[k] != v]
 
 
@@ -242,31 +243,6 @@ def compute_maps(
     return done
 
 
-def _sha256(path: str | Path) -> str | None:
-    """The file's sha256 (hex); None when there is no such file (any more)."""
-    if not Path(path).is_file():
-        return None
-    digest = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
-
-
-def detector_identity(spec: str | None) -> dict:
-    """``{"path", "sha256"}`` of the detector that ``spec`` names (``--detector``, or a map's
-    recorded ``params["detector"]``): None / "packaged" is the file inside the package (its path
-    there), "all" / "none" a baseline (its name, sha256 null), anything else a detector file."""
-    from aogm_cli.mapping.modes import BASELINE_DETECTORS
-
-    if spec in BASELINE_DETECTORS:
-        return {"path": spec, "sha256": None}
-    if spec is None or spec == "packaged":
-        path = default_detector_path()
-        return {"path": path.relative_to(path.parents[2]).as_posix(), "sha256": _sha256(path)}
-    return {"path": str(spec), "sha256": _sha256(spec)}
-
-
 def _map_detector(m: OccupancyMap, reused: bool, identity: dict | None) -> dict | None:
     """The detector behind an adaptive map: this run's for a map made here, else the one its
     parameters record (hashed as the file is now)."""
@@ -274,7 +250,11 @@ def _map_detector(m: OccupancyMap, reused: bool, identity: dict | None) -> dict 
         return None
     if not reused:
         return identity
-    return detector_identity(m.params["detector"]) if "detector" in m.params else None
+    if "detector" not in m.params:
+        return None
+    recorded = m.params.get("detector_sha256")  # what the map was made with (older maps: the file as it is now)
+    found = detector_identity(m.params["detector"])
+    return found if recorded is None else {"path": found["path"], "sha256": recorded}
 
 
 def evaluate_result(entry: LogEntry, mode: str, m: OccupancyMap, map_file: str | None, reused: bool,
