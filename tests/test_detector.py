@@ -312,7 +312,6 @@ def test_packaged_detector_loads_and_flags():
     det = load_detector()
     assert det.path == str(default_detector_path())
     assert det.metrics["validation"]["n_samples"] > 0 and det.metrics["train"]["n_samples"] > 0
-    assert det.scan_context == det.feature_spec.time_neighbours
     flags = det.flag(np.full((3, 24), 1.0, np.float32), 5.0)
     assert flags.shape == (3, 24)
 

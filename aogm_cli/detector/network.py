@@ -60,11 +60,6 @@ class Detector:
     training: dict = field(default_factory=dict)  # how it was trained (network, seed, logs)
     path: str | None = None
 
-    @property
-    def scan_context(self) -> int:
-        """Scans needed on each side of a reading to build its features (time neighbours)."""
-        return self.feature_spec.time_neighbours
-
     def predict_proba(self, x: np.ndarray) -> np.ndarray:
         """(N,) float64 p(y = 1) for (N, F) features (the second column of sklearn's predict_proba)."""
         h = np.asarray(x, dtype=np.float64)

@@ -78,11 +78,6 @@ def probability_from_log_odds(log_odds, observed=None) -> np.ndarray:
     return p.astype(np.float32)
 
 
-def angular_weights(templates: ConeTemplates, config: InverseModelConfig, beam_width: float) -> np.ndarray:
-    """Per template entry, float32: Elfes' E_a(bearing) (clipped at 0), or 1 for the constant model."""
-    return _entry_tables(templates, config.model, float(beam_width))[0]
-
-
 @functools.lru_cache(maxsize=8)
 def _entry_tables(templates: ConeTemplates, model: str, beam_width: float) -> tuple[np.ndarray, np.ndarray]:
     """(angular weights, ranges) per template entry as read-only float32 arrays; cached."""
