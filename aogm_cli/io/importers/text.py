@@ -262,6 +262,37 @@ def build_text_log(
     position = _unit(LENGTH_UNITS, o.position_unit, "position_unit")
     angle = _unit(ANGLE_UNITS, o.angle_unit, "angle_unit")
     time_scale = _unit(TIME_UNITS, o.time_unit, "time_unit")
+    _check_sensor(o)
+    poses_from = range_table if pose_table is None else pose_table
+    cols = _columns(range_table, pose_table, o)
+
+    raw = np.column_stack([range_table.column(c, missing_ok=True) for c in cols.ranges])
+    ranges = raw * length
+    if o.no_echo:
+        ranges[np.isin(raw, np.asarray(o.no_echo, dtype=np.float64))] = np.inf
+    n = raw.shape[0]
+    time = range_table.column(cols.range_time) * time_scale if cols.range_time is not None else o.period * np.arange(n)
+
+    pose_raw = np.column_stack([poses_from.column(c) for c in cols.pose])
+    pose = np.column_stack([pose_raw[:, :2] * position, wrap_angle(pose_raw[:, 2] * angle)])
+    pose, keep, notes = _pair_poses(range_table, pose_table, cols, pose, time, time_scale)
+
+    sensor = SensorSpec(
+        _mounts(mounts, len(cols.ranges), o),
+        o.kind,
+        float(o.beam_width),
+        float(o.min_range),
+        float(o.max_range),
+        float(o.noise_sigma),
+    )
+    log = Log(
+        time=time[keep], pose=pose[keep], ranges=clean_ranges(ranges[keep], o.max_range), sensor=sensor, source=source
+    )
+    return TextImport(log, int((~keep).sum()), tuple(notes))
+
+
+def _check_sensor(o: TextOptions) -> None:
+    """The sensor's kind and beam, and the scan period, are ones a log can hold."""
     if o.kind not in ("sonar", "laser"):
         raise InputError(f"expected sonar or laser, got {o.kind!r}", key="kind")
     for key in ("beam_width", "max_range", "period"):
@@ -271,6 +302,20 @@ def build_text_log(
     if not (0 <= o.min_range < o.max_range):
         raise InputError(f"expected 0 <= min_range < max_range ({o.max_range}), got {o.min_range}", key="min_range")
 
+
+@dataclass(frozen=True)
+class Columns:
+    """Which columns (0-based) hold what: the readings of ``range_table``, the x, y, yaw of the
+    pose table, and each table's time column (None: none)."""
+
+    ranges: list[int]
+    pose: list[int]
+    range_time: int | None
+    pose_time: int | None
+
+
+def _columns(range_table: Table, pose_table: Table | None, o: TextOptions) -> Columns:
+    """Resolve the options' column specs; readings default to every column not used for the pose or time."""
     same = pose_table is None
     poses_from = range_table if same else pose_table
     pose_cols = resolve_columns(o.pose_columns, poses_from, "pose_columns")
@@ -300,26 +345,30 @@ def build_text_log(
             file=range_table.file,
             key="range_columns",
         )
+    return Columns(range_cols, pose_cols, range_time, pose_time)
 
-    raw = np.column_stack([range_table.column(c, missing_ok=True) for c in range_cols])
-    ranges = raw * length
-    if o.no_echo:
-        ranges[np.isin(raw, np.asarray(o.no_echo, dtype=np.float64))] = np.inf
-    n = raw.shape[0]
-    time = range_table.column(range_time) * time_scale if range_time is not None else o.period * np.arange(n)
 
-    pose_raw = np.column_stack([poses_from.column(c) for c in pose_cols])
-    pose = np.column_stack([pose_raw[:, :2] * position, wrap_angle(pose_raw[:, 2] * angle)])
+def _pair_poses(
+    range_table: Table,
+    pose_table: Table | None,
+    cols: Columns,
+    pose: np.ndarray,
+    time: np.ndarray,
+    time_scale: float,
+) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """(a pose per scan, kept scans, notes): poses of a separate table with a time column are
+    interpolated at the scan times (scans outside their span dropped), others pair up row by row."""
+    n = time.shape[0]
     keep = np.ones(n, dtype=bool)
     notes: list[str] = []
-    if not same and pose_time is not None:
-        if range_time is None:
+    if pose_table is not None and cols.pose_time is not None:
+        if cols.range_time is None:
             raise InputError(
                 "poses have a time column but readings do not: name range_time_column too",
                 file=range_table.file,
                 key="range_time_column",
             )
-        pose, keep = interpolate_poses(poses_from.column(pose_time) * time_scale, pose, time)
+        pose, keep = interpolate_poses(pose_table.column(cols.pose_time) * time_scale, pose, time)
         if not keep.any():
             raise InputError(
                 "no scan lies within the time span of the poses", file=pose_table.file, key="pose_time_column"
@@ -332,24 +381,20 @@ def build_text_log(
             file=pose_table.file,
             key="poses",
         )
+    return pose, keep, notes
 
-    s = len(range_cols)
+
+def _mounts(mounts: np.ndarray | None, count: int, o: TextOptions) -> np.ndarray:
+    """(count, 3) sensor mounts: the given ones, checked, else at ``o.sensor_radius`` along ``o.bearings``."""
     if mounts is not None:
         mount = np.asarray(mounts, dtype=np.float64)
-        if mount.shape != (s, 3):
+        if mount.shape != (count, 3):
             raise InputError(
-                f"expected {s} sensor mounts (one per range column) of x y yaw, got shape {mount.shape}", key="mounts"
+                f"expected {count} sensor mounts (one per range column) of x y yaw, got shape {mount.shape}", key="mounts"
             )
-    else:
-        bearings = parse_bearings(o.bearings, s, o.bearing_unit)
-        mount = np.column_stack([o.sensor_radius * np.cos(bearings), o.sensor_radius * np.sin(bearings), bearings])
-    sensor = SensorSpec(
-        mount, o.kind, float(o.beam_width), float(o.min_range), float(o.max_range), float(o.noise_sigma)
-    )
-    log = Log(
-        time=time[keep], pose=pose[keep], ranges=clean_ranges(ranges[keep], o.max_range), sensor=sensor, source=source
-    )
-    return TextImport(log, int((~keep).sum()), tuple(notes))
+        return mount
+    bearings = parse_bearings(o.bearings, count, o.bearing_unit)
+    return np.column_stack([o.sensor_radius * np.cos(bearings), o.sensor_radius * np.sin(bearings), bearings])
 
 
 def read_table(path: str | Path, delimiter: str = "auto", progress: Progress | None = None) -> Table:
