@@ -11,30 +11,28 @@ score every (cluster cell, reading) pair once, without a flip (best of five).
 
 from __future__ import annotations
 
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
-
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from seed_logs import for_each_seed_log  # noqa: E402
+from seed_logs import em_inputs, em_kernel_inputs, for_each_seed_log
 
 from aogm_cli.io.logfile import LogReader
-from aogm_cli.mapping import em as E  # noqa: E402
-from aogm_cli.mapping import mapper  # noqa: E402
-from aogm_cli.mapping.params import resolve_params  # noqa: E402
-from aogm_cli.mapping.sensor_models.forward_model import build_forward_index  # noqa: E402
+from aogm_cli.mapping import em_kernels as K
+from aogm_cli.mapping.adaptive import cluster_forward_index
+from aogm_cli.mapping.modes import map_file
+from aogm_cli.mapping.params import resolve_params
+from aogm_cli.mapping.pipeline import log_grid
+from aogm_cli.mapping.sensor_models.forward_model import build_forward_index
+from aogm_cli.mapping.standard import standard_pass
 
 
 def bench(world_name: str, log_path: Path) -> None:
     params = resolve_params()
-    runs = [mapper.map_adaptive(log_path, params) for _ in range(5)]
+    runs = [map_file(log_path, "adaptive", params) for _ in range(5)]  # the packaged detector
     with LogReader(log_path) as reader:  # the standard map's own clock: mapping work, no I/O
-        grid = mapper.log_grid(reader, params.resolution)
-        t_std = min(mapper.standard_pass(reader, grid, params)[2] for _ in range(5))
+        grid = log_grid(reader, params.resolution)
+        t_std = min(standard_pass(reader, grid, params)[2] for _ in range(5))
     phases = {k: min(r.stats["phase_seconds"][k] for r in runs) for k in runs[0].stats["phase_seconds"]}
     stats = runs[0].stats
     total = sum(phases.values())
@@ -50,26 +48,25 @@ def bench(world_name: str, log_path: Path) -> None:
 
 
 def floors(log_path: Path, params, clusters: np.ndarray, t_std: float) -> None:
-    run = mapper._em_inputs(log_path, params)
+    inputs = em_inputs(log_path, params)
+    run, params = inputs.readings, inputs.params
     forward = params.em.forward
-    occupied = np.ascontiguousarray((run.log_odds > 0).reshape(-1))
-    index = mapper.cluster_forward_index(run, clusters, occupied, forward)
+    occupied = np.ascontiguousarray((inputs.log_odds > 0).reshape(-1))
+    index = cluster_forward_index(run, clusters, occupied, forward)
     full = build_forward_index(run.rows, run.cols, run.bins, run.z, run.grid, run.templates, run.sensor.max_range,
                                forward)
     touching = np.isin(full.reading, index.reading[np.diff(index.ptr) > 0])
     print(f"  readings holding a cluster cell: {touching.sum()} of {full.n_readings}, their cones "
           f"{np.diff(full.ptr)[touching].sum()} of {full.cell.size} full-EM entries")
-    p_hit, l_prior = forward.p_hit, params.em.l_prior
-    cand_cell, cand_ptr, pair_t, pair_e, pair_g = E.pair_index(index, np.flatnonzero(clusters.reshape(-1) > 0))
-    qpow = (1.0 - p_hit) ** np.arange(int(np.max(np.diff(index.ptr))) + 1)
-    nptr, *state = E._init_state(index.ptr, index.cell, index.g, index.g0, index.const, index.w, p_hit, qpow, occupied)
+    pairs, model = em_kernel_inputs(index, np.flatnonzero(clusters.reshape(-1) > 0), params.em)
+    fwd = index.kernel_arrays
+    state = K._init_state(fwd, model, occupied)
     times = []
     for _ in range(5):
         t0 = time.perf_counter()
-        E._residual(cand_cell, cand_ptr, pair_t, pair_e, nptr, pair_g, index.const, index.w, p_hit, l_prior, qpow,
-                    occupied, *state)
+        K._residual(pairs, fwd, model, occupied, state)
         times.append(time.perf_counter() - t0)
-    print(f"  scoring all {pair_t.size} cluster pairs once {min(times) * 1e3:6.2f} ms  = "
+    print(f"  scoring all {pairs.pair_t.size} cluster pairs once {min(times) * 1e3:6.2f} ms  = "
           f"{min(times) / t_std:5.2f} x standard map")
 
 

@@ -7,22 +7,18 @@ the paper compares with), building the forward index, each EM sweep, and the res
 
 from __future__ import annotations
 
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
-
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from seed_logs import for_each_seed_log  # noqa: E402
+from seed_logs import em_inputs, em_kernel_inputs, for_each_seed_log, sweep_stamps
 
 from aogm_cli.io.logfile import LogReader
-from aogm_cli.mapping import em as E  # noqa: E402
-from aogm_cli.mapping import mapper  # noqa: E402
-from aogm_cli.mapping.params import resolve_params  # noqa: E402
-from aogm_cli.mapping.sensor_models.forward_model import build_forward_index  # noqa: E402
+from aogm_cli.mapping import em as E
+from aogm_cli.mapping import em_kernels as K
+from aogm_cli.mapping.params import resolve_params
+from aogm_cli.mapping.sensor_models.forward_model import build_forward_index
+from aogm_cli.mapping.standard import standard_pass
 
 
 def best_of(fn, repeat=5):
@@ -35,35 +31,30 @@ def best_of(fn, repeat=5):
 
 
 def bench(world_name: str, log_path: Path) -> None:
-    params = resolve_params()
-    run = mapper._em_inputs(log_path, params)
-    grid, sensor, log_odds = run.grid, run.sensor, run.log_odds
+    inputs = em_inputs(log_path, resolve_params())
+    params, run, log_odds = inputs.params, inputs.readings, inputs.log_odds
+    grid, sensor = run.grid, run.sensor
     templates, rows, cols, bins, z = run.templates, run.rows, run.cols, run.bins, run.z
     with LogReader(log_path) as reader:  # the standard pass's own clock: mapping work, no I/O
-        t_std = min(mapper.standard_pass(reader, grid, params)[2] for _ in range(5))
+        t_std = min(standard_pass(reader, grid, params)[2] for _ in range(5))
     config = params.em
     t_index, index = best_of(lambda: build_forward_index(rows, cols, bins, z, grid, templates, sensor.max_range, config.forward))
-    candidates = np.unique(index.cell)
-    occupied = np.ascontiguousarray((log_odds > 0).reshape(-1))
-    p_hit, l_prior = config.forward.p_hit, config.l_prior
+    candidates = E.em_candidates(index, grid.height * grid.width)
+    fwd = index.kernel_arrays
     t0 = time.perf_counter()
-    cand_cell, cand_ptr, pair_t, pair_e, pair_g = E.pair_index(index, candidates)
+    pairs, model = em_kernel_inputs(index, candidates, config)
     t_pairs = time.perf_counter() - t0
-    qpow = (1.0 - p_hit) ** np.arange(int(np.max(np.diff(index.ptr))) + 1)
     runs = []
     for _ in range(3):  # best of three, as the standard pass is best of five
         occupied = np.ascontiguousarray((log_odds > 0).reshape(-1))
         t0 = time.perf_counter()
-        nptr, *state = E._init_state(index.ptr, index.cell, index.g, index.g0, index.const, index.w, p_hit, qpow,
-                                     occupied)
+        state = K._init_state(fwd, model, occupied)
         t_init = time.perf_counter() - t0
-        stamps = (np.zeros(index.n_readings, np.int64), np.full(cand_cell.size, -1, np.int64), np.zeros(1, np.int64),
-                  np.zeros(cand_cell.size))
+        stamps = sweep_stamps(index, pairs)
         sweep_times, flips = [], []
         for _ in range(config.max_sweeps):  # exactly run_em's loop, each sweep timed on its own
             t0 = time.perf_counter()
-            n, _ = E._sweep(cand_cell, cand_ptr, pair_t, pair_e, nptr, index.cell, index.g, index.g0, index.const,
-                            index.w, p_hit, l_prior, qpow, occupied, *state, *stamps, pair_g)
+            n, _ = K._sweep(pairs, fwd, model, occupied, state, stamps)
             sweep_times.append(time.perf_counter() - t0)
             flips.append(int(n))
             if n == 0:
@@ -72,7 +63,7 @@ def bench(world_name: str, log_path: Path) -> None:
     t_init = min(r[0] for r in runs)
     sweep_times = np.min([r[1] for r in runs], axis=0)
     t0 = time.perf_counter()
-    E._residual_from_gains(cand_cell, occupied, stamps[3], l_prior)
+    K._residual_from_gains(pairs.cand_cell, occupied, stamps.last_gain, model.l_prior)
     t_res = time.perf_counter() - t0
     check = E.run_em(index, np.ascontiguousarray((log_odds > 0).reshape(-1)), candidates, config)
     assert check.flips == flips, "the bench's loop must match run_em"

@@ -19,6 +19,7 @@ import numpy as np
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import SensorSpec
 from aogm_cli.mapping.pipeline import cone_templates as standard_templates
+from aogm_cli.mapping.pipeline import echo_ranges
 from aogm_cli.mapping.sensor_models.cone import cone_cells, reading_geometry
 from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig
 from aogm_cli.mapping.standard import standard_map
@@ -101,7 +102,8 @@ def ceiling(pose, ranges, sensor, grid, config, templates, block=500):
     for start in range(0, pose.shape[0], block):
         stop = min(pose.shape[0], start + block)
         rows, cols, bins, valid, offset = reading_geometry(pose[start:stop], sensor, grid, templates)
-        z = np.where(valid, ranges[start:stop], np.nan).astype(np.float32).reshape(-1)
+        # the ranges as standard_map takes them (pipeline.echo_ranges, as float32)
+        z = np.where(valid, echo_ranges(ranges[start:stop], grid).astype(np.float32), np.nan).astype(np.float32).reshape(-1)
         limits = _reading_limits(z, offset.reshape(-1), 0.5 * config.alpha, sensor.max_range)
         idx = _gather_cells(
             templates.kernel_arrays, grid.height, grid.width,

@@ -17,16 +17,15 @@ import sys
 import tempfile
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT))
-
-from aogm_cli.evaluation.metrics import evaluate  # noqa: E402
+from aogm_cli.evaluation.metrics import evaluate
 from aogm_cli.io.detectorfile import default_detector_path, load_detector, save_detector
 from aogm_cli.io.logfile import read_log, write_log
-from aogm_cli.mapping import mapper  # noqa: E402
-from aogm_cli.mapping.params import resolve_params  # noqa: E402
-from aogm_cli.simulation.sonar import simulate  # noqa: E402
-from aogm_cli.world.loader import load_world  # noqa: E402
+from aogm_cli.mapping.modes import map_file
+from aogm_cli.mapping.params import resolve_params
+from aogm_cli.simulation.sonar import simulate
+from aogm_cli.world.loader import load_world
+
+ROOT = Path(__file__).resolve().parents[1]
 
 STANDARD_GRID = [{"inverse_model": {"alpha": a, "l_occ": lo}} for a, lo in itertools.product([0.05, 0.07, 0.1], [0.85, 0.6, 0.4])]
 EM_GRID = [{"em": {"sigma": s, "p_hit": h, "p_max": m}}
@@ -51,8 +50,8 @@ def adaptive_tradeoff(folder: Path) -> None:
         write_log(path, simulate(load_world(ROOT / "worlds" / f"{name}.yaml"), seed=1))
         params = resolve_params()
         truth = read_log(path).truth
-        standard = best_of_three(mapper.map_standard, path, params)
-        em = evaluate(mapper.map_em(path, params), truth)["accuracy"]
+        standard = best_of_three(map_file, path, "standard", params)
+        em = evaluate(map_file(path, "em", params), truth)["accuracy"]
         logs.append((name, path, truth, standard.runtime_s, em))
         print(f"{name}: standard {evaluate(standard, truth)['accuracy']:.4f}, em {em:.4f} "
               f"(the bar: adaptive >= {em - 0.005:.4f} at <= 1.5 x standard)")
@@ -64,7 +63,7 @@ def adaptive_tradeoff(folder: Path) -> None:
         params = resolve_params(None, overrides)
         row = [f"{overrides['adaptive']} threshold {threshold or packaged.threshold:.2f}:"]
         for name, path, truth, t_standard, em in logs:
-            m = best_of_three(mapper.map_adaptive, path, params, detector_path)
+            m = best_of_three(map_file, path, "adaptive", params, detector_path)
             acc = evaluate(m, truth)["accuracy"]
             cover = m.stats["cells_in_clusters"] / m.stats["observed_cells"]
             flagged = m.stats["flagged_readings"] / m.stats["readings"]
@@ -79,7 +78,8 @@ def main() -> None:
         with tempfile.TemporaryDirectory() as folder:
             adaptive_tradeoff(Path(folder))
         return
-    grid, make = (STANDARD_GRID, mapper.map_standard) if which == "standard" else (EM_GRID, mapper.map_em)
+    mode = "standard" if which == "standard" else "em"
+    grid = STANDARD_GRID if mode == "standard" else EM_GRID
     worlds = sorted((ROOT / "worlds").glob("*.yaml"))
     print("worlds:", " ".join(w.stem for w in worlds))
     with tempfile.TemporaryDirectory() as folder:
@@ -90,7 +90,7 @@ def main() -> None:
             logs.append((path, read_log(path).truth))
         for overrides in grid:
             params = resolve_params(None, overrides)
-            results = [evaluate(make(path, params), truth) for path, truth in logs]
+            results = [evaluate(map_file(path, mode, params), truth) for path, truth in logs]
             checks = [c["passed"] for r in results for c in r["checks"]]
             print(overrides, "acc", " ".join(f"{r['accuracy']:.3f}" for r in results),
                   "f1", " ".join(f"{r['occupied_f1']:.2f}" for r in results), f"checks {sum(checks)}/{len(checks)}", flush=True)
