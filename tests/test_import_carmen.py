@@ -13,6 +13,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 from aogm_cli.cli import main
 from aogm_cli.core.errors import InputError
+from aogm_cli.core.log import SensorSpec
 from aogm_cli.io.importers import clean_ranges, interpolate_poses
 from aogm_cli.io.importers.carmen import (
     CarmenOptions,
@@ -152,6 +153,21 @@ def test_sonar_mounts_cone_and_pose_interpolated_from_truepos():
     assert_array_equal(log.ranges, np.array([[1.5, np.inf]], dtype=np.float32))
     err = error_of(lines, pose_from="odom")  # the one ODOM line (t=6.5) is before the scan (t=7)
     assert err.key == "ODOM" and "no SONAR scan lies within the time span" in err.message
+
+
+def test_a_sonar_line_without_cone_angle_has_the_sonar_defaults_of_every_log(tmp_path):
+    """Defaults written once, as ``SensorSpec``'s: parse_carmen's and the command's are the same."""
+    lines = ["TRUEPOS 0 0 0 9 9 9 6.0 h 6.0", SONAR.format(t=7.0).replace("SONAR 0.5236", "SONAR 0"), "TRUEPOS 2 0 0 9 9 9 8.0 h 8.0"]
+    sensors = [parse_carmen(lines).log.sensor]
+    path, out = tmp_path / "sonar.log", tmp_path / "sonar.h5"
+    path.write_text("\n".join(lines) + "\n")
+    res = CliRunner().invoke(main, ["import", "carmen", str(path), "-o", str(out), "-q"])
+    assert res.exit_code == 0, res.output
+    sensors.append(read_log(out).sensor)
+    for s in sensors:
+        assert s.kind == "sonar"
+        for key in ("beam_width", "min_range", "max_range", "noise_sigma"):
+            assert getattr(s, key) == getattr(SensorSpec, key), key
 
 
 def test_pose_interpolation_takes_the_short_way_round_and_flags_times_outside():

@@ -11,6 +11,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 from aogm_cli.cli import main
 from aogm_cli.core.errors import InputError
+from aogm_cli.core.log import SensorSpec
 from aogm_cli.io.importers.text import (
     TextOptions,
     build_text_log,
@@ -102,6 +103,20 @@ def test_sensor_attributes_follow_the_options():
     opts = TextOptions(kind="laser", beam_width=0.01, min_range=0.05, max_range=30.0, noise_sigma=0.03)
     s = build_text_log(table(["0 0 0 1"]), options=opts).log.sensor
     assert (s.kind, s.beam_width, s.min_range, s.max_range, s.noise_sigma) == ("laser", 0.01, 0.05, 30.0, 0.03)
+
+
+def test_without_options_the_sensor_has_the_sonar_defaults_of_every_log(tmp_path):
+    """Defaults written once, as ``SensorSpec``'s: the options' and the command's are the same."""
+    sensors = [build_text_log(table(["0 0 0 1 2"])).log.sensor]
+    data, out = tmp_path / "plain.txt", tmp_path / "plain.h5"
+    data.write_text("0 0 0 1 2\n")
+    res = CliRunner().invoke(main, ["import", "text", "--ranges", str(data), "-o", str(out), "-q"])
+    assert res.exit_code == 0, res.output
+    sensors.append(read_log(out).sensor)
+    for s in sensors:
+        assert s.kind == "sonar"
+        for key in ("beam_width", "min_range", "max_range", "noise_sigma"):
+            assert getattr(s, key) == getattr(SensorSpec, key), key
 
 
 def test_separate_pose_table_row_by_row_or_by_time():

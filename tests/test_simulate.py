@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_array_equal
 
-from aogm_cli.core.log import CAUSE_ECHO, CAUSE_NO_ECHO, CAUSE_RANDOM, CAUSE_SPECULAR
+from aogm_cli.core.log import CAUSE_ECHO, CAUSE_NO_ECHO, CAUSE_RANDOM, CAUSE_SPECULAR, SensorSpec
 from aogm_cli.io.logfile import read_log, write_log
 from aogm_cli.simulation.sonar import readings_from_echoes, simulate, sub_ray_offsets
 from aogm_cli.world.config import Sonar
@@ -179,6 +179,14 @@ def corridor_world():
         file="worlds/corridor.yaml",
         text="name: corridor\n",
     )
+
+
+def test_a_world_without_sonar_simulates_a_log_with_the_sensor_defaults():
+    raw = {"bounds": [0, 0, 4, 4], "walls": [{"points": [[0, 0], [4, 0]]}], "trajectory": {"poses": [[2, 2, 0]]}}
+    sensor = simulate(parse_world(raw, file="w.yaml"), seed=0).sensor
+    assert sensor.kind == SensorSpec.kind and sensor.count == 24
+    for key in ("beam_width", "min_range", "max_range", "noise_sigma"):
+        assert getattr(sensor, key) == getattr(SensorSpec, key), key
 
 
 def test_simulate_is_deterministic_and_seed_changes_the_noise():

@@ -6,6 +6,7 @@ from pathlib import Path
 import pytest
 
 from aogm_cli.core.errors import InputError
+from aogm_cli.core.log import SensorSpec
 from aogm_cli.world.loader import load_world, parse_world
 
 WORLDS = sorted((Path(__file__).resolve().parents[1] / "worlds").glob("*.yaml"))
@@ -53,6 +54,14 @@ def test_defaults_give_a_24_sonar_ring():
     assert yaws[1] - yaws[0] == pytest.approx(2 * math.pi / 24)
     assert w.sonar.beam_width == pytest.approx(math.radians(30))
     assert w.surfaces["rough"].specular_threshold == pytest.approx(math.pi / 2)
+
+
+def test_a_world_without_sonar_has_the_sonar_defaults_of_every_log():
+    """The beam's defaults are written once, as ``SensorSpec``'s field defaults."""
+    w = parse_world(minimal(), file="w.yaml")
+    for key in ("beam_width", "min_range", "max_range", "noise_sigma"):
+        assert getattr(w.sonar, key) == getattr(SensorSpec, key), key
+    assert SensorSpec.beam_width == math.radians(30.0)
 
 
 def test_negative_thickness_names_the_key_path():

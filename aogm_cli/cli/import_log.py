@@ -13,7 +13,17 @@ import click
 
 from aogm_cli.cli.options import output_option, progress_bar, quiet_option
 from aogm_cli.core.errors import InputError
-from aogm_cli.io.importers.carmen import POSE_SOURCES, SCAN_MESSAGES, CarmenOptions
+from aogm_cli.io.importers.carmen import (
+    LASER_MAX_RANGE,
+    LASER_MIN_RANGE,
+    LASER_NOISE_SIGMA,
+    POSE_SOURCES,
+    SCAN_MESSAGES,
+    SONAR_MAX_RANGE,
+    SONAR_MIN_RANGE,
+    SONAR_NOISE_SIGMA,
+    CarmenOptions,
+)
 from aogm_cli.io.importers.text import ANGLE_UNITS, DELIMITERS, LENGTH_UNITS, TIME_UNITS, TextOptions
 from aogm_cli.io.outputs import resolve_outputs
 
@@ -86,10 +96,10 @@ def _report(output: str, log, what: str, origin: str, extra: list[str]) -> None:
 @click.option(
     "--max-range",
     type=_positive,
-    help="Max range (m); readings at or beyond it become +inf (no echo). Default: the line's own (RAWLASER, ROBOTLASER), else 80 m for lasers, 5 m for SONAR.",
+    help=f"Max range (m); readings at or beyond it become +inf (no echo). Default: the line's own (RAWLASER, ROBOTLASER), else {LASER_MAX_RANGE:g} m for lasers, {SONAR_MAX_RANGE:g} m for SONAR.",
 )
 @click.option(
-    "--min-range", type=_non_negative, help="Min range (m) of the sensor. Default 0 for lasers, 0.15 for SONAR."
+    "--min-range", type=_non_negative, help=f"Min range (m) of the sensor. Default {LASER_MIN_RANGE:g} for lasers, {SONAR_MIN_RANGE:g} for SONAR."
 )
 @click.option(
     "--beam-width",
@@ -99,7 +109,7 @@ def _report(output: str, log, what: str, origin: str, extra: list[str]) -> None:
 @click.option(
     "--noise-sigma",
     type=_non_negative,
-    help="Range noise (m) recorded in the log. Default 0.01 for lasers, 0.02 for SONAR.",
+    help=f"Range noise (m) recorded in the log. Default {LASER_NOISE_SIGMA:g} for lasers, {SONAR_NOISE_SIGMA:g} for SONAR.",
 )
 @click.option(
     "--mount",

@@ -5,6 +5,7 @@ Domain types only (no file I/O); ``aogm_cli.io.logfile`` reads and writes them a
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterator
 from dataclasses import dataclass
 
@@ -20,11 +21,15 @@ CAUSE_SPECULAR = 3  # specular reflection or multipath: a reading too long
 
 @dataclass(frozen=True)
 class SensorSpec:
-    """The range sensors of a log: mounts (S, 3) in the robot frame and the beam's properties."""
+    """The range sensors of a log: mounts (S, 3) in the robot frame and the beam's properties.
+
+    The field defaults are the sonar's, written only here: the world's ``Sonar``, the world loader,
+    the importers' SONAR and text defaults and the import command's options all read them.
+    """
 
     mount: np.ndarray
     kind: str = "sonar"
-    beam_width: float = np.radians(30.0)
+    beam_width: float = math.radians(30.0)
     min_range: float = 0.15
     max_range: float = 5.0
     noise_sigma: float = 0.02

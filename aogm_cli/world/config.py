@@ -9,6 +9,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from aogm_cli.core.log import SensorSpec
+
 Point = tuple[float, float]
 
 
@@ -96,13 +98,16 @@ class Trajectory:
 
 @dataclass(frozen=True)
 class Sonar:
-    """The sonar ring: mounts (x, y, yaw) in the robot frame and the beam's properties."""
+    """The sonar ring: mounts (x, y, yaw) in the robot frame and the beam's properties.
+
+    The beam's defaults are ``SensorSpec``'s, the sonar defaults of every log.
+    """
 
     mounts: tuple[tuple[float, float, float], ...]
-    beam_width: float = math.radians(30.0)
-    min_range: float = 0.15
-    max_range: float = 5.0
-    noise_sigma: float = 0.02
+    beam_width: float = SensorSpec.beam_width
+    min_range: float = SensorSpec.min_range
+    max_range: float = SensorSpec.max_range
+    noise_sigma: float = SensorSpec.noise_sigma
     random_rate: float = 0.02
     sub_rays: int = 11
     max_bounces: int = 2

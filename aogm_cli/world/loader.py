@@ -338,7 +338,7 @@ def _inside(pt, bounds) -> bool:
 
 def _trajectory(n: Node, bounds) -> Trajectory:
     n.mapping({"waypoints", "speed", "scan_period", "poses"})
-    scan_period = n.get_number("scan_period", 0.5, positive=True)
+    scan_period = n.get_number("scan_period", Trajectory.scan_period, positive=True)
     if n.has("poses") == n.has("waypoints"):
         raise n.error("expected exactly one of 'waypoints' (with speed) or 'poses'")
     if n.has("poses"):
@@ -357,7 +357,7 @@ def _trajectory(n: Node, bounds) -> Trajectory:
             raise n.child("waypoints").child(i).error(f"expected a point inside bounds {list(bounds)}, got {list(pt)}")
     if all(math.dist(waypoints[0], p) == 0 for p in waypoints):
         raise n.child("waypoints").error("expected waypoints that span a distance, got one repeated point")
-    return Trajectory(waypoints=waypoints, speed=n.get_number("speed", 0.3, positive=True), scan_period=scan_period)
+    return Trajectory(waypoints=waypoints, speed=n.get_number("speed", Trajectory.speed, positive=True), scan_period=scan_period)
 
 
 def _sonar(n: Node, robot: Robot) -> Sonar:
@@ -381,9 +381,9 @@ def _sonar(n: Node, robot: Robot) -> Sonar:
         for i in range(count):
             a = 2.0 * math.pi * i / count
             mounts.append((ring * math.cos(a), ring * math.sin(a), a))
-    beam = n.get_angle("beam_width_deg", math.radians(30.0), positive=True, maximum=179.0)
-    min_range = n.get_number("min_range", 0.15, minimum=0.0)
-    max_range = n.get_number("max_range", 5.0, positive=True)
+    beam = n.get_angle("beam_width_deg", Sonar.beam_width, positive=True, maximum=179.0)
+    min_range = n.get_number("min_range", Sonar.min_range, minimum=0.0)
+    max_range = n.get_number("max_range", Sonar.max_range, positive=True)
     if not max_range > min_range:
         raise n.child("max_range").error(f"expected max_range > min_range ({min_range:g}), got {max_range:g}")
     return Sonar(
@@ -391,9 +391,9 @@ def _sonar(n: Node, robot: Robot) -> Sonar:
         beam_width=beam,
         min_range=min_range,
         max_range=max_range,
-        noise_sigma=n.get_number("noise_sigma", 0.02, minimum=0.0),
-        random_rate=n.get_number("random_rate", 0.02, minimum=0.0, maximum=1.0),
-        sub_rays=n.child("sub_rays").integer(minimum=1) if n.has("sub_rays") else 11,
-        max_bounces=n.child("max_bounces").integer(minimum=0) if n.has("max_bounces") else 2,
-        cause_tolerance=n.get_number("cause_tolerance", 0.1, positive=True),
+        noise_sigma=n.get_number("noise_sigma", Sonar.noise_sigma, minimum=0.0),
+        random_rate=n.get_number("random_rate", Sonar.random_rate, minimum=0.0, maximum=1.0),
+        sub_rays=n.child("sub_rays").integer(minimum=1) if n.has("sub_rays") else Sonar.sub_rays,
+        max_bounces=n.child("max_bounces").integer(minimum=0) if n.has("max_bounces") else Sonar.max_bounces,
+        cause_tolerance=n.get_number("cause_tolerance", Sonar.cause_tolerance, positive=True),
     )

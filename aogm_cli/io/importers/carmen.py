@@ -50,14 +50,15 @@ __all__ = [
 
 POSE_SOURCES = ("auto", "line", "odom", "truepos")
 
+# the defaults of each sensor kind when neither the options nor the line say; SONAR's are SensorSpec's
 LASER_MAX_RANGE = 80.0  # m; CARMEN's own reader assumes this for FLASER/RLASER
-SONAR_MAX_RANGE = 5.0  # m
+SONAR_MAX_RANGE = SensorSpec.max_range
 LASER_BEAM_WIDTH = math.radians(0.5)
-SONAR_BEAM_WIDTH = math.radians(30.0)  # when a SONAR line's cone_angle is not positive
+SONAR_BEAM_WIDTH = SensorSpec.beam_width  # when a SONAR line's cone_angle is not positive
 LASER_MIN_RANGE = 0.0
-SONAR_MIN_RANGE = 0.15
+SONAR_MIN_RANGE = SensorSpec.min_range
 LASER_NOISE_SIGMA = 0.01
-SONAR_NOISE_SIGMA = 0.02
+SONAR_NOISE_SIGMA = SensorSpec.noise_sigma
 OFFSET_TOLERANCE = 1e-3  # m and rad: a ROBOTLASER laser offset within this counts as constant
 _DEFAULT_OPTIONS = CarmenOptions()
 

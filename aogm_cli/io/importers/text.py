@@ -82,6 +82,7 @@ class TextOptions:
     or a comma-separated list, in ``bearing_unit``; each sensor sits at ``sensor_radius`` (m) along its
     bearing. ``no_echo``: reading values (in the file's unit) that mean no echo. Readings >= ``max_range``
     (m) become +inf, negative ones NaN. Without time columns, scan k is at time k * ``period``.
+    The beam's defaults are ``SensorSpec``'s (a sonar's).
     """
 
     range_columns: str | None = None
@@ -97,10 +98,10 @@ class TextOptions:
     bearings: str = "ring"
     sensor_radius: float = 0.0
     kind: str = "sonar"
-    beam_width: float = math.radians(30.0)
-    min_range: float = 0.15
-    max_range: float = 5.0
-    noise_sigma: float = 0.02
+    beam_width: float = SensorSpec.beam_width
+    min_range: float = SensorSpec.min_range
+    max_range: float = SensorSpec.max_range
+    noise_sigma: float = SensorSpec.noise_sigma
     period: float = 1.0
     delimiter: str = "auto"
 
