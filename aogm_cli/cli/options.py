@@ -90,8 +90,7 @@ def detector_file(detector: str | None, modes) -> str | None:
     the packaged detector when adaptive runs without one)."""
     if "adaptive" not in modes:
         return None
-    from aogm_cli.io.detectorfile import default_detector_path
-    from aogm_cli.io.detectorfile import BASELINE_DETECTORS
+    from aogm_cli.io.detectorfile import BASELINE_DETECTORS, default_detector_path
 
     if detector is None:
         return str(default_detector_path())
