@@ -40,7 +40,7 @@ def simulate(world_file: str, output: str, seed: int, png: str | None, quiet: bo
     resolve_outputs(world_inputs(world_file, world), [("-o", output), ("--png", png)])
     from aogm_cli.io.logfile import write_log
     from aogm_cli.simulation.sonar import simulate as run_simulation
-    from aogm_cli.world.geometry import trajectory_poses
+    from aogm_cli.world.trajectory import trajectory_poses
 
     n_scans = len(trajectory_poses(world)[0])
     with progress_bar(n_scans, "simulate", quiet, unit="scan") as advance:

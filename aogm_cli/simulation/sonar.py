@@ -17,7 +17,9 @@ from aogm_cli.core.errors import InputError
 from aogm_cli.core.log import CAUSE_ECHO, CAUSE_NO_ECHO, CAUSE_RANDOM, CAUSE_SPECULAR, Log, SensorSpec, Truth
 from aogm_cli.simulation.raycast import geometry, trace_sub_ray
 from aogm_cli.world.config import Sonar, World
-from aogm_cli.world.geometry import build_scene, trajectory_poses, truth_occupancy
+from aogm_cli.world.scene import build_scene
+from aogm_cli.world.trajectory import trajectory_poses
+from aogm_cli.world.truth import truth_occupancy
 
 BLOCK_SCANS = 2048  # scans per kernel call (progress is reported between blocks)
 
