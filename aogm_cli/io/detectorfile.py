@@ -15,8 +15,8 @@ from aogm_cli import __version__
 from aogm_cli.core.errors import InputError
 from aogm_cli.detector.features import FeatureSpec
 from aogm_cli.detector.network import ACTIVATIONS, LAYOUT, Detector, Layer
-from aogm_cli.io.atomic import atomic_output
-from aogm_cli.io.h5file import open_input, text
+from aogm_cli.io.atomic import write_files_atomically
+from aogm_cli.io.h5file import hdf5_bytes, open_input, text
 
 FORMAT = "aogm-detector"
 FORMAT_VERSION = 1
@@ -28,9 +28,10 @@ def default_detector_path() -> Path:
     return Path(__file__).resolve().parent.parent / "data" / "detector.h5"
 
 
-def save_detector(path: str | Path, detector: Detector, inputs: tuple[str | Path, ...] = ()) -> None:
-    """Write ``detector`` to ``path`` in the format of CONTRACT.md (atomically)."""
-    with atomic_output(path, inputs=inputs) as tmp, h5py.File(tmp, "w") as f:
+def detector_bytes(detector: Detector) -> bytes:
+    """The detector file of ``detector`` (CONTRACT.md) as sealed HDF5 bytes."""
+
+    def fill(f: h5py.File) -> None:
         f.attrs["format"] = FORMAT
         f.attrs["format_version"] = FORMAT_VERSION
         f.attrs["aogm_version"] = __version__
@@ -46,6 +47,13 @@ def save_detector(path: str | Path, detector: Detector, inputs: tuple[str | Path
             g.create_dataset("weight", data=np.asarray(layer.weight, dtype=np.float64))
             g.create_dataset("bias", data=np.asarray(layer.bias, dtype=np.float64))
             g.attrs["activation"] = layer.activation
+
+    return hdf5_bytes(fill)
+
+
+def save_detector(path: str | Path, detector: Detector) -> None:
+    """Write ``detector`` to ``path`` in the format of CONTRACT.md (atomically)."""
+    write_files_atomically([(Path(path), detector_bytes(detector))])
 
 
 def load_detector(path: str | Path | None = None) -> Detector:

@@ -17,15 +17,16 @@ from aogm_cli import __version__
 from aogm_cli.core.errors import InputError
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import Log, SensorSpec, Truth
-from aogm_cli.io.atomic import atomic_output
-from aogm_cli.io.h5file import open_input, text
+from aogm_cli.io.atomic import write_files_atomically
+from aogm_cli.io.h5file import hdf5_bytes, open_input, text
 
 FORMAT = "aogm-log"
 FORMAT_VERSION = 1
 
-def write_log(path: str | Path, log: Log) -> None:
-    """Write ``log`` to ``path`` in the format of CONTRACT.md (atomically)."""
-    with atomic_output(path) as tmp, h5py.File(tmp, "w") as f:
+def log_bytes(log: Log) -> bytes:
+    """The log file of ``log`` (CONTRACT.md) as sealed HDF5 bytes."""
+
+    def fill(f: h5py.File) -> None:
         f.attrs["format"] = FORMAT
         f.attrs["format_version"] = FORMAT_VERSION
         f.attrs["aogm_version"] = __version__
@@ -52,6 +53,13 @@ def write_log(path: str | Path, log: Log) -> None:
                 g.attrs[k] = v
             g.attrs["world"] = t.world
             g.attrs["checks"] = json.dumps(list(t.checks))
+
+    return hdf5_bytes(fill)
+
+
+def write_log(path: str | Path, log: Log) -> None:
+    """Write ``log`` to ``path`` in the format of CONTRACT.md (atomically)."""
+    write_files_atomically([(Path(path), log_bytes(log))])
 
 
 class LogReader:

@@ -17,8 +17,8 @@ from aogm_cli import __version__
 from aogm_cli.core.errors import InputError
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.occupancy_map import MODES, OccupancyMap
-from aogm_cli.io.atomic import atomic_output
-from aogm_cli.io.h5file import open_input, text
+from aogm_cli.io.atomic import write_files_atomically
+from aogm_cli.io.h5file import hdf5_bytes, open_input, text
 
 FORMAT = "aogm-map"
 FORMAT_VERSION = 1
@@ -34,9 +34,10 @@ class MapHeader:
     runtime_s: float
 
 
-def write_map_file(path: str | Path, m: OccupancyMap) -> None:
-    """Write ``m`` to ``path`` (atomically)."""
-    with atomic_output(path) as tmp, h5py.File(tmp, "w") as f:
+def map_bytes(m: OccupancyMap) -> bytes:
+    """The map file of ``m`` (CONTRACT.md) as sealed HDF5 bytes."""
+
+    def fill(f: h5py.File) -> None:
         f.attrs["format"] = FORMAT
         f.attrs["format_version"] = FORMAT_VERSION
         f.attrs["mode"] = m.mode
@@ -59,6 +60,13 @@ def write_map_file(path: str | Path, m: OccupancyMap) -> None:
         s = f.create_group("stats")
         for k, v in m.stats.items():
             s.attrs[k] = json.dumps(v) if isinstance(v, (dict, list, tuple)) else v
+
+    return hdf5_bytes(fill)
+
+
+def write_map_file(path: str | Path, m: OccupancyMap) -> None:
+    """Write ``m`` to ``path`` (atomically)."""
+    write_files_atomically([(Path(path), map_bytes(m))])
 
 
 def _header(f: h5py.File, path: str) -> MapHeader:
