@@ -18,8 +18,10 @@ import numpy as np
 
 from aogm_cli.simulation.raycast import geometry
 from aogm_cli.simulation.sonar import BLOCK_SCANS, echo_block, simulate, sub_ray_offsets
-from aogm_cli.world.geometry import build_scene, trajectory_poses, truth_occupancy
 from aogm_cli.world.loader import parse_world
+from aogm_cli.world.scene import build_scene
+from aogm_cli.world.trajectory import trajectory_poses
+from aogm_cli.world.truth import truth_occupancy
 
 
 def bundled_world(name: str, n_poses: int = 20000):
@@ -160,7 +162,7 @@ def main() -> None:
     parser.add_argument("--poses", type=int, default=20000)
     parser.add_argument("--bucket-size", type=float, default=None, help="m (default: the scene's default)")
     args = parser.parse_args()
-    from aogm_cli.world.geometry import DEFAULT_BUCKET_SIZE
+    from aogm_cli.world.scene import DEFAULT_BUCKET_SIZE
 
     bucket = args.bucket_size or DEFAULT_BUCKET_SIZE
 

@@ -17,7 +17,7 @@ import numba
 import numpy as np
 
 from aogm_cli.core.grid import dda_steps
-from aogm_cli.world.geometry import Scene
+from aogm_cli.world.scene import Scene
 
 # The scene as the kernels take it (one argument). Thresholds are stored as cosines: a hit
 # echoes when cos(incidence) >= cos(threshold); a rough surface has cos_threshold = -1.

@@ -1,5 +1,4 @@
-"""The world a simulated robot drives through: typed configuration (``config``), the YAML
-loader that validates it (``loader``), its solids (``solids``), the ray-castable scene
-(``scene``), the truth raster (``truth``) and the path (``trajectory``); ``geometry`` re-exports
-the last four under the names the simulator imports.
+"""The world a simulated robot drives through: typed configuration (``config``), the YAML loader
+that validates it (``loader``), its solids (``solids``), the ray-castable scene (``scene``), the
+truth raster (``truth``) and the path (``trajectory``).
 """
