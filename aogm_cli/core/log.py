@@ -11,12 +11,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from aogm_cli.core.errors import InputError
 from aogm_cli.core.grid import GridSpec
 
 CAUSE_ECHO = 0  # echo of the nearest surface in the cone
 CAUSE_NO_ECHO = 1  # no echo: a max-range reading
 CAUSE_RANDOM = 2  # a random reading
 CAUSE_SPECULAR = 3  # specular reflection or multipath: a reading too long
+SENSOR_KINDS = ("sonar", "laser")
 
 
 @dataclass(frozen=True)
@@ -37,6 +39,30 @@ class SensorSpec:
     @property
     def count(self) -> int:
         return int(self.mount.shape[0])
+
+    def validate(self) -> SensorSpec:
+        """Return self, or raise ``InputError(key=<field>)`` for a value no mapper can use:
+        kind sonar or laser, beam_width in (0, pi), 0 <= min_range < max_range finite,
+        noise_sigma finite >= 0, at least one sensor with finite mounts (S, 3)."""
+        def bad(key, msg):
+            return InputError(msg, key=key)
+
+        if self.kind not in SENSOR_KINDS:
+            raise bad("kind", f"expected one of {', '.join(SENSOR_KINDS)}, got {self.kind!r}")
+        if not 0 < self.beam_width < math.pi:
+            raise bad("beam_width", f"expected a beam width in (0, pi) rad, got {self.beam_width}")
+        if not (math.isfinite(self.min_range) and self.min_range >= 0):
+            raise bad("min_range", f"expected a finite range >= 0 (m), got {self.min_range}")
+        if not (math.isfinite(self.max_range) and self.max_range > self.min_range):
+            raise bad("max_range", f"expected a finite range > min_range = {self.min_range} (m), got {self.max_range}")
+        if not (math.isfinite(self.noise_sigma) and self.noise_sigma >= 0):
+            raise bad("noise_sigma", f"expected a finite number >= 0 (m), got {self.noise_sigma}")
+        mount = np.asarray(self.mount)
+        if mount.ndim != 2 or mount.shape[0] < 1 or mount.shape[1] != 3:
+            raise bad("mount", f"expected shape (S, 3) with S >= 1 sensors, got {mount.shape}")
+        if not np.all(np.isfinite(mount)):
+            raise bad("mount", "expected finite numbers (x, y, yaw of each sensor)")
+        return self
 
     def as_dict(self) -> dict:
         return {

@@ -7,14 +7,18 @@ checks the ``format`` and ``format_version`` attributes; ``text`` reads a string
 from __future__ import annotations
 
 import io
+import json
+import math
 import struct
 import subprocess
 import sys
 import zlib
 from collections.abc import Callable
+from contextlib import contextmanager
 from pathlib import Path
 
 import h5py
+import numpy as np
 
 from aogm_cli.core.errors import InputError
 
@@ -93,6 +97,120 @@ def check_structure(file: str, seconds: float = WATCHDOG_SECONDS) -> None:
         raise InputError(f"the file is damaged or not HDF5: {last[:200]}", file=file)
 
 
+# What h5py raises for a damaged file or an object of an unexpected kind, at open or later
+# (a corrupt compressed chunk fails only when it is read: "filter returned failure during read").
+H5_ERRORS = (OSError, KeyError, TypeError, ValueError, RuntimeError, AttributeError)
+
+
+def _reason(exc: BaseException) -> str:
+    return (str(exc).strip().splitlines() or [exc.__class__.__name__])[-1][:200]
+
+
+@contextmanager
+def reading(file: str, key: str):
+    """Turn any h5py/HDF5 error inside the block into an InputError naming ``file`` and ``key``."""
+    try:
+        yield
+    except InputError:
+        raise
+    except H5_ERRORS as exc:
+        raise InputError(f"cannot be read, the file is damaged ({_reason(exc)})", file=file, key=key) from None
+
+
+def read_dataset(f: h5py.File, name: str, file: str, selection=Ellipsis) -> np.ndarray:
+    """``f[name][selection]``, an HDF5 error becoming an InputError naming ``file`` and ``/name``."""
+    with reading(file, "/" + name.lstrip("/")):
+        return f[name][selection]
+
+
+def dataset(f: h5py.File, name: str, file: str, shape: tuple, kinds: str, what: str,
+            dims: dict | None = None) -> h5py.Dataset:
+    """The dataset ``name`` of ``f``, checked: present, of ``shape`` (ints, or names bound in
+    ``dims`` on first use and compared after) and of a dtype kind in ``kinds`` ("f", "iu", "b")."""
+    key = "/" + name.lstrip("/")
+    dims = {} if dims is None else dims
+    with reading(file, key):
+        obj = f.get(name)
+        if obj is None:
+            raise InputError("missing dataset", file=file, key=key)
+        if not isinstance(obj, h5py.Dataset):
+            raise InputError(f"expected a dataset, got a {type(obj).__name__}", file=file, key=key)
+        got, dtype = obj.shape, obj.dtype
+    want = "(" + ", ".join(str(dims.get(d, d)) for d in shape) + ("," if len(shape) == 1 else "") + ")"
+    if got is None or len(got) != len(shape):
+        raise InputError(f"expected shape {want}, got {got}", file=file, key=key)
+    for d, n in zip(shape, got, strict=True):
+        if isinstance(d, str) and d not in dims:
+            dims[d] = n
+        if dims.get(d, d) != n:
+            raise InputError(f"expected shape {want}, got {got}", file=file, key=key)
+    if dtype.kind not in kinds:
+        raise InputError(f"expected {what}, got dtype {dtype}", file=file, key=key)
+    return obj
+
+
+def attribute(obj, name: str, file: str, key: str, required: bool = True):
+    """The attribute ``name`` of ``obj`` (None when absent and not ``required``)."""
+    with reading(file, key):
+        if name not in obj.attrs:
+            if required:
+                raise InputError("missing attribute", file=file, key=key)
+            return None
+        return obj.attrs[name]
+
+
+def number_attr(obj, name: str, file: str, key: str, required: bool = True) -> float | None:
+    """A finite number attribute as float (not a string, a bool or an array)."""
+    value = attribute(obj, name, file, key, required)
+    if value is None:
+        return None
+    if isinstance(value, np.ndarray) and value.shape in ((), (1,)):
+        value = value.reshape(-1)[0]
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise InputError(f"expected a number, got {value!r}", file=file, key=key)
+    if not math.isfinite(float(value)):
+        raise InputError(f"expected a finite number, got {float(value)}", file=file, key=key)
+    return float(value)
+
+
+def text_attr(obj, name: str, file: str, key: str, required: bool = True) -> str | None:
+    """A string attribute as str."""
+    value = attribute(obj, name, file, key, required)
+    if value is None:
+        return None
+    if not isinstance(value, (str, bytes)):
+        raise InputError(f"expected a string, got {value!r}", file=file, key=key)
+    try:
+        return text(value)
+    except UnicodeDecodeError:
+        raise InputError("expected UTF-8 text", file=file, key=key) from None
+
+
+def vector_attr(obj, name: str, file: str, key: str, n: int) -> tuple[float, ...]:
+    """An attribute of ``n`` finite numbers."""
+    value = np.asarray(attribute(obj, name, file, key))
+    if value.shape != (n,) or value.dtype.kind not in "iuf":
+        raise InputError(f"expected {n} numbers, got {value.tolist()!r}", file=file, key=key)
+    if not np.all(np.isfinite(value)):
+        raise InputError(f"expected {n} finite numbers, got {value.tolist()!r}", file=file, key=key)
+    return tuple(float(v) for v in value)
+
+
+def json_attr(obj, name: str, file: str, key: str, kind: type, required: bool = True):
+    """A JSON attribute decoded, of type ``kind`` (dict or list); None when absent and optional."""
+    raw = text_attr(obj, name, file, key, required)
+    if raw is None:
+        return None
+    try:
+        value = json.loads(raw)
+    except ValueError:
+        raise InputError(f"expected JSON (a {'JSON object' if kind is dict else 'JSON list'})", file=file, key=key) from None
+    if not isinstance(value, kind):
+        raise InputError(f"expected a JSON {'object' if kind is dict else 'list'}, got {type(value).__name__}",
+                         file=file, key=key)
+    return value
+
+
 def open_input(path: str | Path, fmt: str, version: int) -> h5py.File:
     """The HDF5 file at ``path``, open for reading, after checking its seal and that it is
     ``fmt`` ``version``."""
@@ -103,14 +221,19 @@ def open_input(path: str | Path, fmt: str, version: int) -> h5py.File:
         f = h5py.File(file, "r")
     except FileNotFoundError:
         raise InputError("no such file", file=file) from None
-    except OSError as exc:
+    except (OSError, ValueError, RuntimeError) as exc:
         raise InputError(f"not an HDF5 file ({exc.__class__.__name__}); expected {fmt!r}", file=file) from None
-    found = text(f.attrs.get("format")) or None
-    if found != fmt:
+    try:
+        with reading(file, "format"):
+            raw = f.attrs.get("format")
+            found = text(raw) if isinstance(raw, (str, bytes)) else raw
+            found_version = f.attrs.get("format_version")
+        if not isinstance(found, str) or found != fmt:
+            raise InputError(f"expected {fmt!r}, got {found!r}", file=file, key="format")
+        numeric = isinstance(found_version, (int, float, np.integer, np.floating))
+        if not numeric or isinstance(found_version, (bool, np.bool_)) or found_version != version:
+            raise InputError(f"expected {version}, got {found_version!r}", file=file, key="format_version")
+    except BaseException:
         f.close()
-        raise InputError(f"expected {fmt!r}, got {found!r}", file=file, key="format")
-    found_version = f.attrs.get("format_version")
-    if found_version != version:
-        f.close()
-        raise InputError(f"expected {version}, got {found_version!r}", file=file, key="format_version")
+        raise
     return f

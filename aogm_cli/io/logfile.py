@@ -7,6 +7,7 @@ and streams scans in chunks so that mappers need memory for one chunk only.
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -16,9 +17,21 @@ import numpy as np
 from aogm_cli import __version__
 from aogm_cli.core.errors import InputError
 from aogm_cli.core.grid import GridSpec
-from aogm_cli.core.log import Log, SensorSpec, Truth
+from aogm_cli.core.log import CAUSE_ECHO, CAUSE_SPECULAR, Log, SensorSpec, Truth
 from aogm_cli.io.atomic import write_files_atomically
-from aogm_cli.io.h5file import hdf5_bytes, open_input, text
+from aogm_cli.io.h5file import (
+    attribute,
+    dataset,
+    hdf5_bytes,
+    json_attr,
+    number_attr,
+    open_input,
+    read_dataset,
+    reading,
+    text,
+    text_attr,
+    vector_attr,
+)
 
 FORMAT = "aogm-log"
 FORMAT_VERSION = 1
@@ -81,23 +94,70 @@ class LogReader:
         return InputError(message, file=self.path, key=key)
 
     def _check(self) -> None:
-        f = self._f
-        for name in ("scans/time", "scans/pose", "scans/ranges", "sensors/mount"):
-            if name not in f:
-                raise self._error("/" + name, "missing dataset")
-        t = f["scans/time"].shape
-        if len(t) != 1:
-            raise self._error("/scans/time", f"expected shape (T,), got {t}")
-        if f["scans/pose"].shape != (t[0], 3):
-            raise self._error("/scans/pose", f"expected shape ({t[0]}, 3), got {f['scans/pose'].shape}")
-        mount = f["sensors/mount"].shape
-        if len(mount) != 2 or mount[1] != 3:
-            raise self._error("/sensors/mount", f"expected shape (S, 3), got {mount}")
-        if f["scans/ranges"].shape != (t[0], mount[0]):
-            raise self._error("/scans/ranges", f"expected shape ({t[0]}, {mount[0]}), got {f['scans/ranges'].shape}")
-        for k in ("kind", "beam_width", "min_range", "max_range", "noise_sigma"):
-            if k not in f["sensors"].attrs:
-                raise self._error(f"/sensors.{k}", "missing attribute")
+        """Check every dataset and attribute the readers rely on (ranges are checked as they
+        are read, chunk by chunk); the sensor and the truth are read and kept."""
+        f, file, dims = self._f, self.path, {}
+        numbers = "numbers (integer or float)"
+        dataset(f, "scans/time", file, ("T",), "iuf", numbers, dims)
+        dataset(f, "scans/pose", file, ("T", 3), "iuf", numbers, dims)
+        dataset(f, "sensors/mount", file, ("S", 3), "iuf", numbers, dims)
+        dataset(f, "scans/ranges", file, ("T", "S"), "f", "float ranges (m)", dims)
+        self._sensor = self._read_sensor()
+        seed = attribute(f, "seed", file, "seed", required=False)
+        if seed is not None and (isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer))):
+            raise self._error("seed", f"expected a whole number, got {seed!r}")
+        self._truth = None
+        with reading(file, "/truth"):
+            has_truth = "truth" in f
+        if has_truth:
+            self._truth = self._read_truth(dims)
+
+    def _read_sensor(self) -> SensorSpec:
+        f, file = self._f, self.path
+        a = f["sensors"]
+
+        def key(k):
+            return f"/sensors.{k}"
+
+        kind = text_attr(a, "kind", file, key("kind"))
+        values = {k: number_attr(a, k, file, key(k)) for k in ("beam_width", "min_range", "max_range", "noise_sigma")}
+        mount = read_dataset(f, "sensors/mount", file).astype(np.float64, copy=False)
+        try:
+            return SensorSpec(mount=mount, kind=kind, **values).validate()
+        except InputError as exc:
+            raise self._error("/sensors/mount" if exc.key == "mount" else key(exc.key), exc.message) from None
+
+    def _read_truth(self, dims: dict) -> Truth:
+        """The truth, checked: occupancy (H, W) 0/1, cause (T, S) 0..3, ideal_range (T, S)
+        >= 0 or +inf, resolution > 0, origin (x, y), checks a JSON list of passable checks."""
+        f, file = self._f, self.path
+        with reading(file, "/truth"):
+            g = f["truth"]
+            if not isinstance(g, h5py.Group):
+                raise self._error("/truth", "expected a group")
+        dataset(f, "truth/occupancy", file, ("H", "W"), "iub", "integers 0/1", dims)
+        dataset(f, "truth/cause", file, ("T", "S"), "iu", "integers 0..3", dims)
+        dataset(f, "truth/ideal_range", file, ("T", "S"), "f", "float ranges (m)", dims)
+        if dims["H"] < 1 or dims["W"] < 1:
+            raise self._error("/truth/occupancy", f"expected a non-empty grid, got shape ({dims['H']}, {dims['W']})")
+        occupancy = read_dataset(f, "truth/occupancy", file)
+        if not np.all((occupancy == 0) | (occupancy == 1)):
+            raise self._error("/truth/occupancy", "expected 0 (free) or 1 (occupied) in every cell")
+        cause = read_dataset(f, "truth/cause", file)
+        if cause.size and not (cause.min() >= CAUSE_ECHO and cause.max() <= CAUSE_SPECULAR):
+            raise self._error("/truth/cause", f"expected causes {CAUSE_ECHO}..{CAUSE_SPECULAR}, got {cause.min()}..{cause.max()}")
+        ideal = read_dataset(f, "truth/ideal_range", file)
+        if not np.all(ideal >= 0):  # NaN and negative fail
+            raise self._error("/truth/ideal_range", "expected ranges >= 0 (m) or +inf (no surface), got NaN or a negative one")
+        resolution = number_attr(g, "resolution", file, "/truth.resolution")
+        if resolution <= 0:
+            raise self._error("/truth.resolution", f"expected a positive resolution (m per cell), got {resolution}")
+        ox, oy = vector_attr(g, "origin", file, "/truth.origin", 2)
+        raw_checks = json_attr(g, "checks", file, "/truth.checks", list, required=False)
+        checks = tuple(_check_checks([] if raw_checks is None else raw_checks, file))
+        world = text_attr(g, "world", file, "/truth.world", required=False) or ""
+        grid = GridSpec(ox, oy, resolution, int(dims["H"]), int(dims["W"]))
+        return Truth(grid=grid, occupancy=occupancy, cause=cause, ideal_range=ideal, world=world, checks=checks)
 
     def __enter__(self) -> LogReader:
         return self
@@ -114,7 +174,8 @@ class LogReader:
 
     @property
     def source(self) -> str:
-        return text(self._f.attrs.get("source", ""))
+        with reading(self.path, "source"):
+            return text(self._f.attrs.get("source", ""))
 
     @property
     def seed(self) -> int | None:
@@ -123,68 +184,77 @@ class LogReader:
 
     @property
     def sensor(self) -> SensorSpec:
-        a = self._f["sensors"].attrs
-        return SensorSpec(
-            mount=self._f["sensors/mount"][...],
-            kind=text(a["kind"]),
-            beam_width=float(a["beam_width"]),
-            min_range=float(a["min_range"]),
-            max_range=float(a["max_range"]),
-            noise_sigma=float(a["noise_sigma"]),
-        )
+        return self._sensor
 
     @property
     def has_truth(self) -> bool:
-        return "truth" in self._f
+        return self._truth is not None
 
     def truth_grid(self) -> GridSpec | None:
-        """The truth grid's geometry (without loading any array), or None."""
-        if not self.has_truth:
-            return None
-        g = self._f["truth"]
-        h, w = g["occupancy"].shape
-        ox, oy = (float(v) for v in g.attrs["origin"])
-        return GridSpec(ox, oy, float(g.attrs["resolution"]), int(h), int(w))
+        """The truth grid's geometry, or None."""
+        return None if self._truth is None else self._truth.grid
 
     def truth(self) -> Truth | None:
-        if not self.has_truth:
-            return None
-        g = self._f["truth"]
-        try:
-            checks = tuple(json.loads(text(g.attrs.get("checks", "[]"))))
-        except json.JSONDecodeError:
-            raise self._error("/truth.checks", "expected a JSON list") from None
-        return Truth(
-            grid=self.truth_grid(),
-            occupancy=g["occupancy"][...],
-            cause=g["cause"][...],
-            ideal_range=g["ideal_range"][...],
-            world=text(g.attrs.get("world", "")),
-            checks=checks,
-        )
+        return self._truth
 
     def poses(self) -> np.ndarray:
-        return self._f["scans/pose"][...]
+        return read_dataset(self._f, "scans/pose", self.path)
+
+    def _ranges(self, start: int, stop: int) -> np.ndarray:
+        """Ranges of scans start:stop as float32, checked: >= 0, +inf or NaN."""
+        r = read_dataset(self._f, "scans/ranges", self.path, slice(start, stop)).astype(np.float32, copy=False)
+        with np.errstate(invalid="ignore"):
+            negative = r < 0
+        if negative.any():
+            t, s = (int(v[0]) for v in np.nonzero(negative))
+            raise self._error("/scans/ranges", f"expected ranges >= 0 (m), +inf (no echo) or NaN (invalid); "
+                                               f"got {r[t, s]} at scan {start + t}, sensor {s}")
+        return r
 
     def chunks(self, size: int = 4096) -> Iterator[tuple[int, np.ndarray, np.ndarray, np.ndarray]]:
         """Yield (first scan index, time, pose, ranges) for consecutive chunks of ``size`` scans."""
         n = self.n_scans
-        ds_t, ds_p, ds_r = self._f["scans/time"], self._f["scans/pose"], self._f["scans/ranges"]
         for start in range(0, n, size):
             stop = min(n, start + size)
-            yield start, ds_t[start:stop], ds_p[start:stop], ds_r[start:stop].astype(np.float32, copy=False)
+            rows = slice(start, stop)
+            yield (start, read_dataset(self._f, "scans/time", self.path, rows),
+                   read_dataset(self._f, "scans/pose", self.path, rows), self._ranges(start, stop))
 
     def read(self) -> Log:
         """The whole log in memory."""
         return Log(
-            time=self._f["scans/time"][...],
-            pose=self._f["scans/pose"][...],
-            ranges=self._f["scans/ranges"][...].astype(np.float32, copy=False),
+            time=read_dataset(self._f, "scans/time", self.path),
+            pose=self.poses(),
+            ranges=self._ranges(0, self.n_scans),
             sensor=self.sensor,
             source=self.source,
             truth=self.truth(),
             seed=self.seed,
         )
+
+
+def _check_checks(checks: list, file: str) -> list[dict]:
+    """The truth's checks, each ``{"name": str, "passable": {"from": [x, y], "to": [x, y],
+    "robot_radius": r >= 0}}`` as ``aogm simulate`` writes them."""
+
+    def point(v) -> bool:
+        return (isinstance(v, list) and len(v) == 2
+                and all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v))
+
+    for i, c in enumerate(checks):
+        key = f"/truth.checks[{i}]"
+        if not isinstance(c, dict) or not isinstance(c.get("name"), str):
+            raise InputError("expected {\"name\": ..., \"passable\": {...}}", file=file, key=key)
+        p = c.get("passable")
+        if not isinstance(p, dict):
+            raise InputError("expected an object {from, to, robot_radius}", file=file, key=f"{key}.passable")
+        for end in ("from", "to"):
+            if not point(p.get(end)):
+                raise InputError(f"expected [x, y] (finite), got {p.get(end)!r}", file=file, key=f"{key}.passable.{end}")
+        r = p.get("robot_radius")
+        if isinstance(r, bool) or not isinstance(r, (int, float)) or not (math.isfinite(r) and r >= 0):
+            raise InputError(f"expected a number >= 0 (m), got {r!r}", file=file, key=f"{key}.passable.robot_radius")
+    return checks
 
 
 def read_log(path: str | Path) -> Log:
