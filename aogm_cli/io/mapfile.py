@@ -18,7 +18,20 @@ from aogm_cli.core.errors import InputError
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.occupancy_map import MODES, OccupancyMap
 from aogm_cli.io.atomic import write_files_atomically
-from aogm_cli.io.h5file import hdf5_bytes, open_input, text
+from aogm_cli.io.h5file import (
+    check_structure,
+    dataset,
+    hdf5_bytes,
+    is_sealed_intact,
+    json_attr,
+    number_attr,
+    open_input,
+    read_dataset,
+    reading,
+    text,
+    text_attr,
+    vector_attr,
+)
 
 FORMAT = "aogm-map"
 FORMAT_VERSION = 1
@@ -70,14 +83,15 @@ def write_map_file(path: str | Path, m: OccupancyMap) -> None:
 
 
 def _header(f: h5py.File, path: str) -> MapHeader:
-    mode = text(f.attrs.get("mode"))
+    mode = text_attr(f, "mode", path, "mode")
     if mode not in MODES:
         raise InputError(f"expected one of {', '.join(MODES)}, got {mode!r}", file=path, key="mode")
-    try:
-        params = json.loads(text(f.attrs.get("params", "{}")))
-    except json.JSONDecodeError as exc:
-        raise InputError(f"expected JSON: {exc}", file=path, key="params") from None
-    return MapHeader(mode, text(f.attrs.get("source_log", "")), params, float(f.attrs.get("runtime_s", 0.0)))
+    params = json_attr(f, "params", path, "params", dict, required=False) or {}
+    runtime = number_attr(f, "runtime_s", path, "runtime_s", required=False)
+    if runtime is not None and runtime < 0:
+        raise InputError(f"expected a number of seconds >= 0, got {runtime}", file=path, key="runtime_s")
+    source_log = text_attr(f, "source_log", path, "source_log", required=False) or ""
+    return MapHeader(mode, source_log, params, 0.0 if runtime is None else runtime)
 
 
 def read_map_header(path: str | Path) -> MapHeader:
@@ -87,49 +101,75 @@ def read_map_header(path: str | Path) -> MapHeader:
         return _header(f, path)
 
 
+# optional layers: (dtype kinds, what, check of the values or None, message when it fails)
+_LAYERS = {
+    "log_odds": ("f", "float log-odds", lambda a: not np.any(np.isnan(a)), "expected numbers, got NaN"),
+    "occupied": ("b", "bool", None, ""),
+    "clusters": ("iu", "integer cluster ids", lambda a: a.size == 0 or a.min() >= 0, "expected cluster ids >= 0"),
+}
+
+
+def _grids(f: h5py.File, path: str) -> dict:
+    """/map's datasets and attributes, checked: probability (H, W) float in [0, 1], observed
+    (H, W) bool, the optional layers (H, W) of their types, resolution > 0 and origin (x, y)."""
+    dims: dict = {}
+    dataset(f, "map/probability", path, ("H", "W"), "f", "float probabilities", dims)
+    dataset(f, "map/observed", path, ("H", "W"), "b", "bool", dims)
+    g = f["map"]
+    prob = read_dataset(f, "map/probability", path)
+    if not np.all((prob >= 0) & (prob <= 1)):  # NaN fails
+        bad = prob[~((prob >= 0) & (prob <= 1))][0]
+        raise InputError(f"expected probabilities in [0, 1], got {bad}", file=path, key="/map/probability")
+    out = {"probability": prob, "observed": read_dataset(f, "map/observed", path).astype(bool)}
+    for name, (kinds, what, ok, message) in _LAYERS.items():
+        out[name] = None
+        with reading(path, f"/map/{name}"):
+            present = name in g
+        if present:
+            dataset(f, f"map/{name}", path, ("H", "W"), kinds, what, dims)
+            out[name] = read_dataset(f, f"map/{name}", path)
+            if ok is not None and not ok(out[name]):
+                raise InputError(message, file=path, key=f"/map/{name}")
+    resolution = number_attr(g, "resolution", path, "/map.resolution")
+    if resolution <= 0:
+        raise InputError(f"expected a positive resolution (m per cell), got {resolution}", file=path, key="/map.resolution")
+    ox, oy = vector_attr(g, "origin", path, "/map.origin", 2)
+    out["grid"] = GridSpec(ox, oy, resolution, int(dims["H"]), int(dims["W"]))
+    return out
+
+
 def read_map_file(path: str | Path) -> OccupancyMap:
     """Read and check a map file; InputError names the file and the missing or wrong item."""
     path = str(path)
     with open_input(path, FORMAT, FORMAT_VERSION) as f:
         header = _header(f, path)
-        for name in ("map/probability", "map/observed"):
-            if name not in f:
-                raise InputError("missing dataset", file=path, key="/" + name)
-        g = f["map"]
-        prob = g["probability"][...]
-        if prob.ndim != 2:
-            raise InputError(f"expected a 2-D grid, got shape {prob.shape}", file=path, key="/map/probability")
-        ox, oy = (float(v) for v in g.attrs["origin"])
-        grid = GridSpec(ox, oy, float(g.attrs["resolution"]), prob.shape[0], prob.shape[1])
-
-        def optional(name):
-            return g[name][...] if name in g else None
-
+        grids = _grids(f, path)
         stats = {}
-        if "stats" in f:
-            for k, v in f["stats"].attrs.items():
-                stats[k] = _stat(v)
+        with reading(path, "/stats"):
+            if "stats" in f:
+                for k, v in f["stats"].attrs.items():
+                    stats[k] = _stat(v)
         return OccupancyMap(
-            grid=grid,
-            probability=prob,
-            observed=g["observed"][...].astype(bool),
             mode=header.mode,
             params=header.params,
             runtime_s=header.runtime_s,
             source_log=header.source_log,
-            log_odds=optional("log_odds"),
-            occupied=optional("occupied"),
-            clusters=optional("clusters"),
             stats=stats,
+            **grids,
         )
 
 
 def is_map_file(path: str | Path) -> bool:
-    """True when ``path`` is an HDF5 file whose format attribute says aogm-map."""
+    """True when ``path`` is an HDF5 file whose format attribute says aogm-map. A file whose
+    seal is missing or broken has its headers walked first (``h5file.check_structure``), so a
+    damaged file is an InputError naming it, not a hang."""
+    path = str(path)
     try:
+        if not is_sealed_intact(path):
+            check_structure(path)
         with h5py.File(path, "r") as f:
             return text(f.attrs.get("format")) == FORMAT
-    except OSError:
+    except (OSError, ValueError, RuntimeError, KeyError, TypeError):
         return False
 
 
