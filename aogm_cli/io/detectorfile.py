@@ -16,7 +16,16 @@ from aogm_cli.core.errors import InputError
 from aogm_cli.detector.features import FeatureSpec
 from aogm_cli.detector.network import ACTIVATIONS, LAYOUT, Detector, Layer
 from aogm_cli.io.atomic import write_files_atomically
-from aogm_cli.io.h5file import hdf5_bytes, open_input, text
+from aogm_cli.io.h5file import (
+    dataset,
+    hdf5_bytes,
+    json_attr,
+    number_attr,
+    open_input,
+    read_dataset,
+    reading,
+    text_attr,
+)
 
 FORMAT = "aogm-detector"
 FORMAT_VERSION = 1
@@ -63,63 +72,27 @@ def load_detector(path: str | Path | None = None) -> Detector:
         return _read(f, path)
 
 
-
-
-def _json_attr(f: h5py.File, key: str, path: str, required: bool = True) -> dict:
-    if key not in f.attrs:
-        if required:
-            raise InputError("missing attribute", file=path, key=key)
-        return {}
-    try:
-        value = json.loads(text(f.attrs[key]))
-    except ValueError:
-        raise InputError("expected JSON", file=path, key=key) from None
-    if not isinstance(value, dict):
-        raise InputError(f"expected a JSON object, got {type(value).__name__}", file=path, key=key)
-    return value
-
-
 def _read(f: h5py.File, path: str) -> Detector:
-    if "features" not in f.attrs:
-        raise InputError("missing attribute", file=path, key="features")
-    spec = FeatureSpec.from_json(text(f.attrs["features"]), file=path)
-    metrics = _json_attr(f, "metrics", path)
-    labels = _json_attr(f, "labels", path, required=False)
-    training = _json_attr(f, "training", path, required=False)
-    if "threshold" not in f.attrs:
-        raise InputError("missing attribute", file=path, key="threshold")
-    try:
-        threshold = float(f.attrs["threshold"])
-    except (TypeError, ValueError):
-        raise InputError(f"expected a number, got {f.attrs['threshold']!r}", file=path, key="threshold") from None
+    spec = FeatureSpec.from_json(text_attr(f, "features", path, "features"), file=path)
+    metrics = json_attr(f, "metrics", path, "metrics", dict)
+    labels = json_attr(f, "labels", path, "labels", dict, required=False) or {}
+    training = json_attr(f, "training", path, "training", dict, required=False) or {}
+    threshold = number_attr(f, "threshold", path, "threshold")
     if not 0.0 <= threshold <= 1.0:
         raise InputError(f"expected a probability in [0, 1], got {threshold}", file=path, key="threshold")
-    if "layers" not in f or not isinstance(f["layers"], h5py.Group) or len(f["layers"]) == 0:
-        raise InputError("missing group (the network's weights)", file=path, key="/layers")
-    names = sorted(f["layers"].keys(), key=lambda k: int(k) if k.isdigit() else -1)
+    with reading(path, "/layers"):
+        group = f.get("layers")
+        if not isinstance(group, h5py.Group) or len(group) == 0:
+            raise InputError("missing group (the network's weights)", file=path, key="/layers")
+        found = sorted(group.keys())
+    names = sorted(found, key=lambda k: int(k) if k.isdigit() else -1)
     if names != [str(i) for i in range(len(names))]:
-        raise InputError(f"expected layers named 0..{len(names) - 1}, got {sorted(f['layers'].keys())}", file=path, key="/layers")
+        raise InputError(f"expected layers named 0..{len(names) - 1}, got {found}", file=path, key="/layers")
     layers = []
     inputs = spec.n_features
     for name in names:
-        g = f["layers"][name]
-        key = f"/layers/{name}"
-        for part in ("weight", "bias"):
-            if part not in g or not isinstance(g[part], h5py.Dataset):
-                raise InputError("missing dataset", file=path, key=f"{key}/{part}")
-        weight = g["weight"][...].astype(np.float64)
-        bias = g["bias"][...].astype(np.float64)
-        if weight.ndim != 2 or weight.shape[0] != inputs:
-            raise InputError(f"expected shape ({inputs}, outputs), got {weight.shape}", file=path, key=f"{key}/weight")
-        if bias.shape != (weight.shape[1],):
-            raise InputError(f"expected shape ({weight.shape[1]},), got {bias.shape}", file=path, key=f"{key}/bias")
-        if not (np.all(np.isfinite(weight)) and np.all(np.isfinite(bias))):
-            raise InputError("expected finite numbers", file=path, key=key)
-        activation = text(g.attrs["activation"]) if "activation" in g.attrs else None
-        if activation not in ACTIVATIONS:
-            raise InputError(f"expected one of {sorted(ACTIVATIONS)}, got {activation!r}", file=path, key=f"{key}.activation")
-        layers.append(Layer(weight, bias, activation))
-        inputs = weight.shape[1]
+        layers.append(_layer(f, name, inputs, path))
+        inputs = layers[-1].weight.shape[1]
     if inputs != 1 or layers[-1].activation != "logistic":
         raise InputError(
             f"expected the last layer to have 1 logistic output, got {inputs} {layers[-1].activation}",
@@ -127,6 +100,25 @@ def _read(f: h5py.File, path: str) -> Detector:
             key=f"/layers/{names[-1]}",
         )
     return Detector(tuple(layers), spec, threshold, labels, metrics, training, path)
+
+
+def _layer(f: h5py.File, name: str, inputs: int, path: str) -> Layer:
+    """Layer ``name``: weight (inputs, outputs) and bias (outputs,) finite numbers, a known activation."""
+    key = f"layers/{name}"
+    with reading(path, "/" + key):
+        if not isinstance(f[key], h5py.Group):
+            raise InputError("expected a group (weight, bias)", file=path, key="/" + key)
+    dims = {"inputs": inputs}
+    dataset(f, f"{key}/weight", path, ("inputs", "outputs"), "iuf", "numbers", dims)
+    dataset(f, f"{key}/bias", path, ("outputs",), "iuf", "numbers", dims)
+    weight = read_dataset(f, f"{key}/weight", path).astype(np.float64)
+    bias = read_dataset(f, f"{key}/bias", path).astype(np.float64)
+    if not (np.all(np.isfinite(weight)) and np.all(np.isfinite(bias))):
+        raise InputError("expected finite numbers", file=path, key="/" + key)
+    activation = text_attr(f[key], "activation", path, f"/{key}.activation", required=False)
+    if activation not in ACTIVATIONS:
+        raise InputError(f"expected one of {sorted(ACTIVATIONS)}, got {activation!r}", file=path, key=f"/{key}.activation")
+    return Layer(weight, bias, activation)
 
 
 def file_sha256(path: str | Path) -> str | None:
