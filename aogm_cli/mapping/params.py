@@ -17,6 +17,21 @@ from aogm_cli.mapping.sensor_models.forward_model import ForwardModelConfig
 from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig
 
 
+def check_field_types(config) -> None:
+    """Raise ``InputError(key=<field>)`` unless each field of the dataclass ``config`` has its
+    declared type: float fields a finite number (not a bool), int fields a whole number (not a
+    bool, not 2.5 or 2.0), str fields a string. Nested dataclasses are left to their own check."""
+    for f in dataclasses.fields(config):
+        kind = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", "")
+        v = getattr(config, f.name)
+        if kind == "float" and (isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v)):
+            raise InputError(f"expected a finite number, got {v!r}", key=f.name)
+        if kind == "int" and (isinstance(v, bool) or not isinstance(v, int)):
+            raise InputError(f"expected a whole number, got {v!r}", key=f.name)
+        if kind == "str" and not isinstance(v, str):
+            raise InputError(f"expected a string, got {v!r}", key=f.name)
+
+
 @dataclass(frozen=True)
 class EMConfig:
     """EM parameters: the forward model, the occupancy prior, the sweep limit and the start."""
@@ -27,7 +42,9 @@ class EMConfig:
     start: str = "standard"  # "standard": the thresholded standard map; "empty": all free
 
     def validate(self) -> EMConfig:
+        check_field_types(self.forward)
         self.forward.validate()
+        check_field_types(self)
         if self.forward.p_hit >= 1.0:
             raise InputError(f"expected p_hit < 1 for EM, got {self.forward.p_hit:g}", key="p_hit")
         if not 0 < self.prior_occupied < 1:
@@ -61,6 +78,7 @@ class AdaptiveConfig:
     near_occupied: int = 0
 
     def validate(self) -> AdaptiveConfig:
+        check_field_types(self)
         if not self.band_below >= 0:
             raise InputError(f"expected a number >= 0 (m), got {self.band_below!r}", key="band_below")
         if isinstance(self.near_occupied, bool) or not isinstance(self.near_occupied, int) or self.near_occupied < 0:
@@ -133,7 +151,12 @@ def resolve_params(params_file: str | None = None, overrides: dict[str, dict[str
         except (TypeError, ValueError) as exc:
             raise InputError(f"invalid value: {exc}", file=file, key=section) from None
 
-    inverse = build("inverse_model", lambda v: InverseModelConfig(**v).validate())
+    def inverse_model(values):
+        config = InverseModelConfig(**values)
+        check_field_types(config)
+        return config.validate()
+
+    inverse = build("inverse_model", inverse_model)
     em = build(
         "em",
         lambda v: EMConfig(
@@ -142,6 +165,7 @@ def resolve_params(params_file: str | None = None, overrides: dict[str, dict[str
         ).validate(),
     )
     adaptive = build("adaptive", lambda v: AdaptiveConfig(**v).validate())
-    if isinstance(resolution, bool) or not isinstance(resolution, (int, float)) or not resolution > 0:
+    if (isinstance(resolution, bool) or not isinstance(resolution, (int, float)) or not math.isfinite(resolution)
+            or not resolution > 0):
         raise InputError(f"expected a positive number (m per cell), got {resolution!r}", file=file, key="resolution")
     return MapParams(float(resolution), inverse, em, adaptive)
