@@ -20,6 +20,7 @@ import numpy as np
 
 from aogm_cli.core.errors import InputError
 
+MAX_NEIGHBOURS = 1000  # beyond any ring or scan window; bounds the feature count a file can ask for
 NORMALISATION = "range / max_range clipped to [0, 1]; +inf (no echo) and NaN (invalid) -> 1.0"
 
 
@@ -35,8 +36,8 @@ class FeatureSpec:
     def __post_init__(self):
         for name in ("ring_neighbours", "time_neighbours"):
             v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
-                raise InputError(f"expected a non-negative integer, got {v!r}", key=f"features.{name}")
+            if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= MAX_NEIGHBOURS:
+                raise InputError(f"expected a whole number in 0..{MAX_NEIGHBOURS}, got {v!r}", key=f"features.{name}")
         for name in ("differences", "missing_flags"):
             if not isinstance(getattr(self, name), bool):
                 raise InputError(f"expected true or false, got {getattr(self, name)!r}", key=f"features.{name}")
