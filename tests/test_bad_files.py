@@ -288,6 +288,8 @@ def damaged(good: Path, name: str, tmp_path: Path, how: str) -> Path:
     elif how == "zeroed":
         middle = len(data) // 2
         data[middle : middle + 300] = bytes(300)
+    elif how == "zeroed_header":  # in the packaged detector: object headers the HDF5 library used to spin on
+        data[2048 : 2048 + 300] = bytes(300)
     elif how == "chunk":  # flip bytes inside the first chunk of a gzip-compressed dataset
         dataset = "truth/occupancy" if name == "log.h5" else "map/probability"
         with h5py.File(good / name, "r") as f:
@@ -336,11 +338,14 @@ def test_a_damaged_map_is_refused(good, tmp_path, how):
     assert digest(bad) == before
 
 
-@pytest.mark.parametrize("how", ["truncated", "zeroed"])
+@pytest.mark.parametrize("how", ["truncated", "zeroed", "zeroed_header"])
 def test_a_damaged_detector_ends_soon(good, tmp_path, how):
     bad = damaged(good, "detector.h5", tmp_path, how)
     out = tmp_path / "m.h5"
     t0 = time.monotonic()
     result = run("map", good / "log.h5", "--mode", "adaptive", "--detector", bad, "-o", out, "-q")
     assert time.monotonic() - t0 < 30
-    assert_not_a_crash(result, bad, [out])
+    if how == "zeroed":
+        assert_not_a_crash(result, bad, [out])
+    else:
+        assert_refused(result, bad, None, [out])
