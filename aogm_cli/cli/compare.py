@@ -8,8 +8,10 @@ from pathlib import Path
 import click
 
 from aogm_cli.cli.options import (
+    budget_options,
     detector_file,
     detector_option,
+    limits_of,
     mode_choice,
     modes_option,
     params_option,
@@ -105,7 +107,9 @@ def _source(r) -> str:
 @click.option("--jobs", "-j", type=click.IntRange(min=1), default=1, show_default=True,
               help="Map in this many worker processes (see Timings above).")
 @quiet_option
-def compare(inputs, modes_text, detector, params_file, json_out, figure_out, maps_dir, requires, require_checks, jobs, quiet):
+@budget_options
+def compare(inputs, modes_text, detector, params_file, json_out, figure_out, maps_dir, requires, require_checks, jobs, quiet,
+            max_memory=16e9, max_work=None):
     """Map every log in every mode, evaluate each map against the log's truth, and print a table
     (accuracy, occupied F1, Brier, checks passed, runtime, runtime relative to the standard map
     of the same log).
@@ -154,8 +158,13 @@ def compare(inputs, modes_text, detector, params_file, json_out, figure_out, map
             raise InputError(f"mode {mode!r} is not among the modes compared ({', '.join(modes)})", key="--require-checks")
     _check_outputs(inputs, entries, modes, params_file, detector, json_out, figure_out, maps_dir)
 
+    from aogm_cli.core.budget import using
+    from aogm_cli.mapping.budget import check_logs
+
+    limits = limits_of(max_memory, max_work)
+    check_logs([(e.path, mode) for e in entries for mode in modes if mode not in e.maps], params, limits)
     n_tasks = sum(mode not in e.maps for e in entries for mode in modes)
-    with progress_bar(n_tasks, "compare", quiet, unit="map") as advance:
+    with using(limits), progress_bar(n_tasks, "compare", quiet, unit="map") as advance:
         results = lib.run_comparison(
             entries, modes, params, detector=detector, jobs=jobs, maps_dir=maps_dir,
             on_map=lambda i, mode, m: advance(1),

@@ -5,8 +5,10 @@ from __future__ import annotations
 import click
 
 from aogm_cli.cli.options import (
+    budget_options,
     detector_file,
     detector_option,
+    limits_of,
     mode_option,
     output_option,
     params_option,
@@ -62,7 +64,9 @@ def parameter_options(f):
 @resolution_option
 @parameter_options
 @quiet_option
-def map_log(log_file, mode, output, png, detector, params_file, resolution, quiet, **options) -> None:
+@budget_options
+def map_log(log_file, mode, output, png, detector, params_file, resolution, quiet, max_memory=16e9, max_work=None,
+            **options) -> None:
     """Build an occupancy-grid map from LOG.h5.
 
     \b
@@ -101,7 +105,7 @@ def map_log(log_file, mode, output, png, detector, params_file, resolution, quie
         def progress(phase, done, total):
             advance(1)
 
-        result = map_file(log_file, mode, params, detector, progress)
+        result = map_file(log_file, mode, params, detector, progress, limits=limits_of(max_memory, max_work))
     write_map_file(output, result)
     if png:
         from aogm_cli.report.picture import render_map

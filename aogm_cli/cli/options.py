@@ -10,6 +10,7 @@ Option                 commands
 --mode / --modes       map / compare (choices from core.occupancy_map.MODES; also --require-checks)
 --params, --detector   map, compare
 --resolution           map
+--max-memory/--max-work simulate, map, compare (``budget_options``; ``core.budget``)
 """
 
 from __future__ import annotations
@@ -39,6 +40,36 @@ params_option = click.option(
 resolution_option = click.option(
     "--resolution", type=float, help=f"Cell size (m) for logs without truth.  [default: {MapParams().resolution}]"
 )
+
+
+class SizeParam(click.ParamType):
+    """A size in bytes: 16G, 500MB, 2e9 (``core.budget.parse_size``)."""
+
+    name = "size"
+
+    def convert(self, value, param, ctx):
+        from aogm_cli.core.budget import parse_size
+
+        try:
+            return value if isinstance(value, float) else parse_size(value)
+        except ValueError as exc:
+            self.fail(str(exc), param, ctx)
+
+
+def budget_options(f):
+    """``--max-memory SIZE`` and ``--max-work N``: the limits a run's estimate is checked against
+    before any work (``core.budget``); ``limits_of`` turns them into ``core.budget.Limits``."""
+    f = click.option("--max-work", type=click.FloatRange(min=0, min_open=True),
+                     help="Refuse runs estimated to take more elementary operations (ray casts, cell updates)."
+                          "  [default: about an hour's worth]")(f)
+    return click.option("--max-memory", type=SizeParam(), default="16G", show_default=True,
+                        help="Refuse runs estimated to need more memory, e.g. 20G.")(f)
+
+
+def limits_of(max_memory: float, max_work: float | None):
+    from aogm_cli.core.budget import Limits
+
+    return Limits(max_memory=max_memory, max_work=max_work)
 
 
 class LazyDefault(click.Option):

@@ -4,7 +4,15 @@ from __future__ import annotations
 
 import click
 
-from aogm_cli.cli.options import output_option, png_option, progress_bar, quiet_option, seed_option
+from aogm_cli.cli.options import (
+    budget_options,
+    limits_of,
+    output_option,
+    png_option,
+    progress_bar,
+    quiet_option,
+    seed_option,
+)
 from aogm_cli.io.outputs import resolve_outputs
 
 
@@ -24,7 +32,9 @@ def world_inputs(world_file: str, world) -> list[str]:
 @seed_option
 @png_option("Also draw the truth and the trajectory into this PNG.")
 @quiet_option
-def simulate(world_file: str, output: str, seed: int, png: str | None, quiet: bool) -> None:
+@budget_options
+def simulate(world_file: str, output: str, seed: int, png: str | None, quiet: bool,
+             max_memory: float = 16e9, max_work: float | None = None) -> None:
     """Simulate a sonar ring driving through WORLD.yaml and write the log with its truth.
 
     The log holds /scans (time, pose, ranges), /sensors and /truth (occupancy grid, each
@@ -34,16 +44,20 @@ def simulate(world_file: str, output: str, seed: int, png: str | None, quiet: bo
     Example:
       aogm simulate worlds/corridor_door.yaml -o door.h5 --seed 1 --png door_truth.png
     """
+    from aogm_cli.core import budget
+    from aogm_cli.world.budget import simulation_estimate
     from aogm_cli.world.loader import load_world
 
     world = load_world(world_file)
+    limits = limits_of(max_memory, max_work)
+    budget.check(simulation_estimate(world), limits, file=world_file)  # before any work
     resolve_outputs(world_inputs(world_file, world), [("-o", output), ("--png", png)])
     from aogm_cli.io.logfile import write_log
     from aogm_cli.simulation.sonar import simulate as run_simulation
     from aogm_cli.world.trajectory import trajectory_poses
 
     n_scans = len(trajectory_poses(world)[0])
-    with progress_bar(n_scans, "simulate", quiet, unit="scan") as advance:
+    with budget.using(limits), progress_bar(n_scans, "simulate", quiet, unit="scan") as advance:
         log = run_simulation(world, seed=seed, progress=advance)
     if png:
         from aogm_cli.report.picture import render_truth

@@ -11,12 +11,14 @@ from pathlib import Path
 
 import numpy as np
 
+from aogm_cli.core.budget import Limits, check
 from aogm_cli.core.log import Log, SensorSpec
 from aogm_cli.core.occupancy_map import MODES, OccupancyMap
 from aogm_cli.detector.network import ConstantDetector
 from aogm_cli.io.detectorfile import BASELINE_DETECTORS, file_sha256, load_detector
 from aogm_cli.io.logfile import LogReader
 from aogm_cli.mapping.adaptive import map_adaptive
+from aogm_cli.mapping.budget import map_estimate
 from aogm_cli.mapping.em import map_em
 from aogm_cli.mapping.params import MapParams
 from aogm_cli.mapping.pipeline import Progress, log_grid
@@ -60,8 +62,10 @@ def resolved_params(log, params: MapParams) -> MapParams:
 
 
 def map_file(path: str | Path, mode: str, params: MapParams, detector: str | None = None,
-             progress: Progress | None = None) -> OccupancyMap:
-    """Map the log at ``path`` in ``mode`` (``detector``: see ``resolve_detector``).
+             progress: Progress | None = None, limits: Limits | None = None) -> OccupancyMap:
+    """Map the log at ``path`` in ``mode`` (``detector``: see ``resolve_detector``); refused
+    (``InputError``) before any work when its estimate exceeds ``limits`` (default: the
+    limits in force, ``core.budget.active_limits``).
 
     The map's ``runtime_s`` is its mapping work; ``stats["untimed_seconds"]`` says what was
     left out: ``compile`` (the warm-up) and ``read_and_set_up`` (reading the log, cached
@@ -69,6 +73,7 @@ def map_file(path: str | Path, mode: str, params: MapParams, detector: str | Non
     flagger, name = resolve_detector(detector) if mode == "adaptive" else (None, "")
     with LogReader(path) as reader:
         params = resolved_params(reader, params)
+        check(map_estimate(reader, mode, params), limits, file=str(path))
         t0 = time.perf_counter()
         warm_up(reader.sensor, params, mode)
         t_compile = time.perf_counter() - t0

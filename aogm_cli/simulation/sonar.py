@@ -13,9 +13,11 @@ from collections.abc import Callable
 import numba
 import numpy as np
 
+from aogm_cli.core.budget import check
 from aogm_cli.core.errors import InputError
 from aogm_cli.core.log import CAUSE_ECHO, CAUSE_NO_ECHO, CAUSE_RANDOM, CAUSE_SPECULAR, Log, SensorSpec, Truth
 from aogm_cli.simulation.raycast import geometry, trace_sub_ray
+from aogm_cli.world.budget import simulation_estimate
 from aogm_cli.world.config import Sonar, World
 from aogm_cli.world.scene import build_scene
 from aogm_cli.world.trajectory import trajectory_poses
@@ -107,11 +109,13 @@ def simulate(world: World, seed: int, progress: Callable[[int], None] | None = N
 
     Random numbers are drawn up front from ``numpy.random.default_rng(seed)`` in a fixed
     order (random-reading draws, random ranges, noise, each (T, S)), so a seed gives the same
-    arrays bit for bit. ``progress(n_scans_done)`` is called after each block of scans.
+    arrays bit for bit. ``progress(n_scans_done)`` is called after each block of scans. A world
+    whose estimate exceeds the limits in force (``core.budget``) is refused first.
     """
     sonar = world.sonar
     if sonar is None:
         raise InputError("the world has no sonar", file=world.source, key="sonar")
+    check(simulation_estimate(world), file=world.source)
     time, pose = trajectory_poses(world)
     mount = np.asarray(sonar.mounts, dtype=np.float64).reshape(-1, 3)
     n_scans, n_sensors = pose.shape[0], mount.shape[0]

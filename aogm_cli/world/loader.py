@@ -28,6 +28,7 @@ from aogm_cli.world.config import (
 )
 
 ROUGH = Surface("rough", math.pi / 2)
+MAX_SONARS = 100_000  # sonar.count; larger work sizes are refused by world.budget
 
 
 class Node:
@@ -88,12 +89,14 @@ class Node:
             raise self.error(f"expected a number <= {maximum:g}, got {v:g}")
         return v
 
-    def integer(self, *, minimum: int | None = None) -> int:
+    def integer(self, *, minimum: int | None = None, maximum: int | None = None) -> int:
         v = self.value
         if isinstance(v, bool) or not isinstance(v, int):
             raise self.error(f"expected a whole number, got {_describe(v)}")
         if minimum is not None and v < minimum:
             raise self.error(f"expected a whole number >= {minimum}, got {v}")
+        if maximum is not None and v > maximum:
+            raise self.error(f"expected a whole number <= {maximum}, got {v}")
         return int(v)
 
     def string(self) -> str:
@@ -375,7 +378,8 @@ def _sonar(n: Node, robot: Robot) -> Sonar:
         if not mounts:
             raise n.child("mounts").error("expected at least one sonar, got zero")
     else:
-        count = n.child("count").integer(minimum=1) if n.has("count") else 24
+        # the mounts are built here: a ring beyond MAX_SONARS is refused before it is built
+        count = n.child("count").integer(minimum=1, maximum=MAX_SONARS) if n.has("count") else 24
         ring = n.get_number("ring_radius", robot.radius, minimum=0.0)
         mounts = []
         for i in range(count):

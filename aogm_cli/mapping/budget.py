@@ -1,0 +1,76 @@
+"""What mapping a log in a mode would cost: grid cells (with the standard mapper's padding), cone
+templates, readings and EM's forward index, from the header, the poses and a sample of ranges.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from aogm_cli.core.budget import Estimate
+from aogm_cli.mapping.beam import is_narrow_beam
+from aogm_cli.mapping.params import MapParams
+from aogm_cli.mapping.pipeline import log_grid
+
+BYTES_PER_CELL = 40  # log-odds, probability, observed, EM state, the map file in memory
+BYTES_PER_PADDED_CELL = 4  # the standard mapper's padded float32 state
+BYTES_PER_READING = 48  # EM / adaptive: rows, cols, bins, z, flags laid out for every reading
+BYTES_PER_INDEX_ENTRY = 40  # EM's forward index: cell, g and their scratch
+BYTES_PER_TEMPLATE_CELL = 48  # the disc the cone templates are cut from (int64 offsets, ranges, angles)
+SAMPLE_BLOCKS, BLOCK_SCANS = 32, 64  # ranges read to estimate the cones' mean size
+
+
+def cone_cells(reach_cells: np.ndarray, beam_width: float) -> np.ndarray:
+    """Cells of a cone of ``reach_cells`` cells' radius: its area, at least a ray's length."""
+    return np.maximum(0.5 * beam_width * reach_cells**2, reach_cells) + 1.0
+
+
+def mean_reach(reader, params: MapParams, resolution: float) -> float:
+    """The mean reach (m) of a reading's cone (its range plus EM's window, max range for no
+    echo, 0 for invalid), from up to SAMPLE_BLOCKS blocks of scans spread over the log."""
+    n = reader.n_scans
+    sensor = reader.sensor
+    starts = np.unique(np.linspace(0, max(0, n - BLOCK_SCANS), min(SAMPLE_BLOCKS, max(1, n))).astype(np.int64))
+    blocks = [reader._ranges(int(s), int(min(n, s + BLOCK_SCANS))) for s in starts] if n else []
+    if not blocks:
+        return 0.0
+    z = np.concatenate([b.reshape(-1) for b in blocks]).astype(np.float64)
+    beyond = max(params.em.forward.window * params.em.forward.sigma, params.inverse_model.alpha) + resolution
+    reach = np.where(np.isnan(z), 0.0, np.minimum(np.where(np.isinf(z), sensor.max_range, z + beyond),
+                                                  sensor.max_range + resolution))
+    return float(reach.mean()) if reach.size else 0.0
+
+
+def map_estimate(reader, mode: str, params: MapParams) -> Estimate:
+    """Memory (bytes) and work (cone cell updates) of mapping the open log ``reader`` in ``mode``."""
+    sensor = reader.sensor
+    grid = log_grid(reader, params.resolution)
+    res = grid.resolution
+    cells = float(grid.height) * float(grid.width)
+    readings = float(reader.n_scans) * float(sensor.count)
+    reach_cells = (sensor.max_range + res) / res
+    narrow = is_narrow_beam(sensor, res)
+    pad = 0.0 if narrow and mode == "standard" else math.floor(reach_cells)
+    padded = (grid.height + 2 * pad) * (grid.width + 2 * pad) if mode != "em" else 0.0
+    templates = 0.0 if narrow and mode == "standard" else (2 * pad + 1) ** 2
+    per_reading = float(cone_cells(np.array(mean_reach(reader, params, res) / res), sensor.beam_width))
+    entries = readings * per_reading
+    memory = cells * BYTES_PER_CELL + padded * BYTES_PER_PADDED_CELL + templates * BYTES_PER_TEMPLATE_CELL
+    work = entries
+    if mode != "standard":
+        memory += readings * BYTES_PER_READING + entries * BYTES_PER_INDEX_ENTRY
+        work += entries * params.em.max_sweeps
+    detail = (f"a {grid.height} x {grid.width} grid at {res:g} m, {readings:.3g} readings, "
+              f"about {per_reading:.3g} cone cells each")
+    return Estimate(f"the {mode} map of this log", memory, work, "cell updates", detail)
+
+
+def check_logs(tasks, params: MapParams, limits=None) -> None:
+    """Refuse (``InputError``) the first (log path, mode) of ``tasks`` whose map would exceed ``limits``."""
+    from aogm_cli.core.budget import check
+    from aogm_cli.io.logfile import LogReader
+
+    for path, mode in tasks:
+        with LogReader(path) as reader:
+            check(map_estimate(reader, mode, params), limits, file=str(path))
