@@ -149,3 +149,12 @@ def test_required_checks_fail_on_any_failed_check_or_missing_truth():
 def test_nan_values_fail():
     out = parse_gate("em.accuracy > 0").evaluate({("em", "accuracy"): math.nan})
     assert not out.passed
+
+
+def test_deep_nesting_and_long_expressions_are_refused_not_a_recursion_error():
+    for text in ("(" * 10000 + "em.accuracy" + ")" * 10000 + " > 0", "-" * 10000 + "1 > 0",
+                 "(" * 60 + "1" + ")" * 60 + " > 0", " + ".join(["em.accuracy"] * 1000) + " > 0"):
+        with pytest.raises(InputError) as info:
+            parse_gate(text)
+        assert info.value.key == "--require" and len(str(info.value)) < 300
+    assert parse_gate("(" * 20 + "em.accuracy" + ")" * 20 + " > 0")

@@ -310,7 +310,7 @@ def test_intel_log_imports_910_scans_of_180_beams(tmp_path):
     assert (result.message, log.n_scans, log.sensor.count) == ("FLASER", 910, 180)
     assert log.ranges.shape == (910, 180) and log.ranges.dtype == np.float32
     assert result.skipped == {"NEFF": 910, "ODOM": 14541, "PARAM": 2}
-    assert log.source == "aogm import carmen intel-corrected.log.gz"
+    assert log.source.startswith("aogm import carmen intel-corrected.log.gz; skipped 15453 lines (first: line 3: PARAM")
     assert np.isfinite(log.time).all() and np.isfinite(log.pose).all()
     assert int(np.sum(np.diff(log.time) <= 0)) == 4  # file order is kept; 4 FLASER lines are out of time order
     assert_allclose(np.degrees(log.sensor.mount[[0, 179], 2]), [-90, 89])
@@ -319,3 +319,39 @@ def test_intel_log_imports_910_scans_of_180_beams(tmp_path):
     # the same scans with poses interpolated from the raw odometry
     odom = import_carmen(INTEL, CarmenOptions(pose_from="odom")).log
     assert odom.n_scans == 910 and not np.allclose(odom.pose, log.pose)
+
+
+@pytest.mark.parametrize("option", [
+    ["--max-range", "nan"], ["--max-range", "inf"], ["--max-range", "0"], ["--max-range", "-1"],
+    ["--min-range", "9", "--max-range", "8"], ["--mount", "nan", "0", "0"], ["--beam-width", "0"],
+    ["--beam-width", "180"], ["--noise-sigma", "nan"], ["--noise-sigma", "-1"], ["--start-angle", "nan"],
+])
+def test_bad_options_are_refused_naming_the_option(tmp_path, option):
+    log = tmp_path / "tiny.log"
+    log.write_text(FLASER + "\n")
+    r = CliRunner().invoke(main, ["import", "carmen", str(log), "-o", str(tmp_path / "x.h5"), *option])
+    assert r.exit_code == 2, r.output
+    assert option[0] in r.output and "Traceback" not in r.output and not (tmp_path / "x.h5").exists()
+
+
+def test_bad_options_are_refused_by_the_library():
+    for options in ({"max_range": float("nan")}, {"min_range": 5.0, "max_range": 4.0}, {"mount": (float("nan"), 0, 0)},
+                    {"beam_width": math.pi}, {"noise_sigma": -1.0}):
+        assert error_of([FLASER], **options).key in options
+
+
+def test_a_byte_order_mark_keeps_the_first_line(tmp_path):
+    log = tmp_path / "bom.log"
+    log.write_bytes(b"\xef\xbb\xbf" + "\n".join(FLASER.replace("10.0 host", f"{10 + k}.0 host") for k in range(3)).encode())
+    r = CliRunner().invoke(main, ["import", "carmen", str(log), "-o", str(tmp_path / "x.h5")])
+    assert r.exit_code == 0, r.output
+    assert read_log(tmp_path / "x.h5").n_scans == 3 and "skipped" not in r.output
+
+
+def test_skipped_lines_are_reported_with_the_first_line(tmp_path):
+    log = tmp_path / "odd.log"
+    log.write_text("\n".join([FLASER, "NEFF 1 2 3", "PARAM robot_x 1", FLASER.replace("10.0 host", "11.0 host")]))
+    r = CliRunner().invoke(main, ["import", "carmen", str(log), "-o", str(tmp_path / "x.h5"), "-q"])
+    assert r.exit_code == 0
+    assert "aogm: note:" in r.stderr and "skipped 2 lines (first: line 2: NEFF" in r.stderr
+    assert "skipped 2 lines" in read_log(tmp_path / "x.h5").source

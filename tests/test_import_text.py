@@ -210,3 +210,24 @@ def test_import_text_files_and_cli(tmp_path):
     assert not out2.exists()
     res = CliRunner().invoke(main, ["import", "text", "--ranges", str(data), "-o", str(out2), "--bearings", "1,2"])
     assert res.exit_code == 2 and "--bearings: 2 bearings for 4 range columns" in res.output
+
+
+@pytest.mark.parametrize("option", [
+    ["--max-range", "nan"], ["--max-range", "inf"], ["--max-range", "0"], ["--min-range", "6", "--max-range", "5"],
+    ["--bearings", "nan,0,10,20"], ["--beam-width", "180"], ["--beam-width", "0"], ["--noise-sigma", "nan"],
+    ["--noise-sigma", "-1"], ["--range-unit", "furlong"], ["--no-echo", "nan"], ["--sensor-radius", "nan"],
+])
+def test_bad_text_options_are_refused_naming_the_option(tmp_path, option):
+    f = tmp_path / "lab.txt"
+    f.write_text("0 0 0 1 2 3 4\n1 0 0 1 2 3 4\n")
+    r = CliRunner().invoke(main, ["import", "text", "--ranges", str(f), "-o", str(tmp_path / "x.h5"), *option])
+    assert r.exit_code == 2, r.output
+    assert option[0] in r.output and "Traceback" not in r.output
+
+
+def test_a_byte_order_mark_before_a_text_table_is_not_a_cell(tmp_path):
+    f = tmp_path / "lab.csv"
+    f.write_bytes(b"\xef\xbb\xbf" + b"x,y,theta,s1\n0,0,0,1\n1,0,0,2\n")
+    r = CliRunner().invoke(main, ["import", "text", "--ranges", str(f), "-o", str(tmp_path / "x.h5")])
+    assert r.exit_code == 0, r.output
+    assert read_log(tmp_path / "x.h5").n_scans == 2

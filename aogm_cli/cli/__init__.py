@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import sys
 import traceback
+import warnings
 
 import click
 
@@ -19,6 +20,14 @@ class AogmGroup(click.Group):
     """A click group that turns library errors into the exit codes of CONTRACT.md."""
 
     def invoke(self, ctx: click.Context):
+        with warnings.catch_warnings():
+            if ctx.params.get("debug"):
+                show_warnings()
+            else:
+                quiet_library_warnings()
+            return self._invoke(ctx)
+
+    def _invoke(self, ctx: click.Context):
         try:
             return super().invoke(ctx)
         except InputError as exc:
@@ -37,6 +46,24 @@ class AogmGroup(click.Group):
             else:
                 click.echo(f"aogm: failed: {exc.__class__.__name__}: {exc} (run with --debug for a traceback)", err=True)
             ctx.exit(1)
+
+
+def quiet_library_warnings() -> None:
+    """Silence what numpy, h5py, matplotlib, numba and scikit-learn warn about (shown with --debug):
+    a run's outcome is its exit status and its messages, not the libraries' asides."""
+    warnings.simplefilter("ignore")
+    # a library that adds its own "always" filter on import (numba's NumbaWarning) still goes here
+    warnings.showwarning = lambda *args, **kwargs: None
+
+
+def show_warnings() -> None:
+    """With --debug: every warning, with its source line, on stderr."""
+    warnings.simplefilter("default")
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
+
+    warnings.showwarning = show
 
 
 @click.group(cls=AogmGroup, context_settings={"help_option_names": ["-h", "--help"]})

@@ -27,9 +27,21 @@ from aogm_cli.io.importers.carmen import (
 from aogm_cli.io.importers.text import ANGLE_UNITS, DELIMITERS, LENGTH_UNITS, TIME_UNITS, TextOptions
 from aogm_cli.io.outputs import resolve_outputs
 
-_positive = click.FloatRange(min=0, min_open=True)
-_non_negative = click.FloatRange(min=0)
-_angle_deg = click.FloatRange(min=0, max=360, min_open=True)
+
+class FiniteFloat(click.FloatRange):
+    """A float range that also refuses nan and +-inf (which compare false with every bound)."""
+
+    def convert(self, value, param, ctx):
+        v = super().convert(value, param, ctx)
+        if not math.isfinite(v):
+            self.fail(f"expected a finite number, got {value!r}", param, ctx)
+        return v
+
+
+_finite = FiniteFloat()
+_positive = FiniteFloat(min=0, min_open=True)
+_non_negative = FiniteFloat(min=0)
+_angle_deg = FiniteFloat(min=0, max=180, min_open=True, max_open=True)  # a beam width (deg)
 
 
 @click.group("import")
@@ -83,7 +95,7 @@ def _report(output: str, log, what: str, origin: str, extra: list[str]) -> None:
 )
 @click.option(
     "--start-angle",
-    type=float,
+    type=_finite,
     default=_degrees(CarmenOptions.start_angle),
     show_default=True,
     help="First beam's bearing (deg) of FLASER/RLASER, whose lines do not store it.",
@@ -113,7 +125,7 @@ def _report(output: str, log, what: str, origin: str, extra: list[str]) -> None:
 )
 @click.option(
     "--mount",
-    type=(float, float, float),
+    type=(_finite, _finite, _finite),
     metavar="X Y YAW",
     help="Laser mount in the robot frame (m, m, deg) for FLASER, RLASER, RAWLASER. Default 0 0 0.",
 )
@@ -163,15 +175,15 @@ def carmen(
     )
     resolve_outputs([log_file], [("-o", output)])
     with (
-        _option_names(("mount", "pose_from", "message")),
+        _option_names(tuple(CarmenOptions.__dataclass_fields__)),
         progress_bar(file_kilobytes(log_file), "import", quiet, unit="kB") as advance,
     ):
         result = import_carmen(log_file, options, progress=advance)
     write_log(output, result.log)
+    if result.skipped:
+        click.echo(f"aogm: note: {log_file}: {result.skipped_summary()}", err=True)
     if not quiet:
         extra = [f"poses from {result.pose_source if result.pose_source != 'line' else result.message + ' lines'}"]
-        if result.skipped:
-            extra.append("skipped lines: " + ", ".join(f"{k} {v}" for k, v in result.skipped.items()))
         extra.extend(result.notes)
         _report(output, result.log, f"{result.message} scans", Path(log_file).name, extra)
 
@@ -223,7 +235,7 @@ def carmen(
 )
 @click.option(
     "--no-echo",
-    type=float,
+    type=_finite,
     multiple=True,
     help="A reading value (in --range-unit) that means no echo; repeatable. Stored as +inf.",
 )

@@ -18,6 +18,8 @@ from aogm_cli.core.occupancy_map import MODES
 METRICS = ("accuracy", "occupied_precision", "occupied_recall", "occupied_f1", "brier", "runtime", "checks_passed")
 COMPARISONS = ("<=", ">=", "==", "!=", "<", ">")
 OPTION = "--require"
+MAX_LENGTH = 500  # characters of one expression
+MAX_DEPTH = 50  # nested parentheses and signs: the parser and the evaluator recurse this deep
 
 _TOKEN = re.compile(
     r"(?:"
@@ -147,7 +149,9 @@ def tokenize(text: str) -> list[Token]:
 
 
 def _error(text: str, message: str) -> InputError:
-    return InputError(f"{text.strip()!r}: {message}", key=OPTION)
+    shown = text.strip()
+    shown = shown if len(shown) <= 80 else shown[:60] + "..." + shown[-15:]
+    return InputError(f"{shown!r}: {message}", key=OPTION)
 
 
 class _Parser:
@@ -158,6 +162,7 @@ class _Parser:
         self.text = text
         self.tokens = tokenize(text)
         self.i = 0
+        self.depth = 0
         self.names: list[tuple[str, str]] = []
         self.spans: list[tuple[int, int]] = []
 
@@ -201,6 +206,15 @@ class _Parser:
         return node
 
     def factor(self) -> Node:
+        self.depth += 1
+        try:
+            if self.depth > MAX_DEPTH:
+                raise _error(self.text, f"nested more than {MAX_DEPTH} deep (parentheses and signs); expected a simpler expression")
+            return self._factor()
+        finally:
+            self.depth -= 1
+
+    def _factor(self) -> Node:
         tok = self.take()
         if tok.kind == "op" and tok.text in ("+", "-"):
             inner = self.factor()
@@ -236,6 +250,8 @@ def parse_gate(text: str) -> Gate:
     """Parse one ``--require`` expression; InputError (key ``--require``) when malformed."""
     if not text.strip():
         raise _error(text, "empty expression; expected e.g. 'adaptive.accuracy >= em.accuracy - 0.005'")
+    if len(text) > MAX_LENGTH:
+        raise _error(text, f"{len(text)} characters long; expected at most {MAX_LENGTH}")
     return _Parser(text).gate()
 
 

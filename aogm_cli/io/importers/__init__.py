@@ -40,7 +40,7 @@ def read_lines(path: str | Path, progress: Progress | None = None) -> Iterator[s
         compressed = raw.read(2) == _GZIP_MAGIC
         raw.seek(0)
         binary = gzip.GzipFile(fileobj=raw, mode="rb") if compressed else raw
-        text = io.TextIOWrapper(binary, encoding="utf-8", newline=None)
+        text = io.TextIOWrapper(binary, encoding="utf-8-sig", newline=None)  # a BOM is not text
         done_kb = 0
         try:
             for n, line in enumerate(text, start=1):

@@ -7,6 +7,7 @@ only opens the (optionally gzipped) file. The line parsers are importable from h
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections import Counter
 from collections.abc import Iterable
@@ -74,6 +75,16 @@ class CarmenImport:
     skipped: dict[str, int] = field(default_factory=dict)
     outside: int = 0
     notes: tuple[str, ...] = ()
+    first_skipped: tuple[int, str] | None = None  # (line number, message name) of the first skipped line
+
+    def skipped_summary(self) -> str | None:
+        """``skipped 3 lines (first: line 17: NEFF, not imported)``, or None when none was skipped."""
+        if not self.skipped:
+            return None
+        n = sum(self.skipped.values())
+        line, name = self.first_skipped or (0, "?")
+        kinds = ", ".join(f"{k} {v}" for k, v in self.skipped.items())
+        return f"skipped {n} line{'s' if n != 1 else ''} (first: line {line}: {name}, not imported; {kinds})"
 
 
 def parse_carmen(
@@ -89,7 +100,8 @@ def parse_carmen(
         raise InputError(f"expected one of {', '.join(SCAN_MESSAGES)}, got {options.message!r}", key="message")
     if options.pose_from not in POSE_SOURCES:
         raise InputError(f"expected one of {', '.join(POSE_SOURCES)}, got {options.pose_from!r}", key="pose_from")
-    scans, pose_lines, skipped = _sort_lines(lines, options)
+    check_options(options)
+    scans, pose_lines, skipped, first_line = _sort_lines(lines, options)
     first = scans[0]
     message = first.message
     if first.count == 0:
@@ -98,6 +110,7 @@ def parse_carmen(
     for name, entries in pose_lines.items():
         if name.lower() != source_kind and entries:
             skipped[name] += len(entries)
+            first_line.setdefault(name, entries[0][0])
 
     time = np.array([s.time for s in scans])
     offset, line_pose, notes = _sensor_frame(scans, source_kind, options)
@@ -116,21 +129,53 @@ def parse_carmen(
         sensor=_sensor_spec(first, offset, max_range, options),
         source=source,
     )
-    return CarmenImport(log, message, source_kind, dict(sorted(skipped.items())), outside, tuple(notes))
+    first = min(((n, name) for name, n in first_line.items()), default=None)
+    result = CarmenImport(log, message, source_kind, dict(sorted(skipped.items())), outside, tuple(notes), first)
+    summary = result.skipped_summary()
+    if summary:  # the log says what was left out of it
+        log = dataclasses.replace(log, source=f"{source}; {summary}")
+        result = dataclasses.replace(result, log=log)
+    return result
 
 
 # -- which lines ----------------------------------------------------------------------------
 
 
+def check_options(o: CarmenOptions) -> None:
+    """Every option given is finite and in range (errors name the option's key)."""
+    def bad(key: str, expected: str, value) -> InputError:
+        return InputError(f"expected {expected}, got {value}", key=key)
+
+    finite = {"start_angle": o.start_angle, "angular_res": o.angular_res, "max_range": o.max_range,
+              "min_range": o.min_range, "beam_width": o.beam_width, "noise_sigma": o.noise_sigma}
+    for key, v in finite.items():
+        if v is not None and not math.isfinite(v):
+            raise bad(key, "a finite number", v)
+    for key in ("angular_res", "max_range"):
+        if finite[key] is not None and not finite[key] > 0:
+            raise bad(key, "a positive number", finite[key])
+    for key in ("min_range", "noise_sigma"):
+        if finite[key] is not None and finite[key] < 0:
+            raise bad(key, "a number >= 0", finite[key])
+    if o.beam_width is not None and not 0 < o.beam_width < math.pi:
+        raise bad("beam_width", "a beam width between 0 and 180 deg", f"{math.degrees(o.beam_width):g} deg")
+    if o.min_range is not None and o.max_range is not None and not o.min_range < o.max_range:
+        raise bad("min_range", f"min_range < max_range ({o.max_range:g})", o.min_range)
+    if o.mount is not None and not (len(o.mount) == 3 and all(math.isfinite(v) for v in o.mount)):
+        raise bad("mount", "three finite numbers (x, y, yaw)", list(o.mount))
+
+
 def _sort_lines(
     lines: Iterable[str], options: CarmenOptions
-) -> tuple[list[CarmenScan], dict[str, list[tuple[int, str]]], Counter[str]]:
-    """The parsed scans of the chosen type, the (line number, text) of each pose message kind and
-    the count of every other line by message name; an error when no scan is left."""
+) -> tuple[list[CarmenScan], dict[str, list[tuple[int, str]]], Counter[str], dict[str, int]]:
+    """The parsed scans of the chosen type, the (line number, text) of each pose message kind,
+    the count of every other line by message name and the first line of each; an error when no
+    scan is left."""
     picked = options.message is not None
     scans: list[CarmenScan] = []
     pose_lines: dict[str, list[tuple[int, str]]] = {name: [] for name in POSE_MESSAGES}
     skipped: Counter[str] = Counter()
+    first_line: dict[str, int] = {}
     for n, line in enumerate(lines, start=1):
         head = line.lstrip()
         if not head or head.startswith("#"):
@@ -145,10 +190,11 @@ def _sort_lines(
             pose_lines[name].append((n, head))
         else:
             skipped[name] += 1
+            first_line.setdefault(name, n)
     if not scans:
         wanted = options.message or " or ".join(SCAN_MESSAGES)
         raise InputError(f"no {wanted} lines: nothing to import", key=options.message)
-    return scans, pose_lines, skipped
+    return scans, pose_lines, skipped, first_line
 
 
 def _same_geometry(a: CarmenScan, b: CarmenScan) -> bool:

@@ -223,6 +223,8 @@ def parse_bearings(spec: str, count: int, unit: str = "deg") -> np.ndarray:
                 f"expected 'ring', 'ring:N[:START[:STEP]]' or a comma-separated list of numbers, got {spec!r}",
                 key="bearings",
             ) from None
+    if not np.isfinite(bearings).all():
+        raise InputError(f"expected finite bearings, got {spec!r}", key="bearings")
     if bearings.size != count:
         raise InputError(
             f"{bearings.size} bearings for {count} range columns; give one bearing per range column", key="bearings"
@@ -302,6 +304,15 @@ def _check_sensor(o: TextOptions) -> None:
             raise InputError(f"expected a positive number, got {v}", key=key)
     if not (0 <= o.min_range < o.max_range):
         raise InputError(f"expected 0 <= min_range < max_range ({o.max_range}), got {o.min_range}", key="min_range")
+    if not o.beam_width < math.pi:
+        raise InputError(f"expected a beam width under 180 deg, got {math.degrees(o.beam_width):g} deg", key="beam_width")
+    for key in ("noise_sigma", "sensor_radius"):
+        v = getattr(o, key)
+        if not (math.isfinite(v) and v >= 0):
+            raise InputError(f"expected a finite number >= 0, got {v}", key=key)
+    bad_echo = [v for v in o.no_echo if not math.isfinite(v)]
+    if bad_echo:
+        raise InputError(f"expected finite reading values, got {bad_echo[0]}", key="no_echo")
 
 
 @dataclass(frozen=True)
