@@ -116,12 +116,11 @@ def test_residual_from_the_last_sweep_equals_a_fresh_pass():
     occupied = np.zeros(GRID.height * GRID.width, dtype=bool)
     result = run_em(index, occupied, np.unique(index.cell), CONFIG)
     assert result.flips[-1] == 0
-    cand_cell, cand_ptr, pair_t, pair_e, pair_g = E.pair_index(index, result.candidates)
+    pairs = E.pair_index(index, result.candidates)
     qpow = (1 - FORWARD.p_hit) ** np.arange(np.max(np.diff(index.ptr)) + 1)
-    nptr, *state = E._init_state(index.ptr, index.cell, index.g, index.g0, index.const, index.w, FORWARD.p_hit, qpow,
-                                 occupied)
-    fresh = E._residual(cand_cell, cand_ptr, pair_t, pair_e, nptr, pair_g, index.const, index.w,
-                        FORWARD.p_hit, CONFIG.l_prior, qpow, occupied, *state)
+    model = E.EMModel(FORWARD.p_hit, CONFIG.l_prior, qpow)
+    state = E._init_state(index.kernel_arrays, model, occupied)
+    fresh = E._residual(pairs, index.kernel_arrays, model, occupied, state)
     assert np.allclose(result.residual, fresh, rtol=1e-9, atol=1e-12)
 
 

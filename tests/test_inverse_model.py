@@ -7,10 +7,13 @@ import numpy as np
 import pytest
 
 from aogm_cli.core.errors import InputError
+from aogm_cli.core.log import SensorSpec
 from aogm_cli.mapping.sensor_models.inverse_model import (
     InverseModelConfig,
+    InverseUpdate,
     angular_profile,
     inverse_model,
+    inverse_update,
     range_profile,
 )
 
@@ -146,3 +149,18 @@ def test_impossible_values_are_rejected(kwargs, key):
     with pytest.raises(InputError) as err:
         InverseModelConfig(**kwargs).validate()
     assert err.value.key == key
+
+
+@pytest.mark.parametrize("model", ["elfes", "constant"])
+def test_inverse_update_names_the_kernels_constants(model):
+    config = InverseModelConfig(model=model, l_occ=1.2, l_free=-0.7, l0=0.25, clamp_min=-1.5, clamp_max=2.5, alpha=0.08)
+    sensor = SensorSpec(mount=np.zeros((1, 3)), min_range=0.2, max_range=4.0)
+    u = inverse_update(config, sensor, 0.1)
+    assert isinstance(u, InverseUpdate)
+    assert u.half_alpha == 0.08 / 2
+    assert (u.min_range, u.max_range) == (0.2, 4.0)
+    assert u.l_free_minus_l0 == -0.7 - 0.25 and u.l_occ_minus_l0 == 1.2 - 0.25
+    assert (u.clamp_min, u.clamp_max, u.l0) == (-1.5, 2.5, 0.25)
+    assert u.elfes is (model == "elfes")
+    assert u.resolution == 0.1
+    assert all(type(v) is float for k, v in u._asdict().items() if k != "elfes")  # one compiled signature

@@ -104,12 +104,12 @@ def test_kernel_agrees_with_the_inverse_model_function(model, octant, z):
 
 def test_flat_offsets_follow_every_heading_bin():
     templates = build_cone_templates(0.1, BEAM, 1.0, n_bins=64)
-    offs, sel = flat_offsets(templates, 37)
+    flat = flat_offsets(templates, 37)
     for k in range(64):
         drow, dcol, _, _ = templates.cells(k)
         b = templates.base_bin[k]
-        x = offs[sel[k, 0], templates.offsets[b] : templates.offsets[b + 1]]
-        np.testing.assert_array_equal(sel[k, 1] * x.astype(np.int64), drow * 37 + dcol)
+        x = flat.offsets[flat.sel[k, 0], templates.offsets[b] : templates.offsets[b + 1]]
+        np.testing.assert_array_equal(flat.sel[k, 1] * x.astype(np.int64), drow * 37 + dcol)
 
 
 def test_max_range_reading_only_clears():

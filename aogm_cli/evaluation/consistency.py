@@ -28,6 +28,8 @@ believed-occupied arc cell): free space that the log itself says holds an obstac
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 from scipy import ndimage
@@ -38,7 +40,7 @@ from aogm_cli.core.log import SensorSpec
 from aogm_cli.io.logfile import LogReader
 from aogm_cli.mapping.beam import is_narrow_beam
 from aogm_cli.mapping.pipeline import cone_templates, echo_ranges
-from aogm_cli.mapping.sensor_models.cone import ConeTemplates, range_search, reading_geometry
+from aogm_cli.mapping.sensor_models.cone import ConeReadings, ConeTemplates, range_search, reading_geometry
 from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig
 
 # per-reading status
@@ -46,6 +48,16 @@ NOT_COUNTED = -1  # not in range (no echo, NaN, negative) or no finite pose
 UNKNOWN = 0  # neither agrees nor contradicts
 CONTRADICTS = 1  # ends on believed-free cells only
 AGREES = 2  # ends on a believed-occupied cell
+
+
+class ArcMaps(NamedTuple):
+    """``_arc_kernel``'s grid: flat (H * W) bool beliefs, and the contradicted cells it marks."""
+
+    occupied: np.ndarray
+    free: np.ndarray
+    contradicted: np.ndarray
+    height: int
+    width: int
 
 
 def believed_occupied(probability, observed) -> np.ndarray:
@@ -127,31 +139,42 @@ def arc_status(
     if contradicted is None:
         contradicted = np.zeros(grid.shape, dtype=bool)
     status = np.empty(z.size, dtype=np.int8)
-    _arc_kernel(
+    maps = ArcMaps(
         np.ascontiguousarray(occupied, dtype=np.bool_).reshape(-1),
         np.ascontiguousarray(free, dtype=np.bool_).reshape(-1),
         contradicted.reshape(-1),
         grid.height,
         grid.width,
-        rows.reshape(-1),
-        cols.reshape(-1),
-        bins.reshape(-1),
-        zt.reshape(-1),
-        offset.reshape(-1),
-        templates.kernel_arrays,
-        templates.range_index,
-        templates.resolution,
-        0.5 * float(alpha),
-        float(sensor.max_range),
-        status,
     )
+    readings = ConeReadings(rows.reshape(-1), cols.reshape(-1), bins.reshape(-1), zt.reshape(-1), offset.reshape(-1))
+    _arc_kernel(maps, readings, templates.kernel_arrays, 0.5 * float(alpha), float(sensor.max_range), status)
     return status.reshape(z.shape)
 
 
-@numba.njit(cache=True)
-def _arc_kernel(occupied, free, contradicted, height, width, rows, cols, bins, z, offset, tpl, range_index,
-                resolution, half_alpha, max_range, status):
-    offsets, dcol, drow, ranges, base_bin, transform = tpl
+# _nrt=False (a private numba option, as em_kernels._sweep): the kernel allocates nothing, and
+# without reference counting its tuples' arrays cost nothing per reading
+@numba.njit(cache=True, _nrt=False)
+def _arc_kernel(maps, readings, tpl, half_alpha, max_range, status):
+    """Each reading's arc status into ``status``; ``maps`` is an ``ArcMaps``, ``readings``
+    ``cone.ConeReadings`` and ``tpl`` ``ConeTemplates.kernel_arrays``."""
+    occupied = maps.occupied
+    free = maps.free
+    contradicted = maps.contradicted
+    height = maps.height
+    width = maps.width
+    rows = readings.rows
+    cols = readings.cols
+    bins = readings.bins
+    z = readings.z
+    offset = readings.offset
+    offsets = tpl.offsets
+    dcol = tpl.dcol
+    drow = tpl.drow
+    ranges = tpl.ranges
+    base_bin = tpl.base_bin
+    transform = tpl.transform
+    range_index = tpl.range_index
+    resolution = tpl.resolution
     for t in range(z.size):
         zt = z[t]
         if not zt >= 0.0:

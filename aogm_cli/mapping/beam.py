@@ -33,6 +33,7 @@ Cost: O(cells on the ray) per reading, no set-up; the intel log maps in about 0.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -40,11 +41,58 @@ import numpy as np
 from aogm_cli.core.frames import sensor_poses
 from aogm_cli.core.grid import GridSpec, dda_steps
 from aogm_cli.core.log import SensorSpec
-from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig, update_scalars
+from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig, inverse_update
 
 # a ray that stays in a cell for at most this many cells' length only touches it (a corner,
 # up to rounding) and leaves it alone
 TOUCH = 1e-9
+
+
+class Ray(NamedTuple):
+    """One ray for ``_ray_cells_kernel``: from (px, py) (m, from the grid's origin) along the
+    unit vector (ux, uy), up to ``length`` m."""
+
+    px: float
+    py: float
+    ux: float
+    uy: float
+    length: float
+
+
+class RayCells(NamedTuple):
+    """Outputs of ``_ray_cells_kernel``, each with room for every cell of a ray."""
+
+    rows: np.ndarray  # int64
+    cols: np.ndarray  # int64
+    t_enter: np.ndarray  # float64 (m)
+    t_exit: np.ndarray  # float64 (m)
+
+
+class RayGrid(NamedTuple):
+    """A grid's shape as the traversal takes it."""
+
+    height: int
+    width: int
+    resolution: float
+
+
+class BeamGrid(NamedTuple):
+    """``_beam_kernel``'s grid: the flat (height * width) state and the hit stamps."""
+
+    state: np.ndarray  # float32 log-odds, -inf = unobserved
+    hit_scan: np.ndarray  # int32: the last scan whose hit band covered the cell (-1: none)
+    height: int
+    width: int
+
+
+class Rays(NamedTuple):
+    """``_beam_kernel``'s readings, flat arrays of one length, scan after scan."""
+
+    px: np.ndarray  # sensor position (m, from the grid's origin)
+    py: np.ndarray
+    ux: np.ndarray  # unit beam direction
+    uy: np.ndarray
+    z: np.ndarray  # float32 range as logged (NaN or negative: nothing; >= max_range: max-range)
 
 
 def is_narrow_beam(sensor: SensorSpec, resolution: float) -> bool:
@@ -71,10 +119,8 @@ def ray_cells(grid: GridSpec, x: float, y: float, yaw: float, length: float):
     cols = np.empty(n_max, dtype=np.int64)
     t0 = np.empty(n_max, dtype=np.float64)
     t1 = np.empty(n_max, dtype=np.float64)
-    n = _ray_cells_kernel(
-        float(x) - grid.origin_x, float(y) - grid.origin_y, math.cos(yaw), math.sin(yaw), float(length),
-        grid.height, grid.width, grid.resolution, rows, cols, t0, t1,
-    )
+    ray = Ray(float(x) - grid.origin_x, float(y) - grid.origin_y, math.cos(yaw), math.sin(yaw), float(length))
+    n = _ray_cells_kernel(ray, RayGrid(grid.height, grid.width, float(grid.resolution)), RayCells(rows, cols, t0, t1))
     return rows[:n], cols[:n], t0[:n], t1[:n]
 
 
@@ -93,9 +139,10 @@ class BeamMapper:
         self.sensor = sensor
         self.grid = grid
         self.config = config
-        self.scalars = update_scalars(config, sensor, grid.resolution)
+        self.update_constants = inverse_update(config, sensor, grid.resolution)
         self.state = np.full(grid.shape, self.UNOBSERVED, dtype=np.float32)
-        self._hit_scan = np.full(grid.height * grid.width, -1, dtype=np.int32)
+        self._grid = BeamGrid(self.state.reshape(-1), np.full(grid.height * grid.width, -1, dtype=np.int32),
+                              grid.height, grid.width)
         self.scans_done = 0
 
     def update(self, pose: np.ndarray, ranges: np.ndarray) -> None:
@@ -105,20 +152,14 @@ class BeamMapper:
         if z.size != pose.shape[0] * self.sensor.count:
             raise ValueError(f"expected {pose.shape[0]} x {self.sensor.count} ranges, got {z.size}")
         sp = sensor_poses(pose, self.sensor.mount).reshape(-1, 3)
-        _beam_kernel(
-            self.state.reshape(-1),
-            self._hit_scan,
-            self.grid.height,
-            self.grid.width,
+        rays = Rays(
             np.ascontiguousarray(sp[:, 0] - self.grid.origin_x),
             np.ascontiguousarray(sp[:, 1] - self.grid.origin_y),
             np.cos(sp[:, 2]),
             np.sin(sp[:, 2]),
             z,
-            self.scalars,
-            self.sensor.count,
-            self.scans_done,
         )
+        _beam_kernel(self._grid, rays, self.update_constants, self.sensor.count, self.scans_done)
         self.scans_done += pose.shape[0]
 
     def result(self) -> tuple[np.ndarray, np.ndarray]:
@@ -183,10 +224,18 @@ def _next_cell(row, col, t_max_row, t_max_col, d_row, d_col, s_row, s_col, heigh
 
 
 @numba.njit(cache=True)
-def _ray_cells_kernel(px, py, ux, uy, length, height, width, res, rows, cols, t_enter, t_exit):
-    """Write the cells of one ray (see ``ray_cells``) to the outputs; return how many."""
+def _ray_cells_kernel(ray, grid, out):
+    """Write the cells of one ``Ray`` on a ``RayGrid`` (see ``ray_cells``) to ``out``
+    (``RayCells``); return how many."""
+    height = grid.height
+    width = grid.width
+    res = grid.resolution
+    rows = out.rows
+    cols = out.cols
+    t_enter = out.t_enter
+    t_exit = out.t_exit
     row, col, t0, t_stop, t_max_row, t_max_col, d_row, d_col, s_row, s_col = _ray_start(
-        px, py, ux, uy, 0.0, length, height, width, res
+        ray.px, ray.py, ray.ux, ray.uy, 0.0, ray.length, height, width, res
     )
     tiny = TOUCH * res
     n = 0
@@ -207,23 +256,35 @@ def _ray_cells_kernel(px, py, ux, uy, length, height, width, res, rows, cols, t_
     return n
 
 
-@numba.njit(cache=True)
-def _beam_kernel(state, hit_scan, height, width, px, py, ux, uy, z, scalars, n_beams, first_scan):
-    """Compiled log-odds update of the readings in order, scan by scan (``n_beams`` readings
-    each), on the flat (H * W) ``state``. Reading t is a ray from (px[t], py[t]) (m, from the
+# _nrt=False (a private numba option, as em_kernels._sweep): the kernel allocates nothing, and
+# without reference counting its tuples' arrays cost nothing per reading
+@numba.njit(cache=True, _nrt=False)
+def _beam_kernel(grid, rays, update, n_beams, first_scan):
+    """Compiled log-odds update of the ``Rays`` in order, scan by scan (``n_beams`` readings
+    each, the first scan numbered ``first_scan``), on the ``BeamGrid``, with the constants of
+    ``update`` (an ``InverseUpdate``). Reading t is a ray from (px[t], py[t]) (m, from the
     grid's origin) along (ux[t], uy[t]). First pass per scan: stamp the cells of every hit band
     with the scan's number in ``hit_scan``; second pass: update every ray's cells, with no free
     evidence for stamped cells.
     """
-    half_alpha = scalars[0]
-    min_range = scalars[1]
-    max_range = scalars[2]
-    c_free = np.float32(scalars[3])
-    c_occ = np.float32(scalars[4])
-    lo = np.float32(scalars[5])
-    hi = np.float32(scalars[6])
-    l0 = np.float32(scalars[7])
-    res = scalars[8]
+    state = grid.state
+    hit_scan = grid.hit_scan
+    height = grid.height
+    width = grid.width
+    px = rays.px
+    py = rays.py
+    ux = rays.ux
+    uy = rays.uy
+    z = rays.z
+    half_alpha = update.half_alpha
+    min_range = update.min_range
+    max_range = update.max_range
+    c_free = np.float32(update.l_free_minus_l0)
+    c_occ = np.float32(update.l_occ_minus_l0)
+    lo = np.float32(update.clamp_min)
+    hi = np.float32(update.clamp_max)
+    l0 = np.float32(update.l0)
+    res = update.resolution
     tiny = TOUCH * res
     for k in range(z.size // n_beams):
         scan = first_scan + k

@@ -9,6 +9,8 @@ of one it holds occupied); 8-connected components of the union are the clusters,
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba
 import numpy as np
 from scipy import ndimage
@@ -17,9 +19,39 @@ from aogm_cli.core.grid import GridSpec
 from aogm_cli.mapping.sensor_models.cone import cone_cells
 
 
+class BandReadings(NamedTuple):
+    """``_band``'s readings: flat arrays of one length."""
+
+    rows: np.ndarray  # the sensor's cell (int64; may lie outside the grid)
+    cols: np.ndarray
+    bins: np.ndarray  # heading bin (int64)
+    lower: np.ndarray  # float64 template ranges of the band (upper NaN or < 0: no band)
+    upper: np.ndarray
+
+
+class BandGrid(NamedTuple):
+    """``_band``'s grid: its shape, the mask it counts cells of, and the union it marks."""
+
+    height: int
+    width: int
+    cell_mask: np.ndarray  # flat bool (H * W)
+    swept: np.ndarray  # flat bool (H * W): set on every cell of some band
+
+
 @numba.njit(cache=True)
-def _band(tpl, height, width, rows, cols, bins, lower, upper, cell_mask, counts, swept):
-    offsets = tpl[0]
+def _band(tpl, grid, readings, counts):
+    """Mark each reading's band in ``grid.swept`` and count its cells of ``grid.cell_mask``
+    into ``counts``; ``tpl`` is ``ConeTemplates.kernel_arrays``."""
+    height = grid.height
+    width = grid.width
+    cell_mask = grid.cell_mask
+    swept = grid.swept
+    rows = readings.rows
+    cols = readings.cols
+    bins = readings.bins
+    lower = readings.lower
+    upper = readings.upper
+    offsets = tpl.offsets
     scratch_cell = np.empty(offsets[-1], dtype=np.int64)
     scratch_range = np.empty(offsets[-1], dtype=np.float64)
     for t in range(rows.shape[0]):
@@ -54,8 +86,8 @@ def cone_bands(grid: GridSpec, templates, rows, cols, bins, z_model, below: floa
         mask = np.ascontiguousarray(np.asarray(cell_mask, dtype=np.bool_).reshape(-1))
     counts = np.zeros(z.shape[0], dtype=np.int64)
     swept = np.zeros(grid.height * grid.width, dtype=np.bool_)
-    _band(templates.kernel_arrays, grid.height, grid.width, np.asarray(rows, np.int64).reshape(-1),
-          np.asarray(cols, np.int64).reshape(-1), np.asarray(bins, np.int64).reshape(-1), lower, upper, mask, counts, swept)
+    readings = BandReadings(*(np.ascontiguousarray(a, np.int64).reshape(-1) for a in (rows, cols, bins)), lower, upper)
+    _band(templates.kernel_arrays, BandGrid(grid.height, grid.width, mask, swept), readings, counts)
     return swept.reshape(grid.shape), counts
 
 

@@ -19,6 +19,9 @@ import numpy as np
 
 from aogm_cli.core.occupancy_map import OccupancyMap
 from aogm_cli.mapping.em_kernels import (
+    EMModel,
+    PairIndex,
+    SweepStamps,
     _init_state,
     _objective,
     _pair_index,
@@ -43,25 +46,25 @@ class EMResult:
     residual: np.ndarray  # p(m_x = 1 | Z, m*) of each candidate
 
 
-def pair_index(index: ForwardIndex, candidates: np.ndarray):
-    """Cell -> readings index for ``candidates``: (cand_cell, cand_ptr, pair_t, pair_e, pair_g).
+def pair_index(index: ForwardIndex, candidates: np.ndarray) -> PairIndex:
+    """Cell -> readings index for ``candidates``: a ``PairIndex`` (cand_cell, cand_ptr, pair_t,
+    pair_e, pair_g).
 
     Only the candidates appear (each with its (reading, entry) pairs in reading order, and
     each pair's Gaussian, stored along the pairs for the sweeps); other cells of the cones
     are held fixed by EM. The look-up table spans the candidates' range of flat ids only, so
     a small cluster costs little.
     """
-    candidates = np.asarray(candidates, dtype=np.int64)
+    candidates = np.ascontiguousarray(candidates, dtype=np.int64)
     if candidates.size > 1 and not np.all(candidates[1:] > candidates[:-1]):
         candidates = np.unique(candidates)
     if candidates.size == 0:
         empty = np.zeros(0, dtype=np.int64)
-        return candidates, np.zeros(1, dtype=np.int64), empty, empty, np.zeros(0)
+        return PairIndex(candidates, np.zeros(1, dtype=np.int64), empty, empty, np.zeros(0))
     lo = int(candidates[0])
     lookup = np.full(int(candidates[-1]) - lo + 1, -1, dtype=np.int64)
     lookup[candidates - lo] = np.arange(candidates.size)
-    cand_ptr, pair_t, pair_e, pair_g = _pair_index(index.ptr, index.cell, index.g, lookup, lo, candidates.size)
-    return candidates, cand_ptr, pair_t, pair_e, pair_g
+    return _pair_index(index.kernel_arrays, candidates, lookup, lo)
 
 
 def run_em(
@@ -76,35 +79,30 @@ def run_em(
     objective or ``config.max_sweeps``; ``progress(sweep, flips, objective)`` after each."""
     if occupied.dtype != np.bool_ or occupied.ndim != 1:
         raise ValueError("occupied must be a flat bool array")
-    p_hit = config.forward.p_hit
-    l_prior = config.l_prior
-    cand_cell, cand_ptr, pair_t, pair_e, pair_g = pair_index(index, candidates)
+    p_hit = float(config.forward.p_hit)
+    pairs = pair_index(index, candidates)
+    fwd = index.kernel_arrays
     max_entries = int(np.max(np.diff(index.ptr))) if index.n_readings else 0
-    qpow = (1.0 - p_hit) ** np.arange(max_entries + 1, dtype=np.float64)
-    nptr, *state = _init_state(index.ptr, index.cell, index.g, index.g0, index.const, index.w, p_hit, qpow, occupied)
-    s = state[4]
-    objective = [_objective(index.const, index.w, s, occupied, cand_cell, l_prior)]
+    model = EMModel(p_hit, float(config.l_prior), (1.0 - p_hit) ** np.arange(max_entries + 1, dtype=np.float64))
+    state = _init_state(fwd, model, occupied)
+    objective = [_objective(fwd, model, state, occupied, pairs.cand_cell)]
     flips: list[int] = []
-    reading_stamp = np.zeros(index.n_readings, dtype=np.int64)
-    cand_stamp = np.full(cand_cell.shape[0], -1, dtype=np.int64)
-    clock = np.zeros(1, dtype=np.int64)
-    last_gain = np.zeros(cand_cell.shape[0], dtype=np.float64)
+    n_cand = pairs.cand_cell.shape[0]
+    stamps = SweepStamps(np.zeros(index.n_readings, dtype=np.int64), np.full(n_cand, -1, dtype=np.int64),
+                         np.zeros(1, dtype=np.int64), np.zeros(n_cand, dtype=np.float64))
     for sweep in range(1, config.max_sweeps + 1):
-        n_flips, _ = _sweep(cand_cell, cand_ptr, pair_t, pair_e, nptr, index.cell, index.g, index.g0,
-                            index.const, index.w, p_hit, l_prior, qpow, occupied, *state,
-                            reading_stamp, cand_stamp, clock, last_gain, pair_g)
+        n_flips, _ = _sweep(pairs, fwd, model, occupied, state, stamps)
         flips.append(int(n_flips))
-        objective.append(_objective(index.const, index.w, s, occupied, cand_cell, l_prior))
+        objective.append(_objective(fwd, model, state, occupied, pairs.cand_cell))
         if progress:
             progress(sweep, int(n_flips), objective[-1])
         if n_flips == 0:
             break
     if flips and flips[-1] == 0:
-        residual = _residual_from_gains(cand_cell, occupied, last_gain, l_prior)
+        residual = _residual_from_gains(pairs.cand_cell, occupied, stamps.last_gain, model.l_prior)
     else:  # stopped by max_sweeps: score every candidate once more
-        residual = _residual(cand_cell, cand_ptr, pair_t, pair_e, nptr, pair_g, index.const, index.w, p_hit,
-                             l_prior, qpow, occupied, *state)
-    return EMResult(len(flips), flips, [float(v) for v in objective], cand_cell, residual)
+        residual = _residual(pairs, fwd, model, occupied, state)
+    return EMResult(len(flips), flips, [float(v) for v in objective], pairs.cand_cell, residual)
 
 
 def em_candidates(index: ForwardIndex, n_cells: int) -> np.ndarray:

@@ -37,6 +37,9 @@ compiled scatter-add over the same cells, on one core of the development machine
   so that numba drops its negative-index checks; flat offsets precomputed per grid width,
   so no integer multiplies), leaving a scalar read-modify-write loop as lean as the
   scatter-add's;
+* the kernel runs without numba's reference counting (``_nrt=False``): its inputs come as
+  named tuples, and counting references to their arrays per reading cost a third of the
+  kernel's time on the bundled worlds' logs;
 * "observed" lives in the log-odds grid itself (-inf until first seen), and the grid is
   padded by the cone's reach, so that there is no second scattered write and no bounds
   check for sensors inside the grid.
@@ -47,6 +50,7 @@ from __future__ import annotations
 import functools
 import time
 from collections.abc import Iterable
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -59,13 +63,14 @@ from aogm_cli.mapping.params import MapParams
 from aogm_cli.mapping.pipeline import Progress, Timed, cone_templates, echo_ranges, log_grid, params_json
 from aogm_cli.mapping.sensor_models.cone import (
     SPARE_MASK,
+    ConeReadings,
     ConeTemplates,
     cone_flat_cells,
     flat_offsets,
     range_search,
     reading_geometry,
 )
-from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig, angular_profile, update_scalars
+from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig, angular_profile, inverse_update
 
 
 def probability_from_log_odds(log_odds, observed=None) -> np.ndarray:
@@ -78,9 +83,26 @@ def probability_from_log_odds(log_odds, observed=None) -> np.ndarray:
     return p.astype(np.float32)
 
 
+class EntryTables(NamedTuple):
+    """Per template entry, read-only float32: what the standard kernel reads besides the cell."""
+
+    weights: np.ndarray  # Elfes' E_a(bearing) (clipped at 0), or 1 for the constant model
+    ranges32: np.ndarray  # the entry's range (m)
+
+
+class PaddedGrid(NamedTuple):
+    """The standard kernel's grid: the flat padded state and the scratch of one reading."""
+
+    state: np.ndarray  # (height * width + SPARE_MASK + 1,) float32 log-odds, -inf = unobserved
+    height: int  # of the padded grid
+    width: int
+    idx_buf: np.ndarray  # (max entries of a template,) int32: one reading's flat cell indices
+    inc_buf: np.ndarray  # (max entries of a template,) float32: ... and their increments
+
+
 @functools.lru_cache(maxsize=8)
-def _entry_tables(templates: ConeTemplates, model: str, beam_width: float) -> tuple[np.ndarray, np.ndarray]:
-    """(angular weights, ranges) per template entry as read-only float32 arrays; cached."""
+def _entry_tables(templates: ConeTemplates, model: str, beam_width: float) -> EntryTables:
+    """Angular weights and ranges per template entry as read-only float32 arrays; cached."""
     if model == "elfes":
         weights = np.maximum(angular_profile(templates.bearings, beam_width), 0.0).astype(np.float32)
     else:
@@ -88,7 +110,7 @@ def _entry_tables(templates: ConeTemplates, model: str, beam_width: float) -> tu
     ranges32 = templates.ranges.astype(np.float32)
     weights.setflags(write=False)
     ranges32.setflags(write=False)
-    return weights, ranges32
+    return EntryTables(weights, ranges32)
 
 
 class StandardMapper:
@@ -123,48 +145,31 @@ class StandardMapper:
         self.grid = grid
         self.config = config
         self.templates = templates
-        self.weights, self.ranges32 = _entry_tables(templates, config.model, float(sensor.beam_width))
-        self.scalars = update_scalars(config, sensor, 1.0 if config.model == "elfes" else 0.0, templates.resolution)
+        self.entries = _entry_tables(templates, config.model, float(sensor.beam_width))
+        self.update_constants = inverse_update(config, sensor, templates.resolution)
         # the state is padded by the templates' extent on every side, so that the cone of any
         # sensor inside the grid lies wholly inside the padded state: no bounds checks
         self.pad = int(templates.extent)
         self.padded_shape = (grid.height + 2 * self.pad, grid.width + 2 * self.pad)
         if self.padded_shape[0] * self.padded_shape[1] + SPARE_MASK + 1 >= 2**31:
             raise ValueError(f"grid of {grid.height} x {grid.width} cells is too large (limit 2**31 cells)")
-        self.flat_offsets, self.flat_sel = flat_offsets(templates, self.padded_shape[1])
+        self.flat_offsets = flat_offsets(templates, self.padded_shape[1])
         size = int(np.diff(templates.offsets).max())
-        self._idx_buf = np.empty(size, dtype=np.int32)
-        self._inc_buf = np.empty(size, dtype=np.float32)
         # spare cells after the grid absorb the updates of cone cells outside it
         hp, wp = self.padded_shape
-        self._flat = np.full(hp * wp + SPARE_MASK + 1, self.UNOBSERVED, dtype=np.float32)
-        padded = self._flat[: hp * wp].reshape(hp, wp)
+        flat = np.full(hp * wp + SPARE_MASK + 1, self.UNOBSERVED, dtype=np.float32)
+        self._grid = PaddedGrid(flat, hp, wp, np.empty(size, dtype=np.int32), np.empty(size, dtype=np.float32))
+        padded = flat[: hp * wp].reshape(hp, wp)
         self.state = padded[self.pad : self.pad + grid.height, self.pad : self.pad + grid.width]
 
     def update(self, pose: np.ndarray, ranges: np.ndarray) -> None:
         """Apply scans (pose (T, 3), ranges (T, S)) in order: every reading's cone, clamped."""
         rows, cols, bins, valid, offset = reading_geometry(pose, self.sensor, self.grid, self.templates)
         z = np.where(valid, np.asarray(ranges, dtype=np.float32), np.float32(np.nan)).astype(np.float32)
-        _standard_kernel(
-            self._flat,
-            self.padded_shape[0],
-            self.padded_shape[1],
-            rows.reshape(-1) + self.pad,
-            cols.reshape(-1) + self.pad,
-            bins.reshape(-1),
-            z.reshape(-1),
-            offset.reshape(-1),
-            self.templates.kernel_arrays,
-            self.templates.range_index,
-            self.flat_offsets,
-            self.flat_sel,
-            self.weights,
-            self.ranges32,
-            self.scalars,
-            int(self.templates.extent),
-            self._idx_buf,
-            self._inc_buf,
-        )
+        readings = ConeReadings(rows.reshape(-1) + self.pad, cols.reshape(-1) + self.pad, bins.reshape(-1),
+                                z.reshape(-1), offset.reshape(-1))
+        _standard_kernel(self._grid, readings, self.templates.kernel_arrays, self.flat_offsets, self.entries,
+                         self.update_constants)
 
     def result(self) -> tuple[np.ndarray, np.ndarray]:
         """(log_odds float32 (H, W), observed bool (H, W)); unobserved cells hold the prior l0."""
@@ -242,14 +247,16 @@ def map_standard(log, params: MapParams, progress: Progress | None = None) -> Oc
     )
 
 
-@numba.njit(cache=True)
-def _standard_kernel(
-    state, height, width, rows, cols, bins, z, offset, tpl, range_index, flat_offsets, flat_sel, weights, ranges32,
-    scalars, ext, idx_buf, inc_buf,
-):
-    """Compiled log-odds update of readings t = 0, 1, ... in order on the flat ``state``.
+# _nrt=False (a private numba option, as em_kernels._sweep): the kernel allocates nothing, and
+# without reference counting its tuples' arrays cost nothing per reading
+@numba.njit(cache=True, _nrt=False)
+def _standard_kernel(grid, readings, tpl, flat, entries, update):
+    """Compiled log-odds update of readings t = 0, 1, ... in order on the flat ``grid.state``.
 
-    ``state`` holds height * width cells (the padded grid) plus SPARE_MASK + 1 spare cells
+    ``grid`` is a ``PaddedGrid``, ``readings`` ``cone.ConeReadings`` (cells of the padded
+    grid), ``tpl`` ``ConeTemplates.kernel_arrays``, ``flat`` its ``cone.FlatOffsets`` for the
+    padded width, ``entries`` the ``EntryTables`` and ``update`` the ``InverseUpdate``.
+    ``grid.state`` holds height * width cells (the padded grid) plus SPARE_MASK + 1 spare cells
     at the end that absorb the updates of cone cells outside it. Per reading, entries
     [0, f0) of its template are the blind zone (observed only), [f0, f1) get free evidence
     and [f1, m) occupied evidence; every update is clamped. Vectorised passes write the increments to
@@ -257,17 +264,33 @@ def _standard_kernel(
     read-modify-write of the grid. Loops run over slices from 0 so that numba drops its
     negative-index checks, which would otherwise stop vectorisation.
     """
-    offsets, dcol, drow, ranges, base_bin, transform = tpl
-    half_alpha = scalars[0]
-    min_range = scalars[1]
-    max_range = scalars[2]
-    c_free = scalars[3]
-    c_occ = np.float32(scalars[4])
-    lo = np.float32(scalars[5])
-    hi = np.float32(scalars[6])
-    l0 = np.float32(scalars[7])
-    elfes = scalars[8] != 0.0
-    resolution = scalars[9]
+    state = grid.state
+    height = grid.height
+    width = grid.width
+    idx_buf = grid.idx_buf
+    inc_buf = grid.inc_buf
+    rows = readings.rows
+    cols = readings.cols
+    bins = readings.bins
+    z = readings.z
+    offset = readings.offset
+    offsets = tpl.offsets
+    ranges = tpl.ranges
+    base_bin = tpl.base_bin
+    range_index = tpl.range_index
+    resolution = tpl.resolution
+    ext = tpl.extent
+    weights = entries.weights
+    ranges32 = entries.ranges32
+    half_alpha = update.half_alpha
+    min_range = update.min_range
+    max_range = update.max_range
+    c_free = update.l_free_minus_l0
+    c_occ = np.float32(update.l_occ_minus_l0)
+    lo = np.float32(update.clamp_min)
+    hi = np.float32(update.clamp_max)
+    l0 = np.float32(update.l0)
+    elfes = update.elfes
     zero = np.float32(0.0)
     for t in range(z.size):
         zt = np.float64(z[t])
@@ -312,7 +335,7 @@ def _standard_kernel(
         for j in range(m - f1):
             c2[j] = c_occ * w2[j]
         ib = idx_buf[:m]
-        cone_flat_cells(ib, tpl, flat_offsets, flat_sel, k, m, row0, col0, height, width, ext)
+        cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width)
         # read-modify-write: the only loops that touch the grid
         i0 = ib[:f0]
         for j in range(f0):

@@ -35,6 +35,7 @@ from __future__ import annotations
 import functools
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -69,6 +70,37 @@ def heading_bins_for(resolution: float, reach: float) -> int:
     return max(64, 8 * math.ceil(n / 8))
 
 
+class ConeArrays(NamedTuple):
+    """A ``ConeTemplates`` as compiled kernels take it (``ConeTemplates.kernel_arrays``)."""
+
+    offsets: np.ndarray  # (n_base + 1,) int64: stored bin b's entries are offsets[b]:offsets[b+1]
+    dcol: np.ndarray  # (E,) int32: offsets in the stored bin's frame
+    drow: np.ndarray  # (E,) int32
+    ranges: np.ndarray  # (E,) float64, sorted within each stored bin
+    base_bin: np.ndarray  # (n_bins,) int64: the stored bin of each heading bin
+    transform: np.ndarray  # (n_bins, 4) int64: the lattice symmetry (a, b, c, d) of each heading bin
+    range_index: np.ndarray  # (n_base, n_shells + 1) int64: see ``range_search``
+    resolution: float  # m: the grid's cell size (and the shells' width of range_index)
+    extent: int  # bound of |drow| and |dcol|
+
+
+class FlatOffsets(NamedTuple):
+    """Template offsets as flat index offsets for one grid width (``flat_offsets``)."""
+
+    offsets: np.ndarray  # (4, E) int32: dr W + dc, dr W - dc, dc W + dr, dc W - dr per entry
+    sel: np.ndarray  # (n_bins, 2) int64: per heading bin, which of the four, and its sign (+/-1)
+
+
+class ConeReadings(NamedTuple):
+    """Readings as the compiled cone kernels take them: flat arrays of one length."""
+
+    rows: np.ndarray  # the sensor's cell (int64; may lie outside the grid)
+    cols: np.ndarray
+    bins: np.ndarray  # heading bin (int64)
+    z: np.ndarray  # the range (m; NaN or negative: no information, >= max_range: max-range reading)
+    offset: np.ndarray  # the sensor's axis offset (m; see ``reading_geometry``)
+
+
 @dataclass(frozen=True, eq=False)
 class ConeTemplates:
     """Cone templates in CSR form for the stored bins (0 .. n_bins/8), plus a per-bin symmetry.
@@ -101,9 +133,10 @@ class ConeTemplates:
         return TWO_PI / self.n_bins
 
     @property
-    def kernel_arrays(self) -> tuple:
-        """The arrays compiled kernels take, in order: offsets, dcol, drow, ranges, base_bin, transform."""
-        return (self.offsets, self.dcol, self.drow, self.ranges, self.base_bin, self.transform)
+    def kernel_arrays(self) -> ConeArrays:
+        """The templates as compiled kernels take them."""
+        return ConeArrays(self.offsets, self.dcol, self.drow, self.ranges, self.base_bin, self.transform,
+                          self.range_index, float(self.resolution), int(self.extent))
 
     def heading_bin(self, yaw):
         """Heading bin (int64 array) of each yaw (rad, any real): the bin whose centre is nearest."""
@@ -178,17 +211,18 @@ def cone_cells(tpl, height, width, row, col, k, limit, out_index, out_range, low
     outside the grid are left out. Returns how many were written. The outputs must hold the
     stored bin's entry count.
     """
-    offsets, dcol, drow, ranges, base_bin, transform = tpl
-    b = base_bin[k]
+    offsets = tpl.offsets
+    transform = tpl.transform
+    b = tpl.base_bin[k]
     s = offsets[b]
     e = offsets[b + 1]
     ta = transform[k, 0]
     tb = transform[k, 1]
     tc = transform[k, 2]
     td = transform[k, 3]
-    rng = ranges[s:e]
-    dcs = dcol[s:e]
-    drs = drow[s:e]
+    rng = tpl.ranges[s:e]
+    dcs = tpl.dcol[s:e]
+    drs = tpl.drow[s:e]
     first = 0  # the template's first entry at range >= lower (ranges are sorted)
     if lower > 0.0:
         hi = e - s
@@ -335,12 +369,12 @@ def _build(resolution: float, beam_width: float, reach: float, n_bins: int) -> C
 
 
 @functools.lru_cache(maxsize=8)
-def flat_offsets(templates: ConeTemplates, width: int) -> tuple[np.ndarray, np.ndarray]:
+def flat_offsets(templates: ConeTemplates, width: int) -> FlatOffsets:
     """Template offsets as flat index offsets on a grid ``width`` cells wide, without multiplies.
 
     Every lattice symmetry maps a stored offset (dc, dr) to +/- one of dr W + dc, dr W - dc,
     dc W + dr, dc W - dr. Returns those four (4, E) int32 arrays and, per heading bin, which
-    one and the sign: (n_bins, 2) int64. Cached per (templates, width).
+    one and the sign: (n_bins, 2) int64, as ``FlatOffsets``. Cached per (templates, width).
     """
     dc = templates.dcol.astype(np.int64)
     dr = templates.drow.astype(np.int64)
@@ -353,7 +387,7 @@ def flat_offsets(templates: ConeTemplates, width: int) -> tuple[np.ndarray, np.n
     sel = np.stack([which, sign], axis=1).astype(np.int64)
     offs.setflags(write=False)
     sel.setflags(write=False)
-    return offs, sel
+    return FlatOffsets(offs, sel)
 
 
 # Cone cells outside the grid are sent to SPARE_MASK + 1 spare cells after it, in turn, so
@@ -362,19 +396,20 @@ SPARE_MASK = 255
 
 
 @numba.njit(cache=True, inline="always")
-def cone_flat_cells(ib, tpl, flat_offsets, flat_sel, k, m, row0, col0, height, width, ext):
+def cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width):
     """Compiled: the flat indices (row * width + col, int32) of the first ``m`` template
     entries of heading bin ``k``'s cone from cell (row0, col0) into ``ib``, in template order.
 
-    ``flat_offsets, flat_sel`` are ``flat_offsets(templates, width)``; ``ext`` the templates'
-    extent. A cell outside the height x width grid gets height * width + (j & SPARE_MASK):
+    ``tpl`` is ``ConeTemplates.kernel_arrays`` and ``flat`` is ``flat_offsets(templates,
+    width)``. A cell outside the height x width grid gets height * width + (j & SPARE_MASK):
     one of SPARE_MASK + 1 spare cells after the grid.
     """
-    offsets, dcol, drow, _ranges, base_bin, transform = tpl
-    s = offsets[base_bin[k]]
+    ext = tpl.extent
+    transform = tpl.transform
+    s = tpl.offsets[tpl.base_bin[k]]
     base = row0 * width + col0
-    x_off = flat_offsets[flat_sel[k, 0], s : s + m]
-    positive = flat_sel[k, 1] > 0
+    x_off = flat.offsets[flat.sel[k, 0], s : s + m]
+    positive = flat.sel[k, 1] > 0
     if row0 - ext >= 0 and row0 + ext < height and col0 - ext >= 0 and col0 + ext < width:
         if positive:
             for j in range(m):
@@ -394,8 +429,8 @@ def cone_flat_cells(ib, tpl, flat_offsets, flat_sel, k, m, row0, col0, height, w
         else:  # drow = d dr, dcol = a dc
             dr_lo, dr_hi = (r_lo, r_hi) if transform[k, 3] > 0 else (-r_hi, -r_lo)
             dc_lo, dc_hi = (c_lo, c_hi) if transform[k, 0] > 0 else (-c_hi, -c_lo)
-        dc = dcol[s : s + m]
-        dr = drow[s : s + m]
+        dc = tpl.dcol[s : s + m]
+        dr = tpl.drow[s : s + m]
         sign = 1 if positive else -1
         for j in range(m):
             inside = (dc[j] >= dc_lo) & (dc[j] <= dc_hi) & (dr[j] >= dr_lo) & (dr[j] <= dr_hi)

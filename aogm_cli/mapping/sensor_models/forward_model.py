@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -62,6 +63,17 @@ class ForwardModelConfig:
         return asdict(self)
 
 
+class ForwardArrays(NamedTuple):
+    """A ``ForwardIndex`` as compiled kernels take it (``ForwardIndex.kernel_arrays``)."""
+
+    ptr: np.ndarray  # (R+1,) int64: reading t's entries are ptr[t]:ptr[t+1]
+    cell: np.ndarray  # (E,) int64 flat grid index of each entry
+    g: np.ndarray  # (E,) float64 N(z_t; d, sigma^2) of each entry (0 beyond the window)
+    g0: np.ndarray  # (R,) float64 G0_t
+    const: np.ndarray  # (R,) float64 C_t
+    w: float  # 1 - p_rand - p_max
+
+
 @dataclass(frozen=True)
 class ForwardIndex:
     """Readings and the cells of their (truncated) cones, in range order, as CSR arrays.
@@ -84,6 +96,39 @@ class ForwardIndex:
     def n_readings(self) -> int:
         return int(self.ptr.shape[0] - 1)
 
+    @property
+    def kernel_arrays(self) -> ForwardArrays:
+        """The index as compiled kernels take it (``p_hit`` apart)."""
+        return ForwardArrays(self.ptr, self.cell, self.g, self.g0, self.const, float(self.w))
+
+
+class ForwardReadings(NamedTuple):
+    """``_fill_index``'s readings: flat arrays of one length."""
+
+    rows: np.ndarray  # the sensor's cell (int64; may lie outside the grid)
+    cols: np.ndarray
+    bins: np.ndarray  # heading bin (int64)
+    z: np.ndarray  # float64 range in template ranges (max-range readings: z_max)
+    limit: np.ndarray  # float64 template range up to which the cone counts
+
+
+class IndexGrid(NamedTuple):
+    """``_fill_index``'s grid: its shape and two optional flat bool masks (empty: none)."""
+
+    height: int
+    width: int
+    mask: np.ndarray  # readings none of whose cells is in it get no entries
+    held_free: np.ndarray  # cells left out of every cone
+
+
+class IndexBuffers(NamedTuple):
+    """``_fill_index``'s outputs."""
+
+    cell: np.ndarray  # (upper bound of the entries,) int64
+    g: np.ndarray  # (same,) float64
+    counts: np.ndarray  # (readings,) int64: entries of each reading
+    scratch: np.ndarray  # (entries of the largest template,) int32: one cone's flat cells
+
 
 def gaussian(z, d, sigma):
     """N(z; d, sigma^2) as numpy."""
@@ -100,7 +145,7 @@ def reading_constants(z: np.ndarray, z_max: float, config: ForwardModelConfig):
 
 @numba.njit(cache=True)
 def _reading_sum(ptr, cell, g, g0, p_hit, occupied, t):
-    """S_t for reading t under the binary map ``occupied`` (flat bool)."""
+    """S_t for reading t (arrays of ``ForwardArrays``) under the binary map ``occupied`` (flat bool)."""
     q = 1.0 - p_hit
     qk = 1.0
     s = 0.0
@@ -112,8 +157,14 @@ def _reading_sum(ptr, cell, g, g0, p_hit, occupied, t):
 
 
 @numba.njit(cache=True)
-def reading_log_likelihoods(ptr, cell, g, g0, const, w, p_hit, occupied):
-    """log p(z_t | m) for every reading of the index."""
+def reading_log_likelihoods(index, p_hit, occupied):
+    """log p(z_t | m) for every reading of ``index`` (``ForwardArrays``)."""
+    ptr = index.ptr
+    cell = index.cell
+    g = index.g
+    g0 = index.g0
+    const = index.const
+    w = index.w
     n = ptr.shape[0] - 1
     out = np.empty(n)
     for t in range(n):
@@ -123,24 +174,42 @@ def reading_log_likelihoods(ptr, cell, g, g0, const, w, p_hit, occupied):
 
 def log_likelihoods(index: ForwardIndex, occupied_flat: np.ndarray) -> np.ndarray:
     """log p(z_t | m) per reading of ``index`` for the flat binary map ``occupied_flat``."""
-    return reading_log_likelihoods(
-        index.ptr, index.cell, index.g, index.g0, index.const, index.w, index.p_hit,
-        np.ascontiguousarray(occupied_flat, dtype=np.bool_),
-    )
+    return reading_log_likelihoods(index.kernel_arrays, index.p_hit, np.ascontiguousarray(occupied_flat, dtype=np.bool_))
 
 
-@numba.njit(cache=True)
-def _fill_index(tpl, range_index, resolution, flat_offs, flat_sel, ext, height, width, rows, cols, bins, limits, z,
-                sigma, window, mask, held_free, out_cell, out_g, counts):
+# _nrt=False (a private numba option, as em_kernels._sweep): the kernel allocates nothing (its scratch comes in ``out``), and
+# without reference counting its tuples' arrays cost nothing per reading
+@numba.njit(cache=True, _nrt=False)
+def _fill_index(tpl, flat, grid, readings, sigma, window, out):
     """Cone cells (flat ids) and Gaussians of every reading, packed reading after reading.
 
+    ``tpl`` is ``ConeTemplates.kernel_arrays``, ``flat`` its ``cone.FlatOffsets`` for the
+    grid's width, ``grid`` an ``IndexGrid``, ``readings`` ``ForwardReadings`` and ``out``
+    ``IndexBuffers``; returns the number of entries written.
     Each cone is the template's entries up to the reading's limit, in range order, with the
     cells outside the grid left out (``cone.cone_flat_cells``, as the standard mapper walks
     them). With a non-empty ``mask`` (flat bool), a reading none of whose cells is in the
     mask gets no entries. With a non-empty ``held_free``, the cells it marks are left out.
     """
-    offsets, _dcol, _drow, ranges, base_bin, _transform = tpl
-    ib = np.empty(offsets[-1], dtype=np.int32)
+    offsets = tpl.offsets
+    ranges = tpl.ranges
+    base_bin = tpl.base_bin
+    range_index = tpl.range_index
+    resolution = tpl.resolution
+    ext = tpl.extent
+    height = grid.height
+    width = grid.width
+    mask = grid.mask
+    held_free = grid.held_free
+    rows = readings.rows
+    cols = readings.cols
+    bins = readings.bins
+    z = readings.z
+    limits = readings.limit
+    out_cell = out.cell
+    out_g = out.g
+    counts = out.counts
+    ib = out.scratch
     n_cells = height * width
     norm = 1.0 / (math.sqrt(2.0 * math.pi) * sigma)
     use_mask = mask.shape[0] > 0
@@ -156,7 +225,7 @@ def _fill_index(tpl, range_index, resolution, flat_offs, flat_sel, ext, height, 
         b = base_bin[k]
         r = ranges[offsets[b] : offsets[b + 1]]
         m = range_search(r, range_index[b], resolution, limits[t], True)
-        cone_flat_cells(ib, tpl, flat_offs, flat_sel, k, m, row0, col0, height, width, ext)
+        cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width)
         touches = not use_mask
         n = 0
         for j in range(m):
@@ -218,12 +287,12 @@ def build_forward_index(
     out_cell = np.empty(upper, dtype=np.int64)
     out_g = np.empty(upper, dtype=np.float64)
     counts = np.zeros(len(z), dtype=np.int64)
+    scratch = np.empty(int(np.diff(templates.offsets).max()), dtype=np.int32)
     mask, held_free = (np.zeros(0, dtype=np.bool_) if a is None else np.ascontiguousarray(a, dtype=np.bool_).reshape(-1)
                        for a in (mask, held_free))
-    flat_offs, flat_sel = flat_offsets(templates, grid.width)
-    n = _fill_index(templates.kernel_arrays, templates.range_index, templates.resolution, flat_offs, flat_sel,
-                    int(templates.extent), grid.height, grid.width, rows, cols, bins, limits, z_eff, config.sigma,
-                    config.window, mask, held_free, out_cell, out_g, counts)
+    n = _fill_index(templates.kernel_arrays, flat_offsets(templates, grid.width),
+                    IndexGrid(grid.height, grid.width, mask, held_free), ForwardReadings(rows, cols, bins, z_eff, limits),
+                    float(config.sigma), float(config.window), IndexBuffers(out_cell, out_g, counts, scratch))
     ptr = np.zeros(len(z) + 1, dtype=np.int64)
     np.cumsum(counts, out=ptr[1:])
     g0, const, w = reading_constants(z, z_max, config)

@@ -2,7 +2,8 @@
 
 ``InverseModelConfig`` holds every parameter (validated in one place, recorded in map files);
 ``inverse_model`` is the model as a plain vectorised function, the reference that the compiled
-kernel of ``mapping.standard`` is tested against.
+kernel of ``mapping.standard`` is tested against; ``inverse_update`` gives the constants the
+compiled kernels read, as the named tuple ``InverseUpdate``.
 
 The model (Elfes 1989; Moravec 1988; Probabilistic Robotics table 9.2)
 -----------------------------------------------------------------------
@@ -39,6 +40,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -151,20 +153,35 @@ def inverse_model(d, theta, z, config: InverseModelConfig, *, beam_width: float,
     return out
 
 
-def update_scalars(config: InverseModelConfig, sensor, *extra: float) -> np.ndarray:
-    """The per-map constants the compiled update kernels read, in their order: alpha/2,
-    min_range, max_range, l_free - l0, l_occ - l0, clamp_min, clamp_max, l0, then ``extra``."""
-    return np.array(
-        [
-            0.5 * config.alpha,
-            sensor.min_range,
-            sensor.max_range,
-            config.l_free - config.l0,
-            config.l_occ - config.l0,
-            config.clamp_min,
-            config.clamp_max,
-            config.l0,
-            *extra,
-        ],
-        dtype=np.float64,
+class InverseUpdate(NamedTuple):
+    """The per-map constants of the log-odds update, as the compiled kernels of
+    ``mapping.standard`` (cones) and ``mapping.beam`` (rays) take them; ``inverse_update``
+    builds it. Every field is float64 but ``elfes``."""
+
+    half_alpha: float  # alpha / 2 (m): half the occupied arc's thickness
+    min_range: float  # the sensor's (m): no evidence nearer
+    max_range: float  # the sensor's (m): a reading >= max_range is a max-range reading
+    l_free_minus_l0: float  # free increment at full weight (<= 0)
+    l_occ_minus_l0: float  # occupied increment at full weight (>= 0)
+    clamp_min: float  # bounds of every cell's log-odds after each update
+    clamp_max: float
+    l0: float  # the prior a cell starts from when first observed
+    elfes: bool  # Elfes' weights (model "elfes"); else constant ones (rays always use these)
+    resolution: float  # the grid's cell size (m)
+
+
+def inverse_update(config: InverseModelConfig, sensor, resolution: float) -> InverseUpdate:
+    """The ``InverseUpdate`` of ``config`` for ``sensor`` (its min and max range) on a grid of
+    ``resolution`` metres."""
+    return InverseUpdate(
+        half_alpha=0.5 * float(config.alpha),
+        min_range=float(sensor.min_range),
+        max_range=float(sensor.max_range),
+        l_free_minus_l0=float(config.l_free) - float(config.l0),
+        l_occ_minus_l0=float(config.l_occ) - float(config.l0),
+        clamp_min=float(config.clamp_min),
+        clamp_max=float(config.clamp_max),
+        l0=float(config.l0),
+        elfes=config.model == "elfes",
+        resolution=float(resolution),
     )
