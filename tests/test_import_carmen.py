@@ -355,3 +355,8 @@ def test_skipped_lines_are_reported_with_the_first_line(tmp_path):
     assert r.exit_code == 0
     assert "aogm: note:" in r.stderr and "skipped 2 lines (first: line 2: NEFF" in r.stderr
     assert "skipped 2 lines" in read_log(tmp_path / "x.h5").source
+
+
+def test_a_non_finite_pose_in_the_file_is_reported_with_its_line():
+    err = error_of([FLASER, FLASER.replace("1.0 2.0 0.5", "nan 2.0 0.5").replace("10.0 host", "11.0 host")])
+    assert "line 2: expected a finite pose" in str(err)

@@ -115,6 +115,7 @@ def parse_carmen(
     time = np.array([s.time for s in scans])
     offset, line_pose, notes = _sensor_frame(scans, source_kind, options)
     pose, keep = _scan_poses(message, source_kind, pose_lines, line_pose, time)
+    _check_finite(scans, time, pose, message)
     outside = int((~keep).sum())
     if outside:
         notes.append(f"dropped {outside} scans outside the time span of the {source_kind.upper()} lines")
@@ -163,6 +164,16 @@ def check_options(o: CarmenOptions) -> None:
         raise bad("min_range", f"min_range < max_range ({o.max_range:g})", o.min_range)
     if o.mount is not None and not (len(o.mount) == 3 and all(math.isfinite(v) for v in o.mount)):
         raise bad("mount", "three finite numbers (x, y, yaw)", list(o.mount))
+
+
+def _check_finite(scans: list[CarmenScan], time: np.ndarray, pose: np.ndarray, message: str) -> None:
+    """A scan's time and pose must be finite numbers (its ranges may be NaN: invalid readings)."""
+    bad = ~(np.isfinite(time) & np.isfinite(pose).all(axis=1))
+    if bad.any():
+        i = int(np.argmax(bad))
+        what = "timestamp" if not np.isfinite(time[i]) else "pose"
+        raise InputError(f"line {scans[i].line}: expected a finite {what}, got {time[i] if what == 'timestamp' else [float(v) for v in pose[i]]}"
+                         f" ({int(bad.sum())} such scans)", key=message)
 
 
 def _sort_lines(
