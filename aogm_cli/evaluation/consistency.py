@@ -41,7 +41,7 @@ from aogm_cli.io.logfile import LogReader
 from aogm_cli.mapping.beam import is_narrow_beam
 from aogm_cli.mapping.pipeline import cone_templates, echo_ranges
 from aogm_cli.mapping.sensor_models.cone import ConeReadings, ConeTemplates, range_search, reading_geometry
-from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig
+from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig, occupied_arc
 
 # per-reading status
 NOT_COUNTED = -1  # not in range (no echo, NaN, negative) or no finite pose
@@ -185,8 +185,9 @@ def _arc_kernel(maps, readings, tpl, half_alpha, max_range, status):
         s = offsets[b]
         r = ranges[s : offsets[b + 1]]
         shift = offset[t]
-        f1 = range_search(r, range_index[b], resolution, zt - half_alpha + shift, False)
-        m = range_search(r, range_index[b], resolution, min(zt + half_alpha, max_range) + shift, True)
+        arc_start, arc_end = occupied_arc(zt, half_alpha, max_range)
+        f1 = range_search(r, range_index[b], resolution, arc_start + shift, False)
+        m = range_search(r, range_index[b], resolution, arc_end + shift, True)
         ta = transform[k, 0]
         tb = transform[k, 1]
         tc = transform[k, 2]

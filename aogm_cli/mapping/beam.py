@@ -41,7 +41,7 @@ import numpy as np
 from aogm_cli.core.frames import sensor_poses
 from aogm_cli.core.grid import GridSpec, dda_steps
 from aogm_cli.core.log import SensorSpec
-from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig, inverse_update
+from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig, inverse_update, occupied_arc
 
 # a ray that stays in a cell for at most this many cells' length only touches it (a corner,
 # up to rounding) and leaves it alone
@@ -294,8 +294,9 @@ def _beam_kernel(grid, rays, update, n_beams, first_scan):
             zt = np.float64(z[t])
             if not (zt >= 0.0 and zt < max_range):
                 continue
+            arc_start, arc_end = occupied_arc(zt, half_alpha, max_range)
             row, col, t0, t_stop, t_max_row, t_max_col, d_row, d_col, s_row, s_col = _ray_start(
-                px[t], py[t], ux[t], uy[t], zt - half_alpha, min(zt + half_alpha, max_range), height, width, res
+                px[t], py[t], ux[t], uy[t], arc_start, arc_end, height, width, res
             )
             inside = True
             while inside and t0 < t_stop:  # False for a NaN pose
@@ -315,8 +316,7 @@ def _beam_kernel(grid, rays, update, n_beams, first_scan):
                 end = max_range
                 z_free = np.inf
             else:
-                end = min(zt + half_alpha, max_range)
-                z_free = zt - half_alpha
+                z_free, end = occupied_arc(zt, half_alpha, max_range)
             row, col, t0, t_stop, t_max_row, t_max_col, d_row, d_col, s_row, s_col = _ray_start(
                 px[t], py[t], ux[t], uy[t], 0.0, end, height, width, res
             )

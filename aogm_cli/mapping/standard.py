@@ -70,7 +70,12 @@ from aogm_cli.mapping.sensor_models.cone import (
     range_search,
     reading_geometry,
 )
-from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig, angular_profile, inverse_update
+from aogm_cli.mapping.sensor_models.inverse_model import (
+    InverseModelConfig,
+    angular_profile,
+    inverse_update,
+    occupied_arc,
+)
 
 
 def probability_from_log_odds(log_odds, observed=None) -> np.ndarray:
@@ -313,9 +318,9 @@ def _standard_kernel(grid, readings, tpl, flat, entries, update):
             m = f1
             span = max_range - min_range
         else:
-            z_free = zt - half_alpha
+            z_free, arc_end = occupied_arc(zt, half_alpha, max_range)
             f1 = range_search(r, ri, resolution, z_free + shift, False)
-            m = range_search(r, ri, resolution, min(zt + half_alpha, max_range) + shift, True)
+            m = range_search(r, ri, resolution, arc_end + shift, True)
             span = z_free - min_range
         f0 = min(blind_end, f1)
         # increments: free (<= 0 exactly: rounding must not make it positive), occupied (>= 0)

@@ -42,6 +42,7 @@ import math
 from dataclasses import asdict, dataclass
 from typing import NamedTuple
 
+import numba
 import numpy as np
 
 from aogm_cli.core.errors import InputError
@@ -185,3 +186,11 @@ def inverse_update(config: InverseModelConfig, sensor, resolution: float) -> Inv
         elfes=config.model == "elfes",
         resolution=float(resolution),
     )
+
+
+@numba.njit(cache=True, inline="always")
+def occupied_arc(z, half_alpha, max_range):
+    """(start, end) range of the occupied arc of an echo at range ``z`` (< max_range): from
+    z - alpha/2 to z + alpha/2, cut at max_range. The one definition the compiled mappers
+    (cones and rays) and the consistency re-cast use; ``inverse_model`` is its numpy reference."""
+    return z - half_alpha, min(z + half_alpha, max_range)
