@@ -1,5 +1,18 @@
-"""Entry point for ``python -m aogm_cli``."""
+"""Entry point of the console script ``aogm`` and of ``python -m aogm_cli``: the signal handlers
+are installed first (stdlib only), the commands and their heavy imports (numba) after.
+"""
 
-from aogm_cli.cli import main
+import sys
 
-main()
+
+def main():
+    from aogm_cli.core import interrupts
+
+    interrupts.install()
+    from aogm_cli.cli import main as commands
+
+    return commands()
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

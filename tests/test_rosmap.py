@@ -11,7 +11,7 @@ import pytest
 from numpy.testing import assert_array_equal
 from PIL import Image
 
-from aogm_cli.core.errors import InputError
+from aogm_cli.core.errors import InputError, OutputError
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.io.map_saver import write_map
 from aogm_cli.io.map_server import RosMap, pixels_to_occupancy, read_map_yaml
@@ -280,7 +280,7 @@ def test_write_map_leaves_nothing_on_failure(tmp_path, monkeypatch):
         return real(target)
 
     monkeypatch.setattr(atomic, "_temporary_beside", failing)
-    with pytest.raises(InputError, match="disk full"):
+    with pytest.raises(OutputError, match="disk full"):
         write_map(tmp_path / "out", PROB, OBSERVED, 0.25, (0.0, 0.0))
     assert list(tmp_path.iterdir()) == []
 

@@ -1,7 +1,7 @@
 """The ``aogm`` command group: one small module per subcommand, all thin over the library.
 
-Errors: InputError -> one line on stderr and exit 2; anything else -> exit 1 (traceback
-only with ``--debug``).
+Errors: InputError -> one line on stderr and exit 2; OutputError and anything else -> exit 1
+(traceback only with ``--debug``); SIGINT, SIGTERM, SIGHUP -> 128 + N (``core.interrupts``).
 """
 
 from __future__ import annotations
@@ -13,11 +13,22 @@ import warnings
 import click
 
 from aogm_cli import __version__
-from aogm_cli.core.errors import InputError
+from aogm_cli.core import interrupts
+from aogm_cli.core.errors import InputError, OutputError
 
 
 class AogmGroup(click.Group):
     """A click group that turns library errors into the exit codes of CONTRACT.md."""
+
+    def main(self, *args, **kwargs):
+        """The commands with SIGINT, SIGTERM and SIGHUP handled (``core.interrupts``: temporaries
+        removed, workers ended, exit 128 + N); ``aogm_cli.__main__`` installs them even earlier."""
+        previous = None if interrupts.installed() else interrupts.install()
+        try:
+            return super().main(*args, **kwargs)
+        finally:
+            if previous is not None:
+                interrupts.restore(previous)
 
     def invoke(self, ctx: click.Context):
         with warnings.catch_warnings():
@@ -35,11 +46,16 @@ class AogmGroup(click.Group):
                 traceback.print_exc()
             click.echo(f"aogm: error: {exc}", err=True)
             ctx.exit(2)
+        except OutputError as exc:  # a full disk, any OS error while writing: exit 1
+            if ctx.obj and ctx.obj.get("debug"):
+                traceback.print_exc()
+            click.echo(f"aogm: error: {exc}", err=True)
+            ctx.exit(1)
         except (click.exceptions.Exit, click.ClickException, click.Abort):
             raise
-        except KeyboardInterrupt:
-            click.echo("aogm: interrupted", err=True)
-            ctx.exit(1)
+        except KeyboardInterrupt:  # only when the handlers are not installed (e.g. embedded)
+            click.echo("aogm: interrupted (SIGINT)", err=True)
+            ctx.exit(interrupts.exit_status(2))
         except Exception as exc:  # noqa: BLE001 - the contract: one line, exit 1
             if ctx.obj and ctx.obj.get("debug"):
                 traceback.print_exc()

@@ -177,17 +177,37 @@ def compare(inputs, modes_text, detector, params_file, json_out, figure_out, map
                        "this comparison's; it is reported as it is", err=True)
     labels = lib.log_labels(entries)
     _print_table(results, labels, quiet)
-    if json_out:
-        lib.write_json(json_out, results)
-    if figure_out:
-        from aogm_cli.report.figure import write_comparison_figure
-
-        write_comparison_figure(figure_out, entries, results, labels)
+    _commit_outputs(results, entries, labels, json_out, figure_out, maps_dir)
     if not quiet:
         for path in (json_out, figure_out):
             if path:
                 click.echo(f"wrote {path}", err=True)
     _report_gates(gates, require_checks, results, labels)
+
+
+def _commit_outputs(results, entries, labels, json_out, figure_out, maps_dir) -> None:
+    """--maps-dir maps, --json and --figure in one commit: all written, or none (and a folder
+    --maps-dir made here removed again)."""
+    from aogm_cli.io.atomic import write_files_atomically
+    from aogm_cli.report import compare as lib
+
+    outputs = lib.maps_dir_outputs(results)
+    if json_out:
+        outputs.append((Path(json_out), lib.json_bytes(results)))
+    if figure_out:
+        from aogm_cli.report.figure import comparison_figure_png
+
+        outputs.append((Path(figure_out), comparison_figure_png(entries, results, labels)))
+    made = [f for f in (Path(maps_dir), *Path(maps_dir).parents) if not f.exists()] if maps_dir else []
+    if outputs and made:
+        Path(maps_dir).mkdir(parents=True)
+    try:
+        write_files_atomically(outputs)
+    except BaseException:
+        for folder in made:
+            if folder.exists() and not any(folder.iterdir()):
+                folder.rmdir()
+        raise
 
 
 def _report_gates(gates, require_checks, results, labels) -> None:

@@ -92,7 +92,8 @@ def map_log(log_file, mode, output, png, detector, params_file, resolution, quie
     """
     inputs = (log_file, params_file, detector_file(detector, (mode,)))
     resolve_outputs(inputs, [("-o", output), ("--png", png)])  # before loading the mappers
-    from aogm_cli.io.mapfile import write_map_file
+    from aogm_cli.io.atomic import write_files_atomically
+    from aogm_cli.io.mapfile import map_bytes
     from aogm_cli.mapping.modes import map_file
     from aogm_cli.mapping.params import resolve_params
 
@@ -106,11 +107,12 @@ def map_log(log_file, mode, output, png, detector, params_file, resolution, quie
             advance(1)
 
         result = map_file(log_file, mode, params, detector, progress, limits=limits_of(max_memory, max_work))
-    write_map_file(output, result)
+    outputs = [(output, map_bytes(result))]
     if png:
-        from aogm_cli.report.picture import render_map
+        from aogm_cli.report.picture import map_png
 
-        render_map(png, result.grid, result.probability, result.observed, result.clusters,
-                   title=f"{mode} map of {log_file} ({result.runtime_s:.2f} s)")
+        outputs.append((png, map_png(result.grid, result.probability, result.observed, result.clusters,
+                                     title=f"{mode} map of {log_file} ({result.runtime_s:.2f} s)")))
+    write_files_atomically(outputs)  # the map and the PNG, all or nothing
     if not quiet:
         click.echo(f"{output}: {mode} map {result.grid.height}x{result.grid.width} in {result.runtime_s:.3f} s", err=True)

@@ -22,11 +22,12 @@ def render(map_file: str, output: str, title: str | None, quiet: bool) -> None:
       aogm render door_map.h5 -o door_map.png
     """
     resolve_outputs([map_file], [("-o", output)])
+    from aogm_cli.io.atomic import write_files_atomically
     from aogm_cli.io.mapfile import read_map_file
-    from aogm_cli.report.picture import render_map
+    from aogm_cli.report.picture import map_png
 
     m = read_map_file(map_file)
-    render_map(output, m.grid, m.probability, m.observed, m.clusters,
-               title=title or f"{m.mode} map of {m.source_log} ({m.runtime_s:.2f} s)")
+    write_files_atomically([(output, map_png(m.grid, m.probability, m.observed, m.clusters,
+                                             title=title or f"{m.mode} map of {m.source_log} ({m.runtime_s:.2f} s)"))])
     if not quiet:
         click.echo(f"{output}: {m.mode} map {m.grid.height}x{m.grid.width}", err=True)

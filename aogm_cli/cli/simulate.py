@@ -52,17 +52,19 @@ def simulate(world_file: str, output: str, seed: int, png: str | None, quiet: bo
     limits = limits_of(max_memory, max_work)
     budget.check(simulation_estimate(world), limits, file=world_file)  # before any work
     resolve_outputs(world_inputs(world_file, world), [("-o", output), ("--png", png)])
-    from aogm_cli.io.logfile import write_log
+    from aogm_cli.io.atomic import write_files_atomically
+    from aogm_cli.io.logfile import log_bytes
     from aogm_cli.simulation.sonar import simulate as run_simulation
     from aogm_cli.world.trajectory import trajectory_poses
 
     n_scans = len(trajectory_poses(world)[0])
     with budget.using(limits), progress_bar(n_scans, "simulate", quiet, unit="scan") as advance:
         log = run_simulation(world, seed=seed, progress=advance)
+    outputs = [(output, log_bytes(log))]
     if png:
-        from aogm_cli.report.picture import render_truth
+        from aogm_cli.report.picture import truth_png
 
-        render_truth(log, png, title=world.name)
-    write_log(output, log)
+        outputs.append((png, truth_png(log, title=world.name)))
+    write_files_atomically(outputs)  # the log and the PNG, all or nothing
     if not quiet:
         click.echo(f"{output}: {log.n_scans} scans x {log.sensor.count} sonars from {world_file} (seed {seed})", err=True)

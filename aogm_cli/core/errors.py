@@ -22,3 +22,15 @@ class InputError(Exception):
         if self.file:
             return self
         return InputError(self.message, file=file, key=self.key)
+
+
+class OutputError(Exception):
+    """An output could not be written (a full disk, any OS error): exit status 1, not 2.
+
+    ``str(err)`` reads ``FILE: MESSAGE``, e.g. ``m.h5: no space left on device``.
+    """
+
+    def __init__(self, message: str, *, file: str | None = None):
+        self.file = file
+        self.message = message
+        super().__init__(f"{file}: {message}" if file else message)

@@ -17,14 +17,14 @@ import yaml
 
 from aogm_cli import __version__
 from aogm_cli.core.errors import InputError
+from aogm_cli.core.interrupts import end_workers, worker_init
 from aogm_cli.core.log import Truth
 from aogm_cli.core.occupancy_map import MODES, OccupancyMap
 from aogm_cli.evaluation.consistency import map_consistency
 from aogm_cli.evaluation.metrics import evaluate
-from aogm_cli.io.atomic import atomic_output
 from aogm_cli.io.detectorfile import detector_identity
 from aogm_cli.io.logfile import LogReader
-from aogm_cli.io.mapfile import is_map_file, read_map_file, read_map_header, write_map_file
+from aogm_cli.io.mapfile import is_map_file, map_bytes, read_map_file, read_map_header
 from aogm_cli.mapping.params import MapParams
 
 METRIC_KEYS = ("accuracy", "occupied_precision", "occupied_recall", "occupied_f1", "brier")
@@ -224,22 +224,23 @@ def compute_maps(
         return done
     from concurrent.futures import FIRST_EXCEPTION, ProcessPoolExecutor, wait
 
-    with ProcessPoolExecutor(max_workers=min(jobs, len(tasks))) as pool:
+    pool = ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), initializer=worker_init, initargs=(os.getpid(),))
+    try:
         futures = {pool.submit(map_one, entries[i].path, mode, params, detector): (i, mode) for i, mode in tasks}
         pending = set(futures)
-        try:
-            while pending:
-                finished, pending = wait(pending, return_when=FIRST_EXCEPTION)
-                for fut in finished:
-                    key = futures[fut]
-                    m = fut.result()  # re-raises a worker's error here
-                    done[key] = m
-                    if on_map:
-                        on_map(key[0], key[1], m)
-        except BaseException:
-            for fut in pending:
-                fut.cancel()
-            raise
+        while pending:
+            finished, pending = wait(pending, return_when=FIRST_EXCEPTION)
+            for fut in finished:
+                key = futures[fut]
+                m = fut.result()  # re-raises a worker's error here
+                done[key] = m
+                if on_map:
+                    on_map(key[0], key[1], m)
+    except BaseException:
+        pool.shutdown(wait=False, cancel_futures=True)
+        end_workers()  # the maps still running are not waited for
+        raise
+    pool.shutdown()
     return done
 
 
@@ -284,17 +285,15 @@ def run_comparison(
     on_map: Callable[[int, str, OccupancyMap], None] | None = None,
 ) -> list[ModeResult]:
     """Every log in every mode: given maps reused, the others computed (and written to
-    ``maps_dir`` as DIR/<logstem>_<mode>.h5 when set); results per log, then per mode."""
+    as DIR/<logstem>_<mode>.h5 of ``maps_dir`` when set: ``maps_dir_outputs`` gives their bytes,
+    to commit with the command's other outputs); results per log, then per mode."""
     tasks = [(i, mode) for i, e in enumerate(entries) for mode in modes if mode not in e.maps]
     targets = maps_dir_targets(entries, modes, maps_dir) if maps_dir else {}
-    if targets:
-        Path(maps_dir).mkdir(parents=True, exist_ok=True)
     given = load_given_maps(entries, modes)
     written: dict[tuple[int, str], str] = {}
 
     def finished(i: int, mode: str, m: OccupancyMap) -> None:
         if (i, mode) in targets:
-            write_map_file(targets[(i, mode)], m)
             written[(i, mode)] = str(targets[(i, mode)])
         if on_map:
             on_map(i, mode, m)
@@ -309,6 +308,11 @@ def run_comparison(
             else:
                 results.append(evaluate_result(e, mode, computed[(i, mode)], written.get((i, mode)), False, identity))
     return results
+
+
+def maps_dir_outputs(results: list[ModeResult]) -> list[tuple[Path, bytes]]:
+    """(path, bytes) of every map computed here that goes to --maps-dir."""
+    return [(Path(r.map_file), map_bytes(r.map)) for r in results if not r.reused and r.map_file is not None]
 
 
 def checks_passed(metrics: dict | None) -> float | None:
@@ -395,8 +399,6 @@ def results_json(results: list[ModeResult]) -> dict:
     return {"aogm_version": __version__, "results": out}
 
 
-def write_json(path: str | Path, results: list[ModeResult]) -> None:
-    """Write ``results_json`` to ``path`` atomically."""
-    payload = json.dumps(results_json(results), indent=2, allow_nan=False) + "\n"
-    with atomic_output(path) as tmp:
-        Path(tmp).write_text(payload, encoding="utf-8")
+def json_bytes(results: list[ModeResult]) -> bytes:
+    """``results_json`` as the bytes of ``--json`` (committed with the command's other outputs)."""
+    return (json.dumps(results_json(results), indent=2, allow_nan=False) + "\n").encode("utf-8")

@@ -4,11 +4,9 @@ truth | standard | em | adaptive (clusters outlined), each map titled with its a
 
 from __future__ import annotations
 
-from pathlib import Path
-
 from aogm_cli.io.logfile import LogReader
 from aogm_cli.report.compare import LogEntry, ModeResult
-from aogm_cli.report.picture import draw_map, draw_truth, save_figure
+from aogm_cli.report.picture import draw_map, draw_truth, figure_png
 
 PANEL_WIDTH = 4.0  # inches
 
@@ -31,10 +29,8 @@ def panel_title(result: ModeResult) -> str:
     return "  ".join(parts)
 
 
-def write_comparison_figure(
-    path: str | Path, entries: list[LogEntry], results: list[ModeResult], labels: dict[str, str]
-) -> None:
-    """Write the PNG (atomically): a truth panel and one panel per mode for every log."""
+def comparison_figure_png(entries: list[LogEntry], results: list[ModeResult], labels: dict[str, str]) -> bytes:
+    """The PNG: a truth panel and one panel per mode for every log."""
     plt = _pyplot()
     by_log: dict[str, list[ModeResult]] = {}
     for r in results:
@@ -69,4 +65,4 @@ def write_comparison_figure(
     except BaseException:
         plt.close(fig)
         raise
-    save_figure(fig, path)
+    return figure_png(fig)

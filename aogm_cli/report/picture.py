@@ -6,12 +6,11 @@ blue so that unknown never looks like p = 0.5; clusters are outlined in orange; 
 
 from __future__ import annotations
 
-from pathlib import Path
+import io
 
 import numpy as np
 
 from aogm_cli.core.grid import GridSpec
-from aogm_cli.io.atomic import atomic_output
 
 UNKNOWN_RGB = (0.80, 0.87, 0.96)
 CLUSTER_COLOUR = "#ff7f0e"
@@ -57,20 +56,24 @@ def _figure_size(grid: GridSpec, panels: int = 1) -> tuple[float, float]:
     return width, max(2.5, min(12.0, width / panels * aspect + 1.2))
 
 
-def save_figure(fig, path: str | Path) -> None:
-    """Save a matplotlib figure as PNG atomically and close it."""
+def figure_png(fig) -> bytes:
+    """The PNG bytes of a matplotlib figure, which is closed (the caller commits them with the
+    command's other outputs: ``io.atomic.write_files_atomically``)."""
     plt = _pyplot()
-    with atomic_output(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=120, bbox_inches="tight")
-    plt.close(fig)
+    try:
+        buffer = io.BytesIO()
+        fig.savefig(buffer, format="png", dpi=120, bbox_inches="tight")
+        return buffer.getvalue()
+    finally:
+        plt.close(fig)
 
 
-def render_map(path: str | Path, grid: GridSpec, probability, observed, clusters=None, title: str | None = None) -> None:
-    """Write a PNG of one map."""
+def map_png(grid: GridSpec, probability, observed, clusters=None, title: str | None = None) -> bytes:
+    """A PNG of one map."""
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=_figure_size(grid))
     draw_map(ax, grid, probability, observed, clusters, title)
-    save_figure(fig, path)
+    return figure_png(fig)
 
 
 def draw_truth(ax, grid: GridSpec, occupancy, pose=None, checks=(), title: str | None = None) -> None:
@@ -90,10 +93,10 @@ def draw_truth(ax, grid: GridSpec, occupancy, pose=None, checks=(), title: str |
         ax.annotate(check["name"], (x1, y1), fontsize=7, color="#2ca02c")
 
 
-def render_truth(log, path: str | Path, title: str | None = None) -> None:
-    """Write a PNG of a simulated log's truth grid, trajectory and checks."""
+def truth_png(log, title: str | None = None) -> bytes:
+    """A PNG of a simulated log's truth grid, trajectory and checks."""
     plt = _pyplot()
     truth = log.truth
     fig, ax = plt.subplots(figsize=_figure_size(truth.grid))
     draw_truth(ax, truth.grid, truth.occupancy, log.pose, truth.checks, title=title)
-    save_figure(fig, path)
+    return figure_png(fig)
