@@ -49,6 +49,8 @@ def door(tmp_path_factory) -> Path:
     folder = tmp_path_factory.mktemp("disk_full")
     res = CliRunner().invoke(main, ["simulate", str(WORLD), "-o", str(folder / "door.h5"), "-q"])
     assert res.exit_code == 0, res.output
+    res = CliRunner().invoke(main, ["map", str(folder / "door.h5"), "--mode", "standard", "-o", str(folder / "m.h5"), "-q"])
+    assert res.exit_code == 0, res.output
     (folder / "tiny.log").write_text("".join(
         f"FLASER 3 1.0 2.0 3.0 {i * 0.01:.2f} 0 0 0 0 0 {i * 0.1:.1f} h {i * 0.1:.1f}\n" for i in range(200)))
     return folder
@@ -63,9 +65,9 @@ def check_failed(res, folder: Path, named: Path, outputs: list[Path]) -> None:
     assert leftovers(folder) == []
 
 
-@pytest.mark.parametrize("command", ["simulate", "map", "compare", "import", "train"])
+@pytest.mark.parametrize("command", ["simulate", "map", "compare", "import", "train", "render", "export"])
 def test_a_full_disk_is_exit_1_naming_the_file_and_leaves_nothing(door, tmp_path, command):
-    inputs = [door / "door.h5", door / "tiny.log", WORLD]
+    inputs = [door / "door.h5", door / "tiny.log", door / "m.h5", WORLD]
     before = digest(*inputs)
     out = tmp_path
     if command == "simulate":
@@ -80,9 +82,15 @@ def test_a_full_disk_is_exit_1_naming_the_file_and_leaves_nothing(door, tmp_path
     elif command == "import":
         outputs = [out / "tiny.h5"]
         args = ["import", "carmen", door / "tiny.log", "-o", outputs[0], "-q"]
-    else:
+    elif command == "train":
         outputs = [out / "det.h5"]
         args = ["train", door / "door.h5", "-o", outputs[0], "-q"]
+    elif command == "render":
+        outputs = [out / "r.png"]
+        args = ["render", door / "m.h5", "-o", outputs[0], "-q"]
+    else:
+        outputs = [out / f"e{suffix}" for suffix in (".pgm", ".yaml", ".png", "_scale.yaml")]
+        args = ["export", door / "m.h5", "-o", out / "e", "-q"]
     res = run_full(args, tmp_path)
     named = out / "maps" / "door_standard.h5" if command == "compare" else outputs[0]
     check_failed(res, tmp_path, named, outputs)

@@ -1,6 +1,5 @@
-"""The one error type for bad input: a file, a key path, what was found and what was expected.
-
-Commands turn an InputError into a short message on stderr and exit status 2.
+"""The error types: bad input (a file, a key path, what was found and what was expected) and an
+output that could not be written. Commands turn an InputError into exit status 2, an OutputError into 1.
 """
 
 
