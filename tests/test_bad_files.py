@@ -339,7 +339,8 @@ def test_a_damaged_map_is_refused(good, tmp_path, how):
 
 
 @pytest.mark.parametrize("how", ["truncated", "zeroed", "zeroed_header"])
-def test_a_damaged_detector_ends_soon(good, tmp_path, how):
+def test_a_damaged_detector_ends_soon(good, tmp_path, how, monkeypatch):
+    monkeypatch.setenv("AOGM_HDF5_WATCHDOG_SECONDS", "3")  # the header walk's limit (default 20 s)
     bad = damaged(good, "detector.h5", tmp_path, how)
     out = tmp_path / "m.h5"
     t0 = time.monotonic()

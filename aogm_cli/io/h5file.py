@@ -9,9 +9,10 @@ from __future__ import annotations
 import io
 import json
 import math
+import os
+import signal
 import struct
-import subprocess
-import sys
+import time
 import zlib
 from collections.abc import Callable
 from contextlib import contextmanager
@@ -67,34 +68,66 @@ def is_sealed_intact(file: str) -> bool:
     return size == length and found == crc
 
 
-# Walks every object header and attribute of a file, as a reader would, in a child process.
-_WALK = """
-import sys, h5py
-def visit(name, obj):
-    for key in obj.attrs:
-        obj.attrs[key]
-    if isinstance(obj, h5py.Dataset):
-        obj.shape, obj.dtype
-with h5py.File(sys.argv[1], "r") as f:
-    for key in f.attrs:
-        f.attrs[key]
-    f.visititems(visit)
-"""
-WATCHDOG_SECONDS = 20.0
+WATCHDOG_SECONDS = 20.0  # AOGM_HDF5_WATCHDOG_SECONDS overrides it
 
 
-def check_structure(file: str, seconds: float = WATCHDOG_SECONDS) -> None:
+def _walk(file: str) -> None:
+    """Read every object header and attribute of ``file``, as a reader would."""
+
+    def visit(_name, obj):
+        for key in obj.attrs:
+            obj.attrs[key]
+        if isinstance(obj, h5py.Dataset):
+            obj.shape, obj.dtype  # noqa: B018
+
+    with h5py.File(file, "r") as f:
+        for key in f.attrs:
+            f.attrs[key]
+        f.visititems(visit)
+
+
+def check_structure(file: str, seconds: float | None = None) -> None:
     """Raise InputError unless the HDF5 library can walk ``file``'s headers and attributes within
-    ``seconds`` in a child process: a damaged header can make the library spin without end, and
-    only a process can be stopped from outside. Used for files whose seal is missing or broken
-    (written before aogm sealed its files, edited since, or damaged); sealed intact files skip it."""
+    ``seconds`` in a forked child process: a damaged header can make the library spin without
+    end, and only a process can be stopped from outside. Used for files whose seal is missing or
+    broken (written before aogm sealed its files, edited since, or damaged)."""
+    if seconds is None:
+        seconds = float(os.environ.get("AOGM_HDF5_WATCHDOG_SECONDS", WATCHDOG_SECONDS))
+    read_end, write_end = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child: walk, report, and leave without running the parent's exit handlers
+        os.close(read_end)
+        code = 0
+        try:
+            _walk(file)
+        except BaseException as exc:  # noqa: BLE001 - any failure is the answer
+            os.write(write_end, _reason(exc).encode(errors="replace")[:400])
+            code = 1
+        os._exit(code)
+    os.close(write_end)
     try:
-        done = subprocess.run([sys.executable, "-c", _WALK, file], capture_output=True, timeout=seconds)
-    except subprocess.TimeoutExpired:
-        raise InputError(f"the file is damaged: reading its headers did not finish in {seconds:g} s", file=file) from None
-    if done.returncode != 0:
-        last = (done.stderr.decode(errors="replace").strip().splitlines() or ["?"])[-1]
-        raise InputError(f"the file is damaged or not HDF5: {last[:200]}", file=file)
+        status = _wait(pid, seconds)
+        message = os.read(read_end, 400).decode(errors="replace")
+    finally:
+        os.close(read_end)
+    if status is None:
+        raise InputError(f"the file is damaged: reading its headers did not finish in {seconds:g} s", file=file)
+    if status != 0:
+        raise InputError(f"the file is damaged or not HDF5: {message or 'the reader crashed'}", file=file)
+
+
+def _wait(pid: int, seconds: float) -> int | None:
+    """The child's exit status, or None (and the child killed) after ``seconds``."""
+    deadline = time.monotonic() + seconds
+    while True:
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done:
+            return os.waitstatus_to_exitcode(status)
+        if time.monotonic() > deadline:
+            os.kill(pid, signal.SIGKILL)
+            os.waitpid(pid, 0)
+            return None
+        time.sleep(0.002)
 
 
 # What h5py raises for a damaged file or an object of an unexpected kind, at open or later
