@@ -58,6 +58,13 @@ def processes_in(folder: Path) -> list[str]:
     return found
 
 
+def wait_for_processes(folder: Path, count: int, seconds: float = 15.0) -> int:
+    deadline = time.time() + seconds
+    while len(processes_in(folder)) < count and time.time() < deadline:
+        time.sleep(0.05)
+    return len(processes_in(folder))
+
+
 def wait_for_no_processes(folder: Path, seconds: float = 5.0) -> list[str]:
     deadline = time.time() + seconds
     while (left := processes_in(folder)) and time.time() < deadline:
@@ -73,7 +80,7 @@ def interrupt(args, folder: Path, sig: int, delay: float, group: bool = False, p
                             start_new_session=True)
     time.sleep(delay)
     assert proc.poll() is None, "finished before the signal: make the work longer"
-    assert len(processes_in(folder)) == processes
+    assert wait_for_processes(folder, processes) == processes
     os.killpg(proc.pid, sig) if group else proc.send_signal(sig)
     out, err = proc.communicate(timeout=60)
     return subprocess.CompletedProcess(cmd, proc.returncode, out, err)
@@ -121,7 +128,7 @@ def test_compare_workers_die_with_a_killed_parent(data, tmp_path):
     cmd = [sys.executable, "-m", "aogm_cli", "compare", "long.h5", "--modes", "em,adaptive", "--jobs", "2"]
     proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     time.sleep(3.0)
-    assert len(processes_in(tmp_path)) == 3  # the parent and its two workers
+    assert wait_for_processes(tmp_path, 3) == 3  # the parent and its two workers
     proc.kill()
     proc.communicate(timeout=30)
     assert wait_for_no_processes(tmp_path) == []
