@@ -96,6 +96,8 @@ def check_structure(file: str, seconds: float | None = None) -> None:
     read_end, write_end = os.pipe()
     pid = os.fork()
     if pid == 0:  # the child: walk, report, and leave without running the parent's exit handlers
+        for signum in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+            signal.signal(signum, signal.SIG_DFL)  # the parent's handlers (cleanup, a message) are not the child's
         os.close(read_end)
         code = 0
         try:
