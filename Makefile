@@ -30,6 +30,14 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(BIN)/python -m pytest
 
+# Property-based fuzzing (hypothesis, fixed seed) of world files and of damaged logs, maps and
+# detectors: FUZZ_EXAMPLES per file kind (make test runs 15); prints per kind the examples,
+# crashes, hangs, other exits, partial outputs and the time taken.
+FUZZ_EXAMPLES ?= 2000
+.PHONY: fuzz
+fuzz: $(STAMP)
+	AOGM_FUZZ_EXAMPLES=$(FUZZ_EXAMPLES) $(BIN)/python -m pytest -q -s -p no:cacheprovider tests/test_fuzz.py
+
 bench: $(STAMP)
 	$(BIN)/python bench/bench_simulate.py
 	$(BIN)/python bench/bench_standard.py
