@@ -119,6 +119,7 @@ class Tally:
         self.failures: list[str] = []
         self.slowest = 0.0
         self.t0 = time.monotonic()
+        self.capsys = None
 
     def check(self, damage: str, args: list[str], damaged: Path, before: str, outputs: list[Path], folder: Path):
         result = run_guarded(args, folder)
@@ -173,16 +174,18 @@ class Tally:
                 f"{c['other_exits']} other exits, {c['partial_outputs']} partial outputs, "
                 f"{c['input_changed']} inputs changed, {c['unnamed']} unnamed refusals "
                 f"(exit 0: {c['exit_0']}, exit 2: {c['exit_2']}, of which {c['watchdog']} by the header walk's {WATCHDOG_SECONDS} s limit); slowest {self.slowest:.1f} s, {took:.1f} s in all")
-        print("\n" + line, flush=True)
+        with self.capsys.disabled():
+            print("\n" + line, flush=True)
         assert not self.failures, line + "\n" + "\n".join(self.failures)
 
 
 @pytest.fixture
 def tally(request, capsys):
+    """The test's Tally; ``tally.finish()`` at the test's end prints the counts (shown even without
+    ``-s``) and fails the test on any failing example."""
     t = Tally(request.node.name.removeprefix("test_fuzz_"))
-    yield t
-    with capsys.disabled():
-        t.finish()
+    t.capsys = capsys
+    return t
 
 
 # --- worlds ---------------------------------------------------------------------------------------
@@ -302,6 +305,7 @@ def test_fuzz_worlds(tally):
             tally.check(f"{name}: {'; '.join(edits)}", args, world, digest(world), [out], folder)
 
     fuzz()
+    tally.finish()
 
 
 # --- HDF5 files ----------------------------------------------------------------------------------
@@ -515,6 +519,7 @@ def h5_test(kind: str, good: Path, tally: Tally):
             tally.check("; ".join(edits), args, bad, digest(bad), [out], folder)
 
     fuzz()
+    tally.finish()
 
 
 def test_fuzz_logs(good, tally):

@@ -57,8 +57,8 @@ def is_sealed_intact(file: str) -> bool:
     """True when ``file`` carries aogm's seal and its length and checksum agree with its contents."""
     with open(file, "rb") as fh:
         head = fh.read(len(SEAL_MAGIC) + _SEAL.size)
-        if not head.startswith(SEAL_MAGIC):
-            return False
+        if len(head) < len(SEAL_MAGIC) + _SEAL.size or not head.startswith(SEAL_MAGIC):
+            return False  # not sealed, or cut inside the seal (then the header walk refuses it)
         length, crc = _SEAL.unpack(head[len(SEAL_MAGIC):])
         fh.seek(USER_BLOCK)
         found, size = 0, 0
