@@ -120,6 +120,7 @@ class Tally:
         self.slowest = 0.0
         self.t0 = time.monotonic()
         self.capsys = None
+        self.watchdog: list[str] = []
 
     def check(self, damage: str, args: list[str], damaged: Path, before: str, outputs: list[Path], folder: Path):
         result = run_guarded(args, folder)
@@ -143,6 +144,8 @@ class Tally:
             self.counts[f"exit_{code}"] += 1
             if "did not finish in" in text:
                 self.counts["watchdog"] += 1
+                if len(self.watchdog) < 3:
+                    self.watchdog.append(f"    {damage}: {result['seconds']:.1f} s")
             if code == 2 and str(damaged) not in text:
                 self.counts["unnamed"] += 1
                 problems.append("exit 2 without the file's name")
@@ -176,6 +179,8 @@ class Tally:
                 f"(exit 0: {c['exit_0']}, exit 2: {c['exit_2']}, of which {c['watchdog']} by the header walk's {WATCHDOG_SECONDS} s limit); slowest {self.slowest:.1f} s, {took:.1f} s in all")
         with self.capsys.disabled():
             print("\n" + line, flush=True)
+            if self.watchdog:
+                print("  refused by the header walk's limit (the first few):\n" + "\n".join(self.watchdog), flush=True)
         assert not self.failures, line + "\n" + "\n".join(self.failures)
 
 
