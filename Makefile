@@ -63,4 +63,4 @@ detector: $(STAMP)
 	  -o aogm_cli/data/detector.h5 --seed $(SEED) --quiet
 
 clean:
-	rm -rf $(OUT) .pytest_cache
+	rm -rf $(OUT) .pytest_cache .hypothesis

@@ -11,7 +11,7 @@ signal) is counted instead of ending the test run.
 ``AOGM_FUZZ_EXAMPLES`` sets the examples per file kind (default 15, for ``make test``); ``make
 fuzz`` runs 2000 and prints, per kind, the examples, crashes, hangs, other exits, partial outputs
 and the time taken. The seed is fixed (``derandomize``) and no example database is kept, so a run
-is reproducible and leaves no ``.hypothesis`` folder. Failing examples are collected (not shrunk)
+is reproducible (hypothesis still caches constants in ``.hypothesis/``, ignored by git). Failing examples are collected (not shrunk)
 and the test fails at the end listing the first few with their damage, command and output.
 """
 
