@@ -232,7 +232,7 @@ def tree_edit(draw, tree):
         return f"delete {where}"
     if op == "add_key" and isinstance(node, dict):
         key = draw(st.sampled_from(["unknown", "extra_key", "x", "1", "walls", "sonar"]))
-        node[key] = draw(st.sampled_from(BAD_VALUES))
+        node[key] = copy.deepcopy(draw(st.sampled_from(BAD_VALUES)))  # later edits must not change BAD_VALUES
         return f"add {where}.{key}"
     if op == "truncate" and isinstance(node, list):
         n = draw(st.integers(0, max(0, len(node) - 1)))

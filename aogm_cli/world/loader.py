@@ -28,6 +28,11 @@ from aogm_cli.world.config import (
 )
 
 ROUGH = Surface("rough", math.pi / 2)
+# Every number of a world (metres, seconds, degrees) is at most this in magnitude, and the truth
+# grid is at least MIN_TRUTH_RESOLUTION fine: cell indexes of every shape then fit in int64 (a
+# polygon at 1e300 m made the truth raster's kernel write out of bounds: a segfault).
+MAX_MAGNITUDE = 1e6
+MIN_TRUTH_RESOLUTION = 1e-4
 MAX_SONARS = 100_000  # sonar.count; larger work sizes are refused by world.budget
 
 
@@ -81,6 +86,8 @@ class Node:
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
             raise self.error(f"expected a number, got {_describe(v)}")
         v = float(v)
+        if abs(v) > MAX_MAGNITUDE:
+            raise self.error(f"expected a number of magnitude at most {MAX_MAGNITUDE:g}, got {v:g}")
         if positive and not v > 0:
             raise self.error(f"expected a positive number, got {v:g}")
         if minimum is not None and v < minimum:
@@ -214,7 +221,7 @@ def _bounds(n: Node) -> tuple[float, float, float, float]:
 
 
 def _truth_resolution(top: Node, bounds: tuple[float, float, float, float]) -> float:
-    truth_resolution = top.get_number("truth_resolution", 0.05, positive=True)
+    truth_resolution = top.get_number("truth_resolution", 0.05, minimum=MIN_TRUTH_RESOLUTION)
     if (bounds[2] - bounds[0]) * (bounds[3] - bounds[1]) / truth_resolution**2 > 2.5e8:
         raise top.child("truth_resolution").error("the truth grid would exceed 250 million cells; expected a coarser resolution")
     return truth_resolution
