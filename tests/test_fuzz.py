@@ -497,7 +497,7 @@ def h5_damage(draw, file: Path):
             else:
                 buf += draw(st.binary(min_size=1, max_size=length))
             data = bytes(buf)
-            edits.append(f"{op} {length} at {at}")
+            edits.append(f"{op} {length} at {at}" + (f" (xor {mask:#04x})" if op == "flip" else ""))
     return data, edits
 
 
