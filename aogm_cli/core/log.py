@@ -20,6 +20,8 @@ CAUSE_RANDOM = 2  # a random reading
 CAUSE_SPECULAR = 3  # specular reflection or multipath: a reading too long
 SENSOR_KINDS = ("sonar", "laser")
 
+MAX_MOUNT = 1000.0  # m, rad: a sensor's offset from the robot (and its yaw) beyond this is no robot
+
 
 @dataclass(frozen=True)
 class SensorSpec:
@@ -62,6 +64,9 @@ class SensorSpec:
             raise bad("mount", f"expected shape (S, 3) with S >= 1 sensors, got {mount.shape}")
         if not np.all(np.isfinite(mount)):
             raise bad("mount", "expected finite numbers (x, y, yaw of each sensor)")
+        if np.abs(mount).max() > MAX_MOUNT:
+            raise bad("mount", f"expected each sensor within {MAX_MOUNT:g} m (x, y) and rad (yaw) of the robot, "
+                               f"got {np.abs(mount).max():g}")
         return self
 
     def as_dict(self) -> dict:

@@ -91,6 +91,8 @@ def _header(f: h5py.File, path: str) -> MapHeader:
     if runtime is not None and runtime < 0:
         raise InputError(f"expected a number of seconds >= 0, got {runtime}", file=path, key="runtime_s")
     source_log = text_attr(f, "source_log", path, "source_log", required=False) or ""
+    if not source_log.isprintable():
+        raise InputError("expected the path of the log, got unprintable characters", file=path, key="source_log")
     return MapHeader(mode, source_log, params, 0.0 if runtime is None else runtime)
 
 
