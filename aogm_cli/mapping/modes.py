@@ -49,9 +49,6 @@ def map_log(log, mode: str, params: MapParams, detector=None, detector_name: str
         raise ValueError(f"unknown mode {mode!r}; expected one of {', '.join(MODES)}")
     if mode == "adaptive" and getattr(detector, "path", None):  # the detector file's identity, as it was used
         m.params["detector_sha256"] = file_sha256(detector.path)
-    # the grid is derived (the truth's, or the poses' bounds): recorded with the parameters
-    m.params["grid"] = {"origin": [m.grid.origin_x, m.grid.origin_y], "resolution": m.grid.resolution,
-                        "shape": [m.grid.height, m.grid.width]}
     return m
 
 

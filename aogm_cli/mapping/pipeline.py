@@ -112,8 +112,11 @@ def lay_out_readings(pose: np.ndarray, ranges: np.ndarray, sensor: SensorSpec, g
     return Readings(grid, sensor, templates, ranges, rows, cols, bins, z)
 
 
-def params_json(params: MapParams, mode: str) -> dict:
-    """The parameters a map of ``mode`` records (every parameter, defaults included)."""
+def params_json(params: MapParams, mode: str, grid: GridSpec) -> dict:
+    """The parameters a map of ``mode`` records: every parameter, defaults included, and the
+    grid it was derived onto (the truth's, or the poses' bounds)."""
     d = params.as_dict()
     d["mode"] = mode
+    d["grid"] = {"origin": [grid.origin_x, grid.origin_y], "resolution": grid.resolution,
+                 "shape": [grid.height, grid.width]}
     return d
