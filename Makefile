@@ -44,6 +44,21 @@ bench: $(STAMP)
 	$(BIN)/python bench/bench_em.py
 	$(BIN)/python bench/bench_adaptive.py
 
+# Benchmarks at building scale (not part of test or bench; README "Benchmarks at scale"): adaptive
+# mapping on the two seed worlds (best of 5, one process), then the generated office floor at
+# SCALE_SIZES scans in every mode of SCALE_MODES, each map in its own process under SCALE_MEMORY of
+# address space (a run that does not fit is a failed row). Worlds, logs, maps and JSON: out/bench-scale/.
+SCALE_SIZES  ?= 2000,10000,50000,200000
+SCALE_MODES  ?= standard,em,adaptive,adaptive:all,adaptive:none
+SCALE_MEMORY ?= 12G
+SCALE_ARGS   ?=
+.PHONY: bench-scale
+bench-scale: $(STAMP)
+	@mkdir -p $(OUT)/bench-scale
+	$(BIN)/python bench/bench_seed_adaptive.py --json $(OUT)/bench-scale/seed_worlds.json
+	$(BIN)/python bench/bench_scale.py --sizes $(SCALE_SIZES) --modes $(SCALE_MODES) --max-memory $(SCALE_MEMORY) \
+	  --workdir $(OUT)/bench-scale --json $(OUT)/bench-scale/scale.json $(SCALE_ARGS)
+
 # ruff, and the layers of pyproject.toml's [tool.importlinter] (an import against the flow fails)
 lint: $(STAMP)
 	@status=0; $(BIN)/ruff check . || status=1; $(BIN)/lint-imports --no-cache || status=1; exit $$status

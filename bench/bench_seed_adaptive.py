@@ -1,0 +1,117 @@
+"""Benchmark: adaptive mapping on the paper's two seed worlds, against standard, EM and the baselines.
+
+Run as ``python bench/bench_seed_adaptive.py [--runs 5] [--json OUT]`` (part of ``make
+bench-scale``). Simulates corridor_door and corridor_specular (seed 1) and maps each log in this
+one process with ``aogm_cli.mapping.modes.map_file`` (which compiles every kernel first, outside
+``runtime_s``): standard, em, adaptive with the packaged detector, and adaptive with
+``--detector all`` and ``--detector none``, ``--runs`` rounds of every mode, keeping each
+mode's best ``runtime_s``. Each map is evaluated against its log's truth as ``aogm compare`` does
+(``evaluation.metrics.evaluate``). Then, per world, issue 13's targets: adaptive at most 4 x the
+standard map, accuracy at least EM's minus 0.005 and every check passed, the packaged detector
+at least 1.5 x faster than ``--detector all`` with accuracy within 0.002 of it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+from pathlib import Path
+
+from bench_scale import parse_mode
+
+from aogm_cli.evaluation.metrics import evaluate
+from aogm_cli.io.logfile import LogReader, write_log
+from aogm_cli.mapping.modes import map_file
+from aogm_cli.mapping.params import resolve_params
+from aogm_cli.simulation.sonar import simulate
+from aogm_cli.world.loader import load_world
+
+ROOT = Path(__file__).resolve().parents[1]
+WORLDS = ("corridor_door", "corridor_specular")
+LABELS = ("standard", "em", "adaptive", "adaptive:all", "adaptive:none")
+
+
+def measure(log_path: Path, runs: int) -> dict[str, dict]:
+    """Per label: best runtime_s of ``runs`` maps (the modes taken in turn, round after round, so
+    that a drift of the machine's speed reaches them all), the metrics and the clusters' statistics."""
+    params = resolve_params()
+    with LogReader(log_path) as reader:
+        truth = reader.truth()
+    maps: dict[str, list] = {label: [] for label in LABELS}
+    for _ in range(runs):
+        for label in LABELS:
+            mode, detector = parse_mode(label)
+            maps[label].append(map_file(log_path, mode, params, detector))
+    out = {}
+    for label, made in maps.items():
+        m = made[0]
+        metrics = evaluate(m, truth)
+        stats = m.stats
+        out[label] = {
+            "runtime_s": min(x.runtime_s for x in made),
+            "runtimes_s": [x.runtime_s for x in made],
+            "accuracy": metrics["accuracy"],
+            "occupied_f1": metrics["occupied_f1"],
+            "checks_passed": sum(c["passed"] for c in metrics["checks"]),
+            "checks": len(metrics["checks"]),
+            "flagged_share": stats["flagged_readings"] / stats["readings"] if "flagged_readings" in stats else None,
+            "cluster_share": (stats["cells_in_clusters"] / stats["observed_cells"]
+                              if stats.get("observed_cells") else None),
+            "index_entries": stats.get("index_entries"),
+        }
+    return out
+
+
+def verdict(ok: bool) -> str:
+    return "held" if ok else "NOT held"
+
+
+def report(world: str, rows: dict[str, dict]) -> dict:
+    std = rows["standard"]["runtime_s"]
+    print(f"\n{world}")
+    print(f"  {'mode':<14} {'best ms':>9} {'x std':>7} {'accuracy':>9} {'occ. F1':>8} {'checks':>6} "
+          f"{'flagged':>8} {'clusters':>9} {'index entries':>13}")
+    for label, r in rows.items():
+        share = "" if r["flagged_share"] is None else f"{r['flagged_share']:.1%}"
+        clusters = "" if r["cluster_share"] is None else f"{r['cluster_share']:.1%}"
+        entries = "" if r["index_entries"] is None else f"{r['index_entries']:,}"
+        print(f"  {label:<14} {r['runtime_s'] * 1e3:>9.2f} {r['runtime_s'] / std:>7.2f} {r['accuracy']:>9.4f} "
+              f"{r['occupied_f1']:>8.4f} {r['checks_passed']:>3}/{r['checks']:<2} {share:>8} {clusters:>9} {entries:>13}")
+    ad, em, every = rows["adaptive"], rows["em"], rows["adaptive:all"]
+    ratio = ad["runtime_s"] / std
+    vs_em = ad["accuracy"] - em["accuracy"]
+    speedup = every["runtime_s"] / ad["runtime_s"]
+    vs_all = ad["accuracy"] - every["accuracy"]
+    checks = ad["checks_passed"] == ad["checks"]
+    print(f"  adaptive / standard runtime: x{ratio:.2f} (target <= 4: {verdict(ratio <= 4)})")
+    print(f"  adaptive - em accuracy: {vs_em:+.4f} (target >= -0.005: {verdict(vs_em >= -0.005)}); "
+          f"checks {ad['checks_passed']}/{ad['checks']} ({verdict(checks)})")
+    print(f"  packaged detector vs --detector all: runtime all / packaged x{speedup:.2f} (target >= 1.5: "
+          f"{verdict(speedup >= 1.5)}), accuracy packaged - all {vs_all:+.4f} (target within 0.002: "
+          f"{verdict(abs(vs_all) <= 0.002)})")
+    return {"adaptive_over_standard": ratio, "adaptive_minus_em_accuracy": vs_em, "adaptive_checks_passed": checks,
+            "all_over_packaged_runtime": speedup, "packaged_minus_all_accuracy": vs_all}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--runs", type=int, default=5, help="maps per mode; the best runtime_s is kept (default 5)")
+    parser.add_argument("--json", type=Path, help="write the numbers as JSON")
+    args = parser.parse_args()
+    print(f"Seed worlds (seed 1), every map in this process, best of {args.runs} runtime_s")
+    doc = {}
+    with tempfile.TemporaryDirectory() as folder:
+        for world in WORLDS:
+            log_path = Path(folder) / f"{world}.h5"
+            write_log(log_path, simulate(load_world(ROOT / "worlds" / f"{world}.yaml"), seed=1))
+            rows = measure(log_path, args.runs)
+            doc[world] = {"modes": rows, "targets": report(world, rows)}
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(doc, indent=1) + "\n")
+        print(f"JSON: {args.json}")
+
+
+if __name__ == "__main__":
+    main()
