@@ -1,8 +1,11 @@
-"""Benchmark: EM time per sweep and sweeps to converge, against one standard pass (same run).
+"""Benchmark: EM's set-up and each sweep against one standard pass (same run), with memory.
 
 Run as ``python bench/bench_em.py``. Simulates corridor_door and corridor_specular (seed 1),
-compiles every kernel first, then times: one standard pass over all readings (the ceiling
-the paper compares with), building the forward index, each EM sweep, and the residual pass.
+compiles every kernel first, then times (best of three): one standard pass over all readings
+(the ceiling the paper compares with), laying out EM's readings, their likelihood state
+(one walk of every cone), and each sweep; per sweep it prints the flips, the candidates
+scored, the window pairs generated and the time. EM holds no (reading, cell) pair array:
+the tiles' scratch at its largest is printed beside the readings' own arrays.
 """
 
 from __future__ import annotations
@@ -11,74 +14,56 @@ import time
 from pathlib import Path
 
 import numpy as np
-from seed_logs import em_inputs, em_kernel_inputs, for_each_seed_log, sweep_stamps
+from seed_logs import em_inputs, for_each_seed_log
 
 from aogm_cli.io.logfile import LogReader
 from aogm_cli.mapping import em as E
-from aogm_cli.mapping import em_kernels as K
 from aogm_cli.mapping.params import resolve_params
-from aogm_cli.mapping.sensor_models.forward_model import build_forward_index
 from aogm_cli.mapping.standard import standard_pass
 
 
-def best_of(fn, repeat=5):
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - t0)
-    return min(times), out
+def one_run(inputs):
+    run, config, log_odds = inputs.readings, inputs.params.em, inputs.log_odds
+    keep = ~np.isnan(run.z)
+    t0 = time.perf_counter()
+    rd = E.em_readings(run.rows[keep], run.cols[keep], run.bins[keep], run.z[keep], run.templates, run.grid,
+                       run.sensor.max_range, config.forward)
+    t_readings = time.perf_counter() - t0
+    occupied = np.ascontiguousarray((log_odds > 0).reshape(-1))
+    t0 = time.perf_counter()
+    problem = E.em_problem(rd, run.templates, run.grid.shape, occupied, config)
+    t_state = time.perf_counter() - t0
+    stamps = [time.perf_counter()]
+    result = E.run_em(problem, occupied, np.flatnonzero(problem.seen), config,
+                      lambda *_: stamps.append(time.perf_counter()))
+    t_total = time.perf_counter() - stamps[0]
+    return rd, t_readings, t_state, np.diff(stamps), t_total, result
 
 
 def bench(world_name: str, log_path: Path) -> None:
     inputs = em_inputs(log_path, resolve_params())
-    params, run, log_odds = inputs.params, inputs.readings, inputs.log_odds
-    grid, sensor = run.grid, run.sensor
-    templates, rows, cols, bins, z = run.templates, run.rows, run.cols, run.bins, run.z
     with LogReader(log_path) as reader:  # the standard pass's own clock: mapping work, no I/O
-        t_std = min(standard_pass(reader, grid, params)[2] for _ in range(5))
-    config = params.em
-    t_index, index = best_of(lambda: build_forward_index(rows, cols, bins, z, grid, templates, sensor.max_range, config.forward))
-    candidates = E.em_candidates(index, grid.height * grid.width)
-    fwd = index.kernel_arrays
-    t0 = time.perf_counter()
-    pairs, model = em_kernel_inputs(index, candidates, config)
-    t_pairs = time.perf_counter() - t0
-    runs = []
-    for _ in range(3):  # best of three, as the standard pass is best of five
-        occupied = np.ascontiguousarray((log_odds > 0).reshape(-1))
-        t0 = time.perf_counter()
-        state = K._init_state(fwd, model, occupied)
-        t_init = time.perf_counter() - t0
-        stamps = sweep_stamps(index, pairs)
-        sweep_times, flips = [], []
-        for _ in range(config.max_sweeps):  # exactly run_em's loop, each sweep timed on its own
-            t0 = time.perf_counter()
-            n, _ = K._sweep(pairs, fwd, model, occupied, state, stamps)
-            sweep_times.append(time.perf_counter() - t0)
-            flips.append(int(n))
-            if n == 0:
-                break
-        runs.append((t_init, sweep_times))
-    t_init = min(r[0] for r in runs)
-    sweep_times = np.min([r[1] for r in runs], axis=0)
-    t0 = time.perf_counter()
-    K._residual_from_gains(pairs.cand_cell, occupied, stamps.last_gain, model.l_prior)
-    t_res = time.perf_counter() - t0
-    check = E.run_em(index, np.ascontiguousarray((log_odds > 0).reshape(-1)), candidates, config)
-    assert check.flips == flips, "the bench's loop must match run_em"
-    readings = int(np.isfinite(z).sum() + np.isinf(z).sum())
-    print(f"\n{world_name}: {readings} readings, {candidates.size} candidate cells, {index.cell.size} (reading, cell) pairs")
-    print(f"  standard pass (ceiling)   {t_std * 1e3:8.2f} ms")
-    print(f"  forward index             {t_index * 1e3:8.2f} ms")
-    print(f"  EM sweeps to converge     {len(sweep_times):8d}    flips per sweep {flips}")
-    first = sweep_times[0]
-    print(f"  cell -> readings index    {t_pairs * 1e3:8.2f} ms;  reading state {t_init * 1e3:.2f} ms")
-    print(f"  first sweep (all cells)   {first * 1e3:8.2f} ms  = {first / t_std:5.1f} x standard pass")
-    print(f"  mean sweep                {np.mean(sweep_times) * 1e3:8.2f} ms  = {np.mean(sweep_times) / t_std:5.1f} x standard pass")
-    print(f"  residual probabilities    {t_res * 1e3:8.2f} ms")
-    total = t_index + sum(sweep_times) + t_res + t_std
-    print(f"  EM total                  {total * 1e3:8.2f} ms  = {total / t_std:5.1f} x standard pass")
+        t_std = min(standard_pass(reader, inputs.readings.grid, inputs.params)[2] for _ in range(5))
+    runs = [one_run(inputs) for _ in range(3)]
+    rd, _, _, _, _, result = runs[0]
+    t_readings = min(r[1] for r in runs)
+    t_state = min(r[2] for r in runs)
+    sweeps = np.min([r[3] for r in runs], axis=0)
+    t_total = min(r[4] for r in runs)
+    readings_bytes = sum(a.nbytes for a in rd) + sum(a.nbytes for a in E.em_problem(
+        rd, inputs.readings.templates, inputs.readings.grid.shape,
+        np.ascontiguousarray((inputs.log_odds > 0).reshape(-1)), inputs.params.em).state)
+    print(f"\n{world_name}: {rd.z.size} readings, {result.candidates.size} candidate cells")
+    print(f"  standard pass (ceiling)    {t_std * 1e3:8.2f} ms")
+    print(f"  EM's readings              {t_readings * 1e3:8.2f} ms")
+    print(f"  likelihood state           {t_state * 1e3:8.2f} ms  = {t_state / t_std:5.1f} x standard pass")
+    for k, seconds in enumerate(sweeps):
+        print(f"  sweep {k + 1:2d}  {seconds * 1e3:8.2f} ms  = {seconds / t_std:5.1f} x standard  "
+              f"flips {result.flips[k]:6d}  scored {result.scored[k]:7d}  window pairs {result.pairs[k]:8d}")
+    total = t_std + t_readings + t_state + t_total
+    print(f"  EM total                   {total * 1e3:8.2f} ms  = {total / t_std:5.1f} x standard pass")
+    print(f"  memory: readings and state {readings_bytes / rd.z.size:6.0f} B per reading; tiles' scratch at "
+          f"most {result.scratch_bytes / 1e6:.1f} MB")
 
 
 def main() -> None:

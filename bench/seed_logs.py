@@ -11,12 +11,9 @@ from pathlib import Path
 import numpy as np
 
 from aogm_cli.io.logfile import LogReader, write_log
-from aogm_cli.mapping.em import pair_index
-from aogm_cli.mapping.em_kernels import EMModel, PairIndex, SweepStamps
 from aogm_cli.mapping.modes import resolved_params, warm_up
-from aogm_cli.mapping.params import EMConfig, MapParams
+from aogm_cli.mapping.params import MapParams
 from aogm_cli.mapping.pipeline import Readings, forward_templates, lay_out_readings, log_grid
-from aogm_cli.mapping.sensor_models.forward_model import ForwardIndex
 from aogm_cli.mapping.standard import standard_pass
 from aogm_cli.simulation.sonar import simulate
 from aogm_cli.world.loader import load_world
@@ -59,19 +56,3 @@ def em_inputs(log_path: Path, params: MapParams) -> EMInputs:
     forward_templates(grid, sensor)  # one-time set-up, cached
     readings = lay_out_readings(whole.pose, whole.ranges, sensor, grid)
     return EMInputs(params, readings, log_odds, observed, t_standard)
-
-
-def em_kernel_inputs(index: ForwardIndex, candidates: np.ndarray, config: EMConfig) -> tuple[PairIndex, EMModel]:
-    """The cell -> readings index of ``candidates`` and the model's constants, as ``em.run_em``
-    builds them for its kernels (``em_kernels``)."""
-    p_hit = float(config.forward.p_hit)
-    max_entries = int(np.max(np.diff(index.ptr))) if index.n_readings else 0
-    model = EMModel(p_hit, float(config.l_prior), (1.0 - p_hit) ** np.arange(max_entries + 1, dtype=np.float64))
-    return pair_index(index, candidates), model
-
-
-def sweep_stamps(index: ForwardIndex, pairs: PairIndex) -> SweepStamps:
-    """Fresh bookkeeping for the sweeps, as ``em.run_em`` starts them."""
-    n_cand = pairs.cand_cell.shape[0]
-    return SweepStamps(np.zeros(index.n_readings, dtype=np.int64), np.full(n_cand, -1, dtype=np.int64),
-                       np.zeros(1, dtype=np.int64), np.zeros(n_cand, dtype=np.float64))

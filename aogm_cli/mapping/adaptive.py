@@ -1,9 +1,9 @@
 """The paper's adaptive mode: standard log-odds everywhere, then EM inside each cluster.
 
 The detector flags readings (``detector.network``), the bands their cones sweep near their
-ranges become clusters (``mapping.cluster``), and EM (``mapping.em.run_em``) runs once per
-group of coupled clusters with every other cell held at the thresholded standard map; a
-cluster's cells get EM's residual probability.
+ranges become clusters (``mapping.cluster``), and EM (``mapping.em.run_em``) runs over the
+cluster cells with every other cell held at the thresholded standard map; a cluster's cells
+get EM's residual probability.
 """
 
 from __future__ import annotations
@@ -13,29 +13,29 @@ import time
 import numpy as np
 
 from aogm_cli.core.occupancy_map import OccupancyMap
-from aogm_cli.mapping.cluster import (
-    cluster_contacts,
-    cone_bands,
-    coupled_groups,
-    label_clusters,
-    near_occupied,
-    readings_near_clusters,
-)
-from aogm_cli.mapping.em import run_em
-from aogm_cli.mapping.params import MapParams
+from aogm_cli.mapping.cluster import cone_bands, label_clusters, near_occupied, readings_near_clusters
+from aogm_cli.mapping.em import EMProblem, em_problem, em_readings, find_root, run_em
+from aogm_cli.mapping.params import EMConfig, MapParams
 from aogm_cli.mapping.pipeline import Progress, Readings, forward_templates, lay_out_readings, log_grid, params_json
-from aogm_cli.mapping.sensor_models.forward_model import ForwardIndex, build_forward_index, select_readings
 from aogm_cli.mapping.standard import probability_from_log_odds, standard_pass
 
 
-def cluster_forward_index(run: Readings, clusters: np.ndarray, occupied: np.ndarray, forward) -> ForwardIndex:
-    """The forward index EM inside ``clusters`` (ids, 0 outside) uses: the readings whose cones
-    hold a cluster cell, each cone without the cells outside every cluster that the flat map
-    ``occupied`` holds free (they stay free, and a free cell changes no likelihood)."""
-    near = readings_near_clusters(clusters, run.rows, run.cols, run.z, run.grid, run.sensor.max_range, forward)
-    in_cluster = clusters.reshape(-1) > 0
-    return build_forward_index(run.rows[near], run.cols[near], run.bins[near], run.z[near], run.grid, run.templates,
-                               run.sensor.max_range, forward, mask=in_cluster, held_free=~(in_cluster | occupied))
+def cluster_problem(run: Readings, clusters: np.ndarray, occupied: np.ndarray, config: EMConfig) -> EMProblem:
+    """EM's problem inside ``clusters`` (ids, 0 outside): the readings whose cones could reach a
+    cluster cell (``cluster.readings_near_clusters``), under the flat map ``occupied``, with
+    which clusters share a reading."""
+    near = readings_near_clusters(clusters, run.rows, run.cols, run.z, run.grid, run.sensor.max_range, config.forward)
+    rd = em_readings(run.rows[near], run.cols[near], run.bins[near], run.z[near], run.templates, run.grid,
+                     run.sensor.max_range, config.forward)
+    return em_problem(rd, run.templates, run.grid.shape, occupied, config, labels=clusters.reshape(-1))
+
+
+def coupled_groups(problem: EMProblem, n_clusters: int) -> int:
+    """How many groups of coupled clusters (clusters joined through a reading whose cone holds
+    cells of both): independent problems, which one EM run over every cluster solves at once."""
+    parent = problem.parent
+    roots = {int(find_root(parent, k)) for k in range(1, n_clusters + 1)}
+    return len(roots)
 
 
 def find_clusters(run: Readings, flags: np.ndarray, log_odds: np.ndarray, observed: np.ndarray,
@@ -52,38 +52,27 @@ def find_clusters(run: Readings, flags: np.ndarray, log_odds: np.ndarray, observ
 
 def em_in_clusters(run: Readings, clusters: np.ndarray, n_clusters: int, occupied: np.ndarray,
                    probability: np.ndarray, params: MapParams, progress: Progress | None = None) -> dict:
-    """EM once per group of coupled clusters; ``occupied`` and ``probability`` (flat) are updated
-    in place. Returns the stats of the run and the seconds spent indexing (``t_index``)."""
+    """EM over every cluster cell at once, every other cell held at ``occupied``; ``occupied``
+    and ``probability`` (flat) are updated in place. Clusters that share no reading are
+    independent (as the paper has them): one run over all of them gives each its own result.
+    Returns the stats of the run and the seconds spent setting it up (``t_index``)."""
     config = params.em
-    sweeps, flips = [], []
     t0 = time.perf_counter()
-    # one index over the readings whose cones hold a cluster cell ...
-    flat_clusters = clusters.reshape(-1)
-    index = cluster_forward_index(run, clusters, occupied, config.forward)
-    pairs = cluster_contacts(index.ptr, flat_clusters[index.cell])
-    # ... clusters that share a reading are coupled through it: EM runs once per group of
-    # coupled clusters (clusters that share none are independent, as the paper has them)
-    group = coupled_groups(pairs, n_clusters)
-    group_of_reading = np.zeros(index.n_readings, dtype=np.int64)
-    group_of_reading[pairs[1]] = group[pairs[0] - 1]
-    cell_group = np.where(flat_clusters > 0, group[np.maximum(flat_clusters, 1) - 1], -1)
-    n_groups = int(group.max()) + 1
+    cells = np.flatnonzero(clusters.reshape(-1) > 0)
+    if config.start == "empty":
+        occupied[cells] = False
+    problem = cluster_problem(run, clusters, occupied, config)
     t_index = time.perf_counter() - t0
-    for k in range(n_groups):
-        cells = np.flatnonzero(cell_group == k)
-        readings = np.flatnonzero((group_of_reading == k) & (np.diff(index.ptr) > 0))
-        # one group holding every reading of the index: use it as it is
-        sub = index if n_groups == 1 else select_readings(index, readings)
-        if config.start == "empty":
-            occupied[cells] = False
-        result = run_em(sub, occupied, cells, config)
-        probability[result.candidates] = result.residual
-        sweeps.append(result.sweeps)
-        flips.append(int(sum(result.flips)))
+
+    def on_sweep(sweep, flips, objective):
         if progress:
-            progress("cluster group", k + 1, n_groups)
-    return {"cluster_groups": len(sweeps), "em_sweeps_per_group": sweeps, "em_flips_per_group": flips,
-            "index_entries": int(index.cell.size), "t_index": t_index}
+            progress("em sweep", sweep, config.max_sweeps)
+
+    result = run_em(problem, occupied, cells, config, on_sweep)
+    probability[result.candidates] = result.residual
+    return {"cluster_groups": coupled_groups(problem, n_clusters), "em_readings": int(problem.readings.z.size),
+            "em_sweeps": result.sweeps, "em_flips_per_sweep": result.flips, "em_scored_per_sweep": result.scored,
+            "index_entries": result.peak_pairs, "scratch_bytes": result.scratch_bytes, "t_index": t_index}
 
 
 def map_adaptive(log, params: MapParams, detector, detector_name: str = "packaged",
@@ -110,8 +99,8 @@ def map_adaptive(log, params: MapParams, detector, detector_name: str = "package
     t0 = time.perf_counter()
     occupied = np.ascontiguousarray((log_odds > 0).reshape(-1))  # the thresholded standard map
     probability = probability_from_log_odds(log_odds, observed).reshape(-1)
-    em_stats = {"cluster_groups": 0, "em_sweeps_per_group": [], "em_flips_per_group": [], "index_entries": 0,
-                "t_index": 0.0}
+    em_stats = {"cluster_groups": 0, "em_readings": 0, "em_sweeps": 0, "em_flips_per_sweep": [],
+                "em_scored_per_sweep": [], "index_entries": 0, "scratch_bytes": 0, "t_index": 0.0}
     if n_clusters:
         em_stats = em_in_clusters(run, clusters, n_clusters, occupied, probability, params, progress)
     probability = probability.reshape(grid.shape)

@@ -1,5 +1,6 @@
 """What mapping a log in a mode would cost: grid cells (with the standard mapper's padding), cone
-templates, readings and EM's forward index, from the header, the poses and a sample of ranges.
+templates and readings (EM keeps a few scalars per reading, not its cones' cells), from the
+header, the poses and a sample of ranges.
 """
 
 from __future__ import annotations
@@ -15,8 +16,9 @@ from aogm_cli.mapping.pipeline import log_grid
 
 BYTES_PER_CELL = 40  # log-odds, probability, observed, EM state, the map file in memory
 BYTES_PER_PADDED_CELL = 4  # the standard mapper's padded float32 state
-BYTES_PER_READING = 48  # EM / adaptive: rows, cols, bins, z, flags laid out for every reading
-BYTES_PER_INDEX_ENTRY = 40  # EM's forward index: cell, g and their scratch
+# EM / adaptive: the readings laid out (rows, cols, bins, z: 32), EM's copy of them with their
+# cones' extents (144) and each one's likelihood state (80), its tile slot, the log's ranges
+BYTES_PER_READING = 300
 BYTES_PER_TEMPLATE_CELL = 48  # the disc the cone templates are cut from (int64 offsets, ranges, angles)
 SAMPLE_BLOCKS, BLOCK_SCANS = 32, 64  # ranges read to estimate the cones' mean size
 
@@ -59,7 +61,7 @@ def map_estimate(reader, mode: str, params: MapParams) -> Estimate:
     memory = cells * BYTES_PER_CELL + padded * BYTES_PER_PADDED_CELL + templates * BYTES_PER_TEMPLATE_CELL
     work = entries
     if mode != "standard":
-        memory += readings * BYTES_PER_READING + entries * BYTES_PER_INDEX_ENTRY
+        memory += readings * BYTES_PER_READING
         work += entries * params.em.max_sweeps
     detail = (f"a {grid.height} x {grid.width} grid at {res:g} m, {readings:.3g} readings, "
               f"about {per_reading:.3g} cone cells each")

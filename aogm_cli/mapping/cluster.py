@@ -129,14 +129,6 @@ def _contacts(ptr, entry_cluster):
     return out_c[:n], out_t[:n]
 
 
-def cluster_contacts(ptr: np.ndarray, entry_cluster: np.ndarray) -> np.ndarray:
-    """(2, P) array of every distinct (cluster id, reading position) contact of an index whose
-    entries lie in clusters ``entry_cluster`` (0 = none), sorted by cluster then reading."""
-    c, t = _contacts(ptr, np.ascontiguousarray(entry_cluster, dtype=np.int64))
-    order = np.lexsort((t, c))
-    return np.stack([c[order], t[order]])
-
-
 def readings_near_clusters(clusters, rows, cols, z, grid: GridSpec, z_max: float, forward) -> np.ndarray:
     """Positions of the readings whose forward cone could reach a cluster: the square of the
     cone's reach around the sensor's cell holds a cluster cell (counted in O(1) per reading
@@ -151,21 +143,3 @@ def readings_near_clusters(clusters, rows, cols, z, grid: GridSpec, z_max: float
     c0, c1 = np.clip(cols - r, 0, width), np.clip(cols + r + 1, 0, width)
     inside = table[r1, c1] - table[r0, c1] - table[r1, c0] + table[r0, c0]
     return np.flatnonzero((inside > 0) & (reach >= 0))
-
-
-def coupled_groups(pairs: np.ndarray, n_clusters: int) -> np.ndarray:
-    """Group id (0..G-1) of each cluster 1..n: clusters joined by a common reading share one.
-
-    ``pairs`` is (2, P): cluster id and reading position of every (cluster, reading) contact.
-    (scipy.sparse is imported here, not at start-up; ``mapper.warm_up`` imports it untimed.)
-    """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    n_readings = int(pairs[1].max()) + 1 if pairs.size else 0
-    # a bipartite graph: clusters 0..n-1, readings n..n+R-1
-    graph = coo_matrix((np.ones(pairs.shape[1]), (pairs[0] - 1, n_clusters + pairs[1])),
-                       shape=(n_clusters + n_readings, n_clusters + n_readings))
-    _, labels = connected_components(graph, directed=False)
-    _, group = np.unique(labels[:n_clusters], return_inverse=True)
-    return group

@@ -3,9 +3,10 @@
 Each candidate flip is scored by the exact change of sum_t log p(z_t | m) over the readings
 whose cones hold the cell, plus the occupancy prior: the E-step redone for those readings
 after every accepted flip (generalised EM), so the objective never decreases and EM can
-create obstacles from an empty start. ``run_em`` works on any set of cells with every other
-cell held fixed, using only the readings of the given index: the adaptive mapper calls it
-once per group of clusters. ``map_em`` is the em mode: every observed cell a candidate.
+create obstacles from an empty start. Memory is bounded: each reading keeps a few scalars
+and the cone cells are regenerated tile by tile (``em_kernels``). ``run_em`` works on any
+set of cells with every other cell held fixed: the adaptive mapper calls it on the clusters.
+``map_em`` is the em mode: every cell some cone holds is a candidate.
 """
 
 from __future__ import annotations
@@ -18,20 +19,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from aogm_cli.core.occupancy_map import OccupancyMap
-from aogm_cli.mapping.em_kernels import (
-    EMModel,
-    PairIndex,
-    SweepStamps,
-    _init_state,
-    _objective,
-    _pair_index,
-    _residual,
-    _residual_from_gains,
-    _sweep,
-)
+from aogm_cli.mapping import em_kernels as K
 from aogm_cli.mapping.params import EMConfig, MapParams
 from aogm_cli.mapping.pipeline import Progress, forward_templates, lay_out_readings, log_grid, params_json
-from aogm_cli.mapping.sensor_models.forward_model import ForwardIndex, build_forward_index
+from aogm_cli.mapping.sensor_models.cone import flat_offsets
+from aogm_cli.mapping.sensor_models.forward_model import ForwardModelConfig, reading_constants
 from aogm_cli.mapping.standard import standard_pass
 
 
@@ -44,99 +36,223 @@ class EMResult:
     objective: list[float]  # after each sweep; objective[0] is the start
     candidates: np.ndarray  # flat cell ids EM was free to change
     residual: np.ndarray  # p(m_x = 1 | Z, m*) of each candidate
+    scored: list[int]  # candidates scored per sweep (the rest were unchanged since)
+    pairs: list[int]  # (candidate, reading) pairs generated per sweep
+    peak_pairs: int  # the most pairs one tile held
+    scratch_bytes: int  # the tiles' scratch at its largest
 
 
-def pair_index(index: ForwardIndex, candidates: np.ndarray) -> PairIndex:
-    """Cell -> readings index for ``candidates``: a ``PairIndex`` (cand_cell, cand_ptr, pair_t,
-    pair_e, pair_g).
+def em_readings(rows, cols, bins, z, templates, grid, z_max: float, config: ForwardModelConfig) -> K.EMReadings:
+    """The readings (sensor cells, heading bins, template ranges; flat arrays of one length, as
+    ``pipeline.Readings`` has them) as EM's kernels take them. NaN readings must be left out;
+    +inf is a max-range reading (cone up to z_max); other cones end ``config.window`` sigmas
+    beyond z."""
+    z = np.asarray(z, dtype=np.float64).reshape(-1)
+    if np.isnan(z).any():
+        raise ValueError("NaN readings must be left out of EM's readings")
+    rows, cols, bins = (np.ascontiguousarray(a, dtype=np.int64).reshape(-1) for a in (rows, cols, bins))
+    z_eff = np.where(np.isfinite(z), np.minimum(z, z_max), z_max)
+    limits = np.where(np.isfinite(z), np.minimum(z + config.window * config.sigma, z_max), z_max)
+    # entries before this range are beyond the Gaussian's window (a margin against rounding)
+    lower = z_eff - config.window * config.sigma - 1e-9
+    n = z.shape[0]
+    m, jlo = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
+    box = np.empty((4, n), dtype=np.int64)
+    reach2 = np.empty((2, n), dtype=np.int64)
+    K._reading_extent(templates.kernel_arrays, K.row_groups(templates), rows, cols, bins, limits, lower,
+                      grid.shape, m, jlo, box, reach2)
+    g0, const, _ = reading_constants(z, z_max, config)
+    return K.EMReadings(rows, cols, bins, z_eff, g0, const, m, jlo, box, reach2,
+                        np.argsort(box[0], kind="stable"), np.argsort(box[1], kind="stable"))
 
-    Only the candidates appear (each with its (reading, entry) pairs in reading order, and
-    each pair's Gaussian, stored along the pairs for the sweeps); other cells of the cones
-    are held fixed by EM. The look-up table spans the candidates' range of flat ids only, so
-    a small cluster costs little.
-    """
-    candidates = np.ascontiguousarray(candidates, dtype=np.int64)
-    if candidates.size > 1 and not np.all(candidates[1:] > candidates[:-1]):
-        candidates = np.unique(candidates)
-    if candidates.size == 0:
-        empty = np.zeros(0, dtype=np.int64)
-        return PairIndex(candidates, np.zeros(1, dtype=np.int64), empty, empty, np.zeros(0))
-    lo = int(candidates[0])
-    lookup = np.full(int(candidates[-1]) - lo + 1, -1, dtype=np.int64)
-    lookup[candidates - lo] = np.arange(candidates.size)
-    return _pair_index(index.kernel_arrays, candidates, lookup, lo)
+
+@dataclass
+class EMProblem:
+    """EM's readings under a map, with their state (``em_problem``)."""
+
+    readings: K.EMReadings
+    model: K.EMModel
+    state: K.EMState
+    templates: object
+    shape: tuple[int, int]
+    seen: np.ndarray  # flat bool: cells some cone holds
+    parent: np.ndarray | None  # union-find over cluster ids (with labels): clusters sharing a reading
 
 
-def run_em(
-    index: ForwardIndex,
-    occupied: np.ndarray,
-    candidates: np.ndarray,
-    config: EMConfig,
-    progress: Callable[[int, int, float], None] | None = None,
-) -> EMResult:
-    """Hill-climb the binary map over ``candidates`` (flat ids); ``occupied`` (flat bool) is
-    updated in place, every other cell stays as it is. Sweeps until no flip improves the
-    objective or ``config.max_sweeps``; ``progress(sweep, flips, objective)`` after each."""
-    if occupied.dtype != np.bool_ or occupied.ndim != 1:
-        raise ValueError("occupied must be a flat bool array")
-    p_hit = float(config.forward.p_hit)
-    pairs = pair_index(index, candidates)
-    fwd = index.kernel_arrays
-    max_entries = int(np.max(np.diff(index.ptr))) if index.n_readings else 0
-    model = EMModel(p_hit, float(config.l_prior), (1.0 - p_hit) ** np.arange(max_entries + 1, dtype=np.float64))
-    state = _init_state(fwd, model, occupied)
-    objective = [_objective(fwd, model, state, occupied, pairs.cand_cell)]
-    flips: list[int] = []
-    n_cand = pairs.cand_cell.shape[0]
-    stamps = SweepStamps(np.zeros(index.n_readings, dtype=np.int64), np.full(n_cand, -1, dtype=np.int64),
-                         np.zeros(1, dtype=np.int64), np.zeros(n_cand, dtype=np.float64))
+def em_problem(rd: K.EMReadings, templates, shape: tuple[int, int], occupied: np.ndarray, config: EMConfig,
+               labels: np.ndarray | None = None) -> EMProblem:
+    """Every reading's likelihood state under the flat binary map ``occupied`` (one walk of its
+    cone), the cells the cones hold, and with ``labels`` (flat cluster ids, 0 outside; EM's
+    candidates are then the cluster cells) which clusters share a reading, each reading's
+    extent narrowed to its cluster cells."""
+    fwd = config.forward
+    p_hit = float(fwd.p_hit)
+    top = int(rd.m.max()) if rd.m.size else 0
+    model = K.EMModel(p_hit, float(config.l_prior), (1.0 - p_hit) ** np.arange(top + 1, dtype=np.float64),
+                      1.0 - fwd.p_rand - fwd.p_max, float(fwd.sigma), float(fwd.window))
+    n = rd.z.shape[0]
+    state = K.EMState(np.empty(n), np.empty(n), np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64),
+                      np.empty(2 * n), np.empty(2 * n), np.zeros(n, dtype=np.int64))
+    seen = np.zeros(shape[0] * shape[1], dtype=np.bool_)
+    if labels is None:
+        marks = (seen, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((4, 0), dtype=np.int64))
+    else:
+        labels = np.ascontiguousarray(labels, dtype=np.int64).reshape(-1)
+        marks = (seen, labels, np.arange(int(labels.max(initial=0)) + 1, dtype=np.int64), np.empty((4, n), dtype=np.int64))
+    K._init_state(templates.kernel_arrays, flat_offsets(templates, shape[1]), rd, model, _flat_bool(occupied), shape, marks, state)
+    parent = None
+    if labels is not None:
+        box = marks[3]
+        rd = rd._replace(box=box, enter=np.argsort(box[0], kind="stable"), leave=np.argsort(box[1], kind="stable"))
+        parent = marks[2]
+    return EMProblem(rd, model, state, templates, shape, seen, parent)
+
+
+def find_root(parent: np.ndarray, x: int) -> int:
+    """The union-find root of x in ``EMProblem.parent``."""
+    while parent[x] != x:
+        x = parent[x]
+    return x
+
+
+def _flat_bool(a: np.ndarray) -> np.ndarray:
+    if a.dtype != np.bool_ or a.ndim != 1 or not a.flags.c_contiguous:
+        raise ValueError("occupied must be a flat, contiguous bool array")
+    return a
+
+
+def _candidates(cells: np.ndarray, shape: tuple[int, int]) -> K.Candidates:
+    height, width = shape
+    cells = np.ascontiguousarray(cells, dtype=np.int64)
+    if cells.size > 1 and not np.all(cells[1:] > cells[:-1]):
+        cells = np.unique(cells)
+    of_cell = np.full(height * width, -1, dtype=np.int32)
+    of_cell[cells] = np.arange(cells.size, dtype=np.int32)
+    row_first = np.searchsorted(cells, np.arange(height + 1, dtype=np.int64) * width)
+    n_seg = -(-width // K.SEGMENT)
+    return K.Candidates(cells, of_cell, row_first, np.zeros(0, dtype=np.bool_), np.full(cells.size, -1, dtype=np.int64),
+                        np.zeros(cells.size), np.full((height, n_seg), -1, dtype=np.int64))
+
+
+def _work(n_readings: int, n_seg: int) -> K.TileWork:
+    pairs = 1 << 16
+    room = 1 << 14
+    return K.TileWork(np.zeros(K.CTL_SIZE, dtype=np.int64), np.zeros(n_readings // 64 + 1, dtype=np.uint64),
+                      np.zeros(n_seg + 1, dtype=np.int64), np.empty(max(1024, n_readings // 8), dtype=np.int64),
+                      np.zeros(K.SEGMENT + 1, dtype=np.int64), np.empty(pairs, dtype=np.int64),
+                      np.empty(pairs, dtype=np.int64), np.empty(pairs), np.full(n_readings, -1, dtype=np.int64),
+                      np.empty(room, dtype=np.int64), np.empty(room), np.empty(room), np.zeros(n_seg, dtype=np.int64),
+                      np.empty(1024, dtype=np.int64), np.empty(1024, dtype=np.int64), np.empty(1024, dtype=np.int64),
+                      np.zeros((2, K.SEGMENT + 1)),
+                      np.empty((9, max(1024, n_readings // 8)), dtype=np.int64))
+
+
+def _grown(work: K.TileWork) -> K.TileWork:
+    """``work`` with every buffer the kernel asked for (ctl's NEED_* sizes) half as large again."""
+    ctl = work.ctl
+    grow = {}
+    if ctl[K.CTL_NEED_LIST] > work.seg_list.shape[0]:
+        grow["seg_list"] = np.empty(int(ctl[K.CTL_NEED_LIST] * 1.5) + 1, dtype=np.int64)
+    if ctl[K.CTL_NEED_LIST] > work.spans.shape[1]:
+        grow["spans"] = np.empty((9, int(ctl[K.CTL_NEED_LIST] * 1.5) + 1), dtype=np.int64)
+    if ctl[K.CTL_NEED_LIST] > work.far_lo.shape[0]:
+        size = int(ctl[K.CTL_NEED_LIST] * 1.5) + 1
+        grow |= {name: np.empty(size, dtype=np.int64) for name in ("tile_t", "far_lo", "far_hi")}
+    if ctl[K.CTL_NEED_PAIRS] > work.pair_pos.shape[0]:
+        size = int(ctl[K.CTL_NEED_PAIRS] * 1.5) + 1
+        grow |= {"pair_pos": np.empty(size, dtype=np.int64), "pair_j": np.empty(size, dtype=np.int64),
+                 "pair_g": np.empty(size)}
+    if ctl[K.CTL_NEED_ROOM] > work.obs_j.shape[0]:
+        size = int(ctl[K.CTL_NEED_ROOM] * 1.5) + 1
+        used = int(ctl[K.CTL_BUMP])  # live slots keep their places
+        for name in ("obs_j", "obs_g", "pre"):
+            old = getattr(work, name)
+            grow[name] = np.empty(size, dtype=old.dtype)
+            grow[name][:used] = old[:used]
+    ctl[K.CTL_NEED_LIST] = ctl[K.CTL_NEED_PAIRS] = ctl[K.CTL_NEED_ROOM] = 0
+    return work._replace(**grow)
+
+
+def _scratch_bytes(work: K.TileWork) -> int:
+    return int(sum(a.nbytes for a in work))
+
+
+def run_em(problem: EMProblem, occupied: np.ndarray, candidates: np.ndarray, config: EMConfig,
+           progress: Callable[[int, int, float], None] | None = None) -> EMResult:
+    """Hill-climb the binary map over ``candidates`` (flat ids); ``occupied`` (flat bool, the map
+    ``problem`` was set up under) is updated in place, every other cell stays as it is. Sweeps
+    until no flip improves the objective or ``config.max_sweeps``; ``progress(sweep, flips,
+    objective)`` after each."""
+    occupied = _flat_bool(occupied)
+    rd, model, state = problem.readings, problem.model, problem.state
+    tpl, groups = problem.templates.kernel_arrays, K.row_groups(problem.templates)
+    flat = flat_offsets(problem.templates, problem.shape[1])
+    cand = _candidates(candidates, problem.shape)._replace(occupied=occupied)
+    work = _work(rd.z.shape[0], cand.tile_clock.shape[1])
+    ctl = work.ctl
+    peak = [0, _scratch_bytes(work)]
+
+    def one_pass(mode: int) -> tuple[int, int, int]:
+        nonlocal work
+        before = ctl[K.CTL_FLIPS], ctl[K.CTL_SCORED], ctl[K.CTL_PAIRS]
+        ctl[K.CTL_MODE], ctl[K.CTL_ROW], ctl[K.CTL_SEG], ctl[K.CTL_ENTER], ctl[K.CTL_LEAVE] = mode, 0, 0, 0, 0
+        ctl[K.CTL_BUMP] = 0
+        work.active.fill(0)
+        work.slot.fill(-1)
+        while K._sweep_tiles(tpl, flat, groups, rd, model, cand, state, work) == K.NEED_BUFFERS:
+            work = _grown(work)
+            peak[1] = max(peak[1], _scratch_bytes(work))
+        peak[0] = max(peak[0], work.pair_pos.shape[0])
+        return tuple(int(ctl[i] - b) for i, b in zip((K.CTL_FLIPS, K.CTL_SCORED, K.CTL_PAIRS), before, strict=True))
+
+    objective = [K._objective(rd, model, state, occupied, cand.cell)]
+    flips, scored, pairs = [], [], []
     for sweep in range(1, config.max_sweeps + 1):
-        n_flips, _ = _sweep(pairs, fwd, model, occupied, state, stamps)
-        flips.append(int(n_flips))
-        objective.append(_objective(fwd, model, state, occupied, pairs.cand_cell))
+        n_flips, n_scored, n_pairs = one_pass(K.SWEEP)
+        flips.append(n_flips)
+        scored.append(n_scored)
+        pairs.append(n_pairs)
+        objective.append(K._objective(rd, model, state, occupied, cand.cell))
         if progress:
-            progress(sweep, int(n_flips), objective[-1])
+            progress(sweep, n_flips, objective[-1])
         if n_flips == 0:
             break
-    if flips and flips[-1] == 0:
-        residual = _residual_from_gains(pairs.cand_cell, occupied, stamps.last_gain, model.l_prior)
-    else:  # stopped by max_sweeps: score every candidate once more
-        residual = _residual(pairs, fwd, model, occupied, state)
-    return EMResult(len(flips), flips, [float(v) for v in objective], pairs.cand_cell, residual)
-
-
-def em_candidates(index: ForwardIndex, n_cells: int) -> np.ndarray:
-    """The cells some reading's cone holds (sorted flat ids): a boolean mask, not a sort."""
-    seen = np.zeros(n_cells, dtype=bool)
-    seen[index.cell] = True
-    return np.flatnonzero(seen)
+    if not (flips and flips[-1] == 0):  # stopped by max_sweeps: score every candidate once more
+        one_pass(K.SCORE)
+    residual = K._residual_from_gains(cand.cell, occupied, cand.last_gain, model.l_prior)
+    return EMResult(len(flips), flips, [float(v) for v in objective], cand.cell, residual, scored, pairs,
+                    int(peak[0]), int(peak[1]))
 
 
 def map_em(log, params: MapParams, progress: Progress | None = None) -> OccupancyMap:
-    """The em mode: Thrun's EM map of a log source (``pipeline``); every observed cell is a
-    candidate, started from the thresholded standard map (or empty, ``em.start``)."""
+    """The em mode: Thrun's EM map of a log source (``pipeline``); every cell some cone holds is
+    a candidate, started from the thresholded standard map (or empty, ``em.start``)."""
     config = params.em
     grid = log_grid(log, params.resolution)
     whole = log.read()  # EM needs every reading in memory: read the scans once
     log_odds, observed, t_standard = standard_pass(log, grid, params, chunks=[(0, whole.time, whole.pose, whole.ranges)])
-    forward_templates(grid, log.sensor)  # one-time set-up, cached, outside the clock
+    templates = forward_templates(grid, log.sensor)  # one-time set-up, cached, outside the clock
+    K.row_groups(templates)
     t0 = time.perf_counter()
     run = lay_out_readings(whole.pose, whole.ranges, log.sensor, grid)
+    keep = ~np.isnan(run.z)
+    rd = em_readings(run.rows[keep], run.cols[keep], run.bins[keep], run.z[keep], templates, grid,
+                     log.sensor.max_range, config.forward)
+    del run, keep
     t_readings = time.perf_counter() - t0
     t0 = time.perf_counter()
-    index = build_forward_index(run.rows, run.cols, run.bins, run.z, grid, run.templates, log.sensor.max_range,
-                                config.forward)
-    candidates = em_candidates(index, grid.height * grid.width)
-    t_index = time.perf_counter() - t0
     occupied = (log_odds > 0).reshape(-1) if config.start == "standard" else np.zeros(grid.height * grid.width, bool)
     occupied = np.ascontiguousarray(occupied)
+    problem = em_problem(rd, templates, grid.shape, occupied, config)
+    candidates = np.flatnonzero(problem.seen)
+    t_index = time.perf_counter() - t0
 
     def on_sweep(sweep, flips, objective):
         if progress:
             progress("em sweep", sweep, config.max_sweeps)
 
     t0 = time.perf_counter()
-    result = run_em(index, occupied, candidates, config, on_sweep)
+    result = run_em(problem, occupied, candidates, config, on_sweep)
     probability = np.full(grid.height * grid.width, 1.0 / (1.0 + math.exp(-config.l_prior)), dtype=np.float32)
     probability[result.candidates] = result.residual
     probability = probability.reshape(grid.shape)
@@ -146,8 +262,11 @@ def map_em(log, params: MapParams, progress: Progress | None = None) -> Occupanc
         "sweeps": result.sweeps,
         "flips_per_sweep": result.flips,
         "objective_per_sweep": result.objective,
+        "scored_per_sweep": result.scored,
+        "pairs_per_sweep": result.pairs,
         "candidate_cells": int(result.candidates.size),
-        "index_entries": int(index.cell.size),
+        "index_entries": result.peak_pairs,
+        "scratch_bytes": result.scratch_bytes,
         "phase_seconds": {"standard": t_standard, "readings": t_readings, "index": t_index, "em": t_em},
     }
     return OccupancyMap(

@@ -1,19 +1,76 @@
-"""The compiled kernels of EM mapping (``mapping.em``): per-reading likelihood state, the
-incremental E-step after a flip, one sweep of single-cell flips, the objective and residuals.
+"""The compiled kernels of EM mapping (``mapping.em``) in bounded memory: each reading's
+likelihood state in a few scalars, its cone cells regenerated from the templates row by row,
+and the sweeps of single-cell flips run over tiles (one grid row, a few columns) in row-major
+order, so that no array holds the (reading, cone cell) pairs of the whole log.
 
-Pure functions on arrays, grouped into named tuples by meaning: the forward index
-(``forward_model.ForwardArrays``), the model's constants (``EMModel``), the readings' state
-(``EMState``), the cell -> readings index (``PairIndex``) and the sweeps' bookkeeping
-(``SweepStamps``). ``mapping.em`` lays out their inputs and drives the sweeps.
+Pure functions on arrays, grouped into named tuples by meaning: the templates grouped by row
+(``RowGroups``), the readings (``EMReadings``), the model's constants (``EMModel``), the
+readings' state (``EMState``), the candidates (``Candidates``) and the tiles' scratch
+(``TileWork``). ``mapping.em`` lays out their inputs and drives the sweeps.
+
+How a tile works. The readings whose cones cross grid row r are *active* at r (a bit set,
+updated as r grows); each lists itself under the column segments its cone's row-r cells can
+reach. For one segment, the (candidate, reading) pairs are generated from the templates
+(reading order within each candidate, as the sweep needs them), the candidates are visited
+in order and each flip updates its readings' state. The obstacles of a reading inside its
+Gaussian window (which a flip's score needs in range order, with prefix sums) are rebuilt
+from the map in the tile's scratch when first needed and dropped with the tile; what a
+reading keeps between tiles is S_t, the window's sum, its obstacle counts and two ratios.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import NamedTuple
 
 import numba
 import numpy as np
+
+SWEEP = 0  # TileWork.ctl[CTL_MODE]: flip candidates that raise the objective
+SCORE = 1  # score every candidate once (the residual pass), flip none
+SEGMENT = 32  # columns per tile
+
+# TileWork.ctl slots
+CTL_MODE, CTL_ROW, CTL_SEG, CTL_STATUS = 0, 1, 2, 3
+CTL_NEED_LIST, CTL_NEED_PAIRS, CTL_NEED_ROOM = 4, 5, 6
+CTL_ENTER, CTL_LEAVE, CTL_CLOCK, CTL_FLIPS, CTL_SCORED, CTL_PAIRS = 7, 8, 9, 10, 11, 12
+CTL_BUMP, CTL_BUILT = 13, 14
+CTL_SIZE = 15
+DONE, NEED_BUFFERS = 0, 1
+
+
+class RowGroups(NamedTuple):
+    """Each stored template bin's entries grouped by one offset coordinate and sorted by the
+    other (``row_groups``): ``kind`` 0 groups by dr (listing dc), 1 by dc (listing dr).
+
+    A heading bin whose symmetry takes drow from dr uses kind 0, one that takes it from dc
+    kind 1; either way a group is the cone's cells in one grid row, by column."""
+
+    ptr: np.ndarray  # (2, n_base, 2 ext + 2) int64: group v's entries ptr[kind, b, v + ext]:..[v + ext + 1]
+    j: np.ndarray  # (2, E) int32: entry index within its stored bin (range order)
+    other: np.ndarray  # (2, E) int32: the other offset, ascending within a group
+    lo: np.ndarray  # (2, n_base, 2 ext + 1) int32: least other offset of each group
+    hi: np.ndarray  # (2, n_base, 2 ext + 1) int32: greatest
+    zero: np.ndarray  # (2, n_base, 2 ext + 1) int64: each group's first entry with other offset >= 0
+    box: np.ndarray  # (4, E) int32: min dr, max dr, min dc, max dc over a bin's entries 0..j
+
+
+class EMReadings(NamedTuple):
+    """The readings of an EM problem (flat arrays of one length, ``em.em_readings``)."""
+
+    row0: np.ndarray  # int64 sensor cell (may lie outside the grid)
+    col0: np.ndarray
+    bin: np.ndarray  # int64 heading bin
+    z: np.ndarray  # float64 range in template ranges (max-range readings: z_max)
+    g0: np.ndarray  # float64 G0_t
+    const: np.ndarray  # float64 C_t
+    m: np.ndarray  # int64 template entries of the (truncated) cone
+    jlo: np.ndarray  # int64 first entry that may lie inside the Gaussian window
+    box: np.ndarray  # (4, R) int64 row_lo, row_hi, col_lo, col_hi of the cone in the grid (row_lo > row_hi: none)
+    reach2: np.ndarray  # (2, R) int64 the cone's cells have dr^2 + dc^2 <= reach2[0], those before the window <= reach2[1]
+    enter: np.ndarray  # int64 readings by row_lo (stable)
+    leave: np.ndarray  # int64 readings by row_hi (stable)
 
 
 class EMModel(NamedTuple):
@@ -22,212 +79,420 @@ class EMModel(NamedTuple):
     p_hit: float  # detection probability of each obstacle in a cone (q = 1 - p_hit)
     l_prior: float  # log-odds of the occupancy prior, added per occupied candidate
     qpow: np.ndarray  # float64 q^k for k = 0 .. the most entries of a reading
+    w: float  # 1 - p_rand - p_max
+    sigma: float
+    window: float  # sigmas: the Gaussian is 0 beyond
 
 
 class EMState(NamedTuple):
-    """The likelihood state of every reading t under the current map (``_init_state``).
+    """What every reading t keeps under the current map.
 
-    Far obstacles all come before the window's (entries are in range order), so the window's
-    obstacle of rank r is the (nfar + r)-th obstacle of the reading.
-    """
+    Far obstacles (g = 0, before the window) come before the window's in range order, so
+    S_t = q^nfar (wsum + q^nobs G0), wsum being the window obstacles' sum of
+    q^(rank) p_hit g (``_set_sum``)."""
 
-    nptr: np.ndarray  # (R+1,) int64: reading t's room in obs_pos is nptr[t]:nptr[t+1] (its entries with g > 0)
-    obs_pos: np.ndarray  # entry positions of the obstacles inside the window, in range order, nobs[t] many
-    pre: np.ndarray  # prefix sums of their terms without the q^nfar factor, from nptr[t] + t (nobs[t] + 1 of them)
-    nobs: np.ndarray  # (R,) int64
-    nfar: np.ndarray  # (R,) int64: obstacles before the window (g = 0; they only scale S_t by q each)
-    s: np.ndarray  # (R,) float64: S_t = q^nfar (pre[nobs] + q^nobs G0)
-    far_ratio: np.ndarray  # (2R,) float64: likelihood ratios of adding / removing a far obstacle (_set_sum)
-
-
-class PairIndex(NamedTuple):
-    """Cell -> readings index of EM's candidates (``em.pair_index``)."""
-
-    cand_cell: np.ndarray  # (C,) int64 sorted flat ids of the candidates
-    cand_ptr: np.ndarray  # (C+1,) int64: candidate c's pairs are cand_ptr[c]:cand_ptr[c+1], in reading order
-    pair_t: np.ndarray  # (P,) int64 reading of each pair
-    pair_e: np.ndarray  # (P,) int64 entry of the forward index of each pair
-    pair_g: np.ndarray  # (P,) float64 the entry's Gaussian (index.g[pair_e]), stored along the pairs
+    s: np.ndarray  # (R,) float64 S_t
+    wsum: np.ndarray  # (R,) float64
+    nobs: np.ndarray  # (R,) int64 obstacles inside the window
+    nfar: np.ndarray  # (R,) int64 obstacles before it
+    far_ratio: np.ndarray  # (2R,) float64 likelihood ratios of adding / removing a far obstacle
+    far_log: np.ndarray  # (2R,) float64 their logs
+    stamp: np.ndarray  # (R,) int64 the clock when the reading last changed
 
 
-class SweepStamps(NamedTuple):
-    """What the sweeps remember between them (see ``_sweep``)."""
+class Candidates(NamedTuple):
+    """The cells EM may flip, in flat-id order, and what the sweeps remember of each."""
 
-    reading_stamp: np.ndarray  # (R,) int64: the clock when each reading last changed
-    cand_stamp: np.ndarray  # (C,) int64: the clock when each candidate was last scored (-1: never)
-    clock: np.ndarray  # (1,) int64: accepted flips so far
-    last_gain: np.ndarray  # (C,) float64: each candidate's last data gain of flipping
+    cell: np.ndarray  # (C,) int64 sorted flat ids
+    of_cell: np.ndarray  # (H * W,) int32 candidate position of each cell, -1 for none
+    row_first: np.ndarray  # (H + 1,) int64 row r's candidates are row_first[r]:row_first[r + 1]
+    occupied: np.ndarray  # (H * W,) bool the map
+    stamp: np.ndarray  # (C,) int64 the clock when last scored (-1: never)
+    last_gain: np.ndarray  # (C,) float64 the last data gain of flipping
+    tile_clock: np.ndarray  # (H, n_seg) int64 the clock when each tile was last visited (-1: never)
+
+
+class TileWork(NamedTuple):
+    """The tiles' scratch; ``ctl`` holds the control words (CTL_*), the rest grows on demand."""
+
+    ctl: np.ndarray  # (CTL_SIZE,) int64
+    active: np.ndarray  # (R / 64 + 1,) uint64 bit set of the readings active at the row
+    seg_ptr: np.ndarray  # (n_seg + 1,) int64
+    seg_list: np.ndarray  # int64 readings of each segment, ascending
+    count: np.ndarray  # int64 pairs per candidate of the tile (+1)
+    pair_pos: np.ndarray  # int64 listing (position in the tile's reading list) of each window pair
+    pair_j: np.ndarray  # int64 template entry
+    pair_g: np.ndarray  # float64 its Gaussian (0 before the window)
+    slot: np.ndarray  # (R,) int64 where each active reading's window obstacles are in the arena (-1: none)
+    obs_j: np.ndarray  # int64 arena: per slot its reading (header), then a bit per window entry (occupied or not)
+    obs_g: np.ndarray  # float64 arena: the window obstacles' Gaussians, in range order
+    pre: np.ndarray  # float64 arena: their prefix sums (one more than obstacles)
+    seg_fill: np.ndarray  # (n_seg,) int64 scratch of the segment lists
+    tile_t: np.ndarray  # int64 per listing: its reading
+    far_lo: np.ndarray  # int64 per listing: the tile columns where the cone's cells lie before its window
+    far_hi: np.ndarray  # (far_hi < far_lo: none)
+    far_sum: np.ndarray  # (2, SEGMENT + 1) float64 differences of sum_t log far ratio along the tile (add, remove)
+    spans: np.ndarray  # (9, n) int64 the row's active readings and their ``RowSpan``s (seg_list points into it)
+
+
+@functools.lru_cache(maxsize=4)
+def row_groups(templates) -> RowGroups:
+    """``RowGroups`` of ``templates`` (a ``cone.ConeTemplates``); cached, one-time set-up."""
+    ext = templates.extent
+    n_base = templates.offsets.shape[0] - 1
+    total = int(templates.offsets[-1])
+    ptr = np.zeros((2, n_base, 2 * ext + 2), dtype=np.int64)
+    j_all = np.empty((2, total), dtype=np.int32)
+    other_all = np.empty((2, total), dtype=np.int32)
+    lo = np.zeros((2, n_base, 2 * ext + 1), dtype=np.int32)
+    hi = np.full((2, n_base, 2 * ext + 1), -1, dtype=np.int32)
+    box = np.empty((4, total), dtype=np.int32)
+    zero = np.zeros((2, n_base, 2 * ext + 1), dtype=np.int64)
+    for b in range(n_base):
+        s, e = int(templates.offsets[b]), int(templates.offsets[b + 1])
+        dr = templates.drow[s:e].astype(np.int64)
+        dc = templates.dcol[s:e].astype(np.int64)
+        box[0, s:e] = np.minimum.accumulate(dr)
+        box[1, s:e] = np.maximum.accumulate(dr)
+        box[2, s:e] = np.minimum.accumulate(dc)
+        box[3, s:e] = np.maximum.accumulate(dc)
+        for kind, (key, other) in enumerate(((dr, dc), (dc, dr))):
+            order = np.lexsort((other, key))
+            j_all[kind, s:e] = order
+            other_all[kind, s:e] = other[order]
+            counts = np.bincount(key + ext, minlength=2 * ext + 1)
+            ptr[kind, b, 1:] = s + np.cumsum(counts)
+            ptr[kind, b, 0] = s
+            filled = counts > 0
+            starts, stops = ptr[kind, b, :-1], ptr[kind, b, 1:]
+            lo[kind, b, filled] = other_all[kind, starts[filled]]
+            hi[kind, b, filled] = other_all[kind, stops[filled] - 1]
+            for v in np.flatnonzero(filled):
+                run = other_all[kind, starts[v]:stops[v]]
+                # a row of a cone (a convex set) is a run of consecutive cells: entry positions
+                # follow from the other offset by arithmetic
+                if not np.array_equal(run, np.arange(run[0], run[0] + run.size)):
+                    raise AssertionError("a template row is not a run of consecutive cells")
+                zero[kind, b, v] = starts[v] + min(max(-int(run[0]), 0), run.size)
+    groups = RowGroups(ptr, j_all, other_all, lo, hi, zero, box)
+    for a in groups:
+        a.setflags(write=False)
+    return groups
 
 
 @numba.njit(cache=True, inline="always")
-def _set_sum(t, index, model, state):
-    """Recompute S_t from the state, and the likelihood ratios of adding / removing a far obstacle.
+def _gaussian(z, r, sigma, window):
+    """N(z; r, sigma^2), 0 beyond ``window`` sigmas (as ``forward_model._fill_index``)."""
+    u = (z - r) / sigma
+    if abs(u) <= window:
+        return 1.0 / (math.sqrt(2.0 * math.pi) * sigma) * math.exp(-0.5 * u * u)
+    return 0.0
+
+
+@numba.njit(cache=True, inline="always")
+def _cone_inside(tpl, rd, t, height, width):
+    """Does every cell of reading t's template lie inside the grid (then flat offsets serve)?"""
+    ext = tpl.extent
+    return rd.row0[t] - ext >= 0 and rd.row0[t] + ext < height and rd.col0[t] - ext >= 0 and rd.col0[t] + ext < width
+
+
+@numba.njit(cache=True, inline="always")
+def _entry_cell(tpl, k, j, row0, col0, height, width):
+    """Flat cell of entry j of heading bin k's cone from (row0, col0), or -1 outside the grid."""
+    s = tpl.offsets[tpl.base_bin[k]]
+    dc = np.int64(tpl.dcol[s + j])
+    dr = np.int64(tpl.drow[s + j])
+    r = row0 + tpl.transform[k, 2] * dc + tpl.transform[k, 3] * dr
+    c = col0 + tpl.transform[k, 0] * dc + tpl.transform[k, 1] * dr
+    if r < 0 or r >= height or c < 0 or c >= width:
+        return -1
+    return r * width + c
+
+
+@numba.njit(cache=True)
+def _reading_extent(tpl, groups, rows, cols, bins, limits, lower, grid_shape, out_m, out_jlo, out_box, out_reach2):
+    """Per reading: entries up to ``limits`` (m), the first entry at range >= ``lower`` (jlo),
+    the grid rows and columns its cone's first m entries span (row_lo > row_hi: none) and the
+    squared offsets (cells) of entries m - 1 and jlo - 1 (``EMReadings.reach2``)."""
+    height, width = grid_shape
+    for t in range(rows.shape[0]):
+        k = bins[t]
+        b = tpl.base_bin[k]
+        s = tpl.offsets[b]
+        r = tpl.ranges[s : tpl.offsets[b + 1]]
+        m = np.searchsorted(r, limits[t], side="right") if limits[t] >= 0.0 else 0
+        out_m[t] = m
+        out_jlo[t] = np.searchsorted(r, lower[t], side="left") if lower[t] >= 0.0 else 0
+        out_box[0, t] = height  # none
+        out_box[1, t] = -1
+        out_box[2, t] = width
+        out_box[3, t] = -1
+        out_reach2[0, t] = -1
+        out_reach2[1, t] = -1
+        if m == 0:
+            continue
+        # ranges are resolution * sqrt(dr^2 + dc^2) and distinct squares give distinct ranges
+        out_reach2[0, t] = np.int64(tpl.drow[s + m - 1]) ** 2 + np.int64(tpl.dcol[s + m - 1]) ** 2
+        jlo = out_jlo[t]
+        if jlo > 0:
+            out_reach2[1, t] = np.int64(tpl.drow[s + jlo - 1]) ** 2 + np.int64(tpl.dcol[s + jlo - 1]) ** 2
+        dr_lo, dr_hi = groups.box[0, s + m - 1], groups.box[1, s + m - 1]
+        dc_lo, dc_hi = groups.box[2, s + m - 1], groups.box[3, s + m - 1]
+        ta, tb, tc, td = tpl.transform[k, 0], tpl.transform[k, 1], tpl.transform[k, 2], tpl.transform[k, 3]
+        if tc == 0:  # drow = td dr, dcol = ta dc
+            r_lo, r_hi = (dr_lo, dr_hi) if td > 0 else (-dr_hi, -dr_lo)
+            c_lo, c_hi = (dc_lo, dc_hi) if ta > 0 else (-dc_hi, -dc_lo)
+        else:  # drow = tc dc, dcol = tb dr
+            r_lo, r_hi = (dc_lo, dc_hi) if tc > 0 else (-dc_hi, -dc_lo)
+            c_lo, c_hi = (dr_lo, dr_hi) if tb > 0 else (-dr_hi, -dr_lo)
+        r_lo, r_hi = max(rows[t] + r_lo, 0), min(rows[t] + r_hi, height - 1)
+        c_lo, c_hi = max(cols[t] + c_lo, 0), min(cols[t] + c_hi, width - 1)
+        if r_lo > r_hi or c_lo > c_hi:
+            continue
+        out_box[0, t] = r_lo
+        out_box[1, t] = r_hi
+        out_box[2, t] = c_lo
+        out_box[3, t] = c_hi
+
+
+@numba.njit(cache=True, inline="always")
+def _set_sum(t, rd, model, state):
+    """S_t from the state, and the likelihood ratios of adding / removing a far obstacle.
 
     A far cell has g = 0 and so have all obstacles before it (they are nearer), so adding
     it makes S_t -> q S_t and removing it S_t -> S_t / q, whatever its rank: one value per
     reading instead of a search per (cell, reading) pair.
     """
     qpow = model.qpow
-    const = index.const
-    w = index.w
-    far_ratio = state.far_ratio
+    w = model.w
     q = 1.0 - model.p_hit
-    n = state.nobs[t]
-    value = qpow[state.nfar[t]] * (state.pre[state.nptr[t] + t + n] + qpow[n] * index.g0[t])
+    value = qpow[state.nfar[t]] * (state.wsum[t] + qpow[state.nobs[t]] * rd.g0[t])
     state.s[t] = value
-    base = const[t] + w * value
-    far_ratio[2 * t] = (const[t] + w * q * value) / base  # likelihood ratio of adding one
-    far_ratio[2 * t + 1] = (const[t] + w * value / q) / base  # ... and of removing one
+    c = rd.const[t]
+    base = c + w * value
+    state.far_ratio[2 * t] = (c + w * q * value) / base  # likelihood ratio of adding one
+    state.far_ratio[2 * t + 1] = (c + w * value / q) / base  # ... and of removing one
+    state.far_log[2 * t] = math.log(state.far_ratio[2 * t])
+    state.far_log[2 * t + 1] = math.log(state.far_ratio[2 * t + 1])
 
 
 @numba.njit(cache=True, inline="always")
-def _rebuild_reading(t, index, model, occupied, state):
-    """Reading t's state from scratch under the map ``occupied``."""
-    cell = index.cell
-    g = index.g
-    qpow = model.qpow
-    p_hit = model.p_hit
-    obs_pos = state.obs_pos
-    pre = state.pre
-    base = state.nptr[t]
-    pbase = state.nptr[t] + t
-    k = 0
-    far = 0
-    acc = 0.0
-    pre[pbase] = 0.0
-    for e in range(index.ptr[t], index.ptr[t + 1]):
-        if occupied[cell[e]]:
-            if g[e] == 0.0:
-                far += 1
-                continue
-            obs_pos[base + k] = e
-            acc += qpow[k] * p_hit * g[e]
-            k += 1
-            pre[pbase + k] = acc
-    state.nobs[t] = k
-    state.nfar[t] = far
-    _set_sum(t, index, model, state)
+def _find(parent, x):
+    """Union-find root of x (path halving)."""
+    while parent[x] != x:
+        parent[x] = parent[parent[x]]
+        x = parent[x]
+    return x
 
 
-@numba.njit(cache=True, inline="always")
-def _rank(obs_pos, lo, hi, e):
-    """How many of the sorted entry positions obs_pos[lo:hi] lie before entry ``e``."""
-    k = lo
-    while k < hi and obs_pos[k] < e:  # a window holds few obstacles: a linear scan
-        k += 1
-    return k - lo
-
-
-@numba.njit(cache=True, inline="always")
-def _update_reading(t, e, adding, index, model, state):
-    """Add (or remove) the obstacle at entry ``e`` of reading t: O(1) before the window,
-    else an insertion into the window's list and its prefix sums from that rank on."""
-    g = index.g
-    if g[e] == 0.0:
-        state.nfar[t] += 1 if adding else -1
-        _set_sum(t, index, model, state)
-        return
-    qpow = model.qpow
-    p_hit = model.p_hit
-    obs_pos = state.obs_pos
-    pre = state.pre
-    base = state.nptr[t]
-    pbase = state.nptr[t] + t
-    n = state.nobs[t]
-    r = _rank(obs_pos, base, base + n, e)
-    acc = pre[pbase + r]
-    if adding:
-        for k in range(n, r, -1):
-            obs_pos[base + k] = obs_pos[base + k - 1]
-        obs_pos[base + r] = e
-        n += 1
-        for k in range(r, n):
-            acc += qpow[k] * p_hit * g[obs_pos[base + k]]
-            pre[pbase + k + 1] = acc
-    else:  # shift down and redo the prefix sums in one pass
-        n -= 1
-        for k in range(r, n):
-            moved = obs_pos[base + k + 1]
-            obs_pos[base + k] = moved
-            acc += qpow[k] * p_hit * g[moved]
-            pre[pbase + k + 1] = acc
-    state.nobs[t] = n
-    _set_sum(t, index, model, state)
-
-
-@numba.njit(cache=True)
-def _init_state(index, model, occupied):
-    """The ``EMState`` of every reading of ``index`` (``ForwardArrays``) under ``occupied``;
-    ``nptr`` delimits each reading's room for window obstacles (its entries with g > 0), so
-    that the arrays the sweeps touch stay small."""
-    ptr = index.ptr
-    g = index.g
-    n = ptr.shape[0] - 1
-    nptr = np.zeros(n + 1, dtype=np.int64)
-    for t in range(n):
-        room = 0
-        for e in range(ptr[t], ptr[t + 1]):
-            if g[e] != 0.0:
-                room += 1
-        nptr[t + 1] = nptr[t] + room
-    state = EMState(
-        nptr,
-        np.empty(nptr[n], dtype=np.int64),
-        np.empty(nptr[n] + n, dtype=np.float64),
-        np.zeros(n, dtype=np.int64),
-        np.zeros(n, dtype=np.int64),
-        np.empty(n, dtype=np.float64),
-        np.empty(2 * n, dtype=np.float64),
-    )
-    _rebuild_all(index, model, occupied, state)
-    return state
-
-
-# _nrt=False (as _sweep): no reference counting of the tuples' arrays per reading
+# _nrt=False (a private numba option): the kernel allocates nothing, and without numba's
+# reference counting its tuples' arrays cost nothing per reading
 @numba.njit(cache=True, _nrt=False)
-def _rebuild_all(index, model, occupied, state):
-    """Every reading's state from scratch (``_rebuild_reading``)."""
-    for t in range(state.nobs.shape[0]):
-        _rebuild_reading(t, index, model, occupied, state)
+def _init_state(tpl, flat, rd, model, occupied, grid_shape, marks, state):
+    """Every reading's ``EMState`` under ``occupied`` (one walk of its cone, nearest first).
+
+    ``marks`` = (seen, labels, parent, box): with a non-empty ``seen`` (flat bool) every
+    cone cell is marked in it; with non-empty ``labels`` (flat int, 0 outside every cluster)
+    clusters that share a reading are joined in the union-find ``parent``, and ``box`` (4, R)
+    gets the rows and columns of each reading's cluster cells (row_lo > row_hi: none), the
+    only ones EM may flip: the reading need only be active there.
+    """
+    seen, labels, parent, box = marks
+    height, width = grid_shape
+    qpow = model.qpow
+    p_hit = model.p_hit
+    mark = seen.shape[0] > 0
+    join = labels.shape[0] > 0
+    for t in range(rd.z.shape[0]):
+        state.stamp[t] = 0
+        far = 0
+        k = 0
+        acc = 0.0
+        first = 0
+        if join:
+            box[0, t] = height
+            box[1, t] = -1
+            box[2, t] = width
+            box[3, t] = -1
+        if rd.box[0, t] <= rd.box[1, t]:
+            k_bin = rd.bin[t]
+            s0 = tpl.offsets[tpl.base_bin[k_bin]]
+            inside = _cone_inside(tpl, rd, t, height, width)
+            x_off = flat.offsets[flat.sel[k_bin, 0]]
+            sign = flat.sel[k_bin, 1]
+            at = rd.row0[t] * width + rd.col0[t]
+            for j in range(rd.m[t]):
+                cell = at + sign * np.int64(x_off[s0 + j]) if inside else _entry_cell(tpl, k_bin, j, rd.row0[t],
+                                                                                      rd.col0[t], height, width)
+                if cell < 0:
+                    continue
+                if mark:
+                    seen[cell] = True
+                if join and labels[cell] > 0:
+                    row = cell // width
+                    col = cell - row * width
+                    box[0, t] = min(box[0, t], row)
+                    box[1, t] = max(box[1, t], row)
+                    box[2, t] = min(box[2, t], col)
+                    box[3, t] = max(box[3, t], col)
+                    if first == 0:
+                        first = labels[cell]
+                    else:
+                        a = _find(parent, first)
+                        c = _find(parent, labels[cell])
+                        if a != c:
+                            parent[max(a, c)] = min(a, c)
+                if not occupied[cell]:
+                    continue
+                g = 0.0 if j < rd.jlo[t] else _gaussian(rd.z[t], tpl.ranges[s0 + j], model.sigma, model.window)
+                if g == 0.0:
+                    far += 1
+                    continue
+                acc += qpow[k] * p_hit * g
+                k += 1
+        state.nobs[t] = k
+        state.nfar[t] = far
+        state.wsum[t] = acc
+        _set_sum(t, rd, model, state)
 
 
 @numba.njit(cache=True, inline="always")
-def _flip_gain(c, pairs, index, model, occupied, state):
-    """Exact change of sum_t log p(z_t | m) when candidate c flips (data part only).
+def _row_group(tpl, groups, k, v):
+    """(kind, stored bin, group value, column sign) of row offset v of heading bin k's cone."""
+    b = tpl.base_bin[k]
+    if tpl.transform[k, 2] == 0:  # drow = d dr, dcol = a dc
+        return 0, b, v * tpl.transform[k, 3], tpl.transform[k, 0]
+    return 1, b, v * tpl.transform[k, 2], tpl.transform[k, 1]
 
-    ``pairs.pair_g`` holds each pair's Gaussian (index.g of its entry), stored along the pairs
-    so that the hot loop reads it sequentially."""
-    pair_t = pairs.pair_t
-    pair_e = pairs.pair_e
-    pair_g = pairs.pair_g
-    const = index.const
-    w = index.w
+
+@numba.njit(cache=True, inline="always")
+def _room(rd, t):
+    """Arena entries of reading t's slot: a header, and room for every window entry plus one."""
+    return max(rd.m[t] - rd.jlo[t], 0) + 2
+
+
+@numba.njit(cache=True, inline="always")
+def _build_window(t, tpl, flat, rd, model, cand, work):
+    """Reading t's window obstacles (entries ascending), their Gaussians and prefix sums into a
+    new arena slot, from the map (the arena must have room: ``_make_room``)."""
+    height = cand.tile_clock.shape[0]
+    width = cand.of_cell.shape[0] // height
+    qpow = model.qpow
+    p_hit = model.p_hit
+    k_bin = rd.bin[t]
+    s0 = tpl.offsets[tpl.base_bin[k_bin]]
+    head = work.ctl[CTL_BUMP]
+    work.ctl[CTL_BUMP] = head + _room(rd, t)
+    work.ctl[CTL_BUILT] += 1
+    work.obs_j[head] = t
+    base = head + 1
+    work.slot[t] = base
+    work.pre[base] = 0.0
+    jlo = rd.jlo[t]
+    for k in range((rd.m[t] - jlo + 63) >> 6):
+        work.obs_j[base + k] = 0
+    n = 0
+    acc = 0.0
+    inside = _cone_inside(tpl, rd, t, height, width)
+    x_off = flat.offsets[flat.sel[k_bin, 0]]
+    sign = flat.sel[k_bin, 1]
+    at = rd.row0[t] * width + rd.col0[t]
+    for j in range(rd.jlo[t], rd.m[t]):
+        cell = at + sign * np.int64(x_off[s0 + j]) if inside else _entry_cell(tpl, k_bin, j, rd.row0[t], rd.col0[t],
+                                                                              height, width)
+        if cell < 0 or not cand.occupied[cell]:
+            continue
+        g = _gaussian(rd.z[t], tpl.ranges[s0 + j], model.sigma, model.window)
+        if g == 0.0:
+            continue
+        q = j - jlo
+        work.obs_j[base + (q >> 6)] |= np.int64(1) << np.int64(q & 63)
+        work.obs_g[base + n] = g
+        acc += qpow[n] * p_hit * g
+        n += 1
+        work.pre[base + n] = acc
+
+
+@numba.njit(cache=True, inline="always")
+def _make_room(rd, work, need):
+    """Slide the live slots of the arena down over the dead ones (readings that left, in
+    address order) when fewer than ``need`` entries are free; False when still too few."""
+    ctl = work.ctl
+    top = ctl[CTL_BUMP]
+    if top + need <= work.obs_j.shape[0]:
+        return True
+    a = 0
+    out = 0
+    while a < top:
+        t = work.obs_j[a]
+        size = _room(rd, t)
+        if work.slot[t] == a + 1:  # live
+            if out != a:
+                for k in range(size):
+                    work.obs_j[out + k] = work.obs_j[a + k]
+                    work.obs_g[out + k] = work.obs_g[a + k]
+                    work.pre[out + k] = work.pre[a + k]
+                work.slot[t] = out + 1
+            out += size
+        a += size
+    ctl[CTL_BUMP] = out
+    if 2 * (out + need) <= work.obs_j.shape[0]:  # half free at least, or compactions come too often
+        return True
+    ctl[CTL_NEED_ROOM] = 2 * (out + need)
+    return False
+
+
+@numba.njit(cache=True, inline="always")
+def _popcount(x):
+    """Set bits of the int64 x."""
+    v = np.uint64(x)
+    v = v - ((v >> np.uint64(1)) & np.uint64(0x5555555555555555))
+    v = (v & np.uint64(0x3333333333333333)) + ((v >> np.uint64(2)) & np.uint64(0x3333333333333333))
+    v = (v + (v >> np.uint64(4))) & np.uint64(0x0F0F0F0F0F0F0F0F)
+    return np.int64((v * np.uint64(0x0101010101010101)) >> np.uint64(56))
+
+
+@numba.njit(cache=True, inline="always")
+def _rank(bits, base, q):
+    """How many window obstacles lie before window entry q: set bits below q in the slot's
+    bit map (a wall the standard map draws thick puts tens of obstacles in one window)."""
+    n = 0
+    w = q >> 6
+    for k in range(w):
+        n += _popcount(bits[base + k])
+    return n + _popcount(bits[base + w] & ((np.int64(1) << np.int64(q & 63)) - 1))
+
+
+@numba.njit(cache=True, inline="always")
+def _flip_gain(c, x, lo_pair, hi_pair, rd, model, cand, state, work):
+    """Exact change of sum_t log p(z_t | m) when candidate c (tile column x) flips (data part
+    only): the readings whose cones hold it before their windows through the tile's sums of
+    their log ratios (``far_sum``), the others over its pairs lo_pair:hi_pair, whose window
+    obstacle lists must be built (``_build_window``)."""
+    pair_pos = work.pair_pos
+    pair_j = work.pair_j
+    pair_g = work.pair_g
+    const = rd.const
+    w = model.w
     p_hit = model.p_hit
     qpow = model.qpow
-    nptr = state.nptr
-    obs_pos = state.obs_pos
-    pre = state.pre
-    nobs = state.nobs
-    nfar = state.nfar
     s = state.s
-    far_ratio = state.far_ratio
     q = 1.0 - p_hit
-    adding = not occupied[pairs.cand_cell[c]]
+    adding = not cand.occupied[cand.cell[c]]
     far = 0 if adding else 1
     delta = 0.0
+    for k in range(x + 1):
+        delta += work.far_sum[far, k]
     ratio = 1.0
-    for p in range(pairs.cand_ptr[c], pairs.cand_ptr[c + 1]):
-        t = pair_t[p]
-        if pair_g[p] == 0.0:  # before the reading's window: see _set_sum
-            ratio *= far_ratio[2 * t + far]
-            if ratio > 1e100 or ratio < 1e-100:
-                delta += math.log(ratio)
-                ratio = 1.0
+    for p in range(lo_pair, hi_pair):
+        t = work.tile_t[pair_pos[p]]
+        if pair_g[p] == 0.0:  # a window entry whose Gaussian underflows: as a far one
+            ratio *= state.far_ratio[2 * t + far]
             continue
-        # r = window obstacles of reading t before entry e (binary search in their positions)
-        r = _rank(obs_pos, nptr[t], nptr[t] + nobs[t], pair_e[p])
-        qf = qpow[nfar[t]]
-        a = qf * pre[nptr[t] + t + r]
+        base = work.slot[t]
+        r = _rank(work.obs_j, base, pair_j[p] - rd.jlo[t])
+        qf = qpow[state.nfar[t]]
+        a = qf * work.pre[base + r]
         term = qf * qpow[r] * p_hit * pair_g[p]
         st = s[t]
         if adding:
@@ -246,64 +511,67 @@ def _flip_gain(c, pairs, index, model, occupied, state):
     return delta + math.log(ratio)
 
 
-# _nrt=False: the sweep allocates nothing, and without numba's reference-counting runtime
-# the arrays it hands to the inlined helpers cost nothing per call (as in simulation.raycast;
-# _nrt is a private numba option)
-@numba.njit(cache=True, _nrt=False)
-def _sweep(pairs, index, model, occupied, state, stamps):
-    """One pass over the candidates in order; a flip is kept when it raises the objective.
+@numba.njit(cache=True, inline="always")
+def _far_changed(li, t, x, old_add, old_rem, state, work):
+    """Reading t (listing li) changed after a flip at tile column x: move its log far ratios
+    in the tile's sums over its far columns beyond x (the columns still to be scored)."""
+    lo = max(work.far_lo[li], x + 1)
+    hi = work.far_hi[li]
+    if lo > hi:
+        return
+    d_add = state.far_log[2 * t] - old_add
+    d_rem = state.far_log[2 * t + 1] - old_rem
+    work.far_sum[0, lo] += d_add
+    work.far_sum[0, hi + 1] -= d_add
+    work.far_sum[1, lo] += d_rem
+    work.far_sum[1, hi + 1] -= d_rem
 
-    A candidate none of whose readings changed since it was last scored keeps its (non-
-    improving) gain, so it is skipped: the result equals a full sweep's, at a fraction of
-    the cost once the map settles. ``stamps.clock[0]`` counts accepted flips;
-    ``reading_stamp`` and ``cand_stamp`` record when a reading last changed and when a
-    candidate was last scored; ``last_gain`` keeps each candidate's last data gain (after a
-    sweep without flips, every one is current, which gives the residual probabilities
-    without another pass). Returns (flips, candidates scored).
-    """
-    cand_cell = pairs.cand_cell
-    cand_ptr = pairs.cand_ptr
-    pair_t = pairs.pair_t
-    pair_e = pairs.pair_e
-    l_prior = model.l_prior
-    reading_stamp = stamps.reading_stamp
-    cand_stamp = stamps.cand_stamp
-    clock = stamps.clock
-    last_gain = stamps.last_gain
-    flips = 0
-    evaluated = 0
-    for c in range(cand_cell.shape[0]):
-        if cand_stamp[c] >= 0:
-            dirty = False
-            for p in range(cand_ptr[c], cand_ptr[c + 1]):
-                if reading_stamp[pair_t[p]] > cand_stamp[c]:
-                    dirty = True
-                    break
-            if not dirty:
-                continue
-        evaluated += 1
-        d = _flip_gain(c, pairs, index, model, occupied, state)
-        last_gain[c] = d
-        x = cand_cell[c]
-        d += -l_prior if occupied[x] else l_prior
-        if d > 1e-9:
-            occupied[x] = not occupied[x]
-            last_gain[c] = -last_gain[c]  # flipping back undoes exactly this gain
-            flips += 1
-            clock[0] += 1
-            adding = occupied[x]
-            for p in range(cand_ptr[c], cand_ptr[c + 1]):
-                _update_reading(pair_t[p], pair_e[p], adding, index, model, state)
-                reading_stamp[pair_t[p]] = clock[0]
-        cand_stamp[c] = clock[0]
-    return flips, evaluated
+
+@numba.njit(cache=True, inline="always")
+def _update_reading(t, j, g, adding, model, rd, state, work):
+    """Add (or remove) the obstacle at entry j (Gaussian g) of reading t: O(1) before the
+    window, else an insertion into the window's list and its prefix sums from that rank on."""
+    if g == 0.0:
+        state.nfar[t] += 1 if adding else -1
+        _set_sum(t, rd, model, state)
+        return
+    qpow = model.qpow
+    p_hit = model.p_hit
+    obs_j = work.obs_j
+    obs_g = work.obs_g
+    pre = work.pre
+    base = work.slot[t]
+    n = state.nobs[t]
+    q = j - rd.jlo[t]
+    r = _rank(obs_j, base, q)
+    acc = pre[base + r]
+    bit = np.int64(1) << np.int64(q & 63)
+    if adding:
+        obs_j[base + (q >> 6)] |= bit
+        for k in range(n, r, -1):
+            obs_g[base + k] = obs_g[base + k - 1]
+        obs_g[base + r] = g
+        n += 1
+        for k in range(r, n):
+            acc += qpow[k] * p_hit * obs_g[base + k]
+            pre[base + k + 1] = acc
+    else:  # shift down and redo the prefix sums in one pass
+        obs_j[base + (q >> 6)] &= ~bit
+        n -= 1
+        for k in range(r, n):
+            obs_g[base + k] = obs_g[base + k + 1]
+            acc += qpow[k] * p_hit * obs_g[base + k]
+            pre[base + k + 1] = acc
+    state.nobs[t] = n
+    state.wsum[t] = pre[base + n]
+    _set_sum(t, rd, model, state)
 
 
 @numba.njit(cache=True)
-def _objective(index, model, state, occupied, cand_cell):
+def _objective(rd, model, state, occupied, cand_cell):
     """sum_t log p(z_t | m) plus l_prior per occupied candidate."""
-    const = index.const
-    w = index.w
+    const = rd.const
+    w = model.w
     s = state.s
     total = 0.0
     for t in range(s.shape[0]):
@@ -332,42 +600,339 @@ def _residual_from_gains(cand_cell, occupied, last_gain, l_prior):
     return out
 
 
-@numba.njit(cache=True)
-def _residual(pairs, index, model, occupied, state):
-    """p(m_x = 1 | Z, m*) of each candidate with every other cell held at m*."""
-    cand_cell = pairs.cand_cell
-    out = np.empty(cand_cell.shape[0])
-    for c in range(cand_cell.shape[0]):
-        d = _flip_gain(c, pairs, index, model, occupied, state)
-        out[c] = _logistic((-d if occupied[cand_cell[c]] else d) + model.l_prior)
-    return out
+@numba.njit(cache=True, inline="always")
+def _isqrt(n):
+    """The largest o >= 0 with o * o <= n (-1 for n < 0), exactly."""
+    if n < 0:
+        return np.int64(-1)
+    o = np.int64(math.sqrt(float(n)))
+    while o * o > n:
+        o -= 1
+    while (o + 1) * (o + 1) <= n:
+        o += 1
+    return o
 
 
-@numba.njit(cache=True)
-def _pair_index(index, candidates, lookup, lo):
-    """The ``PairIndex`` of ``candidates`` (sorted flat ids); ``lookup[x - lo]`` is the
-    position of cell x among them, or -1."""
-    ptr = index.ptr
-    cell = index.cell
-    g = index.g
-    n_read = ptr.shape[0] - 1
-    counts = np.zeros(candidates.shape[0] + 1, dtype=np.int64)
-    for e in range(cell.shape[0]):
-        k = cell[e] - lo
-        if 0 <= k < lookup.shape[0] and lookup[k] >= 0:
-            counts[lookup[k] + 1] += 1
-    cand_ptr = np.cumsum(counts)
-    fill = cand_ptr[:-1].copy()
-    pair_t = np.empty(cand_ptr[-1], dtype=np.int64)
-    pair_e = np.empty(cand_ptr[-1], dtype=np.int64)
-    pair_g = np.empty(cand_ptr[-1], dtype=np.float64)
-    for t in range(n_read):
-        for e in range(ptr[t], ptr[t + 1]):
-            k = cell[e] - lo
-            if 0 <= k < lookup.shape[0] and lookup[k] >= 0:
-                j = fill[lookup[k]]
-                pair_t[j] = t
-                pair_e[j] = e
-                pair_g[j] = g[e]
-                fill[lookup[k]] += 1
-    return PairIndex(candidates, cand_ptr, pair_t, pair_e, pair_g)
+class RowSpan(NamedTuple):
+    """One reading's cone in one grid row, as runs of the other offset o (``_row_span``): the
+    cell at o has column col0 + sign * o and template entry j[kind, first + o - o_first]."""
+
+    kind: int
+    first: int
+    o_first: int
+    sign: int
+    o_lo: int  # the cone's cells: o_lo <= o <= o_hi
+    o_hi: int
+    f_lo: int  # those before the window: f_lo <= o <= f_hi (f_hi < f_lo: none)
+    f_hi: int
+
+
+@numba.njit(cache=True, inline="always")
+def _row_span(tpl, groups, rd, t, r):
+    """``RowSpan`` of reading t's cone in grid row r (o_hi < o_lo: none there)."""
+    kind, b, gv, sign = _row_group(tpl, groups, rd.bin[t], r - rd.row0[t])
+    ext = tpl.extent
+    if gv < -ext or gv > ext or rd.m[t] == 0:
+        return RowSpan(0, 0, 0, 1, 1, 0, 1, 0)
+    first = groups.ptr[kind, b, gv + ext]
+    if first == groups.ptr[kind, b, gv + ext + 1]:
+        return RowSpan(0, 0, 0, 1, 1, 0, 1, 0)
+    o_first = np.int64(groups.lo[kind, b, gv + ext])
+    o_last = np.int64(groups.hi[kind, b, gv + ext])
+    # a template entry's range is resolution * sqrt(dr^2 + dc^2): entries < m (or < jlo) are
+    # the cells of the row with o^2 <= reach2 - gv^2, exactly, in integers
+    v = _isqrt(rd.reach2[0, t] - gv * gv)
+    if v < 0:
+        return RowSpan(0, 0, 0, 1, 1, 0, 1, 0)
+    f = min(_isqrt(rd.reach2[1, t] - gv * gv), v)
+    return RowSpan(kind, first, o_first, sign, max(o_first, -v), min(o_last, v), max(o_first, -f), min(o_last, f))
+
+
+@numba.njit(cache=True, inline="always")
+def _o_range(span, col0, c0, c1, lo, hi):
+    """The o of [lo, hi] whose columns lie in [c0, c1)."""
+    if span.sign > 0:
+        return max(lo, c0 - col0), min(hi, c1 - 1 - col0)
+    return max(lo, col0 - c1 + 1), min(hi, col0 - c0)
+
+
+@numba.njit(cache=True, inline="always")
+def _window_pairs(i, t, span, r, c0, c1, c_start, fill, tpl, groups, rd, model, cand, work):
+    """Count (``fill`` False) or write reading t's window pairs in tile columns [c0, c1) of
+    row r (the cone's cells beyond its far run: up to two runs of o); returns how many."""
+    width = cand.of_cell.shape[0] // cand.tile_clock.shape[0]
+    col0 = rd.col0[t]
+    at = r * width + col0
+    gj = groups.j[span.kind]
+    s0 = tpl.offsets[tpl.base_bin[rd.bin[t]]]
+    n = 0
+    for side in range(2):
+        if span.f_lo > span.f_hi:  # no far run: one run, the whole cone row
+            if side == 1:
+                break
+            lo, hi = span.o_lo, span.o_hi
+        elif side == 0:
+            lo, hi = span.o_lo, span.f_lo - 1
+        else:
+            lo, hi = span.f_hi + 1, span.o_hi
+        lo, hi = _o_range(span, col0, c0, c1, lo, hi)
+        for o in range(lo, hi + 1):
+            ci = cand.of_cell[at + span.sign * o]
+            if ci < 0:
+                continue
+            n += 1
+            local = ci - c_start
+            if not fill:
+                work.count[local + 1] += 1
+                continue
+            j = gj[span.first + o - span.o_first]
+            pos = work.count[local]
+            work.count[local] = pos + 1
+            work.pair_pos[pos] = i
+            work.pair_j[pos] = j
+            work.pair_g[pos] = _gaussian(rd.z[t], tpl.ranges[s0 + j], model.sigma, model.window)
+    return n
+
+
+@numba.njit(cache=True, inline="always")
+def _advance(rd, work, r):
+    """The active bit set at row r: readings whose cone rows reach r (repeatable)."""
+    ctl = work.ctl
+    active = work.active
+    n_read = rd.z.shape[0]
+    e = ctl[CTL_ENTER]
+    while e < n_read and rd.box[0, rd.enter[e]] <= r:
+        t = rd.enter[e]
+        active[t >> 6] |= np.uint64(1) << np.uint64(t & 63)
+        e += 1
+    ctl[CTL_ENTER] = e
+    k = ctl[CTL_LEAVE]
+    while k < n_read and rd.box[1, rd.leave[k]] < r:
+        t = rd.leave[k]
+        active[t >> 6] &= ~(np.uint64(1) << np.uint64(t & 63))
+        work.slot[t] = -1  # its arena slot (if any) is dead
+        k += 1
+    ctl[CTL_LEAVE] = k
+
+
+@numba.njit(cache=True, inline="always")
+def _span_at(work, k):
+    """The ``RowSpan`` stored at ``work.spans[:, k]`` (its reading is spans[8, k])."""
+    sp = work.spans
+    return RowSpan(sp[0, k], sp[1, k], sp[2, k], sp[3, k], sp[4, k], sp[5, k], sp[6, k], sp[7, k])
+
+
+@numba.njit(cache=True, inline="always")
+def _list_segments(tpl, groups, rd, work, r, n_seg):
+    """The row's active readings with their ``RowSpan`` in ``spans`` (one each), and each
+    segment's (ascending) in seg_ptr / seg_list, as positions in ``spans``; False (with the
+    size needed in ctl) when a buffer is too small."""
+    active = work.active
+    seg_ptr = work.seg_ptr
+    fill = work.seg_fill
+    sp = work.spans
+    for s in range(n_seg + 1):
+        seg_ptr[s] = 0
+    n = 0
+    for wi in range(active.shape[0]):
+        word = active[wi]
+        t = wi << 6
+        while word != np.uint64(0):
+            if word & np.uint64(1):
+                span = _row_span(tpl, groups, rd, t, r)
+                if span.o_hi >= span.o_lo:
+                    col0 = rd.col0[t]
+                    if span.sign > 0:
+                        lo, hi = col0 + span.o_lo, col0 + span.o_hi
+                    else:
+                        lo, hi = col0 - span.o_hi, col0 - span.o_lo
+                    lo, hi = max(lo, rd.box[2, t]), min(hi, rd.box[3, t])
+                    if lo <= hi:
+                        if n >= sp.shape[1]:
+                            work.ctl[CTL_NEED_LIST] = max(work.ctl[CTL_NEED_LIST], 2 * sp.shape[1])
+                            return False
+                        sp[0, n], sp[1, n], sp[2, n], sp[3, n] = span.kind, span.first, span.o_first, span.sign
+                        sp[4, n], sp[5, n], sp[6, n], sp[7, n] = span.o_lo, span.o_hi, span.f_lo, span.f_hi
+                        sp[8, n] = t
+                        for s in range(lo // SEGMENT, hi // SEGMENT + 1):
+                            seg_ptr[s + 1] += 1
+                        n += 1
+            word >>= np.uint64(1)
+            t += 1
+    for s in range(n_seg):
+        seg_ptr[s + 1] += seg_ptr[s]
+        fill[s] = seg_ptr[s]
+    if seg_ptr[n_seg] > work.seg_list.shape[0]:
+        work.ctl[CTL_NEED_LIST] = max(work.ctl[CTL_NEED_LIST], seg_ptr[n_seg])
+        return False
+    for k in range(n):
+        t = sp[8, k]
+        col0 = rd.col0[t]
+        if sp[3, k] > 0:
+            lo, hi = col0 + sp[4, k], col0 + sp[5, k]
+        else:
+            lo, hi = col0 - sp[5, k], col0 - sp[4, k]
+        lo, hi = max(lo, rd.box[2, t]), min(hi, rd.box[3, t])
+        for s in range(lo // SEGMENT, hi // SEGMENT + 1):
+            work.seg_list[fill[s]] = k
+            fill[s] += 1
+    return True
+
+
+# _nrt=False: the sweep allocates nothing (its scratch comes in ``work``), and without numba's
+# reference-counting runtime the arrays it hands to the inlined helpers cost nothing per call
+@numba.njit(cache=True, _nrt=False)
+def _sweep_tiles(tpl, flat, groups, rd, model, cand, state, work):
+    """One pass over the candidates in flat-id order, tile by tile (see the module docstring):
+    ctl[CTL_MODE] SWEEP keeps each flip that raises the objective, SCORE scores every
+    candidate into ``last_gain`` and flips none.
+
+    A candidate none of whose readings changed since it was last scored keeps its (non-
+    improving) gain and is skipped, and so is a whole tile none of whose readings changed
+    since the tile's last visit: the result equals a full sweep's. The clock counts accepted
+    flips. Starts at (ctl[CTL_ROW], ctl[CTL_SEG]); returns NEED_BUFFERS, with the sizes
+    needed in ctl, before a tile's first change when the scratch is too small (grow it and
+    call again: the pass resumes there), else DONE.
+    """
+    ctl = work.ctl
+    height, n_seg = cand.tile_clock.shape
+    width = cand.of_cell.shape[0] // height
+    mode = ctl[CTL_MODE]
+    occupied = cand.occupied
+    seg_list = work.seg_list
+    cnt = work.count
+    for r in range(ctl[CTL_ROW], height):
+        ca = cand.row_first[r]
+        cb = cand.row_first[r + 1]
+        if ca == cb:
+            continue
+        ctl[CTL_ROW] = r
+        _advance(rd, work, r)
+        if not _list_segments(tpl, groups, rd, work, r, n_seg):
+            ctl[CTL_STATUS] = NEED_BUFFERS
+            return NEED_BUFFERS
+        c_pos = ca
+        row_base = r * width
+        for sg in range(ctl[CTL_SEG], n_seg):
+            c0 = sg * SEGMENT
+            c1 = min(c0 + SEGMENT, width)
+            while c_pos < cb and cand.cell[c_pos] < row_base + c0:
+                c_pos += 1
+            c_start = c_pos
+            while c_pos < cb and cand.cell[c_pos] < row_base + c1:
+                c_pos += 1
+            c_stop = c_pos
+            if c_start == c_stop:
+                continue
+            list_lo = work.seg_ptr[sg]
+            list_hi = work.seg_ptr[sg + 1]
+            clock0 = ctl[CTL_CLOCK]
+            if mode == SWEEP:
+                since = cand.tile_clock[r, sg]
+                dirty = since < 0
+                if not dirty:
+                    for i in range(list_lo, list_hi):
+                        if state.stamp[work.spans[8, seg_list[i]]] > since:
+                            dirty = True
+                            break
+                if not dirty:  # nothing the tile's candidates see changed: each keeps its gain
+                    for c in range(c_start, c_stop):
+                        cand.stamp[c] = clock0
+                    cand.tile_clock[r, sg] = clock0
+                    continue
+            # the tile: each listed reading's far run (into the sums of log far ratios) and
+            # window pairs (counted per candidate, then written in reading order)
+            nc = c_stop - c_start
+            n_list = list_hi - list_lo
+            if n_list > work.far_lo.shape[0]:
+                ctl[CTL_NEED_LIST] = max(ctl[CTL_NEED_LIST], n_list)
+                ctl[CTL_SEG] = sg
+                ctl[CTL_STATUS] = NEED_BUFFERS
+                return NEED_BUFFERS
+            for i in range(nc + 1):
+                cnt[i] = 0
+            for k in range(SEGMENT + 1):
+                work.far_sum[0, k] = 0.0
+                work.far_sum[1, k] = 0.0
+            room = 0
+            n_pairs = 0
+            for i in range(list_lo, list_hi):
+                span = _span_at(work, seg_list[i])
+                t = work.spans[8, seg_list[i]]
+                li = i - list_lo
+                work.tile_t[li] = t
+                work.far_lo[li] = 1
+                work.far_hi[li] = 0
+                if span.o_hi < span.o_lo:
+                    continue
+                f_lo, f_hi = _o_range(span, rd.col0[t], c0, c1, span.f_lo, span.f_hi)
+                if f_lo <= f_hi:
+                    col0 = rd.col0[t]
+                    a, b = (col0 + f_lo, col0 + f_hi) if span.sign > 0 else (col0 - f_hi, col0 - f_lo)
+                    work.far_lo[li] = a - c0
+                    work.far_hi[li] = b - c0
+                    work.far_sum[0, a - c0] += state.far_log[2 * t]
+                    work.far_sum[0, b - c0 + 1] -= state.far_log[2 * t]
+                    work.far_sum[1, a - c0] += state.far_log[2 * t + 1]
+                    work.far_sum[1, b - c0 + 1] -= state.far_log[2 * t + 1]
+                k = _window_pairs(li, t, span, r, c0, c1, c_start, False, tpl, groups, rd, model, cand, work)
+                n_pairs += k
+                if k > 0 and work.slot[t] < 0:
+                    room += _room(rd, t)
+            for i in range(1, nc + 1):
+                cnt[i] += cnt[i - 1]
+            if n_pairs > work.pair_pos.shape[0] or not _make_room(rd, work, room):
+                ctl[CTL_NEED_PAIRS] = n_pairs
+                ctl[CTL_SEG] = sg
+                ctl[CTL_STATUS] = NEED_BUFFERS
+                return NEED_BUFFERS
+            ctl[CTL_PAIRS] += n_pairs
+            for i in range(list_lo, list_hi):
+                span = _span_at(work, seg_list[i])
+                t = work.spans[8, seg_list[i]]
+                if span.o_hi >= span.o_lo:
+                    _window_pairs(i - list_lo, t, span, r, c0, c1, c_start, True, tpl, groups, rd, model, cand, work)
+            for c in range(c_start, c_stop):
+                li = c - c_start
+                lo_pair = 0 if li == 0 else cnt[li - 1]
+                hi_pair = cnt[li]
+                x = cand.cell[c] - row_base - c0  # the tile column
+                for p in range(lo_pair, hi_pair):  # the window obstacles the score needs
+                    t = work.tile_t[work.pair_pos[p]]
+                    if work.pair_g[p] != 0.0 and work.slot[t] < 0:
+                        _build_window(t, tpl, flat, rd, model, cand, work)
+                ctl[CTL_SCORED] += 1
+                d = _flip_gain(c, x, lo_pair, hi_pair, rd, model, cand, state, work)
+                cand.last_gain[c] = d
+                if mode != SWEEP:
+                    continue
+                cell = cand.cell[c]
+                d += -model.l_prior if occupied[cell] else model.l_prior
+                if d > 1e-9:
+                    occupied[cell] = not occupied[cell]
+                    cand.last_gain[c] = -cand.last_gain[c]  # flipping back undoes exactly this gain
+                    ctl[CTL_FLIPS] += 1
+                    ctl[CTL_CLOCK] += 1
+                    adding = occupied[cell]
+                    now = ctl[CTL_CLOCK]
+                    for i in range(n_list):  # the readings that hold the cell before their windows
+                        if work.far_lo[i] <= x <= work.far_hi[i]:
+                            t = work.tile_t[i]
+                            old_add, old_rem = state.far_log[2 * t], state.far_log[2 * t + 1]
+                            state.nfar[t] += 1 if adding else -1
+                            _set_sum(t, rd, model, state)
+                            _far_changed(i, t, x, old_add, old_rem, state, work)
+                            state.stamp[t] = now
+                    for p in range(lo_pair, hi_pair):  # ... and inside them
+                        i = work.pair_pos[p]
+                        t = work.tile_t[i]
+                        old_add, old_rem = state.far_log[2 * t], state.far_log[2 * t + 1]
+                        _update_reading(t, work.pair_j[p], work.pair_g[p], adding, model, rd, state, work)
+                        _far_changed(i, t, x, old_add, old_rem, state, work)
+                        state.stamp[t] = now
+                cand.stamp[c] = ctl[CTL_CLOCK]
+            if mode == SWEEP:
+                cand.tile_clock[r, sg] = clock0
+        ctl[CTL_SEG] = 0
+    ctl[CTL_STATUS] = DONE
+    return DONE

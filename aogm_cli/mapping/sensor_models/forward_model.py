@@ -297,16 +297,3 @@ def build_forward_index(
     np.cumsum(counts, out=ptr[1:])
     g0, const, w = reading_constants(z, z_max, config)
     return ForwardIndex(ptr, out_cell[:n], out_g[:n], g0, const, ids, w, config.p_hit)  # views: no copy
-
-
-def select_readings(index: ForwardIndex, readings: np.ndarray) -> ForwardIndex:
-    """The index restricted to the readings at positions ``readings`` (sorted int array)."""
-    readings = np.asarray(readings, dtype=np.int64)
-    starts, stops = index.ptr[readings], index.ptr[readings + 1]
-    counts = stops - starts
-    ptr = np.zeros(len(readings) + 1, dtype=np.int64)
-    np.cumsum(counts, out=ptr[1:])
-    # entry positions of the selected readings, in order
-    entries = np.repeat(starts - ptr[:-1], counts) + np.arange(ptr[-1])
-    return ForwardIndex(ptr, index.cell[entries], index.g[entries], index.g0[readings], index.const[readings],
-                        index.reading[readings], index.w, index.p_hit)
