@@ -50,9 +50,8 @@ def bench(world_name: str, log_path: Path) -> None:
     t_state = min(r[2] for r in runs)
     sweeps = np.min([r[3] for r in runs], axis=0)
     t_total = min(r[4] for r in runs)
-    readings_bytes = sum(a.nbytes for a in rd) + sum(a.nbytes for a in E.em_problem(
-        rd, inputs.readings.templates, inputs.readings.grid.shape,
-        np.ascontiguousarray((inputs.log_odds > 0).reshape(-1)), inputs.params.em).state)
+    # the readings' two tables (their state included) and the orders they enter and leave the tiles by
+    readings_bytes = rd.ints.nbytes + rd.floats.nbytes + rd.enter.nbytes + rd.leave.nbytes
     print(f"\n{world_name}: {rd.z.size} readings, {result.candidates.size} candidate cells")
     print(f"  standard pass (ceiling)    {t_std * 1e3:8.2f} ms")
     print(f"  EM's readings              {t_readings * 1e3:8.2f} ms")

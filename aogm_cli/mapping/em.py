@@ -50,20 +50,27 @@ def em_readings(rows, cols, bins, z, templates, grid, z_max: float, config: Forw
     z = np.asarray(z, dtype=np.float64).reshape(-1)
     if np.isnan(z).any():
         raise ValueError("NaN readings must be left out of EM's readings")
-    rows, cols, bins = (np.ascontiguousarray(a, dtype=np.int64).reshape(-1) for a in (rows, cols, bins))
-    z_eff = np.where(np.isfinite(z), np.minimum(z, z_max), z_max)
+    n = z.shape[0]
+    ints = np.zeros((n, K.INTS), dtype=np.int64)
+    floats = np.zeros((n, K.FLOATS))
+    for col, a in ((K.I_ROW0, rows), (K.I_COL0, cols), (K.I_BIN, bins)):
+        ints[:, col] = np.asarray(a, dtype=np.int64).reshape(-1)
+    rows, cols, bins = ints[:, K.I_ROW0], ints[:, K.I_COL0], ints[:, K.I_BIN]
+    z_eff = floats[:, K.F_Z]
+    z_eff[:] = np.where(np.isfinite(z), np.minimum(z, z_max), z_max)
     limits = np.where(np.isfinite(z), np.minimum(z + config.window * config.sigma, z_max), z_max)
     # entries before this range are beyond the Gaussian's window (a margin against rounding)
     lower = z_eff - config.window * config.sigma - 1e-9
-    n = z.shape[0]
-    m, jlo = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
-    box = np.empty((4, n), dtype=np.int64)
-    reach2 = np.empty((2, n), dtype=np.int64)
+    m, jlo = ints[:, K.I_M], ints[:, K.I_JLO]
+    box = ints[:, K.I_BOX:K.I_BOX + 4].T
+    reach2 = ints[:, K.I_REACH2:K.I_REACH2 + 2].T
     K._reading_extent(templates.kernel_arrays, K.row_groups(templates), rows, cols, bins, limits, lower,
                       grid.shape, m, jlo, box, reach2)
     g0, const, _ = reading_constants(z, z_max, config)
-    return K.EMReadings(rows, cols, bins, z_eff, g0, const, m, jlo, box, reach2,
-                        np.argsort(box[0], kind="stable"), np.argsort(box[1], kind="stable"))
+    floats[:, K.F_G0] = g0
+    floats[:, K.F_CONST] = const
+    return K.EMReadings(rows, cols, bins, z_eff, floats[:, K.F_G0], floats[:, K.F_CONST], m, jlo, box, reach2,
+                        np.argsort(box[0], kind="stable"), np.argsort(box[1], kind="stable"), ints, floats)
 
 
 @dataclass
@@ -91,8 +98,9 @@ def em_problem(rd: K.EMReadings, templates, shape: tuple[int, int], occupied: np
     model = K.EMModel(p_hit, float(config.l_prior), (1.0 - p_hit) ** np.arange(top + 1, dtype=np.float64),
                       1.0 - fwd.p_rand - fwd.p_max, float(fwd.sigma), float(fwd.window))
     n = rd.z.shape[0]
-    state = K.EMState(np.empty(n), np.empty(n), np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64),
-                      np.empty(2 * n), np.empty(2 * n), np.zeros(n, dtype=np.int64))
+    ints, floats = rd.ints, rd.floats
+    state = K.EMState(floats[:, K.F_S], floats[:, K.F_WSUM], ints[:, K.I_NOBS], ints[:, K.I_NFAR],
+                      floats[:, K.F_RATIO:K.F_RATIO + 2], floats[:, K.F_LOG:K.F_LOG + 2], ints[:, K.I_STAMP])
     seen = np.zeros(shape[0] * shape[1], dtype=np.bool_)
     if labels is None:
         marks = (seen, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((4, 0), dtype=np.int64))
@@ -102,7 +110,8 @@ def em_problem(rd: K.EMReadings, templates, shape: tuple[int, int], occupied: np
     K._init_state(templates.kernel_arrays, flat_offsets(templates, shape[1]), rd, model, _flat_bool(occupied), shape, marks, state)
     parent = None
     if labels is not None:
-        box = marks[3]
+        box = rd.ints[:, K.I_BOX:K.I_BOX + 4].T
+        box[:] = marks[3]
         rd = rd._replace(box=box, enter=np.argsort(box[0], kind="stable"), leave=np.argsort(box[1], kind="stable"))
         parent = marks[2]
     return EMProblem(rd, model, state, templates, shape, seen, parent)
@@ -134,13 +143,14 @@ def _candidates(cells: np.ndarray, shape: tuple[int, int]) -> K.Candidates:
                         np.zeros(cells.size), np.full((height, n_seg), -1, dtype=np.int64))
 
 
-def _work(n_readings: int, n_seg: int) -> K.TileWork:
+def _work(rd: K.EMReadings, n_seg: int) -> K.TileWork:
+    n_readings = rd.z.shape[0]
     pairs = 1 << 16
     room = 1 << 14
     return K.TileWork(np.zeros(K.CTL_SIZE, dtype=np.int64), np.zeros(n_readings // 64 + 1, dtype=np.uint64),
                       np.zeros(n_seg + 1, dtype=np.int64), np.empty(max(1024, n_readings // 8), dtype=np.int64),
                       np.zeros(K.SEGMENT + 1, dtype=np.int64), np.empty(pairs, dtype=np.int64),
-                      np.empty(pairs, dtype=np.int64), np.empty(pairs), np.full(n_readings, -1, dtype=np.int64),
+                      np.empty(pairs, dtype=np.int64), np.empty(pairs), rd.ints[:, K.I_SLOT],
                       np.empty(room, dtype=np.int64), np.empty(room), np.empty(room), np.zeros(n_seg, dtype=np.int64),
                       np.empty(1024, dtype=np.int64), np.empty(1024, dtype=np.int64), np.empty(1024, dtype=np.int64),
                       np.zeros((2, K.SEGMENT + 1)),
@@ -188,7 +198,7 @@ def run_em(problem: EMProblem, occupied: np.ndarray, candidates: np.ndarray, con
     tpl, groups = problem.templates.kernel_arrays, K.row_groups(problem.templates)
     flat = flat_offsets(problem.templates, problem.shape[1])
     cand = _candidates(candidates, problem.shape)._replace(occupied=occupied)
-    work = _work(rd.z.shape[0], cand.tile_clock.shape[1])
+    work = _work(rd, cand.tile_clock.shape[1])
     ctl = work.ctl
     peak = [0, _scratch_bytes(work)]
 

@@ -31,6 +31,10 @@ SWEEP = 0  # TileWork.ctl[CTL_MODE]: flip candidates that raise the objective
 SCORE = 1  # score every candidate once (the residual pass), flip none
 SEGMENT = 32  # columns per tile
 
+# columns of EMReadings.ints and .floats (the readings, then their EMState and arena slot)
+I_ROW0, I_COL0, I_BIN, I_M, I_JLO, I_REACH2, I_BOX, I_NOBS, I_NFAR, I_STAMP, I_SLOT, INTS = 0, 1, 2, 3, 4, 5, 7, 11, 12, 13, 14, 16
+F_Z, F_G0, F_CONST, F_S, F_WSUM, F_RATIO, F_LOG, FLOATS = 0, 1, 2, 3, 4, 5, 7, 9
+
 # TileWork.ctl slots
 CTL_MODE, CTL_ROW, CTL_SEG, CTL_STATUS = 0, 1, 2, 3
 CTL_NEED_LIST, CTL_NEED_PAIRS, CTL_NEED_ROOM = 4, 5, 6
@@ -57,7 +61,12 @@ class RowGroups(NamedTuple):
 
 
 class EMReadings(NamedTuple):
-    """The readings of an EM problem (flat arrays of one length, ``em.em_readings``)."""
+    """The readings of an EM problem (arrays of one length, ``em.em_readings``).
+
+    Every field is a column of two row-per-reading tables, ``ints`` and ``floats``, which
+    also hold each reading's ``EMState``: what the tiles need of one reading shares a cache
+    line or two, whichever pass of the robot it came from.
+    """
 
     row0: np.ndarray  # int64 sensor cell (may lie outside the grid)
     col0: np.ndarray
@@ -71,6 +80,8 @@ class EMReadings(NamedTuple):
     reach2: np.ndarray  # (2, R) int64 the cone's cells have dr^2 + dc^2 <= reach2[0], those before the window <= reach2[1]
     enter: np.ndarray  # int64 readings by row_lo (stable)
     leave: np.ndarray  # int64 readings by row_hi (stable)
+    ints: np.ndarray  # (R, INTS) int64 the table of the integer columns (I_*)
+    floats: np.ndarray  # (R, FLOATS) float64 the table of the real ones (F_*)
 
 
 class EMModel(NamedTuple):
@@ -95,8 +106,8 @@ class EMState(NamedTuple):
     wsum: np.ndarray  # (R,) float64
     nobs: np.ndarray  # (R,) int64 obstacles inside the window
     nfar: np.ndarray  # (R,) int64 obstacles before it
-    far_ratio: np.ndarray  # (2R,) float64 likelihood ratios of adding / removing a far obstacle
-    far_log: np.ndarray  # (2R,) float64 their logs
+    far_ratio: np.ndarray  # (R, 2) float64 likelihood ratios of adding / removing a far obstacle
+    far_log: np.ndarray  # (R, 2) float64 their logs
     stamp: np.ndarray  # (R,) int64 the clock when the reading last changed
 
 
@@ -270,10 +281,10 @@ def _set_sum(t, rd, model, state):
     state.s[t] = value
     c = rd.const[t]
     base = c + w * value
-    state.far_ratio[2 * t] = (c + w * q * value) / base  # likelihood ratio of adding one
-    state.far_ratio[2 * t + 1] = (c + w * value / q) / base  # ... and of removing one
-    state.far_log[2 * t] = math.log(state.far_ratio[2 * t])
-    state.far_log[2 * t + 1] = math.log(state.far_ratio[2 * t + 1])
+    state.far_ratio[t, 0] = (c + w * q * value) / base  # likelihood ratio of adding one
+    state.far_ratio[t, 1] = (c + w * value / q) / base  # ... and of removing one
+    state.far_log[t, 0] = math.log(state.far_ratio[t, 0])
+    state.far_log[t, 1] = math.log(state.far_ratio[t, 1])
 
 
 @numba.njit(cache=True, inline="always")
@@ -487,7 +498,7 @@ def _flip_gain(c, x, lo_pair, hi_pair, rd, model, cand, state, work):
     for p in range(lo_pair, hi_pair):
         t = work.tile_t[pair_pos[p]]
         if pair_g[p] == 0.0:  # a window entry whose Gaussian underflows: as a far one
-            ratio *= state.far_ratio[2 * t + far]
+            ratio *= state.far_ratio[t, far]
             continue
         base = work.slot[t]
         r = _rank(work.obs_j, base, pair_j[p] - rd.jlo[t])
@@ -519,8 +530,8 @@ def _far_changed(li, t, x, old_add, old_rem, state, work):
     hi = work.far_hi[li]
     if lo > hi:
         return
-    d_add = state.far_log[2 * t] - old_add
-    d_rem = state.far_log[2 * t + 1] - old_rem
+    d_add = state.far_log[t, 0] - old_add
+    d_rem = state.far_log[t, 1] - old_rem
     work.far_sum[0, lo] += d_add
     work.far_sum[0, hi + 1] -= d_add
     work.far_sum[1, lo] += d_rem
@@ -871,10 +882,10 @@ def _sweep_tiles(tpl, flat, groups, rd, model, cand, state, work):
                     a, b = (col0 + f_lo, col0 + f_hi) if span.sign > 0 else (col0 - f_hi, col0 - f_lo)
                     work.far_lo[li] = a - c0
                     work.far_hi[li] = b - c0
-                    work.far_sum[0, a - c0] += state.far_log[2 * t]
-                    work.far_sum[0, b - c0 + 1] -= state.far_log[2 * t]
-                    work.far_sum[1, a - c0] += state.far_log[2 * t + 1]
-                    work.far_sum[1, b - c0 + 1] -= state.far_log[2 * t + 1]
+                    work.far_sum[0, a - c0] += state.far_log[t, 0]
+                    work.far_sum[0, b - c0 + 1] -= state.far_log[t, 0]
+                    work.far_sum[1, a - c0] += state.far_log[t, 1]
+                    work.far_sum[1, b - c0 + 1] -= state.far_log[t, 1]
                 k = _window_pairs(li, t, span, r, c0, c1, c_start, False, tpl, groups, rd, model, cand, work)
                 n_pairs += k
                 if k > 0 and work.slot[t] < 0:
@@ -918,7 +929,7 @@ def _sweep_tiles(tpl, flat, groups, rd, model, cand, state, work):
                     for i in range(n_list):  # the readings that hold the cell before their windows
                         if work.far_lo[i] <= x <= work.far_hi[i]:
                             t = work.tile_t[i]
-                            old_add, old_rem = state.far_log[2 * t], state.far_log[2 * t + 1]
+                            old_add, old_rem = state.far_log[t, 0], state.far_log[t, 1]
                             state.nfar[t] += 1 if adding else -1
                             _set_sum(t, rd, model, state)
                             _far_changed(i, t, x, old_add, old_rem, state, work)
@@ -926,7 +937,7 @@ def _sweep_tiles(tpl, flat, groups, rd, model, cand, state, work):
                     for p in range(lo_pair, hi_pair):  # ... and inside them
                         i = work.pair_pos[p]
                         t = work.tile_t[i]
-                        old_add, old_rem = state.far_log[2 * t], state.far_log[2 * t + 1]
+                        old_add, old_rem = state.far_log[t, 0], state.far_log[t, 1]
                         _update_reading(t, work.pair_j[p], work.pair_g[p], adding, model, rd, state, work)
                         _far_changed(i, t, x, old_add, old_rem, state, work)
                         state.stamp[t] = now
