@@ -164,8 +164,7 @@ def map_row(log: Path, scans: int, label: str, folder: Path, args) -> Row:
         stats = m.stats
         row.runtime_s = float(m.runtime_s)
         row.index_entries = stats.get("index_entries")
-        groups = stats.get("em_sweeps_per_group")
-        row.sweeps = stats.get("sweeps", max(groups) if groups else None)
+        row.sweeps = stats.get("sweeps", stats.get("em_sweeps"))
         row.phase_seconds = stats.get("phase_seconds")
         row.stats = summarised(stats)
     return row

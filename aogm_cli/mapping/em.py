@@ -154,7 +154,7 @@ def _work(rd: K.EMReadings, n_seg: int) -> K.TileWork:
                       np.empty(room, dtype=np.int64), np.empty(room), np.empty(room), np.zeros(n_seg, dtype=np.int64),
                       np.empty(1024, dtype=np.int64), np.empty(1024, dtype=np.int64), np.empty(1024, dtype=np.int64),
                       np.zeros((2, K.SEGMENT + 1)),
-                      np.empty((9, max(1024, n_readings // 8)), dtype=np.int64))
+                      np.empty((9, max(1024, n_readings // 8)), dtype=np.int64), np.zeros(n_seg, dtype=np.int64))
 
 
 def _grown(work: K.TileWork) -> K.TileWork:

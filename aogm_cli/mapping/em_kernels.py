@@ -144,6 +144,7 @@ class TileWork(NamedTuple):
     far_hi: np.ndarray  # (far_hi < far_lo: none)
     far_sum: np.ndarray  # (2, SEGMENT + 1) float64 differences of sum_t log far ratio along the tile (add, remove)
     spans: np.ndarray  # (9, n) int64 the row's active readings and their ``RowSpan``s (seg_list points into it)
+    seg_mask: np.ndarray  # (n_seg,) int64 bit k of segment s: column s * SEGMENT + k holds a candidate
 
 
 @functools.lru_cache(maxsize=4)
@@ -734,16 +735,34 @@ def _span_at(work, k):
 
 
 @numba.njit(cache=True, inline="always")
-def _list_segments(tpl, groups, rd, work, r, n_seg):
+def _span_mask(lo, hi, s):
+    """Bits of columns lo..hi within segment s (bit k: column s * SEGMENT + k)."""
+    a = max(lo - s * SEGMENT, 0)
+    b = min(hi - s * SEGMENT, SEGMENT - 1)
+    if a > b:
+        return np.int64(0)
+    return ((np.int64(1) << np.int64(b - a + 1)) - 1) << np.int64(a)
+
+
+@numba.njit(cache=True, inline="always")
+def _list_segments(tpl, groups, rd, cand, work, r, n_seg):
     """The row's active readings with their ``RowSpan`` in ``spans`` (one each), and each
-    segment's (ascending) in seg_ptr / seg_list, as positions in ``spans``; False (with the
-    size needed in ctl) when a buffer is too small."""
+    segment's (ascending) in seg_ptr / seg_list, as positions in ``spans``: a reading is
+    listed where its cone holds a candidate of the row (``seg_mask``). False (with the size
+    needed in ctl) when a buffer is too small."""
     active = work.active
     seg_ptr = work.seg_ptr
     fill = work.seg_fill
     sp = work.spans
+    mask = work.seg_mask
+    width = cand.of_cell.shape[0] // cand.tile_clock.shape[0]
     for s in range(n_seg + 1):
         seg_ptr[s] = 0
+    for s in range(n_seg):
+        mask[s] = 0
+    for c in range(cand.row_first[r], cand.row_first[r + 1]):
+        col = cand.cell[c] - r * width
+        mask[col // SEGMENT] |= np.int64(1) << np.int64(col % SEGMENT)
     n = 0
     for wi in range(active.shape[0]):
         word = active[wi]
@@ -765,9 +784,13 @@ def _list_segments(tpl, groups, rd, work, r, n_seg):
                         sp[0, n], sp[1, n], sp[2, n], sp[3, n] = span.kind, span.first, span.o_first, span.sign
                         sp[4, n], sp[5, n], sp[6, n], sp[7, n] = span.o_lo, span.o_hi, span.f_lo, span.f_hi
                         sp[8, n] = t
+                        listed = False
                         for s in range(lo // SEGMENT, hi // SEGMENT + 1):
-                            seg_ptr[s + 1] += 1
-                        n += 1
+                            if _span_mask(lo, hi, s) & mask[s]:
+                                seg_ptr[s + 1] += 1
+                                listed = True
+                        if listed:
+                            n += 1
             word >>= np.uint64(1)
             t += 1
     for s in range(n_seg):
@@ -785,8 +808,9 @@ def _list_segments(tpl, groups, rd, work, r, n_seg):
             lo, hi = col0 - sp[5, k], col0 - sp[4, k]
         lo, hi = max(lo, rd.box[2, t]), min(hi, rd.box[3, t])
         for s in range(lo // SEGMENT, hi // SEGMENT + 1):
-            work.seg_list[fill[s]] = k
-            fill[s] += 1
+            if _span_mask(lo, hi, s) & mask[s]:
+                work.seg_list[fill[s]] = k
+                fill[s] += 1
     return True
 
 
@@ -819,7 +843,7 @@ def _sweep_tiles(tpl, flat, groups, rd, model, cand, state, work):
             continue
         ctl[CTL_ROW] = r
         _advance(rd, work, r)
-        if not _list_segments(tpl, groups, rd, work, r, n_seg):
+        if not _list_segments(tpl, groups, rd, cand, work, r, n_seg):
             ctl[CTL_STATUS] = NEED_BUFFERS
             return NEED_BUFFERS
         c_pos = ca
