@@ -64,12 +64,13 @@ def em_readings(rows, cols, bins, z, templates, grid, z_max: float, config: Forw
     m, jlo = ints[:, K.I_M], ints[:, K.I_JLO]
     box = ints[:, K.I_BOX:K.I_BOX + 4].T
     reach2 = ints[:, K.I_REACH2:K.I_REACH2 + 2].T
+    inside = ints[:, K.I_INSIDE]
     K._reading_extent(templates.kernel_arrays, K.row_groups(templates), rows, cols, bins, limits, lower,
-                      grid.shape, m, jlo, box, reach2)
+                      grid.shape, (m, jlo, box, reach2, inside))
     g0, const, _ = reading_constants(z, z_max, config)
     floats[:, K.F_G0] = g0
     floats[:, K.F_CONST] = const
-    return K.EMReadings(rows, cols, bins, z_eff, floats[:, K.F_G0], floats[:, K.F_CONST], m, jlo, box, reach2,
+    return K.EMReadings(rows, cols, bins, z_eff, floats[:, K.F_G0], floats[:, K.F_CONST], m, jlo, box, reach2, inside,
                         np.argsort(box[0], kind="stable"), np.argsort(box[1], kind="stable"), ints, floats)
 
 

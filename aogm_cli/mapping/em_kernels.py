@@ -26,13 +26,17 @@ from typing import NamedTuple
 
 import numba
 import numpy as np
+from llvmlite import ir
+from numba import types
+from numba.extending import intrinsic
 
 SWEEP = 0  # TileWork.ctl[CTL_MODE]: flip candidates that raise the objective
 SCORE = 1  # score every candidate once (the residual pass), flip none
 SEGMENT = 32  # columns per tile
 
 # columns of EMReadings.ints and .floats (the readings, then their EMState and arena slot)
-I_ROW0, I_COL0, I_BIN, I_M, I_JLO, I_REACH2, I_BOX, I_NOBS, I_NFAR, I_STAMP, I_SLOT, INTS = 0, 1, 2, 3, 4, 5, 7, 11, 12, 13, 14, 16
+I_ROW0, I_COL0, I_BIN, I_M, I_JLO, I_REACH2, I_BOX, I_NOBS, I_NFAR, I_STAMP, I_SLOT, I_INSIDE, INTS = (
+    0, 1, 2, 3, 4, 5, 7, 11, 12, 13, 14, 15, 16)
 F_Z, F_G0, F_CONST, F_S, F_WSUM, F_RATIO, F_LOG, FLOATS = 0, 1, 2, 3, 4, 5, 7, 9
 
 # TileWork.ctl slots
@@ -78,6 +82,7 @@ class EMReadings(NamedTuple):
     jlo: np.ndarray  # int64 first entry that may lie inside the Gaussian window
     box: np.ndarray  # (4, R) int64 row_lo, row_hi, col_lo, col_hi of the cone in the grid (row_lo > row_hi: none)
     reach2: np.ndarray  # (2, R) int64 the cone's cells have dr^2 + dc^2 <= reach2[0], those before the window <= reach2[1]
+    inside: np.ndarray  # int64 1 when every cell of the cone lies inside the grid (flat offsets serve)
     enter: np.ndarray  # int64 readings by row_lo (stable)
     leave: np.ndarray  # int64 readings by row_hi (stable)
     ints: np.ndarray  # (R, INTS) int64 the table of the integer columns (I_*)
@@ -147,6 +152,17 @@ class TileWork(NamedTuple):
     seg_mask: np.ndarray  # (n_seg,) int64 bit k of segment s: column s * SEGMENT + k holds a candidate
 
 
+@intrinsic
+def _trailing_zeros(typingctx, x):
+    """Compiled: the number of trailing zero bits of the uint64 x (LLVM's cttz; x != 0)."""
+    sig = types.uint64(types.uint64)
+
+    def codegen(context, builder, signature, args):
+        return builder.cttz(args[0], ir.Constant(ir.IntType(1), 1))
+
+    return sig, codegen
+
+
 @functools.lru_cache(maxsize=4)
 def row_groups(templates) -> RowGroups:
     """``RowGroups`` of ``templates`` (a ``cone.ConeTemplates``); cached, one-time set-up."""
@@ -202,13 +218,6 @@ def _gaussian(z, r, sigma, window):
 
 
 @numba.njit(cache=True, inline="always")
-def _cone_inside(tpl, rd, t, height, width):
-    """Does every cell of reading t's template lie inside the grid (then flat offsets serve)?"""
-    ext = tpl.extent
-    return rd.row0[t] - ext >= 0 and rd.row0[t] + ext < height and rd.col0[t] - ext >= 0 and rd.col0[t] + ext < width
-
-
-@numba.njit(cache=True, inline="always")
 def _entry_cell(tpl, k, j, row0, col0, height, width):
     """Flat cell of entry j of heading bin k's cone from (row0, col0), or -1 outside the grid."""
     s = tpl.offsets[tpl.base_bin[k]]
@@ -222,11 +231,12 @@ def _entry_cell(tpl, k, j, row0, col0, height, width):
 
 
 @numba.njit(cache=True)
-def _reading_extent(tpl, groups, rows, cols, bins, limits, lower, grid_shape, out_m, out_jlo, out_box, out_reach2):
+def _reading_extent(tpl, groups, rows, cols, bins, limits, lower, grid_shape, out):
     """Per reading: entries up to ``limits`` (m), the first entry at range >= ``lower`` (jlo),
     the grid rows and columns its cone's first m entries span (row_lo > row_hi: none) and the
     squared offsets (cells) of entries m - 1 and jlo - 1 (``EMReadings.reach2``)."""
     height, width = grid_shape
+    out_m, out_jlo, out_box, out_reach2, out_inside = out
     for t in range(rows.shape[0]):
         k = bins[t]
         b = tpl.base_bin[k]
@@ -241,6 +251,7 @@ def _reading_extent(tpl, groups, rows, cols, bins, limits, lower, grid_shape, ou
         out_box[3, t] = -1
         out_reach2[0, t] = -1
         out_reach2[1, t] = -1
+        out_inside[t] = 0
         if m == 0:
             continue
         # ranges are resolution * sqrt(dr^2 + dc^2) and distinct squares give distinct ranges
@@ -257,8 +268,10 @@ def _reading_extent(tpl, groups, rows, cols, bins, limits, lower, grid_shape, ou
         else:  # drow = tc dc, dcol = tb dr
             r_lo, r_hi = (dc_lo, dc_hi) if tc > 0 else (-dc_hi, -dc_lo)
             c_lo, c_hi = (dr_lo, dr_hi) if tb > 0 else (-dr_hi, -dr_lo)
-        r_lo, r_hi = max(rows[t] + r_lo, 0), min(rows[t] + r_hi, height - 1)
-        c_lo, c_hi = max(cols[t] + c_lo, 0), min(cols[t] + c_hi, width - 1)
+        r_lo, r_hi, c_lo, c_hi = rows[t] + r_lo, rows[t] + r_hi, cols[t] + c_lo, cols[t] + c_hi
+        out_inside[t] = 1 if r_lo >= 0 and r_hi < height and c_lo >= 0 and c_hi < width else 0
+        r_lo, r_hi = max(r_lo, 0), min(r_hi, height - 1)
+        c_lo, c_hi = max(c_lo, 0), min(c_hi, width - 1)
         if r_lo > r_hi or c_lo > c_hi:
             continue
         out_box[0, t] = r_lo
@@ -329,7 +342,7 @@ def _init_state(tpl, flat, rd, model, occupied, grid_shape, marks, state):
         if rd.box[0, t] <= rd.box[1, t]:
             k_bin = rd.bin[t]
             s0 = tpl.offsets[tpl.base_bin[k_bin]]
-            inside = _cone_inside(tpl, rd, t, height, width)
+            inside = rd.inside[t] != 0
             x_off = flat.offsets[flat.sel[k_bin, 0]]
             sign = flat.sel[k_bin, 1]
             at = rd.row0[t] * width + rd.col0[t]
@@ -405,7 +418,7 @@ def _build_window(t, tpl, flat, rd, model, cand, work):
         work.obs_j[base + k] = 0
     n = 0
     acc = 0.0
-    inside = _cone_inside(tpl, rd, t, height, width)
+    inside = rd.inside[t] != 0
     x_off = flat.offsets[flat.sel[k_bin, 0]]
     sign = flat.sel[k_bin, 1]
     at = rd.row0[t] * width + rd.col0[t]
@@ -766,33 +779,31 @@ def _list_segments(tpl, groups, rd, cand, work, r, n_seg):
     n = 0
     for wi in range(active.shape[0]):
         word = active[wi]
-        t = wi << 6
         while word != np.uint64(0):
-            if word & np.uint64(1):
-                span = _row_span(tpl, groups, rd, t, r)
-                if span.o_hi >= span.o_lo:
-                    col0 = rd.col0[t]
-                    if span.sign > 0:
-                        lo, hi = col0 + span.o_lo, col0 + span.o_hi
-                    else:
-                        lo, hi = col0 - span.o_hi, col0 - span.o_lo
-                    lo, hi = max(lo, rd.box[2, t]), min(hi, rd.box[3, t])
-                    if lo <= hi:
-                        if n >= sp.shape[1]:
-                            work.ctl[CTL_NEED_LIST] = max(work.ctl[CTL_NEED_LIST], 2 * sp.shape[1])
-                            return False
-                        sp[0, n], sp[1, n], sp[2, n], sp[3, n] = span.kind, span.first, span.o_first, span.sign
-                        sp[4, n], sp[5, n], sp[6, n], sp[7, n] = span.o_lo, span.o_hi, span.f_lo, span.f_hi
-                        sp[8, n] = t
-                        listed = False
-                        for s in range(lo // SEGMENT, hi // SEGMENT + 1):
-                            if _span_mask(lo, hi, s) & mask[s]:
-                                seg_ptr[s + 1] += 1
-                                listed = True
-                        if listed:
-                            n += 1
-            word >>= np.uint64(1)
-            t += 1
+            t = (wi << 6) + np.int64(_trailing_zeros(word))
+            word &= word - np.uint64(1)  # the lowest set bit off
+            span = _row_span(tpl, groups, rd, t, r)
+            if span.o_hi >= span.o_lo:
+                col0 = rd.col0[t]
+                if span.sign > 0:
+                    lo, hi = col0 + span.o_lo, col0 + span.o_hi
+                else:
+                    lo, hi = col0 - span.o_hi, col0 - span.o_lo
+                lo, hi = max(lo, rd.box[2, t]), min(hi, rd.box[3, t])
+                if lo <= hi:
+                    if n >= sp.shape[1]:
+                        work.ctl[CTL_NEED_LIST] = max(work.ctl[CTL_NEED_LIST], 2 * sp.shape[1])
+                        return False
+                    sp[0, n], sp[1, n], sp[2, n], sp[3, n] = span.kind, span.first, span.o_first, span.sign
+                    sp[4, n], sp[5, n], sp[6, n], sp[7, n] = span.o_lo, span.o_hi, span.f_lo, span.f_hi
+                    sp[8, n] = t
+                    listed = False
+                    for s in range(lo // SEGMENT, hi // SEGMENT + 1):
+                        if _span_mask(lo, hi, s) & mask[s]:
+                            seg_ptr[s + 1] += 1
+                            listed = True
+                    if listed:
+                        n += 1
     for s in range(n_seg):
         seg_ptr[s + 1] += seg_ptr[s]
         fill[s] = seg_ptr[s]
