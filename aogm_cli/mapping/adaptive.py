@@ -82,7 +82,7 @@ def map_adaptive(log, params: MapParams, detector, detector_name: str = "package
     grid = log_grid(log, params.resolution)
     sensor = log.sensor
     whole = log.read()  # EM needs every reading in memory: read the scans once
-    log_odds, observed, t_standard = standard_pass(log, grid, params, chunks=[(0, whole.time, whole.pose, whole.ranges)])
+    log_odds, observed, t_standard = standard_pass(whole, grid, params)
     forward_templates(grid, sensor)  # one-time set-up, cached, outside the clock
     t0 = time.perf_counter()
     run = lay_out_readings(whole.pose, whole.ranges, sensor, grid)

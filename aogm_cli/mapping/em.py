@@ -241,7 +241,7 @@ def map_em(log, params: MapParams, progress: Progress | None = None) -> Occupanc
     config = params.em
     grid = log_grid(log, params.resolution)
     whole = log.read()  # EM needs every reading in memory: read the scans once
-    log_odds, observed, t_standard = standard_pass(log, grid, params, chunks=[(0, whole.time, whole.pose, whole.ranges)])
+    log_odds, observed, t_standard = standard_pass(whole, grid, params)
     templates = forward_templates(grid, log.sensor)  # one-time set-up, cached, outside the clock
     K.row_groups(templates)
     t0 = time.perf_counter()

@@ -105,10 +105,20 @@ class Readings:
     z: np.ndarray
 
 
-def lay_out_readings(pose: np.ndarray, ranges: np.ndarray, sensor: SensorSpec, grid: GridSpec) -> Readings:
-    """The readings of (pose (T, 3), ranges (T, S)) as ``Readings`` on ``grid``."""
+def lay_out_readings(pose: np.ndarray, ranges: np.ndarray, sensor: SensorSpec, grid: GridSpec,
+                     chunk: int = 4096) -> Readings:
+    """The readings of (pose (T, 3), ranges (T, S)) as ``Readings`` on ``grid``, laid out
+    ``chunk`` scans at a time (the placement's temporaries stay small at any log size)."""
     templates = forward_templates(grid, sensor)
-    rows, cols, bins, z = readings_of(pose, ranges, sensor, grid, templates)
+    n = ranges.size
+    rows, cols, bins = (np.empty(n, dtype=np.int64) for _ in range(3))
+    z = np.empty(n)
+    width = ranges.shape[1] if ranges.ndim == 2 else 1
+    for start in range(0, pose.shape[0], chunk):
+        stop = min(start + chunk, pose.shape[0])
+        part = slice(start * width, stop * width)
+        rows[part], cols[part], bins[part], z[part] = readings_of(pose[start:stop], ranges[start:stop], sensor, grid,
+                                                                  templates)
     return Readings(grid, sensor, templates, ranges, rows, cols, bins, z)
 
 
