@@ -174,7 +174,8 @@ def _grown(work: K.TileWork) -> K.TileWork:
         grow |= {"pair_pos": np.empty(size, dtype=np.int64), "pair_j": np.empty(size, dtype=np.int64),
                  "pair_g": np.empty(size)}
     if ctl[K.CTL_NEED_ROOM] > work.obs_j.shape[0]:
-        size = int(ctl[K.CTL_NEED_ROOM] * 1.5) + 1
+        need = int(ctl[K.CTL_NEED_ROOM])
+        size = max(need, min(int(need * 1.5) + 1, K.ARENA_ENTRIES))
         used = int(ctl[K.CTL_BUMP])  # live slots keep their places
         for name in ("obs_j", "obs_g", "pre"):
             old = getattr(work, name)

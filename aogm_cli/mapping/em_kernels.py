@@ -33,6 +33,9 @@ from numba.extending import intrinsic
 SWEEP = 0  # TileWork.ctl[CTL_MODE]: flip candidates that raise the objective
 SCORE = 1  # score every candidate once (the residual pass), flip none
 SEGMENT = 32  # columns per tile
+# the window arena's largest size (entries of 24 bytes: 192 MB); beyond it slots are dropped
+# and rebuilt rather than kept for every reading whose cone crosses the rows being swept
+ARENA_ENTRIES = 1 << 23
 
 # columns of EMReadings.ints and .floats (the readings, then their EMState and arena slot)
 I_ROW0, I_COL0, I_BIN, I_M, I_JLO, I_REACH2, I_BOX, I_NOBS, I_NFAR, I_STAMP, I_SLOT, I_INSIDE, INTS = (
@@ -441,7 +444,9 @@ def _build_window(t, tpl, flat, rd, model, cand, work):
 @numba.njit(cache=True, inline="always")
 def _make_room(rd, work, need):
     """Slide the live slots of the arena down over the dead ones (readings that left, in
-    address order) when fewer than ``need`` entries are free; False when still too few."""
+    address order) when fewer than ``need`` entries are free. Past ARENA_ENTRIES the arena
+    does not grow: every slot is dropped instead (called before a tile builds any, so none is
+    in use; they are rebuilt from the map when needed). False when it must grow."""
     ctl = work.ctl
     top = ctl[CTL_BUMP]
     if top + need <= work.obs_j.shape[0]:
@@ -461,9 +466,22 @@ def _make_room(rd, work, need):
             out += size
         a += size
     ctl[CTL_BUMP] = out
-    if 2 * (out + need) <= work.obs_j.shape[0]:  # half free at least, or compactions come too often
+    size = work.obs_j.shape[0]
+    if 2 * (out + need) <= size:  # half free at least, or compactions come too often
         return True
-    ctl[CTL_NEED_ROOM] = 2 * (out + need)
+    if size < ARENA_ENTRIES:
+        ctl[CTL_NEED_ROOM] = min(2 * (out + need), ARENA_ENTRIES)
+        if ctl[CTL_NEED_ROOM] > size:
+            return False
+    a = 0  # the arena is as large as it gets: drop every slot
+    while a < out:
+        t = work.obs_j[a]
+        work.slot[t] = -1
+        a += _room(rd, t)
+    ctl[CTL_BUMP] = 0
+    if need <= size:
+        return True
+    ctl[CTL_NEED_ROOM] = need  # one tile needs more than the cap
     return False
 
 
