@@ -1,6 +1,7 @@
 """The adaptive mapper: standard outside clusters, EM inside, clusters from flagged readings."""
 
 import dataclasses
+import math
 from pathlib import Path
 
 import h5py
@@ -13,9 +14,12 @@ from aogm_cli.core.grid import GridSpec
 from aogm_cli.io.detectorfile import load_detector, save_detector
 from aogm_cli.io.mapfile import read_map_file
 from aogm_cli.mapping import cluster
-from aogm_cli.mapping.cluster import cluster_contacts, label_clusters
+from aogm_cli.mapping.adaptive import coupled_groups
+from aogm_cli.mapping.cluster import label_clusters
+from aogm_cli.mapping.em import em_problem, em_readings, find_root
 from aogm_cli.mapping.modes import map_file
 from aogm_cli.mapping.params import resolve_params
+from aogm_cli.mapping.sensor_models.cone import build_cone_templates
 
 WORLDS = Path(__file__).resolve().parents[1] / "worlds"
 
@@ -100,15 +104,27 @@ def test_label_clusters_is_8_connected():
     assert labels.dtype == np.int32 and labels[2, 2] == 0
 
 
-def test_cluster_contacts_and_coupled_groups():
-    ptr = np.array([0, 3, 5, 7])
-    entry_cluster = np.array([1, 1, 0, 0, 2, 3, 3])  # reading 0 touches 1; 1 touches 2; 2 touches 3
-    pairs = cluster_contacts(ptr, entry_cluster)
-    assert pairs.tolist() == [[1, 2, 3], [0, 1, 2]]
-    assert cluster.coupled_groups(pairs, 3).tolist() == [0, 1, 2]
-    joined = np.array([[1, 2, 3], [0, 0, 2]])  # one reading touches clusters 1 and 2
-    group = cluster.coupled_groups(joined, 3)
-    assert group[0] == group[1] != group[2]
+def test_coupled_groups_joins_the_clusters_one_cone_holds():
+    grid = GridSpec(0.0, 0.0, 0.1, 21, 41)
+    tpl = build_cone_templates(grid.resolution, math.radians(10.0), 4.0)
+    config = resolve_params().em
+    labels = np.zeros(grid.shape, dtype=np.int64)
+    labels[10, 8] = 1  # clusters 1 and 2 on the beam of a 1.5 m reading from (10, 5) along +x
+    labels[10, 14] = 2
+    labels[2, 10] = 3  # 3 in the cone of a reading from (2, 5) along +x only
+    labels[18, 35] = 4  # 4 in no cone
+    # reading 0 joins 1 and 2; without it they are two groups, as are 3 and 4
+    rows, cols, z = np.array([10, 2]), np.array([5, 5]), np.array([1.5, 1.0])
+    for readings, groups in (([0, 1], 3), ([1], 4)):
+        rd = em_readings(rows[readings], cols[readings], tpl.heading_bin(np.zeros(len(readings))), z[readings], tpl,
+                         grid, 4.0, config.forward)
+        occupied = np.zeros(grid.height * grid.width, dtype=bool)
+        problem = em_problem(rd, tpl, grid.shape, occupied, config, labels=labels.reshape(-1))
+        assert problem.seen[labels.reshape(-1) == 3].all() and not problem.seen[labels.reshape(-1) == 4].any()
+        assert coupled_groups(problem, 4) == groups
+        root = [find_root(problem.parent, k) for k in range(1, 5)]
+        assert (root[0] == root[1]) == (groups == 3)
+        assert len({root[1], root[2], root[3]}) == 3
 
 
 def test_readings_near_clusters_uses_the_cone_reach():
