@@ -65,8 +65,8 @@ def em_readings(rows, cols, bins, z, templates, grid, z_max: float, config: Forw
     box = ints[:, K.I_BOX:K.I_BOX + 4].T
     reach2 = ints[:, K.I_REACH2:K.I_REACH2 + 2].T
     inside = ints[:, K.I_INSIDE]
-    K._reading_extent(templates.kernel_arrays, K.row_groups(templates), rows, cols, bins, limits, lower,
-                      grid.shape, (m, jlo, box, reach2, inside))
+    K._reading_extent(templates.kernel_arrays, K.row_groups(templates), (rows, cols, bins, z_eff, limits, lower),
+                      (float(config.sigma), float(config.window)), grid.shape, (m, jlo, box, reach2, inside))
     g0, const, _ = reading_constants(z, z_max, config)
     floats[:, K.F_G0] = g0
     floats[:, K.F_CONST] = const

@@ -30,6 +30,8 @@ from llvmlite import ir
 from numba import types
 from numba.extending import intrinsic
 
+from aogm_cli.mapping.sensor_models.forward_model import cone_entries, gaussian_at
+
 SWEEP = 0  # TileWork.ctl[CTL_MODE]: flip candidates that raise the objective
 SCORE = 1  # score every candidate once (the residual pass), flip none
 SEGMENT = 32  # columns per tile
@@ -212,15 +214,6 @@ def row_groups(templates) -> RowGroups:
 
 
 @numba.njit(cache=True, inline="always")
-def _gaussian(z, r, sigma, window):
-    """N(z; r, sigma^2), 0 beyond ``window`` sigmas (as ``forward_model._fill_index``)."""
-    u = (z - r) / sigma
-    if abs(u) <= window:
-        return 1.0 / (math.sqrt(2.0 * math.pi) * sigma) * math.exp(-0.5 * u * u)
-    return 0.0
-
-
-@numba.njit(cache=True, inline="always")
 def _entry_cell(tpl, k, j, row0, col0, height, width):
     """Flat cell of entry j of heading bin k's cone from (row0, col0), or -1 outside the grid."""
     s = tpl.offsets[tpl.base_bin[k]]
@@ -234,10 +227,14 @@ def _entry_cell(tpl, k, j, row0, col0, height, width):
 
 
 @numba.njit(cache=True)
-def _reading_extent(tpl, groups, rows, cols, bins, limits, lower, grid_shape, out):
-    """Per reading: entries up to ``limits`` (m), the first entry at range >= ``lower`` (jlo),
-    the grid rows and columns its cone's first m entries span (row_lo > row_hi: none) and the
+def _reading_extent(tpl, groups, readings, gauss, grid_shape, out):
+    """Per reading of ``readings`` = (rows, cols, bins, z, limits, lower): the entries of its
+    cone (m: up to ``limits``, and beyond z only while the Gaussian, ``gauss`` = (sigma,
+    window), is not 0, as ``forward_model.cone_entries``), the first entry at range >=
+    ``lower`` (jlo), the grid rows and columns its cone spans (row_lo > row_hi: none) and the
     squared offsets (cells) of entries m - 1 and jlo - 1 (``EMReadings.reach2``)."""
+    rows, cols, bins, z, limits, lower = readings
+    sigma, window = gauss
     height, width = grid_shape
     out_m, out_jlo, out_box, out_reach2, out_inside = out
     for t in range(rows.shape[0]):
@@ -245,7 +242,7 @@ def _reading_extent(tpl, groups, rows, cols, bins, limits, lower, grid_shape, ou
         b = tpl.base_bin[k]
         s = tpl.offsets[b]
         r = tpl.ranges[s : tpl.offsets[b + 1]]
-        m = np.searchsorted(r, limits[t], side="right") if limits[t] >= 0.0 else 0
+        m = cone_entries(r, z[t], limits[t], sigma, window)
         out_m[t] = m
         out_jlo[t] = np.searchsorted(r, lower[t], side="left") if lower[t] >= 0.0 else 0
         out_box[0, t] = height  # none
@@ -372,7 +369,7 @@ def _init_state(tpl, flat, rd, model, occupied, grid_shape, marks, state):
                             parent[max(a, c)] = min(a, c)
                 if not occupied[cell]:
                     continue
-                g = 0.0 if j < rd.jlo[t] else _gaussian(rd.z[t], tpl.ranges[s0 + j], model.sigma, model.window)
+                g = 0.0 if j < rd.jlo[t] else gaussian_at(rd.z[t], tpl.ranges[s0 + j], model.sigma, model.window)
                 if g == 0.0:
                     far += 1
                     continue
@@ -430,7 +427,7 @@ def _build_window(t, tpl, flat, rd, model, cand, work):
                                                                               height, width)
         if cell < 0 or not cand.occupied[cell]:
             continue
-        g = _gaussian(rd.z[t], tpl.ranges[s0 + j], model.sigma, model.window)
+        g = gaussian_at(rd.z[t], tpl.ranges[s0 + j], model.sigma, model.window)
         if g == 0.0:
             continue
         q = j - jlo
@@ -733,7 +730,7 @@ def _window_pairs(i, t, span, r, c0, c1, c_start, fill, tpl, groups, rd, model, 
             work.count[local] = pos + 1
             work.pair_pos[pos] = i
             work.pair_j[pos] = j
-            work.pair_g[pos] = _gaussian(rd.z[t], tpl.ranges[s0 + j], model.sigma, model.window)
+            work.pair_g[pos] = gaussian_at(rd.z[t], tpl.ranges[s0 + j], model.sigma, model.window)
     return n
 
 
@@ -843,6 +840,32 @@ def _list_segments(tpl, groups, rd, cand, work, r, n_seg):
     return True
 
 
+@numba.njit(cache=True, inline="always")
+def _row_unchanged(rd, cand, state, work, r, n_seg):
+    """True (and every candidate of row r stamped as scored now) when no active reading
+    changed since the row's tiles were last visited: a check of one stamp per reading
+    instead of listing them (late sweeps change few readings)."""
+    since = cand.tile_clock[r, 0]
+    for s in range(1, n_seg):
+        since = min(since, cand.tile_clock[r, s])
+    if since < 0:
+        return False
+    active = work.active
+    for wi in range(active.shape[0]):
+        word = active[wi]
+        while word != np.uint64(0):
+            t = (wi << 6) + np.int64(_trailing_zeros(word))
+            word &= word - np.uint64(1)
+            if state.stamp[t] > since:
+                return False
+    now = work.ctl[CTL_CLOCK]
+    for c in range(cand.row_first[r], cand.row_first[r + 1]):
+        cand.stamp[c] = now
+    for s in range(n_seg):
+        cand.tile_clock[r, s] = now
+    return True
+
+
 # _nrt=False: the sweep allocates nothing (its scratch comes in ``work``), and without numba's
 # reference-counting runtime the arrays it hands to the inlined helpers cost nothing per call
 @numba.njit(cache=True, _nrt=False)
@@ -872,6 +895,8 @@ def _sweep_tiles(tpl, flat, groups, rd, model, cand, state, work):
             continue
         ctl[CTL_ROW] = r
         _advance(rd, work, r)
+        if mode == SWEEP and ctl[CTL_SEG] == 0 and _row_unchanged(rd, cand, state, work, r, n_seg):
+            continue  # no reading whose cone crosses the row changed since its last visit
         if not _list_segments(tpl, groups, rd, cand, work, r, n_seg):
             ctl[CTL_STATUS] = NEED_BUFFERS
             return NEED_BUFFERS

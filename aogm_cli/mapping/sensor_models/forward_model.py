@@ -26,7 +26,7 @@ import numba
 import numpy as np
 
 from aogm_cli.core.errors import InputError
-from aogm_cli.mapping.sensor_models.cone import cone_flat_cells, flat_offsets, range_search
+from aogm_cli.mapping.sensor_models.cone import cone_flat_cells, flat_offsets
 
 
 @dataclass(frozen=True)
@@ -143,6 +143,29 @@ def reading_constants(z: np.ndarray, z_max: float, config: ForwardModelConfig):
     return g0, const, 1.0 - config.p_rand - config.p_max
 
 
+@numba.njit(cache=True, inline="always")
+def gaussian_at(z, r, sigma, window):
+    """Compiled N(z; r, sigma^2), 0 beyond ``window`` sigmas: the one formula of every kernel."""
+    u = (z - r) / sigma
+    if abs(u) <= window:
+        return 1.0 / (math.sqrt(2.0 * math.pi) * sigma) * math.exp(-0.5 * u * u)
+    return 0.0
+
+
+@numba.njit(cache=True)
+def cone_entries(r, z, limit, sigma, window):
+    """How many of a template bin's entries (ranges ``r``, sorted) a reading's cone holds: those
+    up to ``limit``, and beyond the range z only while the Gaussian is not 0 (rounding at
+    z + window sigma, or an underflow, must not leave a cell of zero weight after the window's
+    obstacles, where it would scale their terms by q as if it came before them)."""
+    if not limit >= 0.0:
+        return 0
+    m = np.searchsorted(r, limit, side="right")
+    while m > 0 and r[m - 1] > z and gaussian_at(z, r[m - 1], sigma, window) == 0.0:
+        m -= 1
+    return m
+
+
 @numba.njit(cache=True)
 def _reading_sum(ptr, cell, g, g0, p_hit, occupied, t):
     """S_t for reading t (arrays of ``ForwardArrays``) under the binary map ``occupied`` (flat bool)."""
@@ -194,8 +217,6 @@ def _fill_index(tpl, flat, grid, readings, sigma, window, out):
     offsets = tpl.offsets
     ranges = tpl.ranges
     base_bin = tpl.base_bin
-    range_index = tpl.range_index
-    resolution = tpl.resolution
     ext = tpl.extent
     height = grid.height
     width = grid.width
@@ -211,7 +232,6 @@ def _fill_index(tpl, flat, grid, readings, sigma, window, out):
     counts = out.counts
     ib = out.scratch
     n_cells = height * width
-    norm = 1.0 / (math.sqrt(2.0 * math.pi) * sigma)
     use_mask = mask.shape[0] > 0
     drop = held_free.shape[0] > 0
     pos = 0
@@ -224,7 +244,7 @@ def _fill_index(tpl, flat, grid, readings, sigma, window, out):
         k = bins[t]
         b = base_bin[k]
         r = ranges[offsets[b] : offsets[b + 1]]
-        m = range_search(r, range_index[b], resolution, limits[t], True)
+        m = cone_entries(r, z[t], limits[t], sigma, window)
         cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width)
         touches = not use_mask
         n = 0
@@ -237,8 +257,7 @@ def _fill_index(tpl, flat, grid, readings, sigma, window, out):
             if drop and held_free[c]:
                 continue
             out_cell[pos + n] = c
-            u = (z[t] - r[j]) / sigma
-            out_g[pos + n] = norm * math.exp(-0.5 * u * u) if abs(u) <= window else 0.0
+            out_g[pos + n] = gaussian_at(z[t], r[j], sigma, window)
             n += 1
         if touches:  # else none of its cells is in the mask: the reading keeps no entry
             counts[t] = n
