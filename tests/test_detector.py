@@ -385,3 +385,18 @@ def test_train_help_documents_features_and_labels():
     assert result.exit_code == 0
     for phrase in ("R = 7", "specular", "depth edge", "held out", "Example", "standard map", "--arc-wrong-min"):
         assert phrase in result.output
+
+
+def test_flags_made_in_chunks_equal_the_whole_log_at_once():
+    """The detector reads a log a few thousand scans at a time (bounded memory); each chunk
+    carries the neighbouring scans its features read, so the flags do not depend on it."""
+    from aogm_cli.io.detectorfile import load_detector
+
+    detector = load_detector(None)
+    rng = np.random.default_rng(3)
+    ranges = rng.uniform(0.2, 6.0, size=(301, 24)).astype(np.float32)
+    ranges[rng.random(ranges.shape) < 0.1] = np.inf
+    whole = detector.flag(ranges, 5.0, chunk=10**9)
+    for chunk in (1, 2, 7, 100, 300):
+        assert np.array_equal(detector.flag(ranges, 5.0, chunk=chunk), whole)
+    assert 0 < whole.sum() < whole.size

@@ -73,12 +73,23 @@ class Detector:
         """(N,) bool: p(y = 1) >= threshold."""
         return self.predict_proba(x) >= self.threshold
 
-    def flag(self, ranges: np.ndarray, max_range: float) -> np.ndarray:
-        """(T, S) bool: the readings whose swept region is cluttered or erroneous (y = 1)."""
+    def flag(self, ranges: np.ndarray, max_range: float, chunk: int = 8192) -> np.ndarray:
+        """(T, S) bool: the readings whose swept region is cluttered or erroneous (y = 1).
+
+        ``chunk`` scans at a time (the features and the hidden layer are about 200 bytes per
+        reading), each chunk with the ``time_neighbours`` scans on either side that its
+        features read, so the flags equal those of the whole log at once."""
         ranges = np.asarray(ranges)
-        if ranges.size == 0:
-            return np.zeros(ranges.shape, dtype=bool)
-        return self.flag_features(features(ranges, max_range, self.feature_spec)).reshape(ranges.shape)
+        out = np.zeros(ranges.shape, dtype=bool)
+        pad = self.feature_spec.time_neighbours
+        n = ranges.shape[0] if ranges.ndim else 0
+        for start in range(0, n, chunk):
+            stop = min(start + chunk, n)
+            lo, hi = max(start - pad, 0), min(stop + pad, n)
+            part = ranges[lo:hi]
+            flags = self.flag_features(features(part, max_range, self.feature_spec)).reshape(part.shape)
+            out[start:stop] = flags[start - lo : start - lo + stop - start]
+        return out
 
 
 @dataclass(frozen=True)
