@@ -51,7 +51,7 @@ def bench(world_name: str, log_path: Path) -> None:
     sweeps = np.min([r[3] for r in runs], axis=0)
     t_total = min(r[4] for r in runs)
     # the readings' two tables (their state included) and the orders they enter and leave the tiles by
-    readings_bytes = rd.ints.nbytes + rd.floats.nbytes + rd.enter.nbytes + rd.leave.nbytes
+    readings_bytes = rd.ints.nbytes + rd.floats.nbytes + rd.enter.nbytes + rd.leave.nbytes + rd.window_leave.nbytes
     print(f"\n{world_name}: {rd.z.size} readings, {result.candidates.size} candidate cells")
     print(f"  standard pass (ceiling)    {t_std * 1e3:8.2f} ms")
     print(f"  EM's readings              {t_readings * 1e3:8.2f} ms")

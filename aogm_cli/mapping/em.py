@@ -70,8 +70,16 @@ def em_readings(rows, cols, bins, z, templates, grid, z_max: float, config: Forw
     g0, const, _ = reading_constants(z, z_max, config)
     floats[:, K.F_G0] = g0
     floats[:, K.F_CONST] = const
-    return K.EMReadings(rows, cols, bins, z_eff, floats[:, K.F_G0], floats[:, K.F_CONST], m, jlo, box, reach2, inside,
-                        np.argsort(box[0], kind="stable"), np.argsort(box[1], kind="stable"), ints, floats)
+    window_hi = ints[:, K.I_WINDOW_HI]
+    rd = K.EMReadings(rows, cols, bins, z_eff, floats[:, K.F_G0], floats[:, K.F_CONST], m, jlo, box, reach2, inside,
+                      window_hi, _order(box[0]), _order(box[1]), _order(window_hi), ints, floats)
+    K._window_rows(templates.kernel_arrays, rd, grid.height, window_hi)
+    return rd._replace(window_leave=_order(window_hi))
+
+
+def _order(key: np.ndarray) -> np.ndarray:
+    """The readings by ``key`` (stable), as int32."""
+    return np.argsort(key, kind="stable").astype(np.int32)
 
 
 @dataclass
@@ -113,7 +121,7 @@ def em_problem(rd: K.EMReadings, templates, shape: tuple[int, int], occupied: np
     if labels is not None:
         box = rd.ints[:, K.I_BOX:K.I_BOX + 4].T
         box[:] = marks[3]
-        rd = rd._replace(box=box, enter=np.argsort(box[0], kind="stable"), leave=np.argsort(box[1], kind="stable"))
+        rd = rd._replace(box=box, enter=_order(box[0]), leave=_order(box[1]))
         parent = marks[2]
     return EMProblem(rd, model, state, templates, shape, seen, parent)
 
@@ -208,7 +216,7 @@ def run_em(problem: EMProblem, occupied: np.ndarray, candidates: np.ndarray, con
         nonlocal work
         before = ctl[K.CTL_FLIPS], ctl[K.CTL_SCORED], ctl[K.CTL_PAIRS]
         ctl[K.CTL_MODE], ctl[K.CTL_ROW], ctl[K.CTL_SEG], ctl[K.CTL_ENTER], ctl[K.CTL_LEAVE] = mode, 0, 0, 0, 0
-        ctl[K.CTL_BUMP] = 0
+        ctl[K.CTL_BUMP] = ctl[K.CTL_WINDOW_LEAVE] = 0
         work.active.fill(0)
         work.slot.fill(-1)
         while K._sweep_tiles(tpl, flat, groups, rd, model, cand, state, work) == K.NEED_BUFFERS:

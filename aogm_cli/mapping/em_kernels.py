@@ -40,16 +40,16 @@ SEGMENT = 32  # columns per tile
 ARENA_ENTRIES = 1 << 23
 
 # columns of EMReadings.ints and .floats (the readings, then their EMState and arena slot)
-I_ROW0, I_COL0, I_BIN, I_M, I_JLO, I_REACH2, I_BOX, I_NOBS, I_NFAR, I_STAMP, I_SLOT, I_INSIDE, INTS = (
-    0, 1, 2, 3, 4, 5, 7, 11, 12, 13, 14, 15, 16)
+I_ROW0, I_COL0, I_BIN, I_M, I_JLO, I_REACH2, I_BOX, I_NOBS, I_NFAR, I_STAMP, I_SLOT, I_INSIDE, I_WINDOW_HI, INTS = (
+    0, 1, 2, 3, 4, 5, 7, 11, 12, 13, 14, 15, 16, 17)
 F_Z, F_G0, F_CONST, F_S, F_WSUM, F_RATIO, F_LOG, FLOATS = 0, 1, 2, 3, 4, 5, 7, 9
 
 # TileWork.ctl slots
 CTL_MODE, CTL_ROW, CTL_SEG, CTL_STATUS = 0, 1, 2, 3
 CTL_NEED_LIST, CTL_NEED_PAIRS, CTL_NEED_ROOM = 4, 5, 6
 CTL_ENTER, CTL_LEAVE, CTL_CLOCK, CTL_FLIPS, CTL_SCORED, CTL_PAIRS = 7, 8, 9, 10, 11, 12
-CTL_BUMP, CTL_BUILT = 13, 14
-CTL_SIZE = 15
+CTL_BUMP, CTL_BUILT, CTL_WINDOW_LEAVE = 13, 14, 15
+CTL_SIZE = 16
 DONE, NEED_BUFFERS = 0, 1
 
 
@@ -88,8 +88,10 @@ class EMReadings(NamedTuple):
     box: np.ndarray  # (4, R) int64 row_lo, row_hi, col_lo, col_hi of the cone in the grid (row_lo > row_hi: none)
     reach2: np.ndarray  # (2, R) int64 the cone's cells have dr^2 + dc^2 <= reach2[0], those before the window <= reach2[1]
     inside: np.ndarray  # int64 1 when every cell of the cone lies inside the grid (flat offsets serve)
-    enter: np.ndarray  # int64 readings by row_lo (stable)
-    leave: np.ndarray  # int64 readings by row_hi (stable)
+    window_hi: np.ndarray  # int64 the last grid row of the cone's window cells (-1: none)
+    enter: np.ndarray  # int32 readings by row_lo (stable)
+    leave: np.ndarray  # int32 readings by row_hi (stable)
+    window_leave: np.ndarray  # int32 readings by window_hi (stable): their window slots are dropped past it
     ints: np.ndarray  # (R, INTS) int64 the table of the integer columns (I_*)
     floats: np.ndarray  # (R, FLOATS) float64 the table of the real ones (F_*)
 
@@ -278,6 +280,19 @@ def _reading_extent(tpl, groups, readings, gauss, grid_shape, out):
         out_box[1, t] = r_hi
         out_box[2, t] = c_lo
         out_box[3, t] = c_hi
+
+
+@numba.njit(cache=True)
+def _window_rows(tpl, rd, height, out):
+    """The last grid row of each reading's window cells (entries jlo .. m - 1; -1: none)."""
+    for t in range(rd.z.shape[0]):
+        k = rd.bin[t]
+        s0 = tpl.offsets[tpl.base_bin[k]]
+        tc, td = tpl.transform[k, 2], tpl.transform[k, 3]
+        hi = np.int64(-1)
+        for j in range(rd.jlo[t], rd.m[t]):
+            hi = max(hi, rd.row0[t] + tc * np.int64(tpl.dcol[s0 + j]) + td * np.int64(tpl.drow[s0 + j]))
+        out[t] = min(hi, height - 1)
 
 
 @numba.njit(cache=True, inline="always")
@@ -753,6 +768,11 @@ def _advance(rd, work, r):
         work.slot[t] = -1  # its arena slot (if any) is dead
         k += 1
     ctl[CTL_LEAVE] = k
+    k = ctl[CTL_WINDOW_LEAVE]
+    while k < n_read and rd.window_hi[rd.window_leave[k]] < r:
+        work.slot[rd.window_leave[k]] = -1  # the sweep is past its window: no tile needs the slot again
+        k += 1
+    ctl[CTL_WINDOW_LEAVE] = k
 
 
 @numba.njit(cache=True, inline="always")
