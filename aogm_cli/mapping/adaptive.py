@@ -25,8 +25,8 @@ def cluster_problem(run: Readings, clusters: np.ndarray, occupied: np.ndarray, c
     cluster cell (``cluster.readings_near_clusters``), under the flat map ``occupied``, with
     which clusters share a reading."""
     near = readings_near_clusters(clusters, run.rows, run.cols, run.z, run.grid, run.sensor.max_range, config.forward)
-    rd = em_readings(run.rows[near], run.cols[near], run.bins[near], run.z[near], run.templates, run.grid,
-                     run.sensor.max_range, config.forward)
+    rd = em_readings(run.rows, run.cols, run.bins, run.z, run.templates, run.grid, run.sensor.max_range,
+                     config.forward, select=near)
     return em_problem(rd, run.templates, run.grid.shape, occupied, config, labels=clusters.reshape(-1))
 
 

@@ -42,19 +42,22 @@ class EMResult:
     scratch_bytes: int  # the tiles' scratch at its largest
 
 
-def em_readings(rows, cols, bins, z, templates, grid, z_max: float, config: ForwardModelConfig) -> K.EMReadings:
+def em_readings(rows, cols, bins, z, templates, grid, z_max: float, config: ForwardModelConfig,
+                select: np.ndarray | None = None) -> K.EMReadings:
     """The readings (sensor cells, heading bins, template ranges; flat arrays of one length, as
-    ``pipeline.Readings`` has them) as EM's kernels take them. NaN readings must be left out;
-    +inf is a max-range reading (cone up to z_max); other cones end ``config.window`` sigmas
-    beyond z."""
-    z = np.asarray(z, dtype=np.float64).reshape(-1)
+    ``pipeline.Readings`` has them) as EM's kernels take them, or those ``select`` picks (a
+    bool mask or positions; taken one column at a time, without a copy of every array). NaN
+    readings must be left out; +inf is a max-range reading (cone up to z_max); other cones end
+    ``config.window`` sigmas beyond z."""
+    pick = (lambda a: np.asarray(a).reshape(-1)) if select is None else (lambda a: np.asarray(a).reshape(-1)[select])
+    z = pick(z).astype(np.float64, copy=False)
     if np.isnan(z).any():
         raise ValueError("NaN readings must be left out of EM's readings")
     n = z.shape[0]
     ints = np.zeros((n, K.INTS), dtype=np.int64)
     floats = np.zeros((n, K.FLOATS))
     for col, a in ((K.I_ROW0, rows), (K.I_COL0, cols), (K.I_BIN, bins)):
-        ints[:, col] = np.asarray(a, dtype=np.int64).reshape(-1)
+        ints[:, col] = pick(a)
     rows, cols, bins = ints[:, K.I_ROW0], ints[:, K.I_COL0], ints[:, K.I_BIN]
     z_eff = floats[:, K.F_Z]
     z_eff[:] = np.where(np.isfinite(z), np.minimum(z, z_max), z_max)
@@ -256,8 +259,8 @@ def map_em(log, params: MapParams, progress: Progress | None = None) -> Occupanc
     t0 = time.perf_counter()
     run = lay_out_readings(whole.pose, whole.ranges, log.sensor, grid)
     keep = ~np.isnan(run.z)
-    rd = em_readings(run.rows[keep], run.cols[keep], run.bins[keep], run.z[keep], templates, grid,
-                     log.sensor.max_range, config.forward)
+    rd = em_readings(run.rows, run.cols, run.bins, run.z, templates, grid, log.sensor.max_range, config.forward,
+                     select=keep)
     del run, keep
     t_readings = time.perf_counter() - t0
     t0 = time.perf_counter()

@@ -35,9 +35,9 @@ from aogm_cli.mapping.sensor_models.forward_model import cone_entries, gaussian_
 SWEEP = 0  # TileWork.ctl[CTL_MODE]: flip candidates that raise the objective
 SCORE = 1  # score every candidate once (the residual pass), flip none
 SEGMENT = 32  # columns per tile
-# the window arena's largest size (entries of 24 bytes: 192 MB); beyond it slots are dropped
-# and rebuilt rather than kept for every reading whose cone crosses the rows being swept
-ARENA_ENTRIES = 1 << 23
+# the window arena's largest size (entries of 24 bytes: 96 MB); beyond it slots are dropped
+# and rebuilt (a slot lives while the sweep crosses its reading's window rows)
+ARENA_ENTRIES = 1 << 22
 
 # columns of EMReadings.ints and .floats (the readings, then their EMState and arena slot)
 I_ROW0, I_COL0, I_BIN, I_M, I_JLO, I_REACH2, I_BOX, I_NOBS, I_NFAR, I_STAMP, I_SLOT, I_INSIDE, I_WINDOW_HI, INTS = (
