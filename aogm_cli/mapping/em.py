@@ -54,7 +54,7 @@ def em_readings(rows, cols, bins, z, templates, grid, z_max: float, config: Forw
     if np.isnan(z).any():
         raise ValueError("NaN readings must be left out of EM's readings")
     n = z.shape[0]
-    ints = np.zeros((n, K.INTS), dtype=np.int64)
+    ints = np.zeros((n, K.INTS), dtype=np.int32)  # every integer of a reading fits (see em_kernels.EMReadings)
     floats = np.zeros((n, K.FLOATS))
     for col, a in ((K.I_ROW0, rows), (K.I_COL0, cols), (K.I_BIN, bins)):
         ints[:, col] = pick(a)

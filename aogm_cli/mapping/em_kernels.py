@@ -77,22 +77,24 @@ class EMReadings(NamedTuple):
     line or two, whichever pass of the robot it came from.
     """
 
-    row0: np.ndarray  # int64 sensor cell (may lie outside the grid)
+    row0: np.ndarray  # int32 sensor cell (may lie outside the grid)
     col0: np.ndarray
-    bin: np.ndarray  # int64 heading bin
+    bin: np.ndarray  # int32 heading bin
     z: np.ndarray  # float64 range in template ranges (max-range readings: z_max)
     g0: np.ndarray  # float64 G0_t
     const: np.ndarray  # float64 C_t
-    m: np.ndarray  # int64 template entries of the (truncated) cone
-    jlo: np.ndarray  # int64 first entry that may lie inside the Gaussian window
-    box: np.ndarray  # (4, R) int64 row_lo, row_hi, col_lo, col_hi of the cone in the grid (row_lo > row_hi: none)
-    reach2: np.ndarray  # (2, R) int64 the cone's cells have dr^2 + dc^2 <= reach2[0], those before the window <= reach2[1]
-    inside: np.ndarray  # int64 1 when every cell of the cone lies inside the grid (flat offsets serve)
-    window_hi: np.ndarray  # int64 the last grid row of the cone's window cells (-1: none)
+    m: np.ndarray  # int32 template entries of the (truncated) cone
+    jlo: np.ndarray  # int32 first entry that may lie inside the Gaussian window
+    box: np.ndarray  # (4, R) int32 row_lo, row_hi, col_lo, col_hi of the cone in the grid (row_lo > row_hi: none)
+    reach2: np.ndarray  # (2, R) int32 the cone's cells have dr^2 + dc^2 <= reach2[0], those before the window <= reach2[1]
+    inside: np.ndarray  # int32 1 when every cell of the cone lies inside the grid (flat offsets serve)
+    window_hi: np.ndarray  # int32 the last grid row of the cone's window cells (-1: none)
     enter: np.ndarray  # int32 readings by row_lo (stable)
     leave: np.ndarray  # int32 readings by row_hi (stable)
     window_leave: np.ndarray  # int32 readings by window_hi (stable): their window slots are dropped past it
-    ints: np.ndarray  # (R, INTS) int64 the table of the integer columns (I_*)
+    ints: np.ndarray  # (R, INTS) int32 the table of the integer columns (I_*): cells, bins, template entries
+    # (< 2^31 for any template), counts, arena slots (< ARENA_ENTRIES but for one huge tile) and
+    # the clock of stamps (accepted flips, < 2^31)
     floats: np.ndarray  # (R, FLOATS) float64 the table of the real ones (F_*)
 
 
@@ -116,11 +118,11 @@ class EMState(NamedTuple):
 
     s: np.ndarray  # (R,) float64 S_t
     wsum: np.ndarray  # (R,) float64
-    nobs: np.ndarray  # (R,) int64 obstacles inside the window
-    nfar: np.ndarray  # (R,) int64 obstacles before it
+    nobs: np.ndarray  # (R,) int32 obstacles inside the window
+    nfar: np.ndarray  # (R,) int32 obstacles before it
     far_ratio: np.ndarray  # (R, 2) float64 likelihood ratios of adding / removing a far obstacle
     far_log: np.ndarray  # (R, 2) float64 their logs
-    stamp: np.ndarray  # (R,) int64 the clock when the reading last changed
+    stamp: np.ndarray  # (R,) int32 the clock when the reading last changed
 
 
 class Candidates(NamedTuple):
@@ -146,7 +148,7 @@ class TileWork(NamedTuple):
     pair_pos: np.ndarray  # int64 listing (position in the tile's reading list) of each window pair
     pair_j: np.ndarray  # int64 template entry
     pair_g: np.ndarray  # float64 its Gaussian (0 before the window)
-    slot: np.ndarray  # (R,) int64 where each active reading's window obstacles are in the arena (-1: none)
+    slot: np.ndarray  # (R,) int32 where each active reading's window obstacles are in the arena (-1: none)
     obs_j: np.ndarray  # int64 arena: per slot its reading (header), then a bit per window entry (occupied or not)
     obs_g: np.ndarray  # float64 arena: the window obstacles' Gaussians, in range order
     pre: np.ndarray  # float64 arena: their prefix sums (one more than obstacles)
