@@ -103,7 +103,8 @@ def em_problem(rd: K.EMReadings, templates, shape: tuple[int, int], occupied: np
     """Every reading's likelihood state under the flat binary map ``occupied`` (one walk of its
     cone), the cells the cones hold, and with ``labels`` (flat cluster ids, 0 outside; EM's
     candidates are then the cluster cells) which clusters share a reading, each reading's
-    extent narrowed to its cluster cells."""
+    extent narrowed to its cluster cells. The state is written into ``rd``'s own tables (and,
+    with ``labels``, the narrowed extents): build one problem per ``em_readings`` result."""
     fwd = config.forward
     p_hit = float(fwd.p_hit)
     top = int(rd.m.max()) if rd.m.size else 0
