@@ -282,12 +282,12 @@ def test_run_em_continues_on_its_problem():
                        rtol=0, atol=1e-9)
 
 
-def tiny_work(n_readings, n_seg):
+def tiny_work(rd, n_seg):
     """EM's tile scratch with every growable buffer one element long: every tile asks for more."""
-    work = ORIGINAL_WORK(n_readings, n_seg)
+    work = ORIGINAL_WORK(rd, n_seg)
     one = {name: np.empty(1, dtype=getattr(work, name).dtype)
            for name in ("seg_list", "far_lo", "far_hi", "pair_pos", "pair_j", "pair_g", "obs_j", "obs_g", "pre")}
-    return work._replace(spans=np.empty((9, 1), dtype=np.int64), **one)
+    return work._replace(spans=np.empty((work.spans.shape[0], 1), dtype=np.int64), **one)
 
 
 ORIGINAL_WORK, ORIGINAL_GROWN = E._work, E._grown

@@ -75,8 +75,8 @@ def em_readings(rows, cols, bins, z, templates, grid, z_max: float, config: Forw
     floats[:, K.F_CONST] = const
     window_hi = ints[:, K.I_WINDOW_HI]
     rd = K.EMReadings(rows, cols, bins, z_eff, floats[:, K.F_G0], floats[:, K.F_CONST], m, jlo, box, reach2, inside,
-                      window_hi, _order(box[0]), _order(box[1]), _order(window_hi), ints, floats)
-    K._window_rows(templates.kernel_arrays, rd, grid.height, window_hi)
+                      window_hi, _order(box[0]), _order(box[1]), np.zeros(0, dtype=np.int32), ints, floats)
+    K._window_rows(templates.kernel_arrays, rd, grid.height, window_hi)  # needs the fields above only
     return rd._replace(window_leave=_order(window_hi))
 
 
@@ -131,10 +131,8 @@ def em_problem(rd: K.EMReadings, templates, shape: tuple[int, int], occupied: np
 
 
 def find_root(parent: np.ndarray, x: int) -> int:
-    """The union-find root of x in ``EMProblem.parent``."""
-    while parent[x] != x:
-        x = parent[x]
-    return x
+    """The union-find root of x in ``EMProblem.parent`` (the kernels' own ``_find``)."""
+    return int(K._find(parent, x))
 
 
 def _flat_bool(a: np.ndarray) -> np.ndarray:
@@ -167,7 +165,7 @@ def _work(rd: K.EMReadings, n_seg: int) -> K.TileWork:
                       np.empty(room, dtype=np.int64), np.empty(room), np.empty(room), np.zeros(n_seg, dtype=np.int64),
                       np.empty(1024, dtype=np.int64), np.empty(1024, dtype=np.int64), np.empty(1024, dtype=np.int64),
                       np.zeros((2, K.SEGMENT + 1)),
-                      np.empty((9, max(1024, n_readings // 8)), dtype=np.int64), np.zeros(n_seg, dtype=np.int64))
+                      np.empty((11, max(1024, n_readings // 8)), dtype=np.int64), np.zeros(n_seg, dtype=np.int64))
 
 
 def _grown(work: K.TileWork) -> K.TileWork:
@@ -177,7 +175,7 @@ def _grown(work: K.TileWork) -> K.TileWork:
     if ctl[K.CTL_NEED_LIST] > work.seg_list.shape[0]:
         grow["seg_list"] = np.empty(int(ctl[K.CTL_NEED_LIST] * 1.5) + 1, dtype=np.int64)
     if ctl[K.CTL_NEED_LIST] > work.spans.shape[1]:
-        grow["spans"] = np.empty((9, int(ctl[K.CTL_NEED_LIST] * 1.5) + 1), dtype=np.int64)
+        grow["spans"] = np.empty((11, int(ctl[K.CTL_NEED_LIST] * 1.5) + 1), dtype=np.int64)
     if ctl[K.CTL_NEED_LIST] > work.far_lo.shape[0]:
         size = int(ctl[K.CTL_NEED_LIST] * 1.5) + 1
         grow |= {name: np.empty(size, dtype=np.int64) for name in ("tile_t", "far_lo", "far_hi")}

@@ -14,8 +14,9 @@ reach. For one segment, the (candidate, reading) pairs are generated from the te
 (reading order within each candidate, as the sweep needs them), the candidates are visited
 in order and each flip updates its readings' state. The obstacles of a reading inside its
 Gaussian window (which a flip's score needs in range order, with prefix sums) are rebuilt
-from the map in the tile's scratch when first needed and dropped with the tile; what a
-reading keeps between tiles is S_t, the window's sum, its obstacle counts and two ratios.
+from the map into an arena when a tile first needs them and dropped once the sweep passes
+the window's last row (or the arena reaches its cap); what a reading keeps otherwise is S_t,
+the window's sum, its obstacle counts and the ratios of adding or removing a far obstacle.
 """
 
 from __future__ import annotations
@@ -45,11 +46,11 @@ I_ROW0, I_COL0, I_BIN, I_M, I_JLO, I_REACH2, I_BOX, I_NOBS, I_NFAR, I_STAMP, I_S
 F_Z, F_G0, F_CONST, F_S, F_WSUM, F_RATIO, F_LOG, FLOATS = 0, 1, 2, 3, 4, 5, 7, 9
 
 # TileWork.ctl slots
-CTL_MODE, CTL_ROW, CTL_SEG, CTL_STATUS = 0, 1, 2, 3
-CTL_NEED_LIST, CTL_NEED_PAIRS, CTL_NEED_ROOM = 4, 5, 6
-CTL_ENTER, CTL_LEAVE, CTL_CLOCK, CTL_FLIPS, CTL_SCORED, CTL_PAIRS = 7, 8, 9, 10, 11, 12
-CTL_BUMP, CTL_BUILT, CTL_WINDOW_LEAVE = 13, 14, 15
-CTL_SIZE = 16
+CTL_MODE, CTL_ROW, CTL_SEG = 0, 1, 2
+CTL_NEED_LIST, CTL_NEED_PAIRS, CTL_NEED_ROOM = 3, 4, 5
+CTL_ENTER, CTL_LEAVE, CTL_CLOCK, CTL_FLIPS, CTL_SCORED, CTL_PAIRS = 6, 7, 8, 9, 10, 11
+CTL_BUMP, CTL_WINDOW_LEAVE = 12, 13
+CTL_SIZE = 14
 DONE, NEED_BUFFERS = 0, 1
 
 
@@ -157,7 +158,7 @@ class TileWork(NamedTuple):
     far_lo: np.ndarray  # int64 per listing: the tile columns where the cone's cells lie before its window
     far_hi: np.ndarray  # (far_hi < far_lo: none)
     far_sum: np.ndarray  # (2, SEGMENT + 1) float64 differences of sum_t log far ratio along the tile (add, remove)
-    spans: np.ndarray  # (9, n) int64 the row's active readings and their ``RowSpan``s (seg_list points into it)
+    spans: np.ndarray  # (11, n) int64 the row's active readings' ``RowSpan``s, readings and columns (seg_list points into it)
     seg_mask: np.ndarray  # (n_seg,) int64 bit k of segment s: column s * SEGMENT + k holds a candidate
 
 
@@ -425,7 +426,6 @@ def _build_window(t, tpl, flat, rd, model, cand, work):
     s0 = tpl.offsets[tpl.base_bin[k_bin]]
     head = work.ctl[CTL_BUMP]
     work.ctl[CTL_BUMP] = head + _room(rd, t)
-    work.ctl[CTL_BUILT] += 1
     work.obs_j[head] = t
     base = head + 1
     work.slot[t] = base
@@ -834,6 +834,7 @@ def _list_segments(tpl, groups, rd, cand, work, r, n_seg):
                     sp[0, n], sp[1, n], sp[2, n], sp[3, n] = span.kind, span.first, span.o_first, span.sign
                     sp[4, n], sp[5, n], sp[6, n], sp[7, n] = span.o_lo, span.o_hi, span.f_lo, span.f_hi
                     sp[8, n] = t
+                    sp[9, n], sp[10, n] = lo, hi
                     listed = False
                     for s in range(lo // SEGMENT, hi // SEGMENT + 1):
                         if _span_mask(lo, hi, s) & mask[s]:
@@ -848,13 +849,7 @@ def _list_segments(tpl, groups, rd, cand, work, r, n_seg):
         work.ctl[CTL_NEED_LIST] = max(work.ctl[CTL_NEED_LIST], seg_ptr[n_seg])
         return False
     for k in range(n):
-        t = sp[8, k]
-        col0 = rd.col0[t]
-        if sp[3, k] > 0:
-            lo, hi = col0 + sp[4, k], col0 + sp[5, k]
-        else:
-            lo, hi = col0 - sp[5, k], col0 - sp[4, k]
-        lo, hi = max(lo, rd.box[2, t]), min(hi, rd.box[3, t])
+        lo, hi = sp[9, k], sp[10, k]
         for s in range(lo // SEGMENT, hi // SEGMENT + 1):
             if _span_mask(lo, hi, s) & mask[s]:
                 work.seg_list[fill[s]] = k
@@ -920,7 +915,6 @@ def _sweep_tiles(tpl, flat, groups, rd, model, cand, state, work):
         if mode == SWEEP and ctl[CTL_SEG] == 0 and _row_unchanged(rd, cand, state, work, r, n_seg):
             continue  # no reading whose cone crosses the row changed since its last visit
         if not _list_segments(tpl, groups, rd, cand, work, r, n_seg):
-            ctl[CTL_STATUS] = NEED_BUFFERS
             return NEED_BUFFERS
         c_pos = ca
         row_base = r * width
@@ -958,7 +952,6 @@ def _sweep_tiles(tpl, flat, groups, rd, model, cand, state, work):
             if n_list > work.far_lo.shape[0]:
                 ctl[CTL_NEED_LIST] = max(ctl[CTL_NEED_LIST], n_list)
                 ctl[CTL_SEG] = sg
-                ctl[CTL_STATUS] = NEED_BUFFERS
                 return NEED_BUFFERS
             for i in range(nc + 1):
                 cnt[i] = 0
@@ -995,7 +988,6 @@ def _sweep_tiles(tpl, flat, groups, rd, model, cand, state, work):
             if n_pairs > work.pair_pos.shape[0] or not _make_room(rd, work, room):
                 ctl[CTL_NEED_PAIRS] = n_pairs
                 ctl[CTL_SEG] = sg
-                ctl[CTL_STATUS] = NEED_BUFFERS
                 return NEED_BUFFERS
             ctl[CTL_PAIRS] += n_pairs
             for i in range(list_lo, list_hi):
@@ -1045,5 +1037,4 @@ def _sweep_tiles(tpl, flat, groups, rd, model, cand, state, work):
             if mode == SWEEP:
                 cand.tile_clock[r, sg] = clock0
         ctl[CTL_SEG] = 0
-    ctl[CTL_STATUS] = DONE
     return DONE

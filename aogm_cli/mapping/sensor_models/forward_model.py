@@ -2,7 +2,9 @@
 
 A reading has one cause: random (uniform 1/z_max), a max-range dropout (optional point mass),
 no obstacle detected (max-range reading), or the k-th obstacle of its cone in range order,
-detected with probability p_hit each. One implementation serves EM and the evaluation.
+detected with probability p_hit each. EM's kernels (``mapping.em_kernels``) share this
+module's Gaussian (``gaussian_at``) and cone end (``cone_entries``); ``build_forward_index``
+and ``log_likelihoods`` evaluate the model directly, the reference EM's tests compare with.
 
 For reading t with obstacles d_1 <= ... <= d_K in its cone, q = 1 - p_hit and
 g(d) = N(z; d, sigma^2), G0 = N(z; z_max, sigma^2):
