@@ -104,6 +104,7 @@ def _register() -> None:
     for module, name in (
         ("simulate", "simulate"),
         ("map_log", "map_log"),
+        ("calibrate", "calibrate"),
         ("train", "train"),
         ("render", "render"),
         ("export", "export"),

@@ -6,6 +6,7 @@ import click
 
 from aogm_cli.cli.options import (
     budget_options,
+    calibrate_option,
     detector_file,
     detector_option,
     limits_of,
@@ -54,6 +55,16 @@ def parameter_options(f):
     return f
 
 
+def parameter_overrides(resolution: float | None, calibrate: bool | None, options: dict) -> dict:
+    """``resolve_params``' overrides from the CLI: --resolution, --calibrate/--no-calibrate and
+    the ``parameter_options`` (None where an option was not given)."""
+    overrides: dict = {"resolution": resolution, "inverse_model": {}, "em": {}, "calibration": {"enabled": calibrate}}
+    for name, value in options.items():
+        section, key = name.split("__")
+        overrides[section][key] = value
+    return overrides
+
+
 @click.command("map")
 @click.argument("log_file", metavar="LOG.h5", type=click.Path(dir_okay=False))
 @mode_option
@@ -63,10 +74,11 @@ def parameter_options(f):
 @params_option
 @resolution_option
 @parameter_options
+@calibrate_option
 @quiet_option
 @budget_options
-def map_log(log_file, mode, output, png, detector, params_file, resolution, quiet, max_memory=16e9, max_work=None,
-            **options) -> None:
+def map_log(log_file, mode, output, png, detector, params_file, resolution, calibrate, quiet, max_memory=16e9,
+            max_work=None, **options) -> None:
     """Build an occupancy-grid map from LOG.h5.
 
     \b
@@ -83,6 +95,9 @@ def map_log(log_file, mode, output, png, detector, params_file, resolution, quie
     other cell held at the standard map thresholded at p = 0.5; cluster cells get EM's
     residual probability, all others keep the standard map's.
 
+    em and adaptive learn their forward model from the log itself (--calibrate, the default;
+    `aogm calibrate --help`): the map's params hold the learned values, /stats the rounds.
+
     Maps of a simulated log use its truth grid; other logs get the poses' bounds plus the
     sensor's max range at --resolution. Every parameter used is written into the map file.
 
@@ -97,11 +112,7 @@ def map_log(log_file, mode, output, png, detector, params_file, resolution, quie
     from aogm_cli.mapping.modes import map_file
     from aogm_cli.mapping.params import resolve_params
 
-    overrides: dict = {"resolution": resolution, "inverse_model": {}, "em": {}}
-    for name, value in options.items():
-        section, key = name.split("__")
-        overrides[section][key] = value
-    params = resolve_params(params_file, overrides)
+    params = resolve_params(params_file, parameter_overrides(resolution, calibrate, options))
     with progress_bar(params.em.max_sweeps, f"map ({mode})", quiet, unit="sweep") as advance:
         def progress(phase, done, total):
             advance(1)

@@ -9,7 +9,8 @@ Option                 commands
 --png                  simulate, map
 --mode / --modes       map / compare (choices from core.occupancy_map.MODES; also --require-checks)
 --params, --detector   map, compare
---resolution           map
+--resolution           map, calibrate
+--calibrate/--no-calibrate map, compare (``calibration.enabled``)
 --max-memory/--max-work simulate, map, compare (``budget_options``; ``core.budget``)
 """
 
@@ -39,6 +40,12 @@ params_option = click.option(
 )
 resolution_option = click.option(
     "--resolution", type=float, help=f"Cell size (m) for logs without truth.  [default: {MapParams().resolution}]"
+)
+
+calibrate_option = click.option(
+    "--calibrate/--no-calibrate", "calibrate", default=None,
+    help="em and adaptive: learn the forward model's sigma, p_rand, p_hit and p_max from the log being mapped"
+         " (section calibration: of --params).  [default: on]",
 )
 
 

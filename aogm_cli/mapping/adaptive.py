@@ -8,11 +8,13 @@ get EM's residual probability.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import numpy as np
 
 from aogm_cli.core.occupancy_map import OccupancyMap
+from aogm_cli.mapping.calibration import em_with_model
 from aogm_cli.mapping.cluster import cone_bands, label_clusters, near_occupied, readings_near_clusters
 from aogm_cli.mapping.em import EMProblem, em_problem, em_readings, find_root, run_em
 from aogm_cli.mapping.params import EMConfig, MapParams
@@ -72,7 +74,8 @@ def em_in_clusters(run: Readings, clusters: np.ndarray, n_clusters: int, occupie
     probability[result.candidates] = result.residual
     return {"cluster_groups": coupled_groups(problem, n_clusters), "em_readings": int(problem.readings.z.size),
             "em_sweeps": result.sweeps, "em_flips_per_sweep": result.flips, "em_scored_per_sweep": result.scored,
-            "index_entries": result.peak_pairs, "scratch_bytes": result.scratch_bytes, "t_index": t_index}
+            "em_objective_per_sweep": result.objective, "index_entries": result.peak_pairs,
+            "scratch_bytes": result.scratch_bytes, "t_index": t_index}
 
 
 def map_adaptive(log, params: MapParams, detector, detector_name: str = "packaged",
@@ -100,9 +103,21 @@ def map_adaptive(log, params: MapParams, detector, detector_name: str = "package
     occupied = np.ascontiguousarray((log_odds > 0).reshape(-1))  # the thresholded standard map
     probability = probability_from_log_odds(log_odds, observed).reshape(-1)
     em_stats = {"cluster_groups": 0, "em_readings": 0, "em_sweeps": 0, "em_flips_per_sweep": [],
-                "em_scored_per_sweep": [], "index_entries": 0, "scratch_bytes": 0, "t_index": 0.0}
+                "em_scored_per_sweep": [], "em_objective_per_sweep": [], "index_entries": 0, "scratch_bytes": 0,
+                "t_index": 0.0}
+    config, calibration = params.em, None
     if n_clusters:
-        em_stats = em_in_clusters(run, clusters, n_clusters, occupied, probability, params, progress)
+        t_index = 0.0
+
+        def em_step(em_config: EMConfig, occ: np.ndarray):
+            nonlocal t_index
+            stats = em_in_clusters(run, clusters, n_clusters, occ, probability,
+                                   dataclasses.replace(params, em=em_config), progress)
+            t_index += stats.pop("t_index")
+            return stats["em_objective_per_sweep"][-1], stats["em_sweeps"], stats
+
+        config, em_stats, calibration = em_with_model(run, occupied, params, em_step)
+        em_stats["t_index"] = t_index
     probability = probability.reshape(grid.shape)
     probability[~observed] = 0.5
     t_index = em_stats.pop("t_index")
@@ -119,12 +134,14 @@ def map_adaptive(log, params: MapParams, detector, detector_name: str = "package
         "phase_seconds": phases,
         "detector": detector_name,
     }
+    if calibration is not None:
+        stats["calibration"] = calibration
     return OccupancyMap(
         grid=grid,
         probability=probability,
         observed=observed,
         mode="adaptive",
-        params=params_json(params, "adaptive", grid) | {"detector": detector_name},
+        params=params_json(dataclasses.replace(params, em=config), "adaptive", grid) | {"detector": detector_name},
         runtime_s=sum(phases.values()),
         source_log=log.path,
         log_odds=log_odds,

@@ -11,6 +11,7 @@ set of cells with every other cell held fixed: the adaptive mapper calls it on t
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable
@@ -20,6 +21,7 @@ import numpy as np
 
 from aogm_cli.core.occupancy_map import OccupancyMap
 from aogm_cli.mapping import em_kernels as K
+from aogm_cli.mapping.calibration import em_with_model
 from aogm_cli.mapping.params import EMConfig, MapParams
 from aogm_cli.mapping.pipeline import Progress, forward_templates, lay_out_readings, log_grid, params_json
 from aogm_cli.mapping.sensor_models.cone import flat_offsets
@@ -258,28 +260,37 @@ def map_em(log, params: MapParams, progress: Progress | None = None) -> Occupanc
     t0 = time.perf_counter()
     run = lay_out_readings(whole.pose, whole.ranges, log.sensor, grid)
     keep = ~np.isnan(run.z)
-    rd = em_readings(run.rows, run.cols, run.bins, run.z, templates, grid, log.sensor.max_range, config.forward,
-                     select=keep)
-    del run, keep
     t_readings = time.perf_counter() - t0
-    t0 = time.perf_counter()
     occupied = (log_odds > 0).reshape(-1) if config.start == "standard" else np.zeros(grid.height * grid.width, bool)
     occupied = np.ascontiguousarray(occupied)
-    problem = em_problem(rd, templates, grid.shape, occupied, config)
-    candidates = np.flatnonzero(problem.seen)
-    t_index = time.perf_counter() - t0
+    seconds = {"index": 0.0, "em": 0.0}
 
     def on_sweep(sweep, flips, objective):
         if progress:
             progress("em sweep", sweep, config.max_sweeps)
 
+    def em_step(em_config: EMConfig, occ: np.ndarray):
+        t0 = time.perf_counter()
+        rd = em_readings(run.rows, run.cols, run.bins, run.z, templates, grid, log.sensor.max_range,
+                         em_config.forward, select=keep)
+        problem = em_problem(rd, templates, grid.shape, occ, em_config)
+        candidates = np.flatnonzero(problem.seen)
+        t1 = time.perf_counter()
+        result = run_em(problem, occ, candidates, em_config, on_sweep)
+        seconds["index"] += t1 - t0
+        seconds["em"] += time.perf_counter() - t1
+        return result.objective[-1], result.sweeps, result
+
     t0 = time.perf_counter()
-    result = run_em(problem, occupied, candidates, config, on_sweep)
+    config, result, calibration = em_with_model(run, occupied, params, em_step)
+    t_calibration = time.perf_counter() - t0 - seconds["index"] - seconds["em"]
+    t0 = time.perf_counter()
     probability = np.full(grid.height * grid.width, 1.0 / (1.0 + math.exp(-config.l_prior)), dtype=np.float32)
     probability[result.candidates] = result.residual
     probability = probability.reshape(grid.shape)
     probability[~observed] = 0.5
-    t_em = time.perf_counter() - t0
+    t_em = seconds["em"] + time.perf_counter() - t0
+    t_index = seconds["index"]
     stats = {
         "sweeps": result.sweeps,
         "flips_per_sweep": result.flips,
@@ -289,15 +300,18 @@ def map_em(log, params: MapParams, progress: Progress | None = None) -> Occupanc
         "candidate_cells": int(result.candidates.size),
         "index_entries": result.peak_pairs,
         "scratch_bytes": result.scratch_bytes,
-        "phase_seconds": {"standard": t_standard, "readings": t_readings, "index": t_index, "em": t_em},
+        "phase_seconds": {"standard": t_standard, "readings": t_readings, "calibration": t_calibration,
+                          "index": t_index, "em": t_em},
     }
+    if calibration is not None:
+        stats["calibration"] = calibration
     return OccupancyMap(
         grid=grid,
         probability=probability,
         observed=observed,
         mode="em",
-        params=params_json(params, "em", grid),
-        runtime_s=t_standard + t_readings + t_index + t_em,
+        params=params_json(dataclasses.replace(params, em=config), "em", grid),
+        runtime_s=t_standard + t_readings + t_calibration + t_index + t_em,
         source_log=log.path,
         occupied=occupied.reshape(grid.shape) & observed,
         stats=stats,

@@ -90,6 +90,73 @@ class AdaptiveConfig:
 
 
 @dataclass(frozen=True)
+class CalibrationConfig:
+    """How EM learns its forward model from the log it maps (``mapping.calibration``): on or off,
+    at most ``rounds`` EM runs alternated with closed-form fits of sigma, p_rand, p_hit and
+    p_max (each at most ``fit_iterations`` updates at one map, on at most ``max_readings``
+    readings), ended when no parameter moves by more than ``tolerance`` (sigma relative, the
+    probabilities absolute); each learned value is clipped to its bounds."""
+
+    enabled: bool = True
+    learn: str = "sigma,p_rand,p_hit,p_max"  # which of the forward model's parameters are learned
+    rounds: int = 3
+    fit_iterations: int = 30
+    max_readings: int = 200_000
+    tolerance: float = 0.02
+    # the first EM map is made with sigma at least this broad: a broad model puts each wall at
+    # the readings' mean, and the sigma fitted there comes down to the data's; a narrow start
+    # lets EM's map follow the noise and the fitted sigma stays narrow (measured on
+    # corridor_door at noise 0.12 m: start 0.03 -> sigma 0.051, 0.06 -> 0.082, 0.1 -> 0.100)
+    start_sigma: float = 0.1
+    # bounds: sigma from a tenth of a typical 5 cm cell to half a metre; p_rand, p_max below one
+    # half each (a model that calls most readings random or dropped explains nothing); p_hit
+    # away from 0 and 1 (EM needs q = 1 - p_hit > 0, and a wall missed by every reading is no wall)
+    sigma_min: float = 0.005
+    sigma_max: float = 0.5
+    p_rand_min: float = 0.001
+    p_rand_max: float = 0.5
+    p_max_max: float = 0.4
+    p_hit_min: float = 0.05
+    p_hit_max: float = 0.95
+
+    def validate(self) -> CalibrationConfig:
+        check_field_types(self)
+        if not isinstance(self.enabled, bool):
+            raise InputError(f"expected true or false, got {self.enabled!r}", key="enabled")
+        unknown = set(self.learned) - {"sigma", "p_rand", "p_hit", "p_max"}
+        if unknown or not self.learned:
+            raise InputError(f"expected a comma-separated list of sigma, p_rand, p_hit, p_max, got {self.learn!r}",
+                             key="learn")
+        for key in ("rounds", "fit_iterations", "max_readings"):
+            if getattr(self, key) < 1:
+                raise InputError(f"expected a whole number >= 1, got {getattr(self, key)}", key=key)
+        if not 0 < self.tolerance < 1:
+            raise InputError(f"expected a number in (0, 1), got {self.tolerance:g}", key="tolerance")
+        if not self.start_sigma > 0:
+            raise InputError(f"expected a positive number (m), got {self.start_sigma:g}", key="start_sigma")
+        if not 0 < self.sigma_min <= self.sigma_max:
+            raise InputError(f"expected 0 < sigma_min <= sigma_max, got {self.sigma_min:g}, {self.sigma_max:g}",
+                             key="sigma_min")
+        if not 0 < self.p_rand_min <= self.p_rand_max < 1:
+            raise InputError(f"expected 0 < p_rand_min <= p_rand_max < 1, got {self.p_rand_min:g}, {self.p_rand_max:g}",
+                             key="p_rand_min")
+        if not 0 <= self.p_max_max < 1 or self.p_rand_max + self.p_max_max >= 1:
+            raise InputError(f"expected p_max_max in [0, 1) with p_rand_max + p_max_max < 1, got {self.p_max_max:g}",
+                             key="p_max_max")
+        if not 0 < self.p_hit_min <= self.p_hit_max < 1:
+            raise InputError(f"expected 0 < p_hit_min <= p_hit_max < 1, got {self.p_hit_min:g}, {self.p_hit_max:g}",
+                             key="p_hit_min")
+        return self
+
+    @property
+    def learned(self) -> tuple[str, ...]:
+        return tuple(k.strip() for k in self.learn.split(",") if k.strip())
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
 class MapParams:
     """Parameters of all mappers: grid resolution (logs without truth), inverse model, EM, clusters."""
 
@@ -97,10 +164,11 @@ class MapParams:
     inverse_model: InverseModelConfig = field(default_factory=InverseModelConfig)
     em: EMConfig = field(default_factory=EMConfig)
     adaptive: AdaptiveConfig = field(default_factory=AdaptiveConfig)
+    calibration: CalibrationConfig = field(default_factory=CalibrationConfig)
 
     def as_dict(self) -> dict:
         return {"resolution": self.resolution, "inverse_model": self.inverse_model.as_dict(), "em": self.em.as_dict(),
-                "adaptive": self.adaptive.as_dict()}
+                "adaptive": self.adaptive.as_dict(), "calibration": self.calibration.as_dict()}
 
 
 SECTIONS = {
@@ -108,6 +176,7 @@ SECTIONS = {
     "em": {f.name for f in dataclasses.fields(EMConfig) if f.name != "forward"}
     | {f.name for f in dataclasses.fields(ForwardModelConfig)},
     "adaptive": {f.name for f in dataclasses.fields(AdaptiveConfig)},
+    "calibration": {f.name for f in dataclasses.fields(CalibrationConfig)},
 }
 
 
@@ -119,7 +188,7 @@ def resolve_params(params_file: str | None = None, overrides: dict[str, dict[str
     if params_file:
         raw = read_yaml(params_file)[1] or {}
         if not isinstance(raw, dict):
-            raise InputError("expected a mapping with sections inverse_model, em, adaptive and key resolution", file=file)
+            raise InputError("expected a mapping with sections inverse_model, em, adaptive, calibration and key resolution", file=file)
     for key in raw:
         if key not in SECTIONS and key != "resolution":
             raise InputError(f"unknown key; expected resolution, {', '.join(SECTIONS)}", file=file, key=str(key))
@@ -165,7 +234,8 @@ def resolve_params(params_file: str | None = None, overrides: dict[str, dict[str
         ).validate(),
     )
     adaptive = build("adaptive", lambda v: AdaptiveConfig(**v).validate())
+    calibration = build("calibration", lambda v: CalibrationConfig(**v).validate())
     if (isinstance(resolution, bool) or not isinstance(resolution, (int, float)) or not math.isfinite(resolution)
             or not resolution > 0):
         raise InputError(f"expected a positive number (m per cell), got {resolution!r}", file=file, key="resolution")
-    return MapParams(float(resolution), inverse, em, adaptive)
+    return MapParams(float(resolution), inverse, em, adaptive, calibration)

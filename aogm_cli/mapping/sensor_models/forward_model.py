@@ -318,3 +318,86 @@ def build_forward_index(
     np.cumsum(counts, out=ptr[1:])
     g0, const, w = reading_constants(z, z_max, config)
     return ForwardIndex(ptr, out_cell[:n], out_g[:n], g0, const, ids, w, config.p_hit)  # views: no copy
+
+
+# The E-step's sufficient statistics (``expectation_sums``), slots of its output array
+E_READINGS, E_LOGLIK, E_RANDOM, E_DROPOUT, E_DETECTED, E_EXAMINED, E_SQUARED, E_MISSED, E_SIZE = range(9)
+
+
+class ExpectationReadings(NamedTuple):
+    """``expectation_sums``' readings: flat arrays of one length (NaN readings left out)."""
+
+    rows: np.ndarray  # the sensor's cell (int64; may lie outside the grid)
+    cols: np.ndarray
+    bins: np.ndarray  # heading bin (int64)
+    z: np.ndarray  # float64 range in template ranges; +inf (or >= z_max): a max-range reading
+
+
+@numba.njit(cache=True)
+def expectation_sums(tpl, flat, shape, readings, occupied, model, out, first):
+    """The expectations of every reading's cause under the flat binary map ``occupied``, summed.
+
+    ``model`` is (p_rand, p_max, p_hit, sigma, window, z_max). For reading t with obstacles
+    d_1 <= ... <= d_K in its cone (cells up to z + window sigma; up to z_max for a max-range
+    reading), the causes' posteriors are e_rand = (p_rand / z_max) / p, e_dropout = p_max G0 / p,
+    e_k = w q^(k-1) p_hit g(d_k) / p and e_0 = w q^K G0 / p, with p = p(z_t | m) (module
+    docstring). Adds into ``out`` (E_SIZE,): readings, sum of log p, sum e_rand, sum e_dropout,
+    sum_k e_k (detections), sum_k k e_k + K e_0 (obstacles examined), sum_k e_k (z - d_k)^2,
+    sum e_0 (no obstacle detected). ``first`` (readings,) gets each reading's z - d_1 (NaN for
+    a max-range reading or a cone without obstacles).
+    """
+    p_rand, p_max, p_hit, sigma, window, z_max = model
+    height, width = shape
+    q = 1.0 - p_hit
+    w = 1.0 - p_rand - p_max
+    n_cells = height * width
+    ext = tpl.extent
+    ranges = tpl.ranges
+    ib = np.empty(int(np.max(np.diff(tpl.offsets))), dtype=np.int32)
+    d = np.empty(ib.shape[0])
+    gk = np.empty(ib.shape[0])
+    for t in range(readings.z.shape[0]):
+        z = readings.z[t]
+        at_max = not z < z_max
+        if at_max:
+            z = z_max
+        limit = z_max if at_max else min(z + window * sigma, z_max)
+        row0 = readings.rows[t]
+        col0 = readings.cols[t]
+        n_obs = 0
+        if not (row0 + ext < 0 or row0 - ext >= height or col0 + ext < 0 or col0 - ext >= width):
+            k = readings.bins[t]
+            b = tpl.base_bin[k]
+            r = ranges[tpl.offsets[b] : tpl.offsets[b + 1]]
+            m = cone_entries(r, z, limit, sigma, window)
+            cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width)
+            for j in range(m):
+                c = ib[j]
+                if c < n_cells and occupied[c]:
+                    d[n_obs] = r[j]
+                    gk[n_obs] = gaussian_at(z, r[j], sigma, window)
+                    n_obs += 1
+        first[t] = z - d[0] if n_obs > 0 and not at_max else np.nan
+        u0 = (z - z_max) / sigma
+        g0 = math.exp(-0.5 * u0 * u0) / (math.sqrt(2.0 * math.pi) * sigma)
+        s = 0.0
+        qk = 1.0
+        for i in range(n_obs):
+            s += qk * p_hit * gk[i]
+            qk *= q
+        s_miss = qk * g0
+        p = p_rand / z_max + p_max * g0 + w * (s + s_miss)
+        out[E_READINGS] += 1.0
+        out[E_LOGLIK] += math.log(p)
+        out[E_RANDOM] += p_rand / z_max / p
+        out[E_DROPOUT] += p_max * g0 / p
+        e_miss = w * s_miss / p
+        out[E_MISSED] += e_miss
+        out[E_EXAMINED] += n_obs * e_miss
+        qk = 1.0
+        for i in range(n_obs):
+            e = w * qk * p_hit * gk[i] / p
+            qk *= q
+            out[E_DETECTED] += e
+            out[E_EXAMINED] += (i + 1) * e
+            out[E_SQUARED] += e * (z - d[i]) ** 2

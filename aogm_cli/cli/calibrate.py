@@ -1,0 +1,73 @@
+"""``aogm calibrate``: learn EM's forward model from a log and print it (no map written), or
+write it as a ``--params`` file for other logs of the same robot."""
+
+from __future__ import annotations
+
+import click
+
+from aogm_cli.cli.map_log import parameter_options, parameter_overrides
+from aogm_cli.cli.options import (
+    budget_options,
+    detector_file,
+    detector_option,
+    limits_of,
+    params_option,
+    progress_bar,
+    quiet_option,
+    resolution_option,
+)
+from aogm_cli.io.outputs import resolve_outputs
+
+
+@click.command()
+@click.argument("log_file", metavar="LOG.h5", type=click.Path(dir_okay=False))
+@click.option("--mode", type=click.Choice(["em", "adaptive"]), default="em", show_default=True,
+              help="Whose maps the model is fitted at.")
+@click.option("-o", "--output", type=click.Path(dir_okay=False),
+              help="Also write the learned model as a --params YAML (calibration off, the learned em: values).")
+@detector_option
+@params_option
+@resolution_option
+@parameter_options
+@quiet_option
+@budget_options
+def calibrate(log_file, mode, output, detector, params_file, resolution, quiet, max_memory=16e9, max_work=None,
+              **options) -> None:
+    """Learn the forward model (sigma, p_rand, p_hit, p_max) from LOG.h5 and print it.
+
+    Thrun's EM learns its sensor model too: at a binary map, the expectations of each
+    reading's cause (random, max-range dropout, the k-th obstacle of its cone, no obstacle
+    detected) give the parameters in closed form (p_rand the mean random expectation, p_max
+    the mean dropout expectation, p_hit the expected detections over the expected obstacles
+    examined, sigma^2 the expected squared range error of the detections), iterated at that
+    map until they settle. Round 0 maps with the configured model made at least
+    calibration.start_sigma (0.1 m) broad; each round fits at the last map and maps again,
+    until no parameter moves by more than calibration.tolerance, or calibration.rounds.
+    Every value is clipped to bounds (section calibration: of --params). `aogm map` and
+    `aogm compare` do this by default in em and adaptive modes.
+
+    \b
+    Example:
+      aogm calibrate door.h5
+      aogm calibrate robot.h5 -o robot_model.yaml && aogm map other.h5 --mode em --params robot_model.yaml -o m.h5
+    """
+    resolve_outputs((log_file, params_file, detector_file(detector, (mode,))), [("-o", output)] if output else [])
+    from aogm_cli.mapping.calibration import calibration_table, learned_params_yaml
+    from aogm_cli.mapping.modes import map_file
+    from aogm_cli.mapping.params import resolve_params
+
+    params = resolve_params(params_file, parameter_overrides(resolution, True, options))
+    with progress_bar(params.em.max_sweeps * (params.calibration.rounds + 1), f"calibrate ({mode})", quiet,
+                      unit="sweep") as advance:
+        result = map_file(log_file, mode, params, detector, lambda phase, done, total: advance(1),
+                          limits=limits_of(max_memory, max_work))
+    record = result.stats.get("calibration")
+    if record is None:  # adaptive without clusters: EM never ran
+        raise click.UsageError(f"{log_file}: the detector flagged no cluster; nothing to calibrate in adaptive mode")
+    click.echo(calibration_table(record))
+    if output:
+        from aogm_cli.io.atomic import write_files_atomically
+
+        write_files_atomically([(output, learned_params_yaml(record, log_file).encode())])
+        if not quiet:
+            click.echo(f"{output}: the learned model as --params", err=True)
