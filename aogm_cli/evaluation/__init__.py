@@ -1,3 +1,4 @@
-"""Map quality: ``metrics`` against simulated truth (accuracy, F1, Brier, checks) and
-``consistency`` of a map with its own log, for logs without truth.
+"""Map quality: ``metrics`` against simulated truth (accuracy, F1, Brier, checks), ``consistency``
+of a map with its own log, and ``holdout``: scores of a map on scans held out of its making,
+for logs with or without truth.
 """
