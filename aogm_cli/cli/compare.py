@@ -17,6 +17,7 @@ from aogm_cli.cli.options import (
     params_option,
     progress_bar,
     quiet_option,
+    seed_option,
 )
 from aogm_cli.io.outputs import resolve_outputs
 
@@ -41,16 +42,20 @@ def _print_table(results, labels, quiet: bool) -> None:
 
     from aogm_cli.report.compare import relative_runtimes
 
-    console = Console()
-    if not console.is_terminal:
-        console = Console(width=max(console.width, 200), no_color=True, highlight=False)
-    relative = relative_runtimes(results)
     consistency = any(r.consistency is not None for r in results)  # some log has no truth
+    holdout = any(r.holdout is not None for r in results)
+    console = Console()
+    if not console.is_terminal:  # wide enough for every column, the held-out ones too
+        console = Console(width=max(console.width, 260 if holdout else 200), no_color=True, highlight=False)
+    relative = relative_runtimes(results)
     table = Table(title=None if quiet else "aogm compare")
     columns = [("World", "left"), ("Mode", "left"), ("Accuracy", "right"), ("Occ. F1", "right"), ("Brier", "right"),
                ("Checks", "right")]
     if consistency:
         columns += [("Ends on occ.", "right"), ("±1 cell", "right"), ("Free contra.", "right")]
+    if holdout:
+        columns += [("Held-out AUC", "right"), ("Held-out loglik", "right"), ("Held-out readings", "right"),
+                    ("Held-out scans", "right")]
     columns += [("Runtime (s)", "right"), ("vs standard", "right"), ("Map", "left")]
     for name, justify in columns:
         table.add_column(name, justify=justify, no_wrap=name != "Map", overflow="fold")
@@ -74,13 +79,17 @@ def _print_table(results, labels, quiet: bool) -> None:
             c = r.consistency or {}
             row += [_share(c.get("endpoint_occupied")), _share(c.get("endpoint_occupied_8")),
                     _share(c.get("free_contradicted"))]
+        if holdout:
+            h = r.holdout or {}
+            row += [_share(h.get("holdout_auc")), _share(h.get("holdout_loglik")), str(h.get("holdout_readings", "n/a")),
+                    str(h.get("holdout_scans", "n/a"))]
         row += [f"{r.runtime_s:.3f}", "–" if rel is None else f"x{rel:.2f}", _source(r)]
         table.add_row(*row)
     console.print(table)
 
 
 def _share(v) -> str:
-    return "n/a" if v is None else f"{v:.4f}"
+    return "n/a" if v is None or v != v else f"{v:.4f}"  # v != v: NaN
 
 
 def _source(r) -> str:
@@ -106,10 +115,14 @@ def _source(r) -> str:
               help="Gate: every world check of every log passes in this mode. Repeatable.")
 @click.option("--jobs", "-j", type=click.IntRange(min=1), default=1, show_default=True,
               help="Map in this many worker processes (see Timings above).")
+@click.option("--holdout", type=float, metavar="FRACTION",
+              help="Hold out every round(1/FRACTION)-th scan (0 < FRACTION <= 0.5), map the rest and score "
+                   "each map on the held-out readings (see Held-out scores above).")
+@seed_option
 @quiet_option
 @budget_options
-def compare(inputs, modes_text, detector, params_file, json_out, figure_out, maps_dir, requires, require_checks, jobs, quiet,
-            max_memory=16e9, max_work=None):
+def compare(inputs, modes_text, detector, params_file, json_out, figure_out, maps_dir, requires, require_checks, jobs,
+            holdout, seed, quiet, max_memory=16e9, max_work=None):
     """Map every log in every mode, evaluate each map against the log's truth, and print a table
     (accuracy, occupied F1, Brier, checks passed, runtime, runtime relative to the standard map
     of the same log).
@@ -123,10 +136,23 @@ def compare(inputs, modes_text, detector, params_file, json_out, figure_out, map
     its mode instead of mapping again; its source_log attribute names the log with the truth.
 
     \b
+    Held-out scores (--holdout FRACTION, with or without truth):
+      every round(1/FRACTION)-th scan is held out, from an offset that --seed fixes; each map
+      is made from the other scans and scored on the held-out readings: holdout_auc, the ROC
+      AUC of its occupancy at the cells they end in against the cells they pass through, and
+      holdout_loglik, their mean log-likelihood under one fixed reference forward model
+      (sigma 0.1 m, p_rand 0.1, p_hit 0.5, p_max 0.1; higher is better), plus
+      holdout_readings and holdout_scans. The truth metrics (accuracy, ...) of a simulated
+      log are then those of the map made from the kept scans. Map files given must have been
+      made with the same --holdout and --seed (--maps-dir records them).
+
+    \b
     Gates (exit status 1 when one fails, after --json and --figure are written):
       --require EXPR       MODE.METRIC names, numbers, + - * /, ( ), one of < <= > >= == !=
                            METRIC: accuracy, occupied_precision, occupied_recall,
-                           occupied_f1, brier, runtime (= runtime_s), checks_passed (fraction)
+                           occupied_f1, brier, runtime (= runtime_s), checks_passed (fraction);
+                           with --holdout: holdout_auc, holdout_loglik, holdout_readings,
+                           holdout_scans
       --require-checks M   every check of every log passes in mode M
 
     \b
@@ -141,12 +167,16 @@ def compare(inputs, modes_text, detector, params_file, json_out, figure_out, map
       aogm compare door.h5 hall.h5 --modes standard,em --json results.json --figure cmp.png
       aogm compare door.h5 --maps-dir maps/ --require "em.accuracy >= standard.accuracy"
       aogm compare maps/door_standard.h5 maps/door_em.h5 --require-checks em
+      aogm compare door.h5 --holdout 0.1 --require "em.holdout_loglik >= standard.holdout_loglik"
     """
+    from aogm_cli.evaluation.holdout import HoldoutSplit
     from aogm_cli.mapping.params import resolve_params
     from aogm_cli.report import compare as lib
-    from aogm_cli.report.gates import check_gate_modes, parse_gate
+    from aogm_cli.report.gates import check_gate_metrics, check_gate_modes, parse_gate
 
+    split = None if holdout is None else HoldoutSplit(holdout, seed).validate()
     gates = [parse_gate(text) for text in requires]  # malformed -> exit 2 before any work
+    check_gate_metrics(gates, split is not None)
     params = resolve_params(params_file)
     entries = lib.collect_inputs(list(inputs))
     modes = lib.parse_modes(modes_text) if modes_text else lib.default_modes(entries)
@@ -167,7 +197,7 @@ def compare(inputs, modes_text, detector, params_file, json_out, figure_out, map
     with using(limits), progress_bar(n_tasks, "compare", quiet, unit="map") as advance:
         results = lib.run_comparison(
             entries, modes, params, detector=detector, jobs=jobs, maps_dir=maps_dir,
-            on_map=lambda i, mode, m: advance(1),
+            on_map=lambda i, mode, m: advance(1), holdout=split,
         )
 
     for r in results:

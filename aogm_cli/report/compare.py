@@ -1,7 +1,8 @@
 """The library behind ``aogm compare``: collect logs and map files, map what is missing in each
 mode (optionally in worker processes), evaluate against the truth, and build the JSON of
 CONTRACT.md ("Metrics"). Maps of logs without truth are scored by their consistency with
-the log instead (``aogm_cli.consistency``).
+the log instead (``aogm_cli.consistency``). With a ``HoldoutSplit`` every map is made from the
+kept scans and also scored on the held-out ones (``evaluation.holdout``), truth or not.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from aogm_cli.core.interrupts import end_workers, worker_init
 from aogm_cli.core.log import Truth
 from aogm_cli.core.occupancy_map import MODES, OccupancyMap
 from aogm_cli.evaluation.consistency import map_consistency
+from aogm_cli.evaluation.holdout import SCORE_KEYS, HoldoutSplit, holdout_scores, reference_json, split_log
 from aogm_cli.evaluation.metrics import evaluate
 from aogm_cli.io.detectorfile import detector_identity
 from aogm_cli.io.logfile import LogReader
@@ -60,6 +62,7 @@ class ModeResult:
     reused: bool = False
     consistency: dict | None = None  # logs without truth only
     detector: dict | None = None  # adaptive only: {"path", "sha256"} of the detector used
+    holdout: dict | None = None  # with a HoldoutSplit: ``evaluation.holdout.holdout_scores``
 
 
 def parse_modes(text: str) -> tuple[str, ...]:
@@ -149,12 +152,33 @@ def default_modes(entries: list[LogEntry]) -> tuple[str, ...]:
     return tuple(m for m in MODES if m in present)
 
 
-def map_one(path: str, mode: str, params: MapParams, detector: str | None = None) -> OccupancyMap:
-    """Map one log in one mode. A top-level function, so that worker processes can run it; the
-    mapper measures ``runtime_s`` around the mapping work only, inside the process that maps."""
+def map_one(path: str, mode: str, params: MapParams, detector: str | None = None,
+            holdout: HoldoutSplit | None = None) -> OccupancyMap:
+    """Map one log in one mode, from the scans ``holdout`` keeps when given. A top-level
+    function, so that worker processes can run it; the mapper measures ``runtime_s`` around the
+    mapping work only, inside the process that maps."""
     from aogm_cli.mapping.modes import map_file
 
+    if holdout is not None:
+        return map_kept_scans(path, mode, params, detector, holdout)
     return map_file(path, mode, params, detector)
+
+
+def map_kept_scans(path: str, mode: str, params: MapParams, detector: str | None, holdout: HoldoutSplit) -> OccupancyMap:
+    """Map the scans of the log at ``path`` that ``holdout`` keeps (``evaluation.holdout.split_log``),
+    timed as ``mapping.modes.map_file`` times a log: compilation (the warm-up) and reading left
+    out. The map names the log as its source and records the split in ``params["holdout"]``."""
+    from aogm_cli.mapping.modes import map_log, resolve_detector, resolved_params, warm_up
+
+    flagger, name = resolve_detector(detector) if mode == "adaptive" else (None, "")
+    with LogReader(path) as reader:
+        kept, _held = split_log(reader, holdout)
+    params = resolved_params(kept, params)
+    warm_up(kept.sensor, params, mode)
+    m = map_log(kept, mode, params, flagger, name)
+    m.source_log = str(path)
+    m.params["holdout"] = holdout.as_dict()
+    return m
 
 
 def maps_dir_targets(entries: list[LogEntry], modes: tuple[str, ...], maps_dir: str) -> dict[tuple[int, str], Path]:
@@ -182,8 +206,11 @@ def params_differences(map_params: dict, params: MapParams, has_truth: bool = Fa
     return [k for k, v in wanted.items() if k in map_params and map_params[k] != v]
 
 
-def load_given_maps(entries: list[LogEntry], modes: tuple[str, ...]) -> dict[tuple[int, str], OccupancyMap]:
-    """Read the map files given for the modes compared, and check each against its log's truth grid."""
+def load_given_maps(entries: list[LogEntry], modes: tuple[str, ...],
+                    holdout: HoldoutSplit | None = None) -> dict[tuple[int, str], OccupancyMap]:
+    """Read the map files given for the modes compared, and check each against its log's truth
+    grid and against ``holdout``: a map made from every scan cannot be scored on held-out
+    scans, nor one made from kept scans stand for a map of the whole log."""
     maps = {}
     for i, e in enumerate(entries):
         for mode in modes:
@@ -198,8 +225,25 @@ def load_given_maps(entries: list[LogEntry], modes: tuple[str, ...]) -> dict[tup
                     file=path,
                     key="/map/probability",
                 )
+            check_map_holdout(m, holdout, path)
             maps[(i, mode)] = m
     return maps
+
+
+def check_map_holdout(m: OccupancyMap, holdout: HoldoutSplit | None, path: str) -> None:
+    """InputError (key --holdout) unless map ``m`` (the file ``path``) was made from the scans
+    ``holdout`` keeps (from every scan when None), as its ``params["holdout"]`` records."""
+    made = m.params.get("holdout") if isinstance(m.params, dict) else None
+    wanted = None if holdout is None else holdout.as_dict()
+    if made == wanted:
+        return
+    if made is None:
+        found = "made from every scan of its log"
+    else:
+        found = f"made from the scans kept by --holdout {made.get('fraction')} --seed {made.get('seed')}"
+    expected = (f"a map made with --holdout {holdout.fraction:g} --seed {holdout.seed} (--maps-dir), or the log itself"
+                if holdout else "a map made from every scan (without --holdout)")
+    raise InputError(f"{found}; expected {expected}", file=path, key="--holdout")
 
 
 def compute_maps(
@@ -209,15 +253,17 @@ def compute_maps(
     detector: str | None = None,
     jobs: int = 1,
     on_map: Callable[[int, str, OccupancyMap], None] | None = None,
+    holdout: HoldoutSplit | None = None,
 ) -> dict[tuple[int, str], OccupancyMap]:
-    """Map each (log index, mode) of ``tasks``; with ``jobs`` > 1 in that many worker processes.
+    """Map each (log index, mode) of ``tasks`` (from the scans ``holdout`` keeps, when given);
+    with ``jobs`` > 1 in that many worker processes.
 
     ``on_map`` is called in this process as each map is finished (in order of completion).
     """
     done: dict[tuple[int, str], OccupancyMap] = {}
     if jobs <= 1 or len(tasks) <= 1:
         for i, mode in tasks:
-            m = map_one(entries[i].path, mode, params, detector)
+            m = map_one(entries[i].path, mode, params, detector, holdout)
             done[(i, mode)] = m
             if on_map:
                 on_map(i, mode, m)
@@ -226,7 +272,8 @@ def compute_maps(
 
     pool = ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), initializer=worker_init, initargs=(os.getpid(),))
     try:
-        futures = {pool.submit(map_one, entries[i].path, mode, params, detector): (i, mode) for i, mode in tasks}
+        futures = {pool.submit(map_one, entries[i].path, mode, params, detector, holdout): (i, mode)
+                   for i, mode in tasks}
         pending = set(futures)
         while pending:
             finished, pending = wait(pending, return_when=FIRST_EXCEPTION)
@@ -259,8 +306,9 @@ def _map_detector(m: OccupancyMap, reused: bool, identity: dict | None) -> dict 
 
 
 def evaluate_result(entry: LogEntry, mode: str, m: OccupancyMap, map_file: str | None, reused: bool,
-                    detector: dict | None = None) -> ModeResult:
-    """Metrics against the truth; without truth, the map's consistency with its log instead.
+                    detector: dict | None = None, holdout: HoldoutSplit | None = None) -> ModeResult:
+    """Metrics against the truth; without truth, the map's consistency with its log instead;
+    with ``holdout``, also the scores on the held-out scans (``evaluation.holdout.holdout_scores``).
     ``detector``: this run's detector identity (``detector_identity``)."""
     metrics = None
     consistency = None
@@ -271,8 +319,12 @@ def evaluate_result(entry: LogEntry, mode: str, m: OccupancyMap, map_file: str |
             raise InputError(str(exc), file=map_file or entry.path) from None
     else:
         consistency = map_consistency(entry.path, m)
+    scores = None
+    if holdout is not None:
+        with LogReader(entry.path) as reader:
+            scores = holdout_scores(reader, m, holdout)
     return ModeResult(entry.path, entry.world, mode, float(m.runtime_s), metrics, m, map_file, reused, consistency,
-                      _map_detector(m, reused, detector))
+                      _map_detector(m, reused, detector), scores)
 
 
 def run_comparison(
@@ -283,13 +335,16 @@ def run_comparison(
     jobs: int = 1,
     maps_dir: str | None = None,
     on_map: Callable[[int, str, OccupancyMap], None] | None = None,
+    holdout: HoldoutSplit | None = None,
 ) -> list[ModeResult]:
     """Every log in every mode: given maps reused, the others computed (and written to
     as DIR/<logstem>_<mode>.h5 of ``maps_dir`` when set: ``maps_dir_outputs`` gives their bytes,
-    to commit with the command's other outputs); results per log, then per mode."""
+    to commit with the command's other outputs); results per log, then per mode. With
+    ``holdout``, every map is made from (or, given, must record) the kept scans and is scored
+    on the held-out ones."""
     tasks = [(i, mode) for i, e in enumerate(entries) for mode in modes if mode not in e.maps]
     targets = maps_dir_targets(entries, modes, maps_dir) if maps_dir else {}
-    given = load_given_maps(entries, modes)
+    given = load_given_maps(entries, modes, holdout)
     written: dict[tuple[int, str], str] = {}
 
     def finished(i: int, mode: str, m: OccupancyMap) -> None:
@@ -299,14 +354,15 @@ def run_comparison(
             on_map(i, mode, m)
 
     identity = detector_identity(detector) if any(mode == "adaptive" for _, mode in tasks) else None
-    computed = compute_maps(entries, tasks, params, detector, jobs, finished)
+    computed = compute_maps(entries, tasks, params, detector, jobs, finished, holdout)
     results = []
     for i, e in enumerate(entries):
         for mode in modes:
             if (i, mode) in given:
-                results.append(evaluate_result(e, mode, given[(i, mode)], e.maps[mode], True))
+                results.append(evaluate_result(e, mode, given[(i, mode)], e.maps[mode], True, holdout=holdout))
             else:
-                results.append(evaluate_result(e, mode, computed[(i, mode)], written.get((i, mode)), False, identity))
+                results.append(evaluate_result(e, mode, computed[(i, mode)], written.get((i, mode)), False, identity,
+                                               holdout))
     return results
 
 
@@ -324,10 +380,13 @@ def checks_passed(metrics: dict | None) -> float | None:
 
 
 def metric_values(result: ModeResult) -> dict[str, float | None]:
-    """The values a gate can name for one (log, mode): metrics, runtime, checks_passed."""
+    """The values a gate can name for one (log, mode): metrics, runtime, checks_passed and the
+    held-out scores (None when not computed)."""
     values: dict[str, float | None] = {k: (None if result.metrics is None else result.metrics[k]) for k in METRIC_KEYS}
     values["runtime"] = result.runtime_s
     values["checks_passed"] = checks_passed(result.metrics)
+    for k in SCORE_KEYS:
+        values[k] = None if result.holdout is None else result.holdout[k]
     return values
 
 
@@ -364,12 +423,16 @@ def _finite(v):
     return None if isinstance(v, float) and not math.isfinite(v) else v
 
 
-def metrics_json(metrics: dict | None) -> dict | None:
-    """The metrics object of CONTRACT.md (NaN, e.g. nothing observed, becomes null)."""
-    if metrics is None:
-        return None
-    out = {k: _finite(float(metrics[k])) for k in METRIC_KEYS}
-    out["checks"] = [{"name": c["name"], "passed": bool(c["passed"])} for c in metrics["checks"]]
+def metrics_json(metrics: dict | None, holdout: dict | None = None) -> dict | None:
+    """The metrics object of CONTRACT.md (NaN, e.g. nothing observed, becomes null), plus the
+    held-out scores when given; only those without truth, None with neither."""
+    out = None
+    if metrics is not None:
+        out = {k: _finite(float(metrics[k])) for k in METRIC_KEYS}
+        out["checks"] = [{"name": c["name"], "passed": bool(c["passed"])} for c in metrics["checks"]]
+    if holdout is not None:
+        out = out or {}
+        out.update({k: _finite(holdout[k]) for k in SCORE_KEYS})
     return out
 
 
@@ -388,15 +451,24 @@ def results_json(results: list[ModeResult]) -> dict:
     A result of a log without truth has ``metrics`` null and a ``consistency`` object beside
     it (``aogm_cli.consistency``: method, readings, endpoint_occupied, endpoint_occupied_8,
     endpoint_free, free_cells, free_contradicted).
+
+    With held-out scores, each result's ``metrics`` also holds ``evaluation.holdout.SCORE_KEYS``
+    (and without truth only those), its ``params["holdout"]`` the split, and the top level a
+    ``holdout`` object: the split and the fixed reference the scores use
+    (``evaluation.holdout.reference_json``).
     """
     out = []
     for r in results:
         item = {"log": r.log, "world": r.world, "mode": r.mode, "runtime_s": _finite(float(r.runtime_s)),
-                "metrics": metrics_json(r.metrics), "params": r.map.params, "detector": r.detector}
+                "metrics": metrics_json(r.metrics, r.holdout), "params": r.map.params, "detector": r.detector}
         if r.consistency is not None:
             item["consistency"] = consistency_json(r.consistency)
         out.append(item)
-    return {"aogm_version": __version__, "results": out}
+    doc = {"aogm_version": __version__, "results": out}
+    split = next((r.map.params.get("holdout") for r in results if r.holdout is not None), None)
+    if split is not None:
+        doc["holdout"] = {**split, "reference": reference_json()}
+    return doc
 
 
 def json_bytes(results: list[ModeResult]) -> bytes:

@@ -13,9 +13,13 @@ from dataclasses import dataclass
 
 from aogm_cli.core.errors import InputError
 from aogm_cli.core.occupancy_map import MODES
+from aogm_cli.evaluation.holdout import SCORE_KEYS
 
-# metric names of a gate -> what they mean; runtime is runtime_s, checks_passed a fraction
-METRICS = ("accuracy", "occupied_precision", "occupied_recall", "occupied_f1", "brier", "runtime", "checks_passed")
+# metric names of a gate -> what they mean; runtime is runtime_s, checks_passed a fraction; the
+# held-out scores (``evaluation.holdout``) exist only with --holdout
+HOLDOUT_METRICS = SCORE_KEYS
+METRICS = ("accuracy", "occupied_precision", "occupied_recall", "occupied_f1", "brier", "runtime", "checks_passed",
+           *HOLDOUT_METRICS)
 COMPARISONS = ("<=", ">=", "==", "!=", "<", ">")
 OPTION = "--require"
 MAX_LENGTH = 500  # characters of one expression
@@ -260,6 +264,15 @@ def check_gate_modes(gates: list[Gate], modes: tuple[str, ...]) -> None:
     for gate in gates:
         for mode in sorted(gate.modes - set(modes), key=MODES.index):
             raise _error(gate.text, f"mode {mode!r} is not among the modes compared ({', '.join(modes)}); add it to --modes")
+
+
+def check_gate_metrics(gates: list[Gate], holdout: bool) -> None:
+    """The held-out scores a gate names are computed only with --holdout."""
+    for gate in gates:
+        for mode, metric in gate.names:
+            if metric in HOLDOUT_METRICS and not holdout:
+                raise _error(gate.text, f"metric {metric!r} of {mode}.{metric} is computed only with --holdout; "
+                                        "add e.g. --holdout 0.1")
 
 
 @dataclass(frozen=True)
