@@ -263,9 +263,10 @@ def trace_sub_ray(ox, oy, dx, dy, limit, max_bounces, geo):
     """Follow one sub-ray (unit direction): echo at the first hit within its surface's
     threshold, else mirror-bounce, up to ``max_bounces`` times, over a total path <= limit.
 
-    Returns (first_t, echo, bounces): the distance of the first surface hit (inf if none
-    within limit), the one-way path length to the echoing surface (inf if none within limit)
-    and the number of bounces before it.
+    Returns (first_t, echo, bounces, cos_incidence): the distance of the first surface hit
+    (inf if none within limit), the one-way path length to the echoing surface (inf if none
+    within limit), the number of bounces before it and the cosine of the echo's incidence angle
+    on that surface (0 when there is no echo).
     """
     first = np.inf
     path = 0.0
@@ -277,11 +278,11 @@ def trace_sub_ray(ox, oy, dx, dy, limit, max_bounces, geo):
             first = t
         path += t
         if c >= cthr:
-            return first, path, bounce
+            return first, path, bounce, c
         dn = dx * nx + dy * ny
         side = 1.0 if dn > 0.0 else -1.0
         ox = ox + t * dx - side * BOUNCE_OFFSET * nx
         oy = oy + t * dy - side * BOUNCE_OFFSET * ny
         dx = dx - 2.0 * dn * nx
         dy = dy - 2.0 * dn * ny
-    return first, np.inf, 0
+    return first, np.inf, 0, 0.0

@@ -1,8 +1,9 @@
 """The sonar simulator: a world in, a log with its truth out (``simulate``).
 
-Each reading casts a fan of sub-rays across the cone; the nearest echo (after specular
-bounces) is the reading, then random readings, Gaussian noise and the range limits apply. The
-cause and the noise-free range of the nearest surface of every reading are kept as truth.
+Each reading casts a fan of sub-rays across the cone; the nearest echo strong enough to be
+detected (after specular bounces) is the reading, then crosstalk, random readings, Gaussian
+noise and the range limits apply. The cause and the noise-free range of the nearest surface of
+every reading are kept as truth; the logged poses are the odometry's (``simulation.odometry``).
 """
 
 from __future__ import annotations
@@ -16,14 +17,19 @@ import numpy as np
 from aogm_cli.core.budget import check
 from aogm_cli.core.errors import InputError
 from aogm_cli.core.log import CAUSE_ECHO, CAUSE_NO_ECHO, CAUSE_RANDOM, CAUSE_SPECULAR, Log, SensorSpec, Truth
+from aogm_cli.simulation.odometry import dead_reckoning
 from aogm_cli.simulation.raycast import geometry, trace_sub_ray
 from aogm_cli.world.budget import simulation_estimate
-from aogm_cli.world.config import Sonar, World
+from aogm_cli.world.config import SimulationErrors, Sonar, World
 from aogm_cli.world.scene import build_scene
 from aogm_cli.world.trajectory import trajectory_poses
 from aogm_cli.world.truth import truth_occupancy
 
 BLOCK_SCANS = 2048  # scans per kernel call (progress is reported between blocks)
+# The errors of a real robot draw from their own children of the seed's SeedSequence, so that
+# the draws of the ideal simulator (random readings, their ranges, noise) stay as they were.
+ODOMETRY_STREAM = 1
+CROSSTALK_STREAM = 2
 
 
 def sub_ray_offsets(beam_width: float, sub_rays: int) -> np.ndarray:
@@ -34,13 +40,17 @@ def sub_ray_offsets(beam_width: float, sub_rays: int) -> np.ndarray:
 
 
 @numba.njit(cache=True, _nrt=False)
-def echo_block(pose, mount, cos_off, sin_off, max_range, max_bounces, geo, echo, ideal, multipath):
+def echo_block(pose, mount, cos_off, sin_off, max_range, max_bounces, geo, echo, ideal, multipath,
+               min_strength=0.0, beam=1.0, incidence_exponent=2.0):
     """Noise-free readings of a block of scans (every sensor, every sub-ray), in one call.
 
     pose (B, 3) robot poses; mount (S, 3) sensor mounts; cos_off, sin_off (R,) sub-ray
-    offsets. Writes per reading (B, S): ``echo`` the nearest echo over the sub-rays (one-way
-    path, inf if none within max_range), ``ideal`` the nearest first hit of any sub-ray
+    offsets. Writes per reading (B, S): ``echo`` the nearest detected echo over the sub-rays
+    (one-way path, inf if none within max_range), ``ideal`` the nearest first hit of any sub-ray
     regardless of angle (inf if none) and ``multipath`` whether that echo came after a bounce.
+    With ``min_strength`` > 0 a sub-ray's echo is detected only when its strength
+    ``exp(-2 theta^2 / beam^2) cos(incidence)^incidence_exponent / path^2`` (theta the sub-ray's
+    angle off the axis) is at least ``min_strength``; 0 detects every echo.
     """
     n_sub = cos_off.shape[0]
     for i in range(pose.shape[0]):
@@ -59,9 +69,13 @@ def echo_block(pose, mount, cos_off, sin_off, max_range, max_bounces, geo, echo,
                 dx = ca * cos_off[r] - sa * sin_off[r]
                 dy = sa * cos_off[r] + ca * sin_off[r]
                 # a surface farther than the best echo so far can change neither result
-                first, path, bounces = trace_sub_ray(sx, sy, dx, dy, min(max_range, best), max_bounces, geo)
+                first, path, bounces, cos_inc = trace_sub_ray(sx, sy, dx, dy, min(max_range, best), max_bounces, geo)
                 if first < nearest:
                     nearest = first
+                if min_strength > 0.0 and path < np.inf:
+                    theta = math.atan2(sin_off[r], cos_off[r]) / beam
+                    if math.exp(-2.0 * theta * theta) * cos_inc**incidence_exponent < min_strength * path * path:
+                        path = np.inf  # too weak to be detected
                 if path < best or (path == best and bounces < best_bounces):
                     best = path
                     best_bounces = bounces
@@ -78,17 +92,22 @@ def readings_from_echoes(
     u_range: np.ndarray,
     noise: np.ndarray,
     sonar: Sonar,
+    noise_per_metre: float = 0.0,
+    crossed: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Turn noise-free echoes into readings (float32) and their causes (int8).
 
-    Cause: no echo -> 1 (+inf); an echo after a bounce or farther than ``ideal +
-    cause_tolerance`` -> 3; else 0. Then a reading with ``u_random < random_rate`` becomes
-    ``min_range + u_range * (max_range - min_range)`` (cause 2); ``noise_sigma * noise`` is
-    added; readings are clipped to >= min_range and those >= max_range become +inf (cause 1
-    unless random).
+    Cause: no echo -> 1 (+inf); an echo after a bounce, farther than ``ideal +
+    cause_tolerance`` or ``crossed`` (a neighbour's, see ``crosstalk``) -> 3; else 0. Then a
+    reading with ``u_random < random_rate`` becomes ``min_range + u_range * (max_range -
+    min_range)`` (cause 2); ``(noise_sigma + noise_per_metre * z) * noise`` is added (z the
+    reading so far); readings are clipped to >= min_range and those >= max_range become +inf
+    (cause 1 unless random).
     """
     cause = np.full(echo.shape, CAUSE_ECHO, dtype=np.int8)
     cause[multipath | (echo > ideal + sonar.cause_tolerance)] = CAUSE_SPECULAR
+    if crossed is not None:
+        cause[crossed] = CAUSE_SPECULAR
     no_echo = ~np.isfinite(echo)
     cause[no_echo] = CAUSE_NO_ECHO
     reading = echo.astype(np.float64, copy=True)
@@ -96,7 +115,11 @@ def readings_from_echoes(
     reading[random] = sonar.min_range + u_range[random] * (sonar.max_range - sonar.min_range)
     cause[random] = CAUSE_RANDOM
     with np.errstate(invalid="ignore"):
-        reading = reading + sonar.noise_sigma * noise
+        if noise_per_metre == 0.0:
+            reading = reading + sonar.noise_sigma * noise
+        else:
+            sigma = sonar.noise_sigma + noise_per_metre * np.where(np.isfinite(reading), reading, 0.0)
+            reading = reading + sigma * noise
     reading = np.maximum(reading, sonar.min_range)
     too_far = reading >= sonar.max_range
     reading[too_far] = np.inf
@@ -104,12 +127,35 @@ def readings_from_echoes(
     return reading.astype(np.float32), cause
 
 
+def crosstalk(echo: np.ndarray, u: np.ndarray, right: np.ndarray, rate: float) -> tuple[np.ndarray, np.ndarray]:
+    """Echoes (T, S) after crosstalk, and which readings it changed.
+
+    A reading with ``u < rate`` hears the echo of a ring neighbour (sonar j+1 where ``right``,
+    else j-1, wrapping: the order of the mounts), arriving first when it is nearer: the reading
+    becomes the lesser of the two. ``u`` and ``right`` are draws of the shape of ``echo``.
+    """
+    n_sensors = echo.shape[1]
+    j = np.arange(n_sensors)
+    neighbour = np.where(right, (j + 1) % n_sensors, (j - 1) % n_sensors)
+    other = np.take_along_axis(echo, neighbour, axis=1)
+    crossed = (u < rate) & (other < echo)
+    return np.where(crossed, other, echo), crossed
+
+
+def error_stream(seed: int, stream: int) -> np.random.Generator:
+    """The generator of one error of a real robot: child ``stream`` of the seed's SeedSequence."""
+    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(stream,)))
+
+
 def simulate(world: World, seed: int, progress: Callable[[int], None] | None = None) -> Log:
     """Simulate the world's sonar along its trajectory: the log, with its truth.
 
     Random numbers are drawn up front from ``numpy.random.default_rng(seed)`` in a fixed
     order (random-reading draws, random ranges, noise, each (T, S)), so a seed gives the same
-    arrays bit for bit. ``progress(n_scans_done)`` is called after each block of scans. A world
+    arrays bit for bit; the errors of ``world.errors`` draw from their own streams
+    (``error_stream``), only when they are on, so a world without errors gives the same log
+    as before they existed. The readings are cast from the true poses; the log holds the
+    odometry's estimate of them (``odometry.dead_reckoning``). ``progress(n_scans_done)`` is called after each block of scans. A world
     whose estimate exceeds the limits in force (``core.budget``) is refused first.
     """
     sonar = world.sonar
@@ -124,6 +170,9 @@ def simulate(world: World, seed: int, progress: Callable[[int], None] | None = N
     u_random = rng.random((n_scans, n_sensors))
     u_range = rng.random((n_scans, n_sensors))
     noise = rng.standard_normal((n_scans, n_sensors))
+
+    errors: SimulationErrors = world.errors
+    strength = errors.echo_strength
 
     grid, occupancy = truth_occupancy(world)
     geo = geometry(build_scene(world))
@@ -140,11 +189,21 @@ def simulate(world: World, seed: int, progress: Callable[[int], None] | None = N
         echo_block(
             pose[start:stop], mount, cos_off, sin_off, float(sonar.max_range), int(sonar.max_bounces), geo,
             echo[start:stop], ideal[start:stop], multipath[start:stop],
+            float(strength.min_strength), float(strength.beam), float(strength.incidence_exponent),
         )
         if progress is not None:
             progress(stop)
 
-    ranges, cause = readings_from_echoes(echo, ideal, multipath, u_random, u_range, noise, sonar)
+    crossed = None
+    if errors.crosstalk_rate > 0.0:
+        rng_crosstalk = error_stream(seed, CROSSTALK_STREAM)
+        u_crosstalk = rng_crosstalk.random((n_scans, n_sensors))
+        right = rng_crosstalk.random((n_scans, n_sensors)) < 0.5
+        echo, crossed = crosstalk(echo, u_crosstalk, right, errors.crosstalk_rate)
+    ranges, cause = readings_from_echoes(
+        echo, ideal, multipath, u_random, u_range, noise, sonar, errors.noise_per_metre, crossed
+    )
+    logged_pose = dead_reckoning(pose, errors.odometry, error_stream(seed, ODOMETRY_STREAM))
     truth = Truth(
         grid=grid,
         occupancy=occupancy,
@@ -163,7 +222,7 @@ def simulate(world: World, seed: int, progress: Callable[[int], None] | None = N
     )
     return Log(
         time=time,
-        pose=pose,
+        pose=logged_pose,
         ranges=ranges,
         sensor=sensor,
         source=f"aogm simulate {world.source}",

@@ -13,6 +13,8 @@ BYTES_PER_READING = 112  # draws, echoes, readings and causes (float64 scratch),
 BYTES_PER_SCAN = 200  # time, pose and the trajectory sampler's scratch
 BYTES_PER_TRUTH_CELL = 4  # the raster, its copy in the log file, and scratch
 BYTES_PER_SUB_RAY = 32  # offsets, their cosines and sines
+BYTES_PER_CROSSTALK_READING = 48  # crosstalk's draws, neighbours and echoes (when it is on)
+BYTES_PER_ODOMETRY_SCAN = 160  # odometry's draws, relative motions and estimate (when it is on)
 
 
 def scan_count(world: World) -> float:
@@ -35,6 +37,10 @@ def simulation_estimate(world: World) -> Estimate:
     readings = n_scans * n_sensors
     memory = (readings * BYTES_PER_READING + n_scans * BYTES_PER_SCAN + cells * BYTES_PER_TRUTH_CELL
               + sub_rays * BYTES_PER_SUB_RAY)
+    if world.errors.crosstalk_rate > 0.0:
+        memory += readings * BYTES_PER_CROSSTALK_READING
+    if not world.errors.odometry.off:
+        memory += n_scans * BYTES_PER_ODOMETRY_SCAN
     work = readings * sub_rays * (1 + (sonar.max_bounces if sonar else 0))
     detail = (f"{n_scans:.3g} scans x {n_sensors:.0f} sonars x {sub_rays:.0f} sub-rays, "
               f"{cells:.3g} truth cells")

@@ -1,4 +1,5 @@
-"""The world as typed, frozen configuration: geometry, surfaces, robot, trajectory, sonar, checks.
+"""The world as typed, frozen configuration: geometry, surfaces, robot, trajectory, sonar, the
+errors of a real robot, checks.
 
 These dataclasses are what ``world.loader`` produces from YAML after validation; nothing
 else in the package reads world YAML. Angles are stored in radians, lengths in metres.
@@ -115,6 +116,55 @@ class Sonar:
 
 
 @dataclass(frozen=True)
+class Odometry:
+    """Dead-reckoning drift of the logged poses: the odometry motion model of Probabilistic
+    Robotics (table 5.6) between consecutive scans, each step's relative motion (rot1, trans,
+    rot2) drawn with Gaussian errors of std ``translation * |trans|`` for trans and
+    ``sqrt((rotation * rot)^2 + rotation_per_metre^2 * trans^2 / 2)`` for rot1 and rot2.
+
+    ``translation`` m/m, ``rotation`` rad/rad, ``rotation_per_metre`` rad/m; all zero (the
+    default) logs the true poses.
+    """
+
+    translation: float = 0.0
+    rotation: float = 0.0
+    rotation_per_metre: float = 0.0
+
+    @property
+    def off(self) -> bool:
+        return self.translation == 0.0 and self.rotation == 0.0 and self.rotation_per_metre == 0.0
+
+
+@dataclass(frozen=True)
+class EchoStrength:
+    """The weakest echo a sonar detects. A sub-ray's echo has the strength
+    ``exp(-2 theta^2 / beam^2) * cos(incidence)^incidence_exponent / path^2`` (theta the sub-ray's
+    angle off the sensor axis, path in metres) and is not detected below ``min_strength``
+    (1/m^2; 0, the default, detects every echo). ``beam`` is theta0 of the Kuc & Siegel beam
+    pattern, in radians.
+    """
+
+    min_strength: float = 0.0
+    beam: float = math.radians(15.0)
+    incidence_exponent: float = 2.0
+
+
+@dataclass(frozen=True)
+class SimulationErrors:
+    """The errors of a real robot that the simulator adds; the defaults are all off.
+
+    ``noise_per_metre`` (m/m) makes the range noise's std ``noise_sigma + noise_per_metre * z``;
+    ``crosstalk_rate`` is the probability that a reading takes a neighbouring sonar's echo when
+    that one is nearer (logged as cause 3, specular or multipath).
+    """
+
+    odometry: Odometry = field(default_factory=Odometry)
+    noise_per_metre: float = 0.0
+    crosstalk_rate: float = 0.0
+    echo_strength: EchoStrength = field(default_factory=EchoStrength)
+
+
+@dataclass(frozen=True)
 class PassableCheck:
     """A robot of ``robot_radius`` can go from ``start`` to ``goal`` through believed-free cells."""
 
@@ -132,7 +182,7 @@ class PassableCheck:
 
 @dataclass(frozen=True)
 class World:
-    """Everything ``aogm simulate`` needs: geometry, surfaces, robot, trajectory, sonar and checks."""
+    """Everything ``aogm simulate`` needs: geometry, surfaces, robot, trajectory, sonar, errors and checks."""
 
     name: str
     source: str  # path of the YAML file
@@ -148,5 +198,6 @@ class World:
     robot: Robot = field(default_factory=Robot)
     trajectory: Trajectory = field(default_factory=Trajectory)
     sonar: Sonar | None = None
+    errors: SimulationErrors = field(default_factory=SimulationErrors)
     checks: tuple[PassableCheck, ...] = ()
     description: str = ""

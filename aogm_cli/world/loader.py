@@ -15,11 +15,14 @@ from aogm_cli.io.yamlfile import read_yaml
 from aogm_cli.world.config import (
     Box,
     Circle,
+    EchoStrength,
     Floorplan,
+    Odometry,
     Opening,
     PassableCheck,
     Polygon,
     Robot,
+    SimulationErrors,
     Sonar,
     Surface,
     Trajectory,
@@ -157,7 +160,7 @@ def _closest(key: str, allowed: set[str]) -> str:
 
 TOP_KEYS = {
     "name", "description", "bounds", "truth_resolution", "surfaces", "default_surface", "walls",
-    "boxes", "polygons", "circles", "floorplan", "robot", "trajectory", "sonar", "checks",
+    "boxes", "polygons", "circles", "floorplan", "robot", "trajectory", "sonar", "errors", "checks",
 }
 
 
@@ -185,6 +188,7 @@ def parse_world(raw: Any, *, file: str, text: str = "", base_dir: Path = Path(".
     robot = _robot(top.child("robot")) if top.has("robot") else Robot()
     trajectory = _trajectory(top.child("trajectory"), bounds)
     sonar = _sonar(top.child("sonar") if top.has("sonar") else Node({}, "sonar", file), robot)
+    errors = _errors(top.child("errors") if top.has("errors") else Node({}, "errors", file), sonar)
     checks = _checks(top.child("checks"), bounds, robot) if top.has("checks") else []
 
     if not (walls or boxes or polygons or circles or floorplan):
@@ -205,6 +209,7 @@ def parse_world(raw: Any, *, file: str, text: str = "", base_dir: Path = Path(".
         robot=robot,
         trajectory=trajectory,
         sonar=sonar,
+        errors=errors,
         checks=tuple(checks),
         description=description,
     )
@@ -407,4 +412,30 @@ def _sonar(n: Node, robot: Robot) -> Sonar:
         sub_rays=n.child("sub_rays").integer(minimum=1) if n.has("sub_rays") else Sonar.sub_rays,
         max_bounces=n.child("max_bounces").integer(minimum=0) if n.has("max_bounces") else Sonar.max_bounces,
         cause_tolerance=n.get_number("cause_tolerance", Sonar.cause_tolerance, positive=True),
+    )
+
+
+def _errors(n: Node, sonar: Sonar) -> SimulationErrors:
+    """The ``errors:`` section: every error of a real robot, each off by default."""
+    n.mapping({"odometry", "noise_per_metre", "crosstalk_rate", "echo_strength"})
+    odometry = Odometry()
+    if n.has("odometry"):
+        o = n.child("odometry").mapping({"translation", "rotation", "rotation_per_metre_deg"})
+        odometry = Odometry(
+            translation=o.get_number("translation", 0.0, minimum=0.0, maximum=1.0),
+            rotation=o.get_number("rotation", 0.0, minimum=0.0, maximum=1.0),
+            rotation_per_metre=o.get_angle("rotation_per_metre_deg", 0.0, minimum=0.0, maximum=90.0),
+        )
+    e = n.child("echo_strength") if n.has("echo_strength") else Node({}, f"{n.path}.echo_strength", n.file)
+    e.mapping({"min_strength", "beam_deg", "incidence_exponent"})
+    echo_strength = EchoStrength(
+        min_strength=e.get_number("min_strength", 0.0, minimum=0.0),
+        beam=e.get_angle("beam_deg", sonar.beam_width / 2, positive=True, maximum=90.0),
+        incidence_exponent=e.get_number("incidence_exponent", EchoStrength.incidence_exponent, minimum=0.0, maximum=100.0),
+    )
+    return SimulationErrors(
+        odometry=odometry,
+        noise_per_metre=n.get_number("noise_per_metre", 0.0, minimum=0.0, maximum=1.0),
+        crosstalk_rate=n.get_number("crosstalk_rate", 0.0, minimum=0.0, maximum=1.0),
+        echo_strength=echo_strength,
     )

@@ -1,0 +1,264 @@
+"""The errors of a real robot in the simulator (world key ``errors:``): each off by default and
+then the log of before; odometry drift, range noise growing with range, crosstalk and a minimum
+echo strength each doing what worlds/README.md says; bad values named by their key path."""
+
+from __future__ import annotations
+
+import math
+
+import h5py
+import numpy as np
+import pytest
+import yaml
+from click.testing import CliRunner
+
+from aogm_cli.cli import main
+from aogm_cli.core.log import CAUSE_ECHO, CAUSE_NO_ECHO, CAUSE_SPECULAR
+from aogm_cli.simulation.odometry import dead_reckoning
+from aogm_cli.simulation.sonar import simulate
+from aogm_cli.world.config import Odometry
+from aogm_cli.world.loader import parse_world
+from aogm_cli.world.trajectory import trajectory_poses
+
+BOX = {
+    "bounds": [-0.5, -0.5, 6.5, 4.5],
+    "walls": [{"points": [[0, 0], [6, 0], [6, 4], [0, 4], [0, 0]], "thickness": 0.1}],
+    "boxes": [{"center": [4.0, 2.6], "size": [0.6, 0.4], "yaw_deg": 20}],
+    "circles": [{"center": [2.0, 1.2], "radius": 0.15}],
+    "trajectory": {"waypoints": [[0.8, 2.0], [5.0, 2.0], [5.0, 3.2], [1.0, 3.2]]},
+    "sonar": {"count": 8, "max_range": 5.0, "sub_rays": 5},
+}
+ALL_ON = {
+    "odometry": {"translation": 0.05, "rotation": 0.05, "rotation_per_metre_deg": 2.0},
+    "noise_per_metre": 0.02,
+    "crosstalk_rate": 0.3,
+    "echo_strength": {"min_strength": 0.05},
+}
+
+
+def world(errors=None, **over):
+    raw = {**BOX, **over}
+    if errors is not None:
+        raw["errors"] = errors
+    return parse_world(raw, file="w.yaml", text=yaml.safe_dump(raw))
+
+
+def arrays(log):
+    return {
+        "time": log.time, "pose": log.pose, "ranges": log.ranges, "cause": log.truth.cause,
+        "ideal_range": log.truth.ideal_range, "occupancy": log.truth.occupancy,
+    }
+
+
+def assert_same_log(a, b, but=()):
+    for name, x in arrays(a).items():
+        y = arrays(b)[name]
+        same = x.dtype == y.dtype and np.array_equal(x, y, equal_nan=True)
+        assert same == (name not in but), name
+
+
+# --- each error off: the log of before -----------------------------------------------------------
+
+
+def test_every_error_at_its_default_gives_the_log_without_an_errors_section():
+    plain = simulate(world(), seed=3)
+    zeros = {
+        "odometry": {"translation": 0, "rotation": 0, "rotation_per_metre_deg": 0},
+        "noise_per_metre": 0, "crosstalk_rate": 0,
+        "echo_strength": {"min_strength": 0, "beam_deg": 5, "incidence_exponent": 7},
+    }
+    for errors in ({}, zeros, {"odometry": {}}, {"echo_strength": {}}):
+        assert_same_log(plain, simulate(world(errors), seed=3))
+
+
+@pytest.mark.parametrize("key", sorted(ALL_ON))
+def test_each_error_changes_only_what_it_should(key):
+    plain = simulate(world(), seed=3)
+    log = simulate(world({key: ALL_ON[key]}), seed=3)
+    changed = {"odometry": {"pose"}, "noise_per_metre": {"ranges"}, "crosstalk_rate": {"ranges", "cause"},
+               "echo_strength": {"ranges", "cause"}}[key]
+    assert_same_log(plain, log, but=changed)
+
+
+def test_the_cli_log_of_a_world_with_errors_off_equals_the_plain_one(tmp_path):
+    paths = []
+    for name, errors in (("plain", None), ("off", {"crosstalk_rate": 0, "odometry": {"rotation": 0}})):
+        raw = {**BOX, **({"errors": errors} if errors is not None else {})}
+        (tmp_path / f"{name}.yaml").write_text(yaml.safe_dump(raw))
+        out = tmp_path / f"{name}.h5"
+        r = CliRunner().invoke(main, ["simulate", str(tmp_path / f"{name}.yaml"), "-o", str(out), "--seed", "2", "-q"])
+        assert r.exit_code == 0, r.output
+        paths.append(out)
+    with h5py.File(paths[0]) as a, h5py.File(paths[1]) as b:
+        for name in ("scans/time", "scans/pose", "scans/ranges", "truth/cause", "truth/ideal_range", "truth/occupancy"):
+            assert np.array_equal(a[name][...], b[name][...], equal_nan=True), name
+
+
+# --- odometry drift ----------------------------------------------------------------------------
+
+
+def straight_line(steps, step=0.1):
+    x = np.arange(steps + 1) * step
+    return np.column_stack([x, np.zeros_like(x), np.zeros_like(x)])
+
+
+def test_translation_drift_grows_as_the_square_root_of_the_steps():
+    # std of each 0.1 m step's error: 0.1 * 0.1 = 0.01 m; after n steps 0.01 sqrt(n) m along the line
+    pose = straight_line(400)
+    runs = np.array([dead_reckoning(pose, Odometry(translation=0.1), np.random.default_rng(s)) for s in range(300)])
+    along = runs[:, :, 0] - pose[None, :, 0]
+    for n in (25, 100, 400):
+        assert along[:, n].std() == pytest.approx(0.01 * math.sqrt(n), rel=0.15)
+    assert np.allclose(runs[:, :, 1], 0.0) and np.allclose(runs[:, :, 2], 0.0)  # no turn error
+
+
+def test_heading_drift_per_metre_and_per_radian():
+    pose = straight_line(400)
+    k = math.radians(2.0)  # rad per metre: heading std 2 degrees after the first metre, per step k * 0.1
+    runs = np.array([dead_reckoning(pose, Odometry(rotation_per_metre=k), np.random.default_rng(s)) for s in range(300)])
+    for n in (25, 100, 400):
+        assert runs[:, n, 2].std() == pytest.approx(k * 0.1 * math.sqrt(n), rel=0.15)
+    lateral = np.abs(runs[:, :, 1]).mean(axis=0)
+    assert lateral[400] > lateral[100] > lateral[25] > 0
+    # turning in place: pi/2 per step, std 0.05 * pi/2 per step
+    turns = np.column_stack([np.zeros(101), np.zeros(101), np.arange(101) * (math.pi / 2)])
+    runs = np.array([dead_reckoning(turns, Odometry(rotation=0.05), np.random.default_rng(s)) for s in range(300)])
+    error = (runs[:, -1, 2] - turns[-1, 2] + math.pi) % (2 * math.pi) - math.pi
+    assert error.std() == pytest.approx(0.05 * math.pi / 2 * math.sqrt(100), rel=0.15)
+    assert np.all(runs[:, :, :2] == 0.0)
+
+
+def test_simulated_odometry_drifts_with_distance_is_seeded_and_leaves_the_truth():
+    errors = {"odometry": ALL_ON["odometry"]}
+    w = world(errors)
+    _, true = trajectory_poses(w)
+    logs = [simulate(w, seed=s) for s in (5, 5, 6)]
+    assert_same_log(logs[0], logs[1])
+    assert not np.array_equal(logs[0].pose, logs[2].pose)
+    plain = simulate(world(), seed=5)
+    assert_same_log(plain, logs[0], but={"pose"})  # readings cast from the true poses
+    assert np.array_equal(logs[0].pose[0], true[0])
+    runs = np.array([dead_reckoning(true, w.errors.odometry, np.random.default_rng(s)) for s in range(200)])
+    dist = np.hypot(runs[:, :, 0] - true[:, 0], runs[:, :, 1] - true[:, 1]).mean(axis=0)
+    n = len(dist)
+    assert 0 < dist[n // 4] < dist[n // 2] < dist[-1]
+    assert np.array_equal(dead_reckoning(true, Odometry(), np.random.default_rng(1)), true)
+
+
+def test_backing_up_is_driven_backwards_not_turned_round():
+    pose = np.array([[0.0, 0.0, 0.0], [-0.1, 0.0, 0.0], [-0.2, 0.0, 0.0]])
+    est = dead_reckoning(pose, Odometry(rotation=0.5, translation=1e-9), np.random.default_rng(0))
+    assert np.allclose(est, pose, atol=1e-6)
+
+
+# --- range noise growing with range ---------------------------------------------------------------
+
+
+def test_range_noise_spread_grows_with_range():
+    # one sonar at the robot's centre, one sub-ray, facing a wall face at x = 4.95: 200 scans at
+    # 1 m and 200 at 4 m. sigma(z) = 0.01 + 0.05 z: 0.06 m at 1 m, 0.21 m at 4 m
+    poses = [[3.95, 2.0, 0.0]] * 200 + [[0.95, 2.0, 0.0]] * 200
+    w = world(
+        {"noise_per_metre": 0.05},
+        walls=[{"points": [[5.0, -0.4], [5.0, 4.4]], "thickness": 0.1}], boxes=[], circles=[],
+        trajectory={"poses": poses},
+        sonar={"mounts": [[0, 0, 0]], "sub_rays": 1, "noise_sigma": 0.01, "random_rate": 0.0, "max_range": 5.5},
+    )
+    log = simulate(w, seed=1)
+    err = (log.ranges[:, 0] - log.truth.ideal_range[:, 0]).astype(np.float64)
+    assert np.allclose(log.truth.ideal_range[:200], 1.0) and np.allclose(log.truth.ideal_range[200:], 4.0)
+    assert err[:200].std() == pytest.approx(0.06, rel=0.15)
+    assert err[200:].std() == pytest.approx(0.21, rel=0.15)
+
+
+# --- crosstalk ---------------------------------------------------------------------------------
+
+
+def test_crosstalk_at_rate_one_gives_readings_no_longer_than_the_own_echo():
+    sonar = {"count": 8, "max_range": 5.0, "sub_rays": 5, "noise_sigma": 0.0, "random_rate": 0.0}
+    plain = simulate(world(sonar=sonar), seed=4)
+    log = simulate(world({"crosstalk_rate": 1.0}, sonar=sonar), seed=4)
+    assert np.all(log.ranges <= plain.ranges)
+    shorter = log.ranges < plain.ranges
+    assert shorter.mean() > 0.2
+    assert np.all(log.truth.cause[shorter] == CAUSE_SPECULAR)
+    assert np.array_equal(log.truth.cause[~shorter], plain.truth.cause[~shorter])
+    # each shorter reading is a ring neighbour's echo
+    n = plain.ranges.shape[1]
+    left, right = np.roll(plain.ranges, 1, axis=1), np.roll(plain.ranges, -1, axis=1)
+    assert np.all((log.ranges == left) | (log.ranges == right) | ~shorter)
+    assert np.any(shorter & (log.ranges == left)) and np.any(shorter & (log.ranges == right)) and n == 8
+
+
+# --- a minimum echo strength ---------------------------------------------------------------------
+
+
+def one_ray_world(poses, min_strength):
+    return world(
+        {"echo_strength": {"min_strength": min_strength}},
+        bounds=[-5, -5, 5, 5], walls=[{"points": [[-5, 2], [5, 2]], "thickness": 0.1}], boxes=[], circles=[],
+        trajectory={"poses": poses},
+        sonar={"mounts": [[0, 0, 0]], "sub_rays": 1, "noise_sigma": 0.0, "random_rate": 0.0, "max_range": 5.0},
+    )
+
+
+def test_a_far_or_steep_wall_gives_no_echo_above_the_threshold():
+    # the wall's face is y = 1.95: straight up from y = 0 at 1.95 m (strength 1 / 1.95^2 = 0.26) and
+    # from y = -2.05 at 4 m (0.0625); at 60 degrees incidence from y = 0, 3.9 m away
+    # (cos^2 60 / 3.9^2 = 0.016)
+    poses = [[0, 0, 90], [0, -2.05, 90], [0, 0, 30]]
+    expected = [1.95, 4.0, 3.9]
+    off = simulate(one_ray_world(poses, 0.0), seed=1)
+    assert np.allclose(off.ranges[:, 0], expected, atol=1e-5)
+    assert np.all(off.truth.cause == CAUSE_ECHO)
+    on = simulate(one_ray_world(poses, 0.1), seed=1)
+    assert on.ranges[0, 0] == pytest.approx(1.95, abs=1e-5) and on.truth.cause[0, 0] == CAUSE_ECHO
+    assert np.all(np.isinf(on.ranges[1:, 0])) and np.all(on.truth.cause[1:, 0] == CAUSE_NO_ECHO)
+    assert np.array_equal(on.truth.ideal_range, off.truth.ideal_range)  # the surface is still there
+    # between: 0.02 keeps the far wall straight on (0.0625) and drops the steep one (0.016)
+    mid = simulate(one_ray_world(poses, 0.02), seed=1)
+    assert np.isfinite(mid.ranges[1, 0]) and np.isinf(mid.ranges[2, 0])
+
+
+def test_the_beam_pattern_drops_off_axis_echoes_first():
+    # 3 sub-rays at -15, 0, +15 degrees; theta0 = 15 degrees: the side rays' echoes are e^-2 weaker
+    raw = {"echo_strength": {"min_strength": 0.05, "beam_deg": 15}}
+    poses = [[0, -1.05, 75]]  # the left sub-ray (+15) hits the wall straight on at 3 m; the axis at 15 deg
+    w = world(raw, bounds=[-5, -5, 5, 5], walls=[{"points": [[-5, 2], [5, 2]], "thickness": 0.1}], boxes=[],
+              circles=[], trajectory={"poses": poses},
+              sonar={"mounts": [[0, 0, 0]], "sub_rays": 3, "beam_width_deg": 30, "noise_sigma": 0.0,
+                     "random_rate": 0.0, "max_range": 5.0})
+    log = simulate(w, seed=1)
+    # left ray: exp(-2) / 9 = 0.015 < 0.05, dropped; axis: cos^2(15) / (3 / cos 15)^2 = 0.097, kept
+    assert log.truth.ideal_range[0, 0] == pytest.approx(3.0, abs=1e-5)
+    assert log.ranges[0, 0] == pytest.approx(3.0 / math.cos(math.radians(15)), abs=1e-5)
+
+
+# --- bad values --------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "errors, key, what",
+    [
+        ({"odometry": {"translation": -1}}, "errors.odometry.translation", "expected a number >= 0, got -1"),
+        ({"odometry": {"rotation": "lots"}}, "errors.odometry.rotation", "expected a number"),
+        ({"odometry": {"rotation_per_metre": 0.1}}, "errors.odometry.rotation_per_metre", "unknown key"),
+        ({"odometry": [0.1]}, "errors.odometry", "expected a mapping"),
+        ({"noise_per_metre": -0.01}, "errors.noise_per_metre", ">= 0"),
+        ({"crosstalk_rate": 1.5}, "errors.crosstalk_rate", "<= 1"),
+        ({"crosstalk_rate": True}, "errors.crosstalk_rate", "expected a number"),
+        ({"echo_strength": {"min_strength": -1}}, "errors.echo_strength.min_strength", ">= 0"),
+        ({"echo_strength": {"beam_deg": 0}}, "errors.echo_strength.beam_deg", "positive"),
+        ({"echo_strength": {"threshold": 1}}, "errors.echo_strength.threshold", "unknown key"),
+        ({"drift": 1}, "errors.drift", "unknown key"),
+        (3, "errors", "expected a mapping"),
+    ],
+)
+def test_bad_errors_exit_2_naming_the_key(tmp_path, errors, key, what):
+    path = tmp_path / "w.yaml"
+    path.write_text(yaml.safe_dump({**BOX, "errors": errors}))
+    out = tmp_path / "log.h5"
+    r = CliRunner().invoke(main, ["simulate", str(path), "-o", str(out), "-q"])
+    assert r.exit_code == 2, r.output
+    assert f"{path}: {key}: " in r.output and what in r.output, r.output
+    assert "Traceback" not in r.output and not out.exists()
