@@ -231,7 +231,7 @@ def tree_edit(draw, tree):
         del parent[path[-1]]
         return f"delete {where}"
     if op == "add_key" and isinstance(node, dict):
-        key = draw(st.sampled_from(["unknown", "extra_key", "x", "1", "walls", "sonar"]))
+        key = draw(st.sampled_from(["unknown", "extra_key", "x", "1", "walls", "sonar", "errors"]))
         node[key] = copy.deepcopy(draw(st.sampled_from(BAD_VALUES)))  # later edits must not change BAD_VALUES
         return f"add {where}.{key}"
     if op == "truncate" and isinstance(node, list):
