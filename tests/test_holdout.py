@@ -20,8 +20,10 @@ from aogm_cli.evaluation.holdout import (
     REFERENCE_MODEL,
     SCORE_KEYS,
     HoldoutSplit,
+    arc_alpha,
     auc_from_counts,
     cell_labels,
+    reading_scores,
     reference_log_likelihoods,
     roc_auc,
     split_log,
@@ -131,7 +133,7 @@ def test_cone_labels_are_the_standard_mappers_arc_and_free_region():
     occupied evidence, negatives where it adds free evidence."""
     grid = GridSpec(0.0, 0.0, 0.05, 60, 80)
     sensor = SensorSpec(mount=np.zeros((1, 3)), max_range=2.5, min_range=0.15)
-    config = InverseModelConfig(model="constant", alpha=0.05)
+    config = InverseModelConfig(model="constant", alpha=arc_alpha(grid))
     for z in (1.2137, np.inf):
         pose = np.array([[0.61, 1.52, 0.3]])
         ranges = np.array([[z]], dtype=np.float32)
@@ -154,9 +156,29 @@ def test_laser_labels_are_the_endpoint_and_the_cells_before_the_hit():
     expected_pos[1, 6] = 1
     expected_neg = np.zeros(grid.shape, dtype=int)
     expected_neg[1, :] = 1  # the no-echo ray, to the grid's edge
-    expected_neg[1, :6] += 1  # cells left before z - alpha/2 = 0.285 (col 5 exits at 0.275)
+    expected_neg[1, :4] += 1  # cells left before z - alpha/2 = 0.21 (col 3 exits at 0.175, col 4 at 0.225)
     np.testing.assert_array_equal(pos, expected_pos)
     np.testing.assert_array_equal(neg, expected_neg)
+
+
+def test_a_sonar_readings_positive_is_the_largest_probability_on_its_arc():
+    """One cell of a 30-degree arc echoed: a map holding that cell occupied and the rest of the
+    arc free scores the reading's positive at that cell's probability."""
+    grid = GridSpec(0.0, 0.0, 0.05, 60, 80)
+    sensor = SensorSpec(mount=np.zeros((1, 3)), max_range=2.5, min_range=0.15)
+    pose = np.array([[0.61, 1.52, 0.3]])
+    ranges = np.array([[1.2137]], dtype=np.float32)
+    pos, neg = cell_labels(pose, ranges, sensor, grid)
+    arc = np.argwhere(pos > 0)
+    probability = np.full(grid.shape, 0.2)
+    probability[pos > 0] = 0.05
+    probability[tuple(arc[len(arc) // 2])] = 0.9
+    scores, negatives = reading_scores(pose, ranges, sensor, grid, probability)
+    assert scores.tolist() == [0.9]
+    np.testing.assert_array_equal(negatives, neg)
+    # no echo: no positive, only the free cone
+    scores, _ = reading_scores(pose, np.array([[np.inf]], dtype=np.float32), sensor, grid, probability)
+    assert scores.size == 0
 
 
 # --- the reference log-likelihood ------------------------------------------------------------
