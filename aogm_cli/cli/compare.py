@@ -9,6 +9,7 @@ import click
 
 from aogm_cli.cli.options import (
     budget_options,
+    calibrate_option,
     detector_file,
     detector_option,
     limits_of,
@@ -118,14 +119,16 @@ def _source(r) -> str:
 @click.option("--holdout", type=float, metavar="FRACTION",
               help="Hold out every round(1/FRACTION)-th scan (0 < FRACTION <= 0.5), map the rest and score "
                    "each map on the held-out readings (see Held-out scores above).")
+@calibrate_option
 @seed_option
 @quiet_option
 @budget_options
 def compare(inputs, modes_text, detector, params_file, json_out, figure_out, maps_dir, requires, require_checks, jobs,
-            holdout, seed, quiet, max_memory=16e9, max_work=None):
+            holdout, calibrate, seed, quiet, max_memory=16e9, max_work=None):
     """Map every log in every mode, evaluate each map against the log's truth, and print a table
     (accuracy, occupied F1, Brier, checks passed, runtime, runtime relative to the standard map
-    of the same log).
+    of the same log). em and adaptive learn their forward model from each log (--calibrate,
+    the default; `aogm calibrate --help`).
 
     A log without truth (an imported real log) is scored by re-casting its in-range readings
     against each map instead: the share whose endpoint (a sonar's occupied arc) lies on a cell
@@ -177,7 +180,7 @@ def compare(inputs, modes_text, detector, params_file, json_out, figure_out, map
     split = None if holdout is None else HoldoutSplit(holdout, seed).validate()
     gates = [parse_gate(text) for text in requires]  # malformed -> exit 2 before any work
     check_gate_metrics(gates, split is not None)
-    params = resolve_params(params_file)
+    params = resolve_params(params_file, {"calibration": {"enabled": calibrate}})
     entries = lib.collect_inputs(list(inputs))
     modes = lib.parse_modes(modes_text) if modes_text else lib.default_modes(entries)
     check_gate_modes(gates, modes)
