@@ -1,5 +1,6 @@
 """EM with forward models on hand-computable cases: obstacles where readings say, openings kept."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -172,3 +173,23 @@ def test_leaving_out_cells_held_free_changes_no_likelihood():
     for _ in range(5):  # any map that keeps the held-free cells free: the same likelihoods
         m = fixed_occupied | (candidates & (rng.random(N_CELLS) < 0.3))
         assert np.array_equal(log_likelihoods(full, m), log_likelihoods(small, m))
+
+
+def test_hidden_cells_keep_the_standard_estimate_only_when_asked():
+    """EM's residual at the candidates the data decides; with hidden: standard, a cell EM leaves
+    free though occupancy costs the data nothing (evidence 0, residual = the prior 0.3) keeps
+    what the probability held (the standard map's), one the data objects to does not."""
+    from aogm_cli.mapping.em import EMResult, decided, residual_into
+
+    prior = CONFIG.prior_occupied
+    logistic = lambda x: 1 / (1 + math.exp(-x))  # noqa: E731
+    residual = np.array([prior, logistic(CONFIG.l_prior - 3.0), 0.9, logistic(CONFIG.l_prior - 0.01)])
+    result = EMResult(1, [0], [0.0, 0.0], np.array([0, 1, 2, 3]), residual, [4], [0], 0, 0)
+    hidden = dataclasses.replace(CONFIG, hidden="standard")
+    assert decided(result, hidden).tolist() == [False, True, True, False]
+    probability = np.full(5, 0.8)
+    residual_into(probability, result, hidden)
+    np.testing.assert_allclose(probability, [0.8, residual[1], 0.9, 0.8, 0.8])
+    probability = np.full(5, 0.8)
+    residual_into(probability, result, CONFIG)  # the default: the residual everywhere
+    np.testing.assert_allclose(probability, [*residual, 0.8])

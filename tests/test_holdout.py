@@ -181,6 +181,20 @@ def test_a_sonar_readings_positive_is_the_largest_probability_on_its_arc():
     assert scores.size == 0
 
 
+def test_a_laser_readings_positive_is_the_largest_probability_in_its_hit_band():
+    grid = GridSpec(0.0, 0.0, 0.05, 3, 20)
+    sensor = SensorSpec(mount=np.zeros((1, 3)), kind="laser", beam_width=math.radians(0.5), min_range=0.0,
+                        max_range=1.0)
+    pose = np.array([[0.025, 0.075, 0.0]])
+    ranges = np.array([[0.31]], dtype=np.float32)  # endpoint x = 0.335 (col 6); band 0.21 .. 0.41 of the ray
+    probability = np.full(grid.shape, 0.3)
+    probability[1, 8] = 0.8  # x 0.40-0.45: the ray enters it at 0.375, inside the band
+    probability[1, 9] = 0.99  # enters at 0.425: beyond the band
+    scores, negatives = reading_scores(pose, ranges, sensor, grid, probability)
+    assert scores.tolist() == [0.8]
+    assert negatives[1, :4].tolist() == [1, 1, 1, 1] and negatives.sum() == 4
+
+
 # --- the reference log-likelihood ------------------------------------------------------------
 
 

@@ -19,9 +19,9 @@ leak into the map that scores them. The map is made from the other scans; then:
   draws them (``mapping.standard``: arc z -/+ alpha/2, free from
   min_range up to the arc; the region, whatever Elfes' weights give its cells); a no-echo
   (max-range) reading gives negatives only, its cone from min_range up to max_range. Narrow
-  beams (lasers, ``beam.is_narrow_beam``): the positive is the endpoint's cell (as
-  ``consistency.reading_endpoints``), the negatives the cells the ray crosses before the hit
-  band z - alpha/2 and past min_range (as ``beam.BeamMapper`` marks them free). The arc's
+  beams (lasers, ``beam.is_narrow_beam``): the positive is the largest probability over the
+  cells the ray crosses within alpha/2 of z (the hit band), the negatives the cells it crosses
+  before the hit band and past min_range (as ``beam.BeamMapper`` marks them free). The arc's
   thickness is fixed, ``REFERENCE_ALPHA`` = z -/+ the reference model's sigma (0.1 m), or one
   cell if larger, whatever the maps were made with: a held-out reading's surface lies within
   its noise of z, and a one-cell arc (0.05 m) missed the wall of a sharp (EM) map behind noisy
@@ -247,10 +247,12 @@ def cone_labels(pose: np.ndarray, ranges: np.ndarray, sensor: SensorSpec, grid: 
     return labels if probability is None else (*labels, arc_max)
 
 
-def ray_labels(pose: np.ndarray, ranges: np.ndarray, sensor: SensorSpec, grid: GridSpec) -> tuple[np.ndarray, np.ndarray]:
+def ray_labels(pose: np.ndarray, ranges: np.ndarray, sensor: SensorSpec, grid: GridSpec,
+               probability: np.ndarray | None = None):
     """``cone_labels`` for narrow beams: each in-range reading's endpoint cell is a positive;
     the cells its ray crosses before z - alpha/2 (up to max_range for no echo) and past
-    min_range are negatives."""
+    min_range are negatives. With ``probability`` (H, W), also each reading's largest
+    probability over the cells its ray crosses within alpha/2 of z (NaN for no echo), third."""
     n = grid.height * grid.width
     rows, cols, counted = reading_endpoints(pose, ranges, sensor, grid)
     inside = counted & (rows >= 0) & (rows < grid.height) & (cols >= 0) & (cols < grid.width)
@@ -258,29 +260,33 @@ def ray_labels(pose: np.ndarray, ranges: np.ndarray, sensor: SensorSpec, grid: G
     sp = sensor_poses(np.asarray(pose, dtype=np.float64).reshape(-1, 3), sensor.mount).reshape(-1, 3)
     z = np.asarray(ranges, dtype=np.float64).reshape(-1)
     half = 0.5 * arc_alpha(grid)
+    band_max = np.full(z.size, np.nan)
     cells = []
     for t in np.flatnonzero((z >= 0) & np.isfinite(sp).all(axis=1)):  # one call per reading, not per cell
         echo = z[t] < sensor.max_range
-        r, c, _enter, t_exit = ray_cells(grid, sp[t, 0], sp[t, 1], sp[t, 2], z[t] if echo else sensor.max_range)
+        reach = min(z[t] + half, sensor.max_range) if echo else sensor.max_range
+        r, c, _enter, t_exit = ray_cells(grid, sp[t, 0], sp[t, 1], sp[t, 2], reach)
         free = (t_exit > sensor.min_range) & (t_exit <= z[t] - half if echo else True)
         cells.append(r[free] * grid.width + c[free])
+        if echo and probability is not None:
+            band = t_exit > z[t] - half
+            if band.any():
+                band_max[t] = np.max(probability[r[band], c[band]])
     negatives = np.bincount(np.concatenate(cells or [np.zeros(0, dtype=np.int64)]), minlength=n).astype(np.int32)
-    return positives.reshape(grid.shape), negatives.reshape(grid.shape)
+    labels = positives.reshape(grid.shape), negatives.reshape(grid.shape)
+    return labels if probability is None else (*labels, band_max)
 
 
 def reading_scores(pose: np.ndarray, ranges: np.ndarray, sensor: SensorSpec, grid: GridSpec,
                    probability: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(one positive score per reading that has one, negatives (H, W) int32): the map's
-    ``probability`` (H, W) where each held-out reading says an obstacle is (a sonar: the
-    largest over its occupied arc, since one cell of the arc echoed, not every one; a narrow
-    beam: its endpoint's cell), and per cell how many readings pass through it as free."""
-    if is_narrow_beam(sensor, grid.resolution):
-        rows, cols, counted = reading_endpoints(pose, ranges, sensor, grid)
-        inside = counted & (rows >= 0) & (rows < grid.height) & (cols >= 0) & (cols < grid.width)
-        _positives, negatives = ray_labels(pose, ranges, sensor, grid)
-        return np.asarray(probability, dtype=np.float64)[rows[inside], cols[inside]], negatives
-    _positives, negatives, arc_max = cone_labels(pose, ranges, sensor, grid, probability)
-    return arc_max[np.isfinite(arc_max)], negatives
+    ``probability`` (H, W) where each held-out reading says an obstacle is, the largest over
+    the cells within alpha/2 of its range (a sonar: its occupied arc, since one cell of the arc
+    echoed, not every one; a narrow beam: the cells its ray crosses there), and per cell how
+    many readings pass through it as free."""
+    labels = ray_labels if is_narrow_beam(sensor, grid.resolution) else cone_labels
+    _positives, negatives, band_max = labels(pose, ranges, sensor, grid, np.asarray(probability, dtype=np.float64))
+    return band_max[np.isfinite(band_max)], negatives
 
 
 def cell_labels(pose: np.ndarray, ranges: np.ndarray, sensor: SensorSpec, grid: GridSpec) -> tuple[np.ndarray, np.ndarray]:

@@ -20,11 +20,12 @@ from aogm_cli.mapping.sensor_models.cone import flat_offsets
 LEARNED = ("sigma", "p_rand", "p_hit", "p_max")  # the forward model's parameters calibration sets
 
 
-def sample_readings(run: Readings, max_readings: int) -> F.ExpectationReadings:
-    """The readings the parameters are fitted on: every valid reading of ``run`` (NaN left out),
-    or every n-th of them when there are more than ``max_readings`` (deterministic, spread over
-    the whole log)."""
-    keep = np.flatnonzero(~np.isnan(run.z))
+def sample_readings(run: Readings, max_readings: int, select: np.ndarray | None = None) -> F.ExpectationReadings:
+    """The readings the parameters are fitted on: every valid reading of ``run`` (NaN left out;
+    with ``select``, a bool mask, only those it marks), or every n-th of them when there are
+    more than ``max_readings`` (deterministic, spread over the whole log)."""
+    valid = ~np.isnan(run.z)
+    keep = np.flatnonzero(valid if select is None else valid & select)
     if keep.size > max_readings:
         keep = keep[:: -(-keep.size // max_readings)]
     return F.ExpectationReadings(run.rows[keep].astype(np.int64), run.cols[keep].astype(np.int64),
@@ -110,17 +111,18 @@ def model_values(forward: F.ForwardModelConfig) -> dict:
 EMStep = Callable[[EMConfig, np.ndarray], tuple[float, int, object]]
 
 
-def em_with_model(run: Readings, occupied: np.ndarray, params: MapParams, em_step: EMStep) -> tuple[EMConfig, object, dict | None]:
-    """EM with the configured forward model, or calibrated (``calibrated_em``) when
-    ``params.calibration.enabled``: (the EM config used, ``em_step``'s last result, the record
-    or None)."""
+def em_with_model(run: Readings, occupied: np.ndarray, params: MapParams, em_step: EMStep,
+                  select: np.ndarray | None = None) -> tuple[EMConfig, object, dict | None]:
+    """EM with the configured forward model, or calibrated (``calibrated_em``, fitted on the
+    readings ``select`` marks, default all) when ``params.calibration.enabled``: (the EM config
+    used, ``em_step``'s last result, the record or None)."""
     if not params.calibration.enabled:
         return params.em, em_step(params.em, occupied)[2], None
-    return calibrated_em(run, occupied, params.em, params.calibration, em_step)
+    return calibrated_em(run, occupied, params.em, params.calibration, em_step, select)
 
 
 def calibrated_em(run: Readings, occupied: np.ndarray, em: EMConfig, config: CalibrationConfig,
-                  em_step: EMStep) -> tuple[EMConfig, object, dict]:
+                  em_step: EMStep, select: np.ndarray | None = None) -> tuple[EMConfig, object, dict]:
     """Alternate running EM and fitting the forward model at EM's map: round 0 maps with the
     configured model made at least ``config.start_sigma`` broad, each round fits the parameters
     at the last map (``fit_at_map``) and maps again with them, until the fitted parameters
@@ -132,7 +134,7 @@ def calibrated_em(run: Readings, occupied: np.ndarray, em: EMConfig, config: Cal
     Returns (the EM config the final map was made with, the last EM result, the record: the
     starting values, and per round the fitted values, the mean log-likelihood of the sample at
     the fit, and EM's objective and sweeps)."""
-    readings = sample_readings(run, config.max_readings)
+    readings = sample_readings(run, config.max_readings, select)
     record = {"initial": model_values(em.forward), "readings_used": int(readings.z.shape[0]), "rounds": []}
     start = occupied.copy()
     used = dataclasses.replace(em, forward=dataclasses.replace(em.forward, sigma=max(em.forward.sigma, config.start_sigma)))

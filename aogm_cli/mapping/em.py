@@ -12,7 +12,6 @@ set of cells with every other cell held fixed: the adaptive mapper calls it on t
 from __future__ import annotations
 
 import dataclasses
-import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -26,7 +25,7 @@ from aogm_cli.mapping.params import EMConfig, MapParams
 from aogm_cli.mapping.pipeline import Progress, forward_templates, lay_out_readings, log_grid, params_json
 from aogm_cli.mapping.sensor_models.cone import flat_offsets
 from aogm_cli.mapping.sensor_models.forward_model import ForwardModelConfig, reading_constants
-from aogm_cli.mapping.standard import standard_pass
+from aogm_cli.mapping.standard import probability_from_log_odds, standard_pass
 
 
 @dataclass
@@ -42,6 +41,28 @@ class EMResult:
     pairs: list[int]  # (candidate, reading) pairs generated per sweep
     peak_pairs: int  # the most pairs one tile held
     scratch_bytes: int  # the tiles' scratch at its largest
+
+
+def decided(result: EMResult, config: EMConfig) -> np.ndarray:
+    """Which of ``result``'s candidates the data decides: those believed occupied, and those
+    believed free whose occupancy would lower the data log-likelihood by more than
+    ``config.hidden_gain``. The others are cells EM leaves free although no reading objects to
+    an obstacle there: hidden behind the obstacles the readings detect (a wall's far layers,
+    beyond every cone's window or barely inside it), where the prior alone decides."""
+    with np.errstate(divide="ignore"):
+        evidence = np.log(result.residual) - np.log1p(-result.residual) - config.l_prior  # log p(Z|occ) - log p(Z|free)
+    return (result.residual > 0.5) | (evidence < -config.hidden_gain)
+
+
+def residual_into(probability: np.ndarray, result: EMResult, config: EMConfig) -> None:
+    """Write EM's residual occupancy into the flat ``probability`` at the candidates the data
+    decides (``decided``); the hidden ones keep what ``probability`` holds (the standard map's
+    estimate, ``config.hidden == "standard"``) or get the residual too (``"prior"``)."""
+    if config.hidden == "prior":
+        probability[result.candidates] = result.residual
+        return
+    keep = decided(result, config)
+    probability[result.candidates[keep]] = result.residual[keep]
 
 
 def em_readings(rows, cols, bins, z, templates, grid, z_max: float, config: ForwardModelConfig,
@@ -285,8 +306,8 @@ def map_em(log, params: MapParams, progress: Progress | None = None) -> Occupanc
     config, result, calibration = em_with_model(run, occupied, params, em_step)
     t_calibration = time.perf_counter() - t0 - seconds["index"] - seconds["em"]
     t0 = time.perf_counter()
-    probability = np.full(grid.height * grid.width, 1.0 / (1.0 + math.exp(-config.l_prior)), dtype=np.float32)
-    probability[result.candidates] = result.residual
+    probability = probability_from_log_odds(log_odds, observed).reshape(-1)
+    residual_into(probability, result, config)
     probability = probability.reshape(grid.shape)
     probability[~observed] = 0.5
     t_em = seconds["em"] + time.perf_counter() - t0

@@ -40,6 +40,14 @@ class EMConfig:
     prior_occupied: float = 0.3  # prior p(m_x = 1) of every cell
     max_sweeps: int = 20
     start: str = "standard"  # "standard": the thresholded standard map; "empty": all free
+    # "prior" (Thrun's residual everywhere) or "standard": cells EM leaves free though no
+    # reading objects to an obstacle there (occupancy would lower the data log-likelihood by
+    # at most hidden_gain: a wall's far layers, hidden behind the obstacles the readings
+    # detect) keep the standard map's estimate. Measured on the 13 bundled worlds (README,
+    # "Walls hidden behind walls"): "standard" raises EM's occupied recall 1.5-4x (corridor_door
+    # 0.39 -> 0.58, office_doors_real 0.11 -> 0.46) but moves accuracy by -0.015 .. +0.012
+    hidden: str = "prior"
+    hidden_gain: float = 0.05
 
     def validate(self) -> EMConfig:
         check_field_types(self.forward)
@@ -51,6 +59,10 @@ class EMConfig:
             raise InputError(f"expected a probability in (0, 1), got {self.prior_occupied:g}", key="prior_occupied")
         if self.max_sweeps < 1:
             raise InputError(f"expected a whole number >= 1, got {self.max_sweeps}", key="max_sweeps")
+        if self.hidden not in ("standard", "prior"):
+            raise InputError(f"expected 'standard' or 'prior', got {self.hidden!r}", key="hidden")
+        if not self.hidden_gain >= 0:
+            raise InputError(f"expected a number >= 0, got {self.hidden_gain!r}", key="hidden_gain")
         if self.start not in ("standard", "empty"):
             raise InputError(f"expected 'standard' or 'empty', got {self.start!r}", key="start")
         return self
