@@ -63,10 +63,15 @@ bench-scale: $(STAMP)
 lint: $(STAMP)
 	@status=0; $(BIN)/ruff check . || status=1; $(BIN)/lint-imports --no-cache || status=1; exit $$status
 
-# The packaged detector: simulate every bundled world except the two test worlds of the paper's
-# figures, hold out two (a specular corridor and a furnished room) for validation, train (seeded).
-DETECTOR_WORLDS     := $(filter-out worlds/corridor_door.yaml worlds/corridor_specular.yaml,$(WORLDS))
+# The packaged detector: simulate every bundled world, clean and realistic (*_real: an errors:
+# section), except the two test worlds of the paper's figures and their realistic variants, hold
+# out two (a specular corridor and a furnished room) for validation, train (seeded). The file's
+# training_logs attribute records each log's world, realistic flag, seed and scans.
+# DETECTOR_OUT=FILE writes the detector there instead of into the package.
+DETECTOR_TEST_WORLDS := corridor_door corridor_specular
+DETECTOR_WORLDS     := $(filter-out $(foreach n,$(DETECTOR_TEST_WORLDS),worlds/$(n).yaml worlds/$(n)_real.yaml),$(WORLDS))
 DETECTOR_VALIDATION := l_corridor furnished_room
+DETECTOR_OUT        ?= aogm_cli/data/detector.h5
 .PHONY: detector
 detector: $(STAMP)
 	@mkdir -p $(OUT)/detector
@@ -75,7 +80,7 @@ detector: $(STAMP)
 	done
 	$(BIN)/aogm train $(patsubst worlds/%.yaml,$(OUT)/detector/%.h5,$(DETECTOR_WORLDS)) \
 	  $(foreach n,$(DETECTOR_VALIDATION),--validation-logs $(OUT)/detector/$(n).h5) \
-	  -o aogm_cli/data/detector.h5 --seed $(SEED) --quiet
+	  -o $(DETECTOR_OUT) --seed $(SEED) --quiet
 
 clean:
 	rm -rf $(OUT) .pytest_cache .hypothesis

@@ -8,6 +8,7 @@ import math
 import h5py
 import numpy as np
 import pytest
+import yaml
 from click.testing import CliRunner
 from numpy.testing import assert_allclose, assert_array_equal
 
@@ -17,8 +18,8 @@ from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import Log, SensorSpec, Truth
 from aogm_cli.detector.features import FeatureSpec, features, neighbour_ranges
 from aogm_cli.detector.network import Detector, Layer
-from aogm_cli.io.detectorfile import default_detector_path, load_detector, save_detector
-from aogm_cli.io.logfile import write_log
+from aogm_cli.io.detectorfile import TRAINING_LOGS, default_detector_path, load_detector, save_detector
+from aogm_cli.io.logfile import read_log, write_log
 from aogm_cli.mapping.cluster import cone_bands, near_occupied
 from aogm_cli.mapping.pipeline import cone_templates as standard_templates
 from aogm_cli.mapping.pipeline import readings_of
@@ -33,6 +34,7 @@ from aogm_cli.training.fit import (
     split_by_world,
 )
 from aogm_cli.training.labels import LabelDefinition, depth_edge, erroneous, labels, standard_wrong, sub_ray_depths
+from aogm_cli.training.provenance import log_provenance
 from aogm_cli.world.loader import parse_world
 
 INF, NAN = np.inf, np.nan
@@ -319,22 +321,21 @@ def test_packaged_detector_loads_and_flags():
 # ---------------------------------------------------------------- aogm train
 
 
-def _door_world(length: float):
-    """A short corridor past a 1 m door into a small room: edges at the frame, random readings."""
-    return parse_world(
-        {
-            "bounds": [-0.5, -0.5, 6.5, 4.0],
-            "walls": [
-                {"points": [[0, 0], [6, 0]]},
-                {"points": [[0, 2], [6, 2]], "openings": [{"at": 3.0, "width": 1.0}]},
-                {"points": [[2, 2], [2, 3.5], [4, 3.5], [4, 2]]},
-            ],
-            "circles": [{"center": [4.5, 0.5], "radius": 0.15}],
-            "trajectory": {"waypoints": [[1.0, 1.0], [1.0 + length, 1.0]], "scan_period": 0.5},
-            "sonar": {"count": 12, "random_rate": 0.05},
-        },
-        file="door.yaml",
-    )
+def _door_world(length: float, **extra):
+    """A short corridor past a 1 m door into a small room: edges at the frame, random readings
+    (``extra``: more top-level keys, e.g. name and errors; the YAML text goes into the log)."""
+    raw = {
+        "bounds": [-0.5, -0.5, 6.5, 4.0],
+        "walls": [
+            {"points": [[0, 0], [6, 0]]},
+            {"points": [[0, 2], [6, 2]], "openings": [{"at": 3.0, "width": 1.0}]},
+            {"points": [[2, 2], [2, 3.5], [4, 3.5], [4, 2]]},
+        ],
+        "circles": [{"center": [4.5, 0.5], "radius": 0.15}],
+        "trajectory": {"waypoints": [[1.0, 1.0], [1.0 + length, 1.0]], "scan_period": 0.5},
+        "sonar": {"count": 12, "random_rate": 0.05},
+    } | extra
+    return parse_world(raw, file="door.yaml", text=yaml.safe_dump(raw))
 
 
 @pytest.fixture(scope="module")
@@ -383,8 +384,69 @@ def test_train_command_bad_input_exits_2_without_output(tiny_logs, tmp_path):
 def test_train_help_documents_features_and_labels():
     result = CliRunner().invoke(main, ["train", "--help"])
     assert result.exit_code == 0
-    for phrase in ("R = 7", "specular", "depth edge", "held out", "Example", "standard map", "--arc-wrong-min"):
+    for phrase in ("R = 7", "specular", "depth edge", "held out", "Example", "standard map", "--arc-wrong-min",
+                   "training_logs", "errors:"):
         assert phrase in result.output
+
+
+# ---------------------------------------------------------------- which logs it was trained on
+
+
+@pytest.fixture(scope="module")
+def real_log(tmp_path_factory):
+    """A door log of a realistic variant: a name and an errors: section."""
+    errors = {"odometry": {"translation": 0.02}, "noise_per_metre": 0.01, "crosstalk_rate": 0.02}
+    path = tmp_path_factory.mktemp("real") / "door_real.h5"
+    write_log(path, simulate(_door_world(3.5, name="little_door_real", errors=errors), seed=5))
+    return path
+
+
+def test_train_records_the_logs_and_which_are_realistic(tiny_logs, real_log, tmp_path):
+    clean = tiny_logs[0]
+    out = tmp_path / "det.h5"
+    result = CliRunner().invoke(main, ["train", str(real_log), str(clean), "--validation-logs", str(clean), "-o", str(out),
+                                       "--seed", "1", "--hidden", "6", "--quiet"])
+    assert result.exit_code == 0, result.output
+    with h5py.File(out) as f:
+        recorded = json.loads(f.attrs[TRAINING_LOGS])
+        assert TRAINING_LOGS not in json.loads(f.attrs["training"])  # stored once, at the root
+    assert recorded == {
+        "train": [{"file": "door_real.h5", "world": "little_door_real", "realistic": True,
+                   "errors": ["crosstalk_rate", "noise_per_metre", "odometry"], "seed": 5,
+                   "scans": read_log(real_log).n_scans, "source": "aogm simulate door.yaml"}],
+        # no name: in the world, so the world file that its source names
+        "validation": [{"file": "door0.h5", "world": "door", "realistic": False, "errors": [], "seed": 0,
+                        "scans": read_log(clean).n_scans, "source": "aogm simulate door.yaml"}],
+    }
+    assert load_detector(out).training[TRAINING_LOGS] == recorded
+    # a detector file written before the attribute existed still loads, and is written back without one
+    with h5py.File(out, "a") as f:
+        del f.attrs[TRAINING_LOGS]
+    old = load_detector(out)
+    assert TRAINING_LOGS not in old.training and old.training["seed"] == 1
+    save_detector(tmp_path / "again.h5", old)
+    with h5py.File(tmp_path / "again.h5") as f:
+        assert TRAINING_LOGS not in f.attrs
+    with h5py.File(out, "a") as f:
+        f.attrs[TRAINING_LOGS] = "{oops"
+    with pytest.raises(InputError) as err:
+        load_detector(out)
+    assert err.value.key == TRAINING_LOGS
+
+
+def test_log_provenance_without_the_world_text():
+    log = Log(np.zeros(2), np.zeros((2, 3)), np.ones((2, 4), np.float32), SensorSpec(np.zeros((4, 3))),
+              "aogm simulate worlds/x_real.yaml", None, 7)
+    assert log_provenance("some/dir/x.h5", log) == {"file": "x.h5", "world": "x_real", "realistic": None, "errors": [],
+                                                    "seed": 7, "scans": 2, "source": "aogm simulate worlds/x_real.yaml"}
+
+
+def test_the_packaged_detector_never_trained_on_a_test_world():
+    recorded = load_detector().training.get(TRAINING_LOGS)
+    if recorded is None:
+        pytest.skip("the packaged detector predates training_logs")
+    worlds = [entry["world"] for part in ("train", "validation") for entry in recorded[part]]
+    assert worlds and not [w for w in worlds if w.startswith(("corridor_door", "corridor_specular"))]
 
 
 def test_flags_made_in_chunks_equal_the_whole_log_at_once():

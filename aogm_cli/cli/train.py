@@ -59,7 +59,10 @@ def train(log_files, output, seed, validation_logs, hidden, activation, beta, ri
     beta 0.25 weighs precision over recall (a false flag costs EM time in a needless cluster,
     a missed one is mostly covered by its flagged neighbours' bands; on the bundled worlds
     it gives a threshold near 0.9 and more accurate adaptive maps than beta = 1). Precision,
-    recall, F1 and counts on training and validation logs are printed and stored in the file.
+    recall, F1 and counts on training and validation logs are printed and stored in the file,
+    and so are the logs themselves (attribute training_logs, JSON): per training and
+    validation log its file name, world, whether that world is a realistic variant (it has
+    an errors: section), its errors, seed, scan count and source.
     \b
     Example:
       aogm train out/lab.h5 out/hall.h5 out/office.h5 --validation-logs out/office.h5 -o detector.h5 --seed 1

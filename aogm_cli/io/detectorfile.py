@@ -30,6 +30,10 @@ from aogm_cli.io.h5file import (
 FORMAT = "aogm-detector"
 FORMAT_VERSION = 1
 BASELINE_DETECTORS = ("all", "none")  # --detector all|none: flag every reading, or none
+# Root attribute (JSON) naming the logs the detector was trained and validated on, per log its
+# file, world, realistic flag, seed and scans (training.provenance); in memory it is the
+# ``training`` dict's entry of the same name. Files written before it existed have none.
+TRAINING_LOGS = "training_logs"
 
 
 def default_detector_path() -> Path:
@@ -48,7 +52,11 @@ def detector_bytes(detector: Detector) -> bytes:
         f.attrs["metrics"] = json.dumps(detector.metrics)
         f.attrs["threshold"] = float(detector.threshold)
         f.attrs["labels"] = json.dumps(detector.labels)
-        f.attrs["training"] = json.dumps(detector.training)
+        training = dict(detector.training)
+        logs = training.pop(TRAINING_LOGS, None)
+        f.attrs["training"] = json.dumps(training)
+        if logs is not None:
+            f.attrs[TRAINING_LOGS] = json.dumps(logs)
         group = f.create_group("layers")
         group.attrs["layout"] = LAYOUT
         for i, layer in enumerate(detector.layers):
@@ -77,6 +85,9 @@ def _read(f: h5py.File, path: str) -> Detector:
     metrics = json_attr(f, "metrics", path, "metrics", dict)
     labels = json_attr(f, "labels", path, "labels", dict, required=False) or {}
     training = json_attr(f, "training", path, "training", dict, required=False) or {}
+    logs = json_attr(f, TRAINING_LOGS, path, TRAINING_LOGS, dict, required=False)
+    if logs is not None:
+        training[TRAINING_LOGS] = logs
     threshold = number_attr(f, "threshold", path, "threshold")
     if not 0.0 <= threshold <= 1.0:
         raise InputError(f"expected a probability in [0, 1], got {threshold}", file=path, key="threshold")

@@ -16,8 +16,10 @@ from aogm_cli.core.errors import InputError
 from aogm_cli.core.log import Log
 from aogm_cli.detector.features import FeatureSpec, features
 from aogm_cli.detector.network import Detector, Layer
+from aogm_cli.io.detectorfile import TRAINING_LOGS
 from aogm_cli.training.config import TrainingConfig
 from aogm_cli.training.labels import LabelDefinition, labels
+from aogm_cli.training.provenance import training_logs
 
 THRESHOLDS = np.round(np.arange(0.05, 0.951, 0.01), 2)  # candidate flag thresholds
 
@@ -132,7 +134,8 @@ def train_detector(
     """Fit the detector on ``train_logs`` (name, log) and score it there and on ``validation_logs``.
 
     The flag threshold maximises F_beta on the training data; ``metrics`` holds precision,
-    recall, F1 and sample counts on training and validation (None without validation logs).
+    recall, F1 and sample counts on training and validation (None without validation logs);
+    ``training[TRAINING_LOGS]`` which logs it learnt from and was validated on (``provenance``).
     ``progress(1)`` is called per log labelled and once after fitting.
     """
     spec = spec or FeatureSpec()
@@ -164,6 +167,7 @@ def train_detector(
         "sklearn_version": sklearn.__version__,
         "train_logs": list(train.logs),
         "validation_logs": list(validation.logs),
+        TRAINING_LOGS: training_logs(train_logs, validation_logs),
     }
     return Detector(detector.layers, spec, threshold, definition.as_dict(), metrics, training)
 
