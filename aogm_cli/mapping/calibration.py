@@ -137,7 +137,8 @@ def calibrated_em(run: Readings, occupied: np.ndarray, em: EMConfig, config: Cal
     readings = sample_readings(run, config.max_readings, select)
     record = {"initial": model_values(em.forward), "readings_used": int(readings.z.shape[0]), "rounds": []}
     start = occupied.copy()
-    used = dataclasses.replace(em, forward=dataclasses.replace(em.forward, sigma=max(em.forward.sigma, config.start_sigma)))
+    used = dataclasses.replace(em, forward=dataclasses.replace(em.forward, sigma=max(em.forward.sigma, config.start_sigma)),
+                               max_sweeps=min(em.max_sweeps, config.start_sweeps))
     objective, sweeps, result = em_step(used, occupied)
     record["rounds"].append({"round": 0, **model_values(used.forward), "em_objective": float(objective), "em_sweeps": int(sweeps)})
     for round_no in range(1, config.rounds + 1):

@@ -120,6 +120,7 @@ class CalibrationConfig:
     # lets EM's map follow the noise and the fitted sigma stays narrow (measured on
     # corridor_door at noise 0.12 m: start 0.03 -> sigma 0.051, 0.06 -> 0.082, 0.1 -> 0.100)
     start_sigma: float = 0.1
+    start_sweeps: int = 3  # the first (broad) EM run's sweep limit: its map only serves the first fit
     # bounds: sigma from a tenth of a typical 5 cm cell to half a metre; p_rand, p_max below one
     # half each (a model that calls most readings random or dropped explains nothing); p_hit
     # away from 0 and 1 (EM needs q = 1 - p_hit > 0, and a wall missed by every reading is no wall)
@@ -139,7 +140,7 @@ class CalibrationConfig:
         if unknown or not self.learned:
             raise InputError(f"expected a comma-separated list of sigma, p_rand, p_hit, p_max, got {self.learn!r}",
                              key="learn")
-        for key in ("rounds", "fit_iterations", "max_readings"):
+        for key in ("rounds", "fit_iterations", "max_readings", "start_sweeps"):
             if getattr(self, key) < 1:
                 raise InputError(f"expected a whole number >= 1, got {getattr(self, key)}", key=key)
         if not 0 < self.tolerance < 1:
