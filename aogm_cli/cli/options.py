@@ -5,7 +5,7 @@ with ``io.outputs.resolve_outputs`` before any work.
 Option                 commands
 -o/--output            simulate, map, train, render, export (a PREFIX), import carmen, import text
 -q/--quiet             simulate, map, train, render, export, compare, import carmen, import text
---seed                 simulate, train
+--seed                 simulate, train, compare (--holdout)
 --png                  simulate, map
 --mode / --modes       map / compare (choices from core.occupancy_map.MODES; also --require-checks)
 --params, --detector   map, compare
