@@ -26,7 +26,7 @@ def compare(logs: list[str], out: Path, *extra: str, jobs: int) -> dict:
            *extra]
     subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
     results = json.loads(out.read_text())["results"]
-    return {(r["world"] or Path(r["log"]).stem, r["mode"]): {**r["metrics"], "runtime_s": r["runtime_s"]} for r in results}
+    return {(r["world"] or Path(r["log"]).stem, r["mode"]): {**(r["metrics"] or {}), "runtime_s": r["runtime_s"]} for r in results}
 
 
 def fmt(v, digits=4) -> str:

@@ -185,3 +185,29 @@ def test_range_search_is_searchsorted():
             for right in (False, True):
                 want = np.searchsorted(r, v, side="right" if right else "left") if v >= 0 else 0
                 assert range_search(r, tpl.range_index[b], tpl.resolution, v, right) == want
+
+
+def test_a_narrow_beams_cone_holds_every_cell_its_ray_crosses():
+    """A 0.5-degree beam's cone on a 5 cm grid (narrower than a cell up to 5.7 m): with ray=True
+    it holds every cell a grid traversal of its axis crosses, at every heading tried; without,
+    cells along the axis go missing (gaps of over a metre)."""
+    import math
+
+    from aogm_cli.core.grid import GridSpec
+    from aogm_cli.mapping.beam import ray_cells
+    from aogm_cli.mapping.sensor_models.cone import build_cone_templates
+
+    grid = GridSpec(-10.0, -10.0, 0.05, 400, 400)
+    narrow = build_cone_templates(0.05, math.radians(0.5), 8.0, margin=0.05)
+    ray = build_cone_templates(0.05, math.radians(0.5), 8.0, margin=0.05, ray=True)
+    row, col = grid.world_to_cell(0.0, 0.0)
+    missing_narrow = 0
+    for k in range(0, ray.n_bins, 97):
+        yaw = float(ray.bin_heading(k))
+        rows, cols, _, _ = ray_cells(grid, 0.025, 0.025, yaw, 7.5)  # from the cell's centre
+        crossed = set(zip((rows - row).tolist(), (cols - col).tolist(), strict=True))
+        drow, dcol, _, _ = ray.cells(k)
+        assert crossed <= set(zip(drow.tolist(), dcol.tolist(), strict=True)), k
+        drow, dcol, _, _ = narrow.cells(k)
+        missing_narrow += len(crossed - set(zip(drow.tolist(), dcol.tolist(), strict=True)))
+    assert missing_narrow > 0

@@ -1,7 +1,7 @@
 """Standard mapping of narrow-beam sensors (lasers): one ray per reading instead of a cone template.
 
-Owns the dispatch rule (``is_narrow_beam``), the Amanatides-Woo grid traversal (``ray_cells``)
-and ``BeamMapper``, the log-odds update along rays with the state and clamping of ``standard``.
+Owns the Amanatides-Woo grid traversal (``ray_cells``) and ``BeamMapper`` (the dispatch rule,
+``is_narrow_beam``, lives in ``pipeline``, whose cone templates need it too), the log-odds update along rays with the state and clamping of ``standard``.
 
 The model along a ray (Amanatides & Woo 1987, traversed from the sensor's true position)
 -----------------------------------------------------------------------------------------
@@ -41,6 +41,7 @@ import numpy as np
 from aogm_cli.core.frames import sensor_poses
 from aogm_cli.core.grid import GridSpec, dda_steps
 from aogm_cli.core.log import SensorSpec
+from aogm_cli.mapping.pipeline import is_narrow_beam  # noqa: F401 - re-exported: its callers import it from here
 from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig, inverse_update, occupied_arc
 
 # a ray that stays in a cell for at most this many cells' length only touches it (a corner,
@@ -93,16 +94,6 @@ class Rays(NamedTuple):
     ux: np.ndarray  # unit beam direction
     uy: np.ndarray
     z: np.ndarray  # float32 range as logged (NaN or negative: nothing; >= max_range: max-range)
-
-
-def is_narrow_beam(sensor: SensorSpec, resolution: float) -> bool:
-    """Does standard mapping trace this sensor's readings as rays rather than cones?
-
-    Yes for a laser (``kind == "laser"``: its reading is the first return near the beam's
-    axis, and its beam, 0.5 deg or less, is no wider than the spacing of its beams), and for
-    any sensor whose cone is under a cell wide at max range (beam_width * max_range < resolution).
-    """
-    return sensor.kind == "laser" or float(sensor.beam_width) * float(sensor.max_range) < float(resolution)
 
 
 def ray_cells(grid: GridSpec, x: float, y: float, yaw: float, length: float):

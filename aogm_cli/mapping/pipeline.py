@@ -50,10 +50,23 @@ def echo_ranges(ranges: np.ndarray, grid: GridSpec) -> np.ndarray:
     return np.asarray(ranges, dtype=np.float64) + 0.5 * grid.resolution
 
 
+def is_narrow_beam(sensor: SensorSpec, resolution: float) -> bool:
+    """Does standard mapping trace this sensor's readings as rays rather than cones?
+
+    Yes for a laser (``kind == "laser"``: its reading is the first return near the beam's
+    axis, and its beam, 0.5 deg or less, is no wider than the spacing of its beams), and for
+    any sensor whose cone is under a cell wide at max range (beam_width * max_range < resolution).
+    """
+    return sensor.kind == "laser" or float(sensor.beam_width) * float(sensor.max_range) < float(resolution)
+
+
 def cone_templates(grid: GridSpec, sensor: SensorSpec) -> ConeTemplates:
     """The cone templates every mode uses on ``grid``: reach max_range plus one cell (for the
-    axis-offset correction of ``cone.reading_geometry``); cached, one-time set-up."""
-    return build_cone_templates(grid.resolution, sensor.beam_width, sensor.max_range, margin=grid.resolution)
+    axis-offset correction of ``cone.reading_geometry``); cached, one-time set-up. A narrow
+    beam's cones (EM's forward model of a laser) also hold every cell their ray crosses, as the
+    ray tracing of standard mapping and of the held-out scores does (``build_cone_templates``)."""
+    return build_cone_templates(grid.resolution, sensor.beam_width, sensor.max_range, margin=grid.resolution,
+                                ray=is_narrow_beam(sensor, grid.resolution))
 
 
 def forward_templates(grid: GridSpec, sensor: SensorSpec) -> ConeTemplates:

@@ -288,11 +288,15 @@ def _wrap(angle: np.ndarray) -> np.ndarray:
 
 
 def build_cone_templates(
-    resolution: float, beam_width: float, max_range: float, *, margin: float = 0.0, n_bins: int | None = None
+    resolution: float, beam_width: float, max_range: float, *, margin: float = 0.0, n_bins: int | None = None,
+    ray: bool = False,
 ) -> ConeTemplates:
     """Cone templates for a grid ``resolution`` (m), a ``beam_width`` (rad) and ranges up to
     ``max_range + margin`` (m). ``n_bins`` defaults to ``heading_bins_for`` and must be a
-    multiple of 8. Cached: equal arguments return the same (read-only) object.
+    multiple of 8. With ``ray``, a cone also holds every cell its axis crosses (the cells of a
+    grid traversal of the ray: centre within resolution/2 (|cos a| + |sin a|) of the axis, a its
+    angle to the grid), so that a beam narrower than a cell leaves no gap along its ray.
+    Cached: equal arguments return the same (read-only) object.
     """
     if not (math.isfinite(resolution) and resolution > 0):
         raise InputError(f"expected a positive resolution, got {resolution}", key="resolution")
@@ -305,11 +309,11 @@ def build_cone_templates(
         n_bins = heading_bins_for(resolution, reach)
     if n_bins < 8 or n_bins % 8:
         raise InputError(f"expected a positive multiple of 8, got {n_bins}", key="n_bins")
-    return _build(float(resolution), float(beam_width), reach, int(n_bins))
+    return _build(float(resolution), float(beam_width), reach, int(n_bins), bool(ray))
 
 
 @functools.lru_cache(maxsize=4)
-def _build(resolution: float, beam_width: float, reach: float, n_bins: int) -> ConeTemplates:
+def _build(resolution: float, beam_width: float, reach: float, n_bins: int, ray: bool = False) -> ConeTemplates:
     q = n_bins // 8
     half = 0.5 * beam_width
     ext = int(math.floor(reach / resolution + _TOL))
@@ -324,8 +328,10 @@ def _build(resolution: float, beam_width: float, reach: float, n_bins: int) -> C
     ang = np.arctan2(dr.astype(np.float64), dc.astype(np.float64))
     # stored bins have axes in [0, 45] deg: pre-select the cells that any of them can see
     lo, hi = -half - 1e-6, math.pi / 4 + half + 1e-6
+    # with ``ray``, a cell up to resolution / sqrt 2 off an axis is on its ray: widen by its angle
+    slack = np.arcsin(np.minimum(1.0, resolution / np.sqrt(2.0) / np.maximum(rng, 1e-12))) if ray else 0.0
     if beam_width < 1.5 * math.pi:
-        near = ((ang - lo) % TWO_PI <= hi - lo) | (r2 == 0)
+        near = ((ang - lo + slack) % TWO_PI <= hi - lo + 2 * slack) | (r2 == 0)
         dr, dc, r2, rng, ang = dr[near], dc[near], r2[near], rng[near], ang[near]
 
     offsets = np.zeros(q + 2, dtype=np.int64)
@@ -334,6 +340,10 @@ def _build(resolution: float, beam_width: float, reach: float, n_bins: int) -> C
         off = _wrap(ang - b * (TWO_PI / n_bins))
         off[r2 == 0] = 0.0
         sel = np.abs(off) <= half + _TOL
+        if ray:  # the cells a traversal of the axis crosses
+            axis = b * (TWO_PI / n_bins)
+            reach_off = 0.5 * resolution * (abs(math.cos(axis)) + abs(math.sin(axis)))
+            sel |= (np.abs(off) < math.pi / 2) & (rng * np.abs(np.sin(off)) <= reach_off + _TOL * resolution)
         order = np.lexsort((dc[sel], dr[sel], off[sel], r2[sel]))
         parts_dc.append(dc[sel][order])
         parts_dr.append(dr[sel][order])
