@@ -88,12 +88,18 @@ def independent_metrics(map_path, log_path):
 
 def test_json_follows_the_contract_and_matches_the_map_files(logs, compared):
     out, data, _ = compared
-    assert set(data) == {"aogm_version", "results"} and data["aogm_version"] == "0.1.0"
+    assert set(data) == {"format", "format_version", "aogm_version", "results"} and data["aogm_version"] == "0.1.0"
+    assert (data["format"], data["format_version"]) == ("aogm-compare", 1)
     assert [(r["log"], r["mode"]) for r in data["results"]] == [
         (str(logs[0]), "standard"), (str(logs[0]), "em"), (str(logs[1]), "standard"), (str(logs[1]), "em")
     ]
     for r in data["results"]:
-        assert set(r) == {"log", "world", "mode", "runtime_s", "metrics", "params", "detector"}
+        assert set(r) == {"log", "world", "mode", "truth", "runtime_s", "metrics", "params", "detector", "calibration"}
+        assert r["truth"] is True
+        if r["mode"] == "em":  # the forward model learned from the log, as the map's parameters record it
+            assert r["calibration"]["final"] == {k: r["params"]["em"][k] for k in ("sigma", "p_rand", "p_hit", "p_max")}
+        else:
+            assert r["calibration"] is None
         assert r["params"]["mode"] == r["mode"] and r["detector"] is None  # no adaptive map here
         assert r["world"] == "tiny_door"
         assert set(r["metrics"]) == set(METRICS) | {"checks"}

@@ -1,5 +1,6 @@
-"""``aogm compare``: logs (or their map files) x modes -> a metrics table, JSON, a figure, and
-quality gates (``--require``, ``--require-checks``) that set the exit status."""
+"""``aogm compare``: logs (or their map files) x modes -> a metrics table, JSON, CSV, a figure,
+and quality gates (``--require``, ``--require-checks``) that set the exit status; or the same
+table and gates from the JSON of earlier runs (``--from-json``), merged, without mapping."""
 
 from __future__ import annotations
 
@@ -23,16 +24,17 @@ from aogm_cli.cli.options import (
 from aogm_cli.io.outputs import resolve_outputs
 
 
-def _check_outputs(inputs, entries, modes, params_file, detector, json_out, figure_out, maps_dir) -> None:
-    """Every output (--json, --figure, the --maps-dir maps to write) against every input: the
-    arguments, the logs that map files name, --params and --detector."""
+def _check_outputs(inputs, entries, modes, params_file, detector, json_out, csv_out, figure_out, maps_dir) -> None:
+    """Every output (--json, --csv, --figure, the --maps-dir maps to write) against every input:
+    the arguments, the logs that map files name, --params and --detector."""
     from aogm_cli.report.compare import maps_dir_targets
 
     targets = maps_dir_targets(entries, modes, maps_dir) if maps_dir else {}
     sources = [e.path for e in entries]
     resolve_outputs(
         [*inputs, *sources, params_file, detector_file(detector, modes)],
-        [("--json", json_out), ("--figure", figure_out), *(("--maps-dir", t) for t in targets.values())],
+        [("--json", json_out), ("--csv", csv_out), ("--figure", figure_out),
+         *(("--maps-dir", t) for t in targets.values())],
         [("--maps-dir", maps_dir)],
     )
 
@@ -94,22 +96,32 @@ def _share(v) -> str:
 
 
 def _source(r) -> str:
-    """Where a row's map came from: a file given, or mapped here (and written to --maps-dir)."""
+    """Where a row's map came from: a file given, or mapped here (and written to --maps-dir); for
+    a result read back with --from-json, that file."""
+    if r.results_file is not None:
+        return f"json {Path(r.results_file).name}"
     if r.reused:
         return f"file {Path(r.map_file).name}"
     return "mapped" if r.map_file is None else f"mapped -> {Path(r.map_file).name}"
 
 
 @click.command("compare")
-@click.argument("inputs", nargs=-1, required=True, metavar="LOG.h5|MAP.h5 ...", type=click.Path(dir_okay=False))
+@click.argument("inputs", nargs=-1, required=True, metavar="LOG.h5|MAP.h5 ... | RESULTS.json ...",
+                type=click.Path(dir_okay=False))
 @modes_option
 @detector_option
 @params_option
-@click.option("--json", "json_out", type=click.Path(dir_okay=False), help="Write the results as JSON (CONTRACT.md shape).")
+@click.option("--json", "json_out", type=click.Path(dir_okay=False),
+              help="Write the results as JSON (CONTRACT.md shape), to read back with --from-json.")
+@click.option("--csv", "csv_out", type=click.Path(dir_okay=False),
+              help="Write the table as CSV: one row per log and mode, every metric and check (see CSV above).")
 @click.option("--figure", "figure_out", type=click.Path(dir_okay=False),
               help="Write a PNG: one row per log; truth and each mode's map, titled with accuracy and runtime.")
 @click.option("--maps-dir", type=click.Path(file_okay=False),
               help="Also write every map computed here as DIR/<logstem>_<mode>.h5, to pass back in later.")
+@click.option("--from-json", "from_json", is_flag=True,
+              help="The arguments are --json files of earlier runs: merge their results, print the table and "
+                   "apply the gates without mapping (see Merging above).")
 @click.option("--require", "requires", multiple=True, metavar="EXPR",
               help="Gate, evaluated per log, e.g. 'adaptive.accuracy >= em.accuracy - 0.005'. Repeatable.")
 @click.option("--require-checks", multiple=True, type=mode_choice,
@@ -123,8 +135,8 @@ def _source(r) -> str:
 @seed_option
 @quiet_option
 @budget_options
-def compare(inputs, modes_text, detector, params_file, json_out, figure_out, maps_dir, requires, require_checks, jobs,
-            holdout, calibrate, seed, quiet, max_memory=16e9, max_work=None):
+def compare(inputs, modes_text, detector, params_file, json_out, csv_out, figure_out, maps_dir, from_json, requires,
+            require_checks, jobs, holdout, calibrate, seed, quiet, max_memory=16e9, max_work=None):
     """Map every log in every mode, evaluate each map against the log's truth, and print a table
     (accuracy, occupied F1, Brier, checks passed, runtime, runtime relative to the standard map
     of the same log). em and adaptive learn their forward model from each log (--calibrate,
@@ -150,13 +162,28 @@ def compare(inputs, modes_text, detector, params_file, json_out, figure_out, map
       made with the same --holdout and --seed (--maps-dir records them).
 
     \b
-    Gates (exit status 1 when one fails, after --json and --figure are written):
+    Gates (exit status 1 when one fails, after --json, --csv and --figure are written):
       --require EXPR       MODE.METRIC names, numbers, + - * /, ( ), one of < <= > >= == !=
                            METRIC: accuracy, occupied_precision, occupied_recall,
                            occupied_f1, brier, runtime (= runtime_s), checks_passed (fraction);
                            with --holdout: holdout_auc, holdout_loglik, holdout_readings,
                            holdout_scans
       --require-checks M   every check of every log passes in mode M
+
+    \b
+    CSV (--csv): one row per log and mode, always these columns in this order, empty where a
+    value does not apply: log, world, mode, truth, runtime_s, runtime_vs_standard, accuracy,
+    occupied_precision, occupied_recall, occupied_f1, brier, checks_passed, consistency_*
+    (logs without truth), holdout_* (--holdout), learned_sigma, learned_p_rand,
+    learned_p_hit, learned_p_max, learned_from_readings (the forward model an em or adaptive
+    map's calibration learned); then one check:NAME column (true/false) per world check.
+
+    \b
+    Merging (--from-json): the arguments are --json files of earlier runs; their results are
+    merged (one log and mode in two files: exit 2 naming both; every file must hold the same
+    --holdout split, or none), printed and gated as if compared here, and written again with
+    --json and --csv. Nothing is mapped: --figure, --maps-dir and the mapping options are
+    refused (exit 2).
 
     \b
     Timings: each map's runtime_s is measured inside the process that builds it, around the
@@ -171,25 +198,26 @@ def compare(inputs, modes_text, detector, params_file, json_out, figure_out, map
       aogm compare door.h5 --maps-dir maps/ --require "em.accuracy >= standard.accuracy"
       aogm compare maps/door_standard.h5 maps/door_em.h5 --require-checks em
       aogm compare door.h5 --holdout 0.1 --require "em.holdout_loglik >= standard.holdout_loglik"
+      aogm compare --from-json door.json hall.json --csv all.csv --require-checks em
     """
+    from aogm_cli.report.gates import parse_gate
+
+    gates = [parse_gate(text) for text in requires]  # malformed -> exit 2 before any work
+    if from_json:
+        _refuse_mapping_options(click.get_current_context())
+        _compare_results_files(list(inputs), gates, require_checks, json_out, csv_out, quiet)
+        return
+
     from aogm_cli.evaluation.holdout import HoldoutSplit
     from aogm_cli.mapping.params import resolve_params
     from aogm_cli.report import compare as lib
-    from aogm_cli.report.gates import check_gate_metrics, check_gate_modes, parse_gate
 
     split = None if holdout is None else HoldoutSplit(holdout, seed).validate()
-    gates = [parse_gate(text) for text in requires]  # malformed -> exit 2 before any work
-    check_gate_metrics(gates, split is not None)
     params = resolve_params(params_file, {"calibration": {"enabled": calibrate}})
     entries = lib.collect_inputs(list(inputs))
     modes = lib.parse_modes(modes_text) if modes_text else lib.default_modes(entries)
-    check_gate_modes(gates, modes)
-    for mode in require_checks:
-        if mode not in modes:
-            from aogm_cli.core.errors import InputError
-
-            raise InputError(f"mode {mode!r} is not among the modes compared ({', '.join(modes)})", key="--require-checks")
-    _check_outputs(inputs, entries, modes, params_file, detector, json_out, figure_out, maps_dir)
+    _check_gates(gates, require_checks, modes, split is not None)
+    _check_outputs(inputs, entries, modes, params_file, detector, json_out, csv_out, figure_out, maps_dir)
 
     from aogm_cli.core.budget import using
     from aogm_cli.mapping.budget import check_logs
@@ -210,27 +238,76 @@ def compare(inputs, modes_text, detector, params_file, json_out, figure_out, map
                        "this comparison's; it is reported as it is", err=True)
     labels = lib.log_labels(entries)
     _print_table(results, labels, quiet)
-    _commit_outputs(results, entries, labels, json_out, figure_out, maps_dir)
-    if not quiet:
-        for path in (json_out, figure_out):
-            if path:
-                click.echo(f"wrote {path}", err=True)
+    figure = None
+    if figure_out:
+        from aogm_cli.report.figure import comparison_figure_png
+
+        figure = comparison_figure_png(entries, results, labels)
+    _commit_outputs(results, None, json_out, csv_out, figure_out, figure, maps_dir, quiet)
     _report_gates(gates, require_checks, results, labels)
 
 
-def _commit_outputs(results, entries, labels, json_out, figure_out, maps_dir) -> None:
-    """--maps-dir maps, --json and --figure in one commit: all written, or none (and a folder
-    --maps-dir made here removed again)."""
+# options that only mapping uses: refused with --from-json (parameter name -> option)
+MAPPING_OPTIONS = {"figure_out": "--figure", "maps_dir": "--maps-dir", "modes_text": "--modes", "detector": "--detector",
+                   "params_file": "--params", "jobs": "--jobs", "holdout": "--holdout", "calibrate": "--calibrate/--no-calibrate",
+                   "seed": "--seed", "max_memory": "--max-memory", "max_work": "--max-work"}
+
+
+def _refuse_mapping_options(ctx: click.Context) -> None:
+    """InputError (exit 2) naming the first option given that needs maps or mapping."""
+    from click.core import ParameterSource
+
+    from aogm_cli.core.errors import InputError
+
+    for name, option in MAPPING_OPTIONS.items():
+        source = ctx.get_parameter_source(name)
+        if source is not None and source != ParameterSource.DEFAULT:
+            need = "the maps" if name in ("figure_out", "maps_dir") else "mapping"
+            raise InputError(f"needs {need}; --from-json reads results only (drop {option}, or compare the logs "
+                             "or map files instead)", key=option)
+
+
+def _check_gates(gates, require_checks, modes, holdout: bool) -> None:
+    """Gates name modes among those compared, and held-out scores only with ``holdout``."""
+    from aogm_cli.report.gates import check_gate_metrics, check_gate_modes
+
+    check_gate_metrics(gates, holdout)
+    check_gate_modes(gates, modes)
+    for mode in require_checks:
+        if mode not in modes:
+            from aogm_cli.core.errors import InputError
+
+            raise InputError(f"mode {mode!r} is not among the modes compared ({', '.join(modes)})", key="--require-checks")
+
+
+def _compare_results_files(paths, gates, require_checks, json_out, csv_out, quiet) -> None:
+    """--from-json: merge the results of the --json files ``paths``, print, write and gate them."""
+    from aogm_cli.report import compare as lib
+
+    merged = lib.merge_results_files(paths)
+    _check_gates(gates, require_checks, merged.modes, merged.holdout is not None)
+    resolve_outputs(paths, [("--json", json_out), ("--csv", csv_out)])
+    labels = lib.result_labels(merged.results)
+    _print_table(merged.results, labels, quiet)
+    _commit_outputs(merged.results, merged.holdout, json_out, csv_out, None, None, None, quiet)
+    _report_gates(gates, require_checks, merged.results, labels)
+
+
+def _commit_outputs(results, holdout, json_out, csv_out, figure_out, figure, maps_dir, quiet) -> None:
+    """--maps-dir maps, --json, --csv and --figure (its PNG bytes ``figure``) in one commit: all
+    written, or none (and a folder --maps-dir made here removed again). ``holdout``: the
+    top-level holdout object of merged results (``report.compare.results_json``)."""
     from aogm_cli.io.atomic import write_files_atomically
     from aogm_cli.report import compare as lib
 
     outputs = lib.maps_dir_outputs(results)
     if json_out:
-        outputs.append((Path(json_out), lib.json_bytes(results)))
+        # provenance (issue 15, part 2): pass aogm_cli.io.provenance's record as provenance= here
+        outputs.append((Path(json_out), lib.json_bytes(results, holdout)))
+    if csv_out:
+        outputs.append((Path(csv_out), lib.csv_bytes(results)))
     if figure_out:
-        from aogm_cli.report.figure import comparison_figure_png
-
-        outputs.append((Path(figure_out), comparison_figure_png(entries, results, labels)))
+        outputs.append((Path(figure_out), figure))
     made = [f for f in (Path(maps_dir), *Path(maps_dir).parents) if not f.exists()] if maps_dir else []
     if outputs and made:
         Path(maps_dir).mkdir(parents=True)
@@ -241,6 +318,10 @@ def _commit_outputs(results, entries, labels, json_out, figure_out, maps_dir) ->
             if folder.exists() and not any(folder.iterdir()):
                 folder.rmdir()
         raise
+    if not quiet:
+        for path in (json_out, csv_out, figure_out):
+            if path:
+                click.echo(f"wrote {path}", err=True)
 
 
 def _report_gates(gates, require_checks, results, labels) -> None:
@@ -264,4 +345,3 @@ def _report_gates(gates, require_checks, results, labels) -> None:
     if failures:
         click.echo(f"aogm: {len(failures)} of {total} gates failed", err=True)
         click.get_current_context().exit(1)
-

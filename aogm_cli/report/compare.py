@@ -1,12 +1,15 @@
 """The library behind ``aogm compare``: collect logs and map files, map what is missing in each
 mode (optionally in worker processes), evaluate against the truth, and build the JSON of
-CONTRACT.md ("Metrics"). Maps of logs without truth are scored by their consistency with
-the log instead (``aogm_cli.consistency``). With a ``HoldoutSplit`` every map is made from the
-kept scans and also scored on the held-out ones (``evaluation.holdout``), truth or not.
+CONTRACT.md ("Metrics") and the CSV table. Maps of logs without truth are scored by their
+consistency with the log instead (``aogm_cli.consistency``). With a ``HoldoutSplit`` every map
+is made from the kept scans and also scored on the held-out ones (``evaluation.holdout``), truth
+or not. Results JSON files read back and merge (``merge_results_files``) without mapping again.
 """
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 import math
 import os
@@ -30,6 +33,11 @@ from aogm_cli.io.mapfile import is_map_file, map_bytes, read_map_file, read_map_
 from aogm_cli.mapping.params import MapParams
 
 METRIC_KEYS = ("accuracy", "occupied_precision", "occupied_recall", "occupied_f1", "brier")
+CONSISTENCY_KEYS = ("method", "readings", "endpoint_occupied", "endpoint_occupied_8", "endpoint_free", "free_cells",
+                    "free_contradicted")  # ``evaluation.consistency.summarize``
+LEARNED_KEYS = ("sigma", "p_rand", "p_hit", "p_max")  # ``mapping.calibration.LEARNED``: stats["calibration"]["final"]
+RESULTS_FORMAT = "aogm-compare"  # the "format" of a --json file; "format_version" RESULTS_FORMAT_VERSION
+RESULTS_FORMAT_VERSION = 1
 
 
 @dataclass
@@ -50,19 +58,28 @@ class LogEntry:
 @dataclass
 class ModeResult:
     """One (log, mode): the map, its runtime, its metrics (None without truth), where it came
-    from, and for a log without truth its consistency with the log (``consistency.log_consistency``)."""
+    from, and for a log without truth its consistency with the log (``consistency.log_consistency``).
+    A result read back from a --json file (``read_results_file``) has no map."""
 
     log: str
     world: str
     mode: str
     runtime_s: float
     metrics: dict | None
-    map: OccupancyMap
+    map: OccupancyMap | None
     map_file: str | None = None  # the map file given, or the one written to --maps-dir
     reused: bool = False
     consistency: dict | None = None  # logs without truth only
     detector: dict | None = None  # adaptive only: {"path", "sha256"} of the detector used
     holdout: dict | None = None  # with a HoldoutSplit: ``evaluation.holdout.holdout_scores``
+    params: dict = field(default_factory=dict)  # the parameters the map records
+    calibration: dict | None = None  # the map's stats["calibration"]: the forward model it learned
+    results_file: str | None = None  # the --json file it was read back from
+
+    @property
+    def truth(self) -> bool:
+        """Whether the log has truth (and so the truth metrics and checks)."""
+        return self.metrics is not None
 
 
 def parse_modes(text: str) -> tuple[str, ...]:
@@ -115,6 +132,10 @@ def collect_inputs(paths: list[str]) -> list[LogEntry]:
     """Sort the arguments into logs and map files (``is_map_file``), each map attached to its
     log via ``source_log``; logs in order of first mention. InputError on a bad file or on two
     map files of one mode for one log."""
+    for p in paths:
+        if Path(p).suffix.lower() == ".json":
+            raise InputError("a JSON file, not a log or map; to read back the results of aogm compare --json, "
+                             "add --from-json", file=p)
     kinds = [(p, is_map_file(p)) for p in paths]
     given_logs = [p for p, is_map in kinds if not is_map]
     entries: dict[str, LogEntry] = {}
@@ -324,7 +345,16 @@ def evaluate_result(entry: LogEntry, mode: str, m: OccupancyMap, map_file: str |
         with LogReader(entry.path) as reader:
             scores = holdout_scores(reader, m, holdout)
     return ModeResult(entry.path, entry.world, mode, float(m.runtime_s), metrics, m, map_file, reused, consistency,
-                      _map_detector(m, reused, detector), scores)
+                      _map_detector(m, reused, detector), scores, m.params, _plain(m.stats.get("calibration")))
+
+
+def _plain(value):
+    """``value`` as plain JSON types: numpy scalars of a fresh map's stats become Python numbers,
+    NaN and infinities None."""
+    if value is None:
+        return None
+    text = json.dumps(value, default=lambda v: v.item() if hasattr(v, "item") else str(v))
+    return json.loads(text, parse_constant=lambda name: None)
 
 
 def run_comparison(
@@ -402,11 +432,31 @@ def gate_values(results: list[ModeResult]) -> list[tuple[str, dict[tuple[str, st
 
 def log_labels(entries: list[LogEntry]) -> dict[str, str]:
     """log path -> how tables and messages name it: the world name, plus the file stem when two
-    logs share a world name."""
-    count: dict[str, int] = {}
-    for e in entries:
-        count[e.world] = count.get(e.world, 0) + 1
-    return {e.path: e.world if count[e.world] == 1 else f"{e.world} ({e.stem})" for e in entries}
+    logs share a world name (the whole path when they share the stem too)."""
+    return labels_of([(e.path, e.world) for e in entries])
+
+
+def result_labels(results: list[ModeResult]) -> dict[str, str]:
+    """``log_labels`` for results (read back from --json files, without their logs)."""
+    return labels_of(list({r.log: (r.log, r.world) for r in results}.values()))
+
+
+def labels_of(logs: list[tuple[str, str]]) -> dict[str, str]:
+    """(log path, world) pairs -> {log path: label}; see ``log_labels``."""
+    worlds: dict[str, int] = {}
+    stems: dict[tuple[str, str], int] = {}
+    for path, world in logs:
+        worlds[world] = worlds.get(world, 0) + 1
+        stems[(world, Path(path).stem)] = stems.get((world, Path(path).stem), 0) + 1
+    labels = {}
+    for path, world in logs:
+        if worlds[world] == 1:
+            labels[path] = world
+        elif stems[(world, Path(path).stem)] == 1:
+            labels[path] = f"{world} ({Path(path).stem})"
+        else:
+            labels[path] = f"{world} ({path})"
+    return labels
 
 
 def relative_runtimes(results: list[ModeResult]) -> dict[tuple[str, str], float | None]:
@@ -443,10 +493,13 @@ def consistency_json(consistency: dict | None) -> dict | None:
     return {k: _finite(float(v)) if isinstance(v, float) else v for k, v in consistency.items()}
 
 
-def results_json(results: list[ModeResult]) -> dict:
+def results_json(results: list[ModeResult], holdout: dict | None = None, provenance: dict | None = None) -> dict:
     """``{"aogm_version", "results": [{log, world, mode, runtime_s, metrics}]}`` as in CONTRACT.md,
-    each result also with ``params`` (the parameters the map records) and ``detector``
-    (``{"path", "sha256"}`` for an adaptive map, else null).
+    plus ``format`` ("aogm-compare") and ``format_version`` (1) for reading it back
+    (``read_results_file``), and ``provenance`` when given. Each result also has ``truth``
+    (whether its log has truth), ``params`` (the parameters the map records), ``detector``
+    (``{"path", "sha256"}`` for an adaptive map, else null) and ``calibration`` (the map's
+    ``stats["calibration"]``: the forward model it learned, per round and ``final``, else null).
 
     A result of a log without truth has ``metrics`` null and a ``consistency`` object beside
     it (``aogm_cli.consistency``: method, readings, endpoint_occupied, endpoint_occupied_8,
@@ -455,22 +508,244 @@ def results_json(results: list[ModeResult]) -> dict:
     With held-out scores, each result's ``metrics`` also holds ``evaluation.holdout.SCORE_KEYS``
     (and without truth only those), its ``params["holdout"]`` the split, and the top level a
     ``holdout`` object: the split and the fixed reference the scores use
-    (``evaluation.holdout.reference_json``).
+    (``evaluation.holdout.reference_json``; ``holdout`` given: that object, as read back).
     """
     out = []
     for r in results:
-        item = {"log": r.log, "world": r.world, "mode": r.mode, "runtime_s": _finite(float(r.runtime_s)),
-                "metrics": metrics_json(r.metrics, r.holdout), "params": r.map.params, "detector": r.detector}
+        item = {"log": r.log, "world": r.world, "mode": r.mode, "truth": r.truth, "runtime_s": _finite(float(r.runtime_s)),
+                "metrics": metrics_json(r.metrics, r.holdout), "params": r.params, "detector": r.detector,
+                "calibration": r.calibration}
         if r.consistency is not None:
             item["consistency"] = consistency_json(r.consistency)
         out.append(item)
-    doc = {"aogm_version": __version__, "results": out}
-    split = next((r.map.params.get("holdout") for r in results if r.holdout is not None), None)
-    if split is not None:
+    doc = {"format": RESULTS_FORMAT, "format_version": RESULTS_FORMAT_VERSION, "aogm_version": __version__,
+           "results": out}
+    split = next((r.params.get("holdout") for r in results if r.holdout is not None), None)
+    if holdout is not None:
+        doc["holdout"] = holdout
+    elif split is not None:
         doc["holdout"] = {**split, "reference": reference_json()}
+    if provenance is not None:
+        doc["provenance"] = provenance
     return doc
 
 
-def json_bytes(results: list[ModeResult]) -> bytes:
+def json_bytes(results: list[ModeResult], holdout: dict | None = None, provenance: dict | None = None) -> bytes:
     """``results_json`` as the bytes of ``--json`` (committed with the command's other outputs)."""
-    return (json.dumps(results_json(results), indent=2, allow_nan=False) + "\n").encode("utf-8")
+    return (json.dumps(results_json(results, holdout, provenance), indent=2, allow_nan=False) + "\n").encode("utf-8")
+
+
+# --- the CSV table ------------------------------------------------------------------------------
+
+# Every run writes these columns in this order (empty cells where a value does not apply), then one
+# ``check:<name>`` column per world check, in order of first appearance.
+CSV_COLUMNS = ("log", "world", "mode", "truth", "runtime_s", "runtime_vs_standard", *METRIC_KEYS, "checks_passed",
+               *(f"consistency_{k}" for k in CONSISTENCY_KEYS), *SCORE_KEYS,
+               *(f"learned_{k}" for k in LEARNED_KEYS), "learned_from_readings")
+
+
+def csv_table(results: list[ModeResult]) -> tuple[list[str], list[dict]]:
+    """(columns, one row per result {column: value, None where it does not apply}) of ``--csv``:
+    ``CSV_COLUMNS`` (the truth metrics, the consistency of a log without truth, the held-out
+    scores, the forward model the map's calibration learned), then ``check:<name>`` columns."""
+    relative = relative_runtimes(results)
+    checks = list(dict.fromkeys(f"check:{c['name']}" for r in results if r.metrics for c in r.metrics["checks"]))
+    rows = []
+    for r in results:
+        calibration = r.calibration or {}
+        final = calibration.get("final") or {}
+        row = {"log": r.log, "world": r.world, "mode": r.mode, "truth": r.truth, "runtime_s": r.runtime_s,
+               "runtime_vs_standard": relative[(r.log, r.mode)], "checks_passed": checks_passed(r.metrics),
+               **{k: (r.metrics or {}).get(k) for k in METRIC_KEYS},
+               **{f"consistency_{k}": (r.consistency or {}).get(k) for k in CONSISTENCY_KEYS},
+               **{k: (r.holdout or {}).get(k) for k in SCORE_KEYS},
+               **{f"learned_{k}": final.get(k) for k in LEARNED_KEYS},
+               "learned_from_readings": calibration.get("readings_used")}
+        row.update({f"check:{c['name']}": bool(c["passed"]) for c in (r.metrics or {}).get("checks", [])})
+        rows.append(row)
+    return [*CSV_COLUMNS, *checks], rows
+
+
+def csv_cell(value) -> str:
+    """A CSV cell: empty for None and NaN, true/false, floats in full (``repr``) precision."""
+    if hasattr(value, "item"):  # numpy scalars
+        value = value.item()
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return ""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return repr(value) if isinstance(value, float) else str(value)
+
+
+def csv_bytes(results: list[ModeResult]) -> bytes:
+    """``csv_table`` as the bytes of ``--csv`` (header line, then one line per log and mode)."""
+    columns, rows = csv_table(results)
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(columns)
+    for row in rows:
+        writer.writerow([csv_cell(row.get(c)) for c in columns])
+    return buffer.getvalue().encode("utf-8")
+
+
+# --- results read back from --json files ---------------------------------------------------------
+
+EXPECTED_FILE = "a JSON file written by aogm compare --json"
+
+
+@dataclass
+class MergedResults:
+    """The results of several --json files (``merge_results_files``) and the ``holdout`` object
+    they share (None without held-out scores)."""
+
+    results: list[ModeResult]
+    holdout: dict | None
+
+    @property
+    def modes(self) -> tuple[str, ...]:
+        present = {r.mode for r in self.results}
+        return tuple(m for m in MODES if m in present)
+
+
+def merge_results_files(paths: list[str]) -> MergedResults:
+    """Read every --json file (``read_results_file``) and merge their results, grouped by log in
+    order of first mention. InputError (exit 2) naming both files when one (log, mode) is in two
+    of them, or when they hold scores of different --holdout splits (one with, one without too)."""
+    results: list[ModeResult] = []
+    seen: dict[tuple[str, str], str] = {}
+    holdout = first = None
+    for n, path in enumerate(paths):
+        found, split = read_results_file(path)
+        if n == 0:
+            holdout, first = split, path
+        elif split != holdout:
+            raise InputError(f"{_split_text(split)}, but {first} has {_split_text(holdout)}; expected results of one "
+                             "--holdout split (or none) in every file", file=path, key="holdout")
+        for i, r in enumerate(found):
+            where = f"{path} results[{i}]"
+            if (r.log, r.mode) in seen:
+                raise InputError(f"the {r.mode} result of the log {r.log} is also at {seen[(r.log, r.mode)]}; expected "
+                                 "each log and mode in one file only (leave one out)", file=path, key=f"results[{i}]")
+            seen[(r.log, r.mode)] = where
+            results.append(r)
+    order: dict[str, int] = {}
+    for r in results:
+        order.setdefault(r.log, len(order))
+    return MergedResults(sorted(results, key=lambda r: order[r.log]), holdout)
+
+
+def _split_text(split: dict | None) -> str:
+    if split is None:
+        return "no held-out scores"
+    return f"held-out scores of --holdout {split.get('fraction')} --seed {split.get('seed')}"
+
+
+def read_results_file(path: str) -> tuple[list[ModeResult], dict | None]:
+    """The results of a --json file (``results_json``) and its ``holdout`` object (None when it
+    has none). InputError (exit 2) naming the file and the key on anything else: not JSON, not
+    of format "aogm-compare" version 1, a key missing or of the wrong type."""
+    try:
+        doc = json.loads(Path(path).read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(f"no such file; expected {EXPECTED_FILE}", file=path) from None
+    except UnicodeDecodeError:
+        raise InputError(f"not JSON (not UTF-8 text); expected {EXPECTED_FILE}", file=path) from None
+    except json.JSONDecodeError as exc:
+        raise InputError(f"not JSON ({exc.msg}: line {exc.lineno} column {exc.colno}); expected {EXPECTED_FILE}",
+                         file=path) from None
+    except OSError as exc:
+        raise InputError(f"cannot be read ({exc.strerror}); expected {EXPECTED_FILE}", file=path) from None
+    return _ResultsReader(path).document(doc)
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _number_or_null(v) -> bool:
+    return v is None or _is_number(v)
+
+
+def _nan(v) -> float | int:
+    """A JSON number as read (null: NaN, as before ``metrics_json`` wrote it)."""
+    return math.nan if v is None else v
+
+
+def _shown(v) -> str:
+    text = json.dumps(v)
+    return text if len(text) <= 40 else text[:37] + "..."
+
+
+class _ResultsReader:
+    """Checks one --json document key by key; every error names the file and the key path."""
+
+    def __init__(self, path: str):
+        self.path = path
+
+    def get(self, obj: dict, name: str, where: str, ok: Callable[[object], bool], expected: str, required: bool = True):
+        key = f"{where}.{name}" if where else name
+        if name not in obj:
+            if required:
+                raise InputError(f"missing; expected {expected}", file=self.path, key=key)
+            return None
+        if not ok(obj[name]):
+            raise InputError(f"expected {expected}, got {_shown(obj[name])}", file=self.path, key=key)
+        return obj[name]
+
+    def document(self, doc) -> tuple[list[ModeResult], dict | None]:
+        if not isinstance(doc, dict):
+            raise InputError(f"expected a JSON object with format, format_version and results, got {_shown(doc)}; "
+                             f"expected {EXPECTED_FILE}", file=self.path)
+        self.get(doc, "format", "", lambda v: v == RESULTS_FORMAT, f'"{RESULTS_FORMAT}" ({EXPECTED_FILE})')
+        self.get(doc, "format_version", "", lambda v: _is_number(v) and v == RESULTS_FORMAT_VERSION,
+                 str(RESULTS_FORMAT_VERSION))
+        self.get(doc, "aogm_version", "", lambda v: isinstance(v, str), "a version string")
+        holdout = self.get(doc, "holdout", "", lambda v: isinstance(v, dict), "an object", required=False)
+        items = self.get(doc, "results", "", lambda v: isinstance(v, list) and len(v) > 0, "a non-empty list")
+        return [self.result(item, f"results[{i}]", holdout is not None) for i, item in enumerate(items)], holdout
+
+    def result(self, item, where: str, holdout: bool) -> ModeResult:
+        if not isinstance(item, dict):
+            raise InputError(f"expected an object, got {_shown(item)}", file=self.path, key=where)
+        get = self.get
+        log = get(item, "log", where, lambda v: isinstance(v, str) and v != "", "the log's path")
+        world = get(item, "world", where, lambda v: isinstance(v, str), "a string")
+        mode = get(item, "mode", where, lambda v: v in MODES, f"one of {', '.join(MODES)}")
+        truth = get(item, "truth", where, lambda v: isinstance(v, bool), "true or false")
+        runtime = get(item, "runtime_s", where, _number_or_null, "a number of seconds")
+        params = get(item, "params", where, lambda v: isinstance(v, dict), "an object")
+        detector = get(item, "detector", where, lambda v: v is None or isinstance(v, dict), "an object or null")
+        calibration = get(item, "calibration", where, lambda v: v is None or isinstance(v, dict), "an object or null")
+        if calibration is not None:
+            final = get(calibration, "final", f"{where}.calibration", lambda v: isinstance(v, dict), "an object")
+            for k in LEARNED_KEYS:
+                get(final, k, f"{where}.calibration.final", _is_number, "a number")
+        consistency = get(item, "consistency", where, lambda v: isinstance(v, dict), "an object (the log has no truth)",
+                          required=not truth)
+        for k in CONSISTENCY_KEYS if consistency is not None else ():
+            ok = (lambda v: isinstance(v, str)) if k == "method" else _number_or_null
+            get(consistency, k, f"{where}.consistency", ok, "a string" if k == "method" else "a number or null")
+        wanted = truth or holdout  # metrics hold the truth metrics, the held-out scores, or both
+        metrics = get(item, "metrics", where, lambda v: isinstance(v, dict) if wanted else v is None,
+                      "an object" if wanted else "null (no truth and no held-out scores)")
+        scores = None
+        if holdout:
+            scores = {k: _nan(get(metrics, k, f"{where}.metrics", _number_or_null, "a number or null"))
+                      for k in SCORE_KEYS}
+        truth_metrics = self.truth_metrics(metrics, f"{where}.metrics") if truth else None
+        return ModeResult(log, world, mode, _nan(runtime), truth_metrics, None, consistency=consistency,
+                          detector=detector, holdout=scores, params=params, calibration=calibration,
+                          results_file=self.path)
+
+    def truth_metrics(self, metrics: dict, where: str) -> dict:
+        out = {k: _nan(self.get(metrics, k, where, _number_or_null, "a number or null")) for k in METRIC_KEYS}
+        checks = self.get(metrics, "checks", where, lambda v: isinstance(v, list), "a list of {name, passed}")
+        out["checks"] = []
+        for j, c in enumerate(checks):
+            if not isinstance(c, dict):
+                raise InputError(f"expected an object {{name, passed}}, got {_shown(c)}", file=self.path,
+                                 key=f"{where}.checks[{j}]")
+            name = self.get(c, "name", f"{where}.checks[{j}]", lambda v: isinstance(v, str), "a string")
+            passed = self.get(c, "passed", f"{where}.checks[{j}]", lambda v: isinstance(v, bool), "true or false")
+            out["checks"].append({"name": name, "passed": passed})
+        return out
