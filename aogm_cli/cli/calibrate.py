@@ -3,6 +3,8 @@ write it as a ``--params`` file for other logs of the same robot."""
 
 from __future__ import annotations
 
+import json
+
 import click
 
 from aogm_cli.cli.map_log import parameter_options, parameter_overrides
@@ -51,11 +53,14 @@ def calibrate(log_file, mode, output, detector, params_file, resolution, quiet, 
       aogm calibrate door.h5
       aogm calibrate robot.h5 -o robot_model.yaml && aogm map other.h5 --mode em --params robot_model.yaml -o m.h5
     """
-    resolve_outputs((log_file, params_file, detector_file(detector, (mode,))), [("-o", output)] if output else [])
+    inputs = (log_file, params_file, detector_file(detector, (mode,)))
+    resolve_outputs(inputs, [("-o", output)] if output else [])
+    from aogm_cli.io.provenance import provenance
     from aogm_cli.mapping.calibration import calibration_table, learned_params_yaml
     from aogm_cli.mapping.modes import map_file
     from aogm_cli.mapping.params import resolve_params
 
+    made = provenance(inputs) if output else None  # the inputs as read, the time the run starts
     params = resolve_params(params_file, parameter_overrides(resolution, True, options))
     with progress_bar(params.em.max_sweeps * (params.calibration.rounds + 1), f"calibrate ({mode})", quiet,
                       unit="sweep") as advance:
@@ -68,6 +73,7 @@ def calibrate(log_file, mode, output, detector, params_file, resolution, quiet, 
     if output:
         from aogm_cli.io.atomic import write_files_atomically
 
-        write_files_atomically([(output, learned_params_yaml(record, log_file).encode())])
+        text = f"# provenance: {json.dumps(made, sort_keys=True)}\n" + learned_params_yaml(record, log_file)
+        write_files_atomically([(output, text.encode())])
         if not quiet:
             click.echo(f"{output}: the learned model as --params", err=True)

@@ -109,16 +109,18 @@ def map_log(log_file, mode, output, png, detector, params_file, resolution, cali
     resolve_outputs(inputs, [("-o", output), ("--png", png)])  # before loading the mappers
     from aogm_cli.io.atomic import write_files_atomically
     from aogm_cli.io.mapfile import map_bytes
+    from aogm_cli.io.provenance import provenance
     from aogm_cli.mapping.modes import map_file
     from aogm_cli.mapping.params import resolve_params
 
+    record = provenance(inputs)  # the inputs as read, the time the run starts
     params = resolve_params(params_file, parameter_overrides(resolution, calibrate, options))
     with progress_bar(params.em.max_sweeps, f"map ({mode})", quiet, unit="sweep") as advance:
         def progress(phase, done, total):
             advance(1)
 
         result = map_file(log_file, mode, params, detector, progress, limits=limits_of(max_memory, max_work))
-    outputs = [(output, map_bytes(result))]
+    outputs = [(output, map_bytes(result, record))]
     if png:
         from aogm_cli.report.picture import map_png
 

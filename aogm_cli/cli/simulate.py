@@ -51,16 +51,19 @@ def simulate(world_file: str, output: str, seed: int, png: str | None, quiet: bo
     world = load_world(world_file)
     limits = limits_of(max_memory, max_work)
     budget.check(simulation_estimate(world), limits, file=world_file)  # before any work
-    resolve_outputs(world_inputs(world_file, world), [("-o", output), ("--png", png)])
+    inputs = world_inputs(world_file, world)
+    resolve_outputs(inputs, [("-o", output), ("--png", png)])
     from aogm_cli.io.atomic import write_files_atomically
     from aogm_cli.io.logfile import log_bytes
+    from aogm_cli.io.provenance import provenance
     from aogm_cli.simulation.sonar import simulate as run_simulation
     from aogm_cli.world.trajectory import trajectory_poses
 
+    record = provenance(inputs)  # the inputs as read, the time the run starts
     n_scans = len(trajectory_poses(world)[0])
     with budget.using(limits), progress_bar(n_scans, "simulate", quiet, unit="scan") as advance:
         log = run_simulation(world, seed=seed, progress=advance)
-    outputs = [(output, log_bytes(log))]
+    outputs = [(output, log_bytes(log, record))]
     if png:
         from aogm_cli.report.picture import truth_png
 

@@ -70,18 +70,20 @@ def train(log_files, output, seed, validation_logs, hidden, activation, beta, ri
     resolve_outputs([*log_files, *validation_logs], [("-o", output)])  # before loading scikit-learn
     from aogm_cli.io.detectorfile import save_detector
     from aogm_cli.io.logfile import read_log
+    from aogm_cli.io.provenance import provenance
     from aogm_cli.training.fit import split_by_world, train_detector
     from aogm_cli.training.labels import LabelDefinition
 
     spec = FeatureSpec(ring_neighbours, time_neighbours)
     config = TrainingConfig(hidden=hidden, activation=activation, seed=seed, beta=beta)
     train_paths, validation_paths = split_by_world(log_files, validation_logs)
+    record = provenance([*train_paths, *validation_paths])  # the inputs as read, the time the run starts
     with progress_bar(len(train_paths) + len(validation_paths) + 1, "train", quiet, unit="step") as advance:
         train_logs = [(p, read_log(p)) for p in train_paths]
         validation_logs_read = [(p, read_log(p)) for p in validation_paths]
         detector = train_detector(train_logs, validation_logs_read, spec, LabelDefinition(arc_wrong_min=arc_wrong_min), config,
                                   advance)
-    save_detector(output, detector)
+    save_detector(output, detector, record)
     click.echo(format_metrics(detector.metrics))
     if not quiet:
         click.echo(f"{output}: detector {detector.training['network']}, threshold {detector.threshold:.2f}", err=True)

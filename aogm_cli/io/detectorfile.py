@@ -4,7 +4,6 @@
 
 from __future__ import annotations
 
-import hashlib
 import json
 from pathlib import Path
 
@@ -26,6 +25,7 @@ from aogm_cli.io.h5file import (
     reading,
     text_attr,
 )
+from aogm_cli.io.provenance import file_sha256, write_provenance
 
 FORMAT = "aogm-detector"
 FORMAT_VERSION = 1
@@ -41,8 +41,9 @@ def default_detector_path() -> Path:
     return Path(__file__).resolve().parent.parent / "data" / "detector.h5"
 
 
-def detector_bytes(detector: Detector) -> bytes:
-    """The detector file of ``detector`` (CONTRACT.md) as sealed HDF5 bytes."""
+def detector_bytes(detector: Detector, provenance: dict | None = None) -> bytes:
+    """The detector file of ``detector`` (CONTRACT.md) as sealed HDF5 bytes, with ``provenance``
+    (``io.provenance.provenance``) in the root attribute of that name when given."""
 
     def fill(f: h5py.File) -> None:
         f.attrs["format"] = FORMAT
@@ -57,6 +58,7 @@ def detector_bytes(detector: Detector) -> bytes:
         f.attrs["training"] = json.dumps(training)
         if logs is not None:
             f.attrs[TRAINING_LOGS] = json.dumps(logs)
+        write_provenance(f, provenance)
         group = f.create_group("layers")
         group.attrs["layout"] = LAYOUT
         for i, layer in enumerate(detector.layers):
@@ -68,9 +70,9 @@ def detector_bytes(detector: Detector) -> bytes:
     return hdf5_bytes(fill)
 
 
-def save_detector(path: str | Path, detector: Detector) -> None:
-    """Write ``detector`` to ``path`` in the format of CONTRACT.md (atomically)."""
-    write_files_atomically([(Path(path), detector_bytes(detector))])
+def save_detector(path: str | Path, detector: Detector, provenance: dict | None = None) -> None:
+    """Write ``detector`` to ``path`` in the format of CONTRACT.md (atomically), with ``provenance``."""
+    write_files_atomically([(Path(path), detector_bytes(detector, provenance))])
 
 
 def load_detector(path: str | Path | None = None) -> Detector:
@@ -130,17 +132,6 @@ def _layer(f: h5py.File, name: str, inputs: int, path: str) -> Layer:
     if activation not in ACTIVATIONS:
         raise InputError(f"expected one of {sorted(ACTIVATIONS)}, got {activation!r}", file=path, key=f"/{key}.activation")
     return Layer(weight, bias, activation)
-
-
-def file_sha256(path: str | Path) -> str | None:
-    """The file's sha256 (hex); None when there is no such file (any more)."""
-    if not Path(path).is_file():
-        return None
-    digest = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 def detector_identity(spec: str | None) -> dict:

@@ -32,12 +32,14 @@ from aogm_cli.io.h5file import (
     text_attr,
     vector_attr,
 )
+from aogm_cli.io.provenance import write_provenance
 
 FORMAT = "aogm-log"
 FORMAT_VERSION = 1
 
-def log_bytes(log: Log) -> bytes:
-    """The log file of ``log`` (CONTRACT.md) as sealed HDF5 bytes."""
+def log_bytes(log: Log, provenance: dict | None = None) -> bytes:
+    """The log file of ``log`` (CONTRACT.md) as sealed HDF5 bytes, with ``provenance``
+    (``io.provenance.provenance``) in the root attribute of that name when given."""
 
     def fill(f: h5py.File) -> None:
         f.attrs["format"] = FORMAT
@@ -46,6 +48,7 @@ def log_bytes(log: Log) -> bytes:
         f.attrs["source"] = log.source
         if log.seed is not None:
             f.attrs["seed"] = int(log.seed)
+        write_provenance(f, provenance)
         chunk_rows = max(1, min(log.n_scans, 4096))
         scans = f.create_group("scans")
         scans.create_dataset("time", data=np.asarray(log.time, dtype=np.float64))
@@ -70,9 +73,9 @@ def log_bytes(log: Log) -> bytes:
     return hdf5_bytes(fill)
 
 
-def write_log(path: str | Path, log: Log) -> None:
-    """Write ``log`` to ``path`` in the format of CONTRACT.md (atomically)."""
-    write_files_atomically([(Path(path), log_bytes(log))])
+def write_log(path: str | Path, log: Log, provenance: dict | None = None) -> None:
+    """Write ``log`` to ``path`` in the format of CONTRACT.md (atomically), with ``provenance``."""
+    write_files_atomically([(Path(path), log_bytes(log, provenance))])
 
 
 class LogReader:

@@ -32,6 +32,7 @@ from aogm_cli.io.h5file import (
     text_attr,
     vector_attr,
 )
+from aogm_cli.io.provenance import write_provenance
 
 FORMAT = "aogm-map"
 FORMAT_VERSION = 1
@@ -47,8 +48,9 @@ class MapHeader:
     runtime_s: float
 
 
-def map_bytes(m: OccupancyMap) -> bytes:
-    """The map file of ``m`` (CONTRACT.md) as sealed HDF5 bytes."""
+def map_bytes(m: OccupancyMap, provenance: dict | None = None) -> bytes:
+    """The map file of ``m`` (CONTRACT.md) as sealed HDF5 bytes, with ``provenance``
+    (``io.provenance.provenance``) in the root attribute of that name when given."""
 
     def fill(f: h5py.File) -> None:
         f.attrs["format"] = FORMAT
@@ -58,6 +60,7 @@ def map_bytes(m: OccupancyMap) -> bytes:
         f.attrs["source_log"] = m.source_log
         f.attrs["runtime_s"] = float(m.runtime_s)
         f.attrs["params"] = json.dumps(m.params, sort_keys=True)
+        write_provenance(f, provenance)
         g = f.create_group("map")
         for k, v in m.grid.attrs().items():
             g.attrs[k] = v
@@ -77,9 +80,9 @@ def map_bytes(m: OccupancyMap) -> bytes:
     return hdf5_bytes(fill)
 
 
-def write_map_file(path: str | Path, m: OccupancyMap) -> None:
-    """Write ``m`` to ``path`` (atomically)."""
-    write_files_atomically([(Path(path), map_bytes(m))])
+def write_map_file(path: str | Path, m: OccupancyMap, provenance: dict | None = None) -> None:
+    """Write ``m`` to ``path`` (atomically), with ``provenance``."""
+    write_files_atomically([(Path(path), map_bytes(m, provenance))])
 
 
 def _header(f: h5py.File, path: str) -> MapHeader:
