@@ -1,6 +1,7 @@
 """``aogm compare`` end to end on tiny simulated corridors: JSON, map reuse, gates, figure."""
 
 import dataclasses
+import hashlib
 import json
 import shutil
 
@@ -71,6 +72,10 @@ def compared(logs, tmp_path_factory):
     return out, json.loads((out / "r.json").read_text()), result.output
 
 
+def sha256(path):
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
 def independent_metrics(map_path, log_path):
     """Metrics straight from the files: the map's arrays and the log's truth, via map_metrics."""
     with h5py.File(map_path) as f:
@@ -88,7 +93,8 @@ def independent_metrics(map_path, log_path):
 
 def test_json_follows_the_contract_and_matches_the_map_files(logs, compared):
     out, data, _ = compared
-    assert set(data) == {"format", "format_version", "aogm_version", "results"} and data["aogm_version"] == "0.1.0"
+    assert set(data) == {"format", "format_version", "aogm_version", "results", "provenance"}
+    assert data["aogm_version"] == "0.1.0"
     assert (data["format"], data["format_version"]) == ("aogm-compare", 1)
     assert [(r["log"], r["mode"]) for r in data["results"]] == [
         (str(logs[0]), "standard"), (str(logs[0]), "em"), (str(logs[1]), "standard"), (str(logs[1]), "em")
@@ -135,7 +141,10 @@ def test_map_files_give_the_same_numbers_without_mapping(logs, compared, monkeyp
     assert len(maps) == 4
     result = run("compare", *maps, "--json", tmp_path / "again.json", "-q")  # modes from the map files
     assert result.exit_code == 0, result.output
-    assert json.loads((tmp_path / "again.json").read_text()) == data
+    again = json.loads((tmp_path / "again.json").read_text())
+    assert again.pop("provenance")["inputs"] == [{"path": str(m), "sha256": sha256(m)} for m in maps] + [
+        {"path": str(log), "sha256": sha256(log)} for log in logs]  # the maps given, then the logs they name
+    assert again == {k: v for k, v in data.items() if k != "provenance"}
     # a log together with one of its maps: only the missing mode is mapped
     monkeypatch.undo()
     result = run("compare", logs[0], out / "maps" / "door_1_em.h5", "--modes", "standard,em", "--json", tmp_path / "mix.json", "-q")

@@ -3,9 +3,11 @@ earlier runs read back, merged, printed and gated without mapping again."""
 
 import csv
 import dataclasses
+import hashlib
 import json
 import shutil
 
+import h5py
 import pytest
 import yaml
 from click.testing import CliRunner
@@ -87,6 +89,15 @@ def runs(logs, tmp_path_factory):
     return out, a.output
 
 
+def without_provenance(doc):
+    """The document without its provenance (the command and the time of the run that wrote it)."""
+    return {k: v for k, v in doc.items() if k != "provenance"}
+
+
+def sha256(path):
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
 def no_mapping(monkeypatch):
     def refuse(*args, **kwargs):
         raise AssertionError("a map was computed")
@@ -123,7 +134,7 @@ def test_the_csv_has_a_row_per_log_and_mode_equal_to_the_json(runs):
             assert all(row[f"learned_{k}"] == "" for k in LEARNED) and row["learned_from_readings"] == ""
 
 
-def test_from_json_merges_prints_and_gates_without_mapping(runs, tmp_path, monkeypatch):
+def test_from_json_merges_prints_and_gates_without_mapping(logs, runs, tmp_path, monkeypatch):
     out, _ = runs
     no_mapping(monkeypatch)
     a, b = (json.loads((out / name).read_text()) for name in ("a.json", "b.json"))
@@ -137,14 +148,16 @@ def test_from_json_merges_prints_and_gates_without_mapping(runs, tmp_path, monke
     assert "gates: 4 of 6 passed" in result.output
     merged = json.loads((tmp_path / "merged.json").read_text())
     assert merged["results"] == a["results"] + b["results"]  # the union, unchanged
-    assert {k: v for k, v in merged.items() if k != "results"} == {k: v for k, v in a.items() if k != "results"}
+    assert without_provenance({**merged, "results": []}) == without_provenance({**a, "results": []})
+    assert merged["provenance"]["inputs"] == [{"path": str(out / n), "sha256": sha256(out / n)} for n in ("a.json", "b.json")]
+    assert a["provenance"]["inputs"][0]["sha256"] == sha256(logs[0])
     header, rows = read_csv(tmp_path / "merged.csv")
     assert header == read_csv(out / "a.csv")[0] and len(rows) == 4
     assert rows[:2] == read_csv(out / "a.csv")[1]  # the same cells as the run that mapped
     # merged again: the same document
     again = run("compare", "--from-json", tmp_path / "merged.json", "--json", tmp_path / "again.json", "-q")
     assert again.exit_code == 0, again.output
-    assert json.loads((tmp_path / "again.json").read_text()) == merged
+    assert without_provenance(json.loads((tmp_path / "again.json").read_text())) == without_provenance(merged)
 
 
 def test_a_failed_gate_reads_as_in_the_run_that_mapped(runs, tmp_path, monkeypatch):
@@ -166,8 +179,10 @@ def test_without_truth_and_with_holdout_the_csv_and_json_come_back_the_same(logs
     params = tmp_path / "p.yaml"
     params.write_text("resolution: 0.1\n")
     first = run("compare", bare, "--modes", "standard,em", "--holdout", 0.2, "--params", params, "--json",
-                tmp_path / "h.json", "--csv", tmp_path / "h.csv", "-q")
+                tmp_path / "h.json", "--csv", tmp_path / "h.csv", "--maps-dir", tmp_path / "maps", "-q")
     assert first.exit_code == 0, first.output
+    with h5py.File(tmp_path / "maps" / "bare_em.h5") as f:  # the maps record the run's provenance too
+        assert {"path": str(bare), "sha256": sha256(bare)} in json.loads(f.attrs["provenance"])["inputs"]
     header, rows = read_csv(tmp_path / "h.csv")
     assert header == FIXED  # no truth: no check columns
     for row in rows:
@@ -179,7 +194,8 @@ def test_without_truth_and_with_holdout_the_csv_and_json_come_back_the_same(logs
                tmp_path / "h2.csv", "--require", "em.holdout_loglik > -100", "-q")
     assert back.exit_code == 0, back.output
     assert "Held-out AUC" in back.output and "Ends on occ." in back.output
-    assert json.loads((tmp_path / "h2.json").read_text()) == json.loads((tmp_path / "h.json").read_text())
+    assert without_provenance(json.loads((tmp_path / "h2.json").read_text())) == without_provenance(
+        json.loads((tmp_path / "h.json").read_text()))
     assert (tmp_path / "h2.csv").read_bytes() == (tmp_path / "h.csv").read_bytes()
 
 

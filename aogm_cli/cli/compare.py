@@ -24,19 +24,23 @@ from aogm_cli.cli.options import (
 from aogm_cli.io.outputs import resolve_outputs
 
 
-def _check_outputs(inputs, entries, modes, params_file, detector, json_out, csv_out, figure_out, maps_dir) -> None:
+def _check_outputs(inputs, entries, modes, params_file, detector, json_out, csv_out, figure_out,
+                   maps_dir) -> list[str]:
     """Every output (--json, --csv, --figure, the --maps-dir maps to write) against every input:
-    the arguments, the logs that map files name, --params and --detector."""
+    the arguments, the logs that map files name, --params and --detector. Returns those inputs
+    (each once, for the provenance)."""
     from aogm_cli.report.compare import maps_dir_targets
 
     targets = maps_dir_targets(entries, modes, maps_dir) if maps_dir else {}
     sources = [e.path for e in entries]
+    every = [str(p) for p in (*inputs, *sources, params_file, detector_file(detector, modes)) if p is not None]
     resolve_outputs(
-        [*inputs, *sources, params_file, detector_file(detector, modes)],
+        every,
         [("--json", json_out), ("--csv", csv_out), ("--figure", figure_out),
          *(("--maps-dir", t) for t in targets.values())],
         [("--maps-dir", maps_dir)],
     )
+    return list(dict.fromkeys(every))
 
 
 def _print_table(results, labels, quiet: bool) -> None:
@@ -217,7 +221,10 @@ def compare(inputs, modes_text, detector, params_file, json_out, csv_out, figure
     entries = lib.collect_inputs(list(inputs))
     modes = lib.parse_modes(modes_text) if modes_text else lib.default_modes(entries)
     _check_gates(gates, require_checks, modes, split is not None)
-    _check_outputs(inputs, entries, modes, params_file, detector, json_out, csv_out, figure_out, maps_dir)
+    read = _check_outputs(inputs, entries, modes, params_file, detector, json_out, csv_out, figure_out, maps_dir)
+    from aogm_cli.io.provenance import provenance
+
+    record = provenance(read)  # the inputs as read, the time the run starts
 
     from aogm_cli.core.budget import using
     from aogm_cli.mapping.budget import check_logs
@@ -243,7 +250,7 @@ def compare(inputs, modes_text, detector, params_file, json_out, csv_out, figure
         from aogm_cli.report.figure import comparison_figure_png
 
         figure = comparison_figure_png(entries, results, labels)
-    _commit_outputs(results, None, json_out, csv_out, figure_out, figure, maps_dir, quiet)
+    _commit_outputs(results, record, json_out, csv_out, figure_out, figure, maps_dir, quiet)
     _report_gates(gates, require_checks, results, labels)
 
 
@@ -282,28 +289,30 @@ def _check_gates(gates, require_checks, modes, holdout: bool) -> None:
 
 def _compare_results_files(paths, gates, require_checks, json_out, csv_out, quiet) -> None:
     """--from-json: merge the results of the --json files ``paths``, print, write and gate them."""
+    from aogm_cli.io.provenance import provenance
     from aogm_cli.report import compare as lib
 
+    record = provenance(paths)  # the files as read, the time the run starts
     merged = lib.merge_results_files(paths)
     _check_gates(gates, require_checks, merged.modes, merged.holdout is not None)
     resolve_outputs(paths, [("--json", json_out), ("--csv", csv_out)])
     labels = lib.result_labels(merged.results)
     _print_table(merged.results, labels, quiet)
-    _commit_outputs(merged.results, merged.holdout, json_out, csv_out, None, None, None, quiet)
+    _commit_outputs(merged.results, record, json_out, csv_out, None, None, None, quiet, merged.holdout)
     _report_gates(gates, require_checks, merged.results, labels)
 
 
-def _commit_outputs(results, holdout, json_out, csv_out, figure_out, figure, maps_dir, quiet) -> None:
+def _commit_outputs(results, record, json_out, csv_out, figure_out, figure, maps_dir, quiet, holdout=None) -> None:
     """--maps-dir maps, --json, --csv and --figure (its PNG bytes ``figure``) in one commit: all
-    written, or none (and a folder --maps-dir made here removed again). ``holdout``: the
-    top-level holdout object of merged results (``report.compare.results_json``)."""
+    written, or none (and a folder --maps-dir made here removed again). The maps and the JSON
+    record the provenance ``record`` (``io.provenance``; the CSV stays a plain table).
+    ``holdout``: the top-level holdout object of merged results (``report.compare.results_json``)."""
     from aogm_cli.io.atomic import write_files_atomically
     from aogm_cli.report import compare as lib
 
-    outputs = lib.maps_dir_outputs(results)
+    outputs = lib.maps_dir_outputs(results, record)
     if json_out:
-        # provenance (issue 15, part 2): pass aogm_cli.io.provenance's record as provenance= here
-        outputs.append((Path(json_out), lib.json_bytes(results, holdout)))
+        outputs.append((Path(json_out), lib.json_bytes(results, holdout, record)))
     if csv_out:
         outputs.append((Path(csv_out), lib.csv_bytes(results)))
     if figure_out:

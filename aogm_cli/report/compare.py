@@ -396,9 +396,10 @@ def run_comparison(
     return results
 
 
-def maps_dir_outputs(results: list[ModeResult]) -> list[tuple[Path, bytes]]:
-    """(path, bytes) of every map computed here that goes to --maps-dir."""
-    return [(Path(r.map_file), map_bytes(r.map)) for r in results if not r.reused and r.map_file is not None]
+def maps_dir_outputs(results: list[ModeResult], provenance: dict | None = None) -> list[tuple[Path, bytes]]:
+    """(path, bytes) of every map computed here that goes to --maps-dir, with ``provenance``
+    (``io.provenance.provenance`` of the comparison's inputs)."""
+    return [(Path(r.map_file), map_bytes(r.map, provenance)) for r in results if not r.reused and r.map_file is not None]
 
 
 def checks_passed(metrics: dict | None) -> float | None:
