@@ -1,0 +1,139 @@
+"""ROS messages -> readings and poses: the message types the rosbag importer reads, what it takes
+from each (REP-117 ranges, a Range's sensor fields, a scan's geometry, a cloud's echo points), and
+the rule that groups a ring's asynchronous readings into scans.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from aogm_cli.io.importers.rosbag_tf import pose_of
+
+RANGE = "sensor_msgs/msg/Range"
+LASER_SCAN = "sensor_msgs/msg/LaserScan"
+POINT_CLOUD = "sensor_msgs/msg/PointCloud"
+POINT_CLOUD2 = "sensor_msgs/msg/PointCloud2"
+SONAR_ARRAY = "p2os_msgs/msg/SonarArray"
+RANGE_TYPES = (RANGE, LASER_SCAN, POINT_CLOUD, POINT_CLOUD2, SONAR_ARRAY)
+ODOMETRY = "nav_msgs/msg/Odometry"
+POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
+POSE_COVARIANCE = "geometry_msgs/msg/PoseWithCovarianceStamped"
+POSE_TYPES = (ODOMETRY, POSE_STAMPED, POSE_COVARIANCE)
+TF_TYPE = "tf2_msgs/msg/TFMessage"
+RADIATION = {0: "ultrasound", 1: "infrared"}  # sensor_msgs/Range ULTRASOUND, INFRARED
+# p2os_msgs/SonarArray.msg, registered when a bag carries no definition of it (ROS 2 bags may not)
+SONAR_ARRAY_MSG = "std_msgs/Header header\nint32 ranges_count\nfloat64[] ranges\n"
+POINT_TOLERANCE = 1e-4  # m: a recovered echo point this close to max range is a max-range reading
+
+
+@dataclass
+class Readings:
+    """Readings of the range topics as they come: a time, a sensor (or a whole row) and its range."""
+
+    time: list[float] = field(default_factory=list)
+    sensor: list[int] = field(default_factory=list)  # Range topics: the topic's index
+    rows: list[np.ndarray] = field(default_factory=list)  # whole-message types: one row per message
+    values: list[float] = field(default_factory=list)
+    frames: dict[int, str] = field(default_factory=dict)  # sensor (or 0) -> its message's frame_id
+    fields: dict[int, tuple] = field(default_factory=dict)  # sensor -> (radiation, fov, min, max) of its first message
+    geometry: tuple | None = None  # LaserScan: (angle_min, angle_increment, count, range_min, range_max)
+
+
+def decimal(value: float) -> float:
+    """A float32 message field as the decimal it was written as (0.15, not 0.15000000596)."""
+    return float(str(np.float32(value)))
+
+
+def stamp(msg) -> float:
+    s = msg.header.stamp
+    return s.sec + s.nanosec / 1e9
+
+
+def group_readings(time: np.ndarray, sensor: np.ndarray, pose: np.ndarray, window: float,
+                   tolerance: tuple[float, float]) -> np.ndarray:
+    """Scan (row) index of each reading of a ring of Range topics, readings in time order.
+
+    The rule: a scan is a firing cycle. It starts at a reading and takes the next ones in time
+    while no sensor fires twice, each lies within ``window`` s of the scan's first reading, and the
+    robot's pose at each reading's own time is within ``tolerance`` (m, rad) of its pose at the
+    scan's first reading, which are the scan's time and pose. So a reading is mapped from its own
+    pose to within the tolerance: when the robot moves during a cycle, the cycle becomes several
+    scans, with NaN (no reading) for the sensors that did not fire in each.
+    """
+    row = np.empty(time.size, dtype=np.int64)
+    n, first, seen = -1, 0, set()
+    for i in range(time.size):
+        d = pose[i] - pose[first]
+        turn = abs((d[2] + math.pi) % (2 * math.pi) - math.pi)
+        if (n < 0 or sensor[i] in seen or time[i] - time[first] > window
+                or math.hypot(d[0], d[1]) > tolerance[0] or turn > tolerance[1]):
+            n, first, seen = n + 1, i, set()
+        seen.add(int(sensor[i]))
+        row[i] = n
+    return row
+
+
+def cloud_points(msg, kind: str) -> np.ndarray:
+    """(n, 2) x, y of a PointCloud's points, or of a PointCloud2's x and y fields."""
+    if kind == POINT_CLOUD:
+        return np.array([(p.x, p.y) for p in msg.points], dtype=np.float64).reshape(-1, 2)
+    types = {1: "i1", 2: "u1", 3: "i2", 4: "u2", 5: "i4", 6: "u4", 7: "f4", 8: "f8"}  # sensor_msgs/PointField
+    fields = {f.name: f for f in msg.fields}
+    if "x" not in fields or "y" not in fields:
+        raise ValueError(f"no x and y fields (fields: {', '.join(fields)})")
+    order = ">" if msg.is_bigendian else "<"
+    names = ("x", "y")
+    dtype = np.dtype({"names": names, "formats": [order + types[fields[k].datatype] for k in names],
+                      "offsets": [fields[k].offset for k in names], "itemsize": msg.point_step})
+    n = msg.width * msg.height
+    data = np.frombuffer(np.asarray(msg.data, dtype=np.uint8).tobytes(), dtype=dtype, count=n)
+    return np.column_stack([data["x"], data["y"]]).astype(np.float64)
+
+
+def _sonar_ranges(points: np.ndarray, mounts: np.ndarray) -> np.ndarray:
+    """Ranges of echo points (n, 2) in the robot frame, one per sonar in mount order: each point's
+    distance from its sonar (its bearing is the sonar's)."""
+    if points.shape[0] != mounts.shape[0]:
+        raise ValueError(f"{points.shape[0]} points for {mounts.shape[0]} sonar mounts")
+    return np.hypot(points[:, 0] - mounts[:, 0], points[:, 1] - mounts[:, 1])
+
+
+def collect_ranges(msg, kind: str, sensor: int, t: float, into: Readings, mounts: np.ndarray | None) -> None:
+    """Add one message's readings (raises ValueError for one to skip, with the reason)."""
+    if kind == RANGE:
+        into.frames.setdefault(sensor, msg.header.frame_id)
+        into.fields.setdefault(sensor, (int(msg.radiation_type), decimal(msg.field_of_view),
+                                        decimal(msg.min_range), decimal(msg.max_range)))
+        r = float(msg.range)
+        into.time.append(t)
+        into.sensor.append(sensor)
+        into.values.append(math.inf if r >= msg.max_range else r)
+        return
+    into.frames.setdefault(0, msg.header.frame_id)
+    if kind == LASER_SCAN:
+        geometry = (float(msg.angle_min), float(msg.angle_increment), len(msg.ranges),
+                    decimal(msg.range_min), decimal(msg.range_max))
+        if into.geometry is None:
+            into.geometry = geometry
+        elif geometry[:3] != into.geometry[:3]:
+            raise ValueError("beam count or angles differ from the first scan's")
+        row = np.asarray(msg.ranges, dtype=np.float64)
+        row[row >= msg.range_max] = np.inf
+    elif kind == SONAR_ARRAY:
+        row = np.asarray(msg.ranges, dtype=np.float64)
+    else:
+        row = _sonar_ranges(cloud_points(msg, kind), mounts)
+    if into.rows and row.size != into.rows[0].size:
+        raise ValueError(f"{row.size} readings, the first message has {into.rows[0].size}")
+    into.time.append(t)
+    into.rows.append(row)
+
+
+
+
+def pose_of_message(msg, kind: str) -> tuple[float, float, float]:
+    p = msg.pose if kind == POSE_STAMPED else msg.pose.pose
+    return pose_of(p.position, p.orientation)
