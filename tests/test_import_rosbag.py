@@ -119,7 +119,7 @@ def bag_value(r: float, k: int, max_range: float) -> float:
 
 
 def write_ring_bag(path: Path, kind: str, log: Log, skip_static: str | None = None, tilt: float = 0.0,
-                   pose_until: float | None = None) -> None:
+                   pose_until: float | None = None, radiation: int = 0) -> None:
     """A sonar ring of Range topics /sonar/0../sonar/23 (frames sonar_i in /tf_static) and poses on
     /tf as map -> odom (1 Hz) and odom -> base_link (at each scan)."""
     s = log.sensor
@@ -147,7 +147,7 @@ def write_ring_bag(path: Path, kind: str, log: Log, skip_static: str | None = No
                 odom_pose = compose(invert(ODOM), pose)[0]
                 bag.tf("/tf", stamp, [bag.transform(stamp, "odom", "base_link", odom_pose)])
             for i, r in enumerate(row):
-                msg = bag.msg("sensor_msgs/msg/Range", header=bag.header(stamp, f"sonar_{i}"), radiation_type=0,
+                msg = bag.msg("sensor_msgs/msg/Range", header=bag.header(stamp, f"sonar_{i}"), radiation_type=radiation,
                               field_of_view=s.beam_width, min_range=s.min_range, max_range=s.max_range,
                               range=bag_value(r, k + i, s.max_range))
                 bag.write(f"/sonar/{i}", "sensor_msgs/msg/Range", stamp, msg)
@@ -325,9 +325,9 @@ def errors_of(result, out: Path) -> str:
 def test_missing_topic_and_wrong_type_exit_2_naming_the_topic(bags, tmp_path):
     out = tmp_path / "x.h5"
     assert "/sonar/99: no such topic in the bag" in errors_of(run(bags["ring"], "--ranges", "/sonar/99", "-o", out), out)
-    assert "/tf: a topic of type tf2_msgs/msg/TFMessage" in errors_of(run(bags["ring"], "--ranges", "/tf", "-o", out), out)
+    assert "/tf: a topic of type tf2_msgs/TFMessage; expected one of sensor_msgs/Range" in errors_of(run(bags["ring"], "--ranges", "/tf", "-o", out), out)
     text = errors_of(run(bags["scan"], "--ranges", "/scan", "--pose", "/scan", "-o", out), out)
-    assert "/scan: a topic of type sensor_msgs/msg/LaserScan; expected one of nav_msgs/Odometry" in text
+    assert "/scan: a topic of type sensor_msgs/LaserScan; expected one of nav_msgs/Odometry" in text
     assert "/nope: no such pose topic" in errors_of(run(bags["scan"], "--ranges", "/scan", "--pose", "/nope", "-o", out), out)
     assert "'/x*'" in errors_of(run(bags["ring"], "--ranges", "/x*", "-o", out), out)
 
@@ -342,6 +342,25 @@ def test_no_tf_for_a_sensor_frame_or_a_tilted_sonar_exit_2_naming_the_frame(orig
     write_ring_bag(tilted, "ros1", short, tilt=math.radians(20))
     assert "tilted 20.0 deg" in errors_of(run(tilted, "--ranges", "/sonar/*", "-o", out), out)
     assert run(tilted, "--ranges", "/sonar/*", "--tilt-tolerance", "25", "-o", out).exit_code == 0
+
+
+def test_radiation_type_is_recorded_and_checked(original, tmp_path):
+    short = dataclasses.replace(original, time=original.time[:3], pose=original.pose[:3], ranges=original.ranges[:3])
+    infrared, odd, out = tmp_path / "ir.bag", tmp_path / "odd.bag", tmp_path / "x.h5"
+    write_ring_bag(infrared, "ros1", short, radiation=1)
+    assert run(infrared, "--ranges", "/sonar/*", "-o", out).exit_code == 0
+    assert "(infrared)" in read_log(out).source
+    write_ring_bag(odd, "ros1", short, radiation=7)
+    out = tmp_path / "y.h5"
+    assert "/sonar/0: radiation_type 7: expected 0 (ULTRASOUND) or 1 (INFRARED)" in errors_of(
+        run(odd, "--ranges", "/sonar/*", "-o", out), out)
+
+
+def test_a_file_that_is_not_a_bag_exits_2_naming_it(tmp_path):
+    bag, out = tmp_path / "junk.bag", tmp_path / "x.h5"
+    bag.write_bytes(b"#ROSBAG V2.0\n" + bytes(100))
+    assert "junk.bag: cannot read" in errors_of(run(bag, "--ranges", "/sonar/*", "-o", out), out)
+    assert "no such file or folder" in errors_of(run(tmp_path / "none", "--ranges", "/a", "-o", out), out)
 
 
 def test_poses_that_do_not_cover_the_readings_exit_2_naming_the_frame_or_topic(original, bags, tmp_path):

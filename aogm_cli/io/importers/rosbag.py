@@ -87,11 +87,16 @@ class RosbagImport:
         if len(ring) > 1:
             n = sum(self.topics[t][1] for t in ring)
             lines.append(f"{ring[0]}..{ring[-1]}: {len(ring)} topics, {n} sensor_msgs/Range messages")
-        lines += [f"{topic}: {count} {kind.replace('/msg/', '/')} messages"
+        lines += [f"{topic}: {count} {ros_name(kind)} messages"
                   for topic, (kind, count) in self.topics.items() if len(ring) < 2 or topic not in ring]
         lines.append(f"poses from {self.pose_source}; mounts from {self.mount_source}")
         lines.extend(f"skipped {n}: {why}" for why, n in self.skipped.items())
         return lines + list(self.notes)
+
+
+def ros_name(msgtype: str | None) -> str:
+    """sensor_msgs/msg/Range as ROS 1 and users write it: sensor_msgs/Range."""
+    return str(msgtype).replace("/msg/", "/")
 
 
 def _natural(name: str) -> list:
@@ -120,11 +125,11 @@ def resolve_topics(specs: tuple[str, ...], types: dict[str, str | None]) -> list
     kinds = {types[t] for t in out}
     for t in out:
         if types[t] not in RANGE_TYPES:
-            expected = ", ".join(k.replace("/msg/", "/") for k in RANGE_TYPES)
-            raise InputError(f"a topic of type {types[t]}; expected one of {expected}", key=t)
+            expected = ", ".join(ros_name(k) for k in RANGE_TYPES)
+            raise InputError(f"a topic of type {ros_name(types[t])}; expected one of {expected}", key=t)
     if len(kinds) > 1 or (kinds != {RANGE} and len(out) > 1):
         raise InputError(f"one log holds several Range topics or one topic of another type, got {len(out)} topics "
-                         f"of types {', '.join(sorted(str(k) for k in kinds))}", key=out[1])
+                         f"of types {', '.join(sorted(ros_name(k) for k in kinds))}", key=out[1])
     return out
 
 
@@ -170,7 +175,10 @@ def _open(path: Path):
     try:
         reader = AnyReader([path])
         reader.open()
-    except (AnyReaderError, OSError, ValueError, KeyError) as exc:
+    except Exception as exc:
+        if not (isinstance(exc, (AnyReaderError, OSError, ValueError, KeyError))
+                or type(exc).__module__.startswith("rosbags")):
+            raise
         what = "a ROS 1 .bag file or a ROS 2 bag folder (metadata.yaml with sqlite3 or MCAP storage)"
         raise InputError(f"cannot read as a ROS bag ({exc}); expected {what}", file=str(path)) from None
     if SONAR_ARRAY not in reader.typestore.fielddefs:
@@ -202,13 +210,18 @@ def read_bag(path: str | Path, options: RosbagOptions, mounts: np.ndarray | None
             if pose_spec not in types:
                 raise InputError(f"no such pose topic in the bag (topics: {', '.join(sorted(types))})", key=pose_spec)
             if types[pose_spec] not in POSE_TYPES:
-                expected = ", ".join(k.replace("/msg/", "/") for k in POSE_TYPES)
-                raise InputError(f"a topic of type {types[pose_spec]}; expected one of {expected}", key=pose_spec)
+                expected = ", ".join(ros_name(k) for k in POSE_TYPES)
+                raise InputError(f"a topic of type {ros_name(types[pose_spec])}; expected one of {expected}",
+                                 key=pose_spec)
         if mounts is None and kind in (POINT_CLOUD, POINT_CLOUD2, SONAR_ARRAY):
-            raise InputError(f"{kind.replace('/msg/', '/')} carries no sensor mounts: give --mounts FILE", key="mounts")
+            raise InputError(f"{ros_name(kind)} carries no sensor mounts: give --mounts FILE", key="mounts")
         collected = _read_messages(reader, types, topics, kind, pose_spec, options, mounts)
     except InputError as exc:
         raise exc.in_file(str(path)) from None
+    except Exception as exc:
+        if type(exc).__module__.startswith("rosbags"):  # a damaged or truncated bag, read message by message
+            raise InputError(f"cannot read the bag ({exc})", file=str(path)) from None
+        raise
     finally:
         reader.close()
     try:
@@ -281,7 +294,7 @@ def _poses(c: _Collected, pose_spec, time: np.ndarray, o: RosbagOptions) -> tupl
         if not c.pose_series.time:
             raise InputError("no pose messages", key=pose_spec)
         pose, covered = c.pose_series.at(time, o.max_gap)
-        return pose, covered, pose_spec, f"{c.types[pose_spec].replace('/msg/', '/')} topic {pose_spec}"
+        return pose, covered, pose_spec, f"{ros_name(c.types[pose_spec])} topic {pose_spec}"
     parent, child = pose_spec
     pose, covered, edge = c.tree.poses(parent, child, time, o.max_gap, key=f"tf:{parent}.{child}")
     return pose, covered, f"tf {edge}", f"tf {parent} -> {child}"
@@ -390,7 +403,7 @@ def _assemble(c: _Collected, topics, kind, pose_spec, o: RosbagOptions, mounts, 
         limit = np.full(ranges.shape[1], o.max_range if o.max_range is not None else spec["max_range"])
         if kind in (POINT_CLOUD, POINT_CLOUD2):  # points in float32: max range to within their precision
             limit = limit - POINT_TOLERANCE
-        what = f"{kind.replace('/msg/', '/')} topic {topics[0]}"
+        what = f"{ros_name(kind)} topic {topics[0]}"
     too_close, invalid = int(np.isneginf(ranges).sum()), int(np.isnan(ranges).sum())
     cleaned = clean_ranges(ranges, limit[None, :])
     no_echo = int(np.isposinf(cleaned).sum())
