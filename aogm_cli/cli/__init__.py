@@ -110,6 +110,7 @@ def _register() -> None:
         ("export", "export"),
         ("import_log", "import_log"),
         ("compare", "compare"),
+        ("info", "info"),
     ):
         main.add_command(getattr(importlib.import_module(f"aogm_cli.cli.{module}"), name))
 

@@ -246,18 +246,34 @@ def json_attr(obj, name: str, file: str, key: str, kind: type, required: bool = 
     return value
 
 
+def _open_checked(file: str, expected: str) -> h5py.File:
+    """The HDF5 file ``file``, open for reading, after checking its seal (or, without an intact
+    seal, walking its headers); InputError saying it is not HDF5 and that ``expected`` was."""
+    try:
+        if not is_sealed_intact(file):
+            check_structure(file)
+        return h5py.File(file, "r")
+    except FileNotFoundError:
+        raise InputError("no such file", file=file) from None
+    except (OSError, ValueError, RuntimeError) as exc:
+        raise InputError(f"not an HDF5 file ({exc.__class__.__name__}); expected {expected}", file=file) from None
+
+
+def file_format(path: str | Path, expected: str) -> str | None:
+    """The ``format`` attribute of the HDF5 file at ``path`` (None when it has none, or not a
+    string); InputError when the file is missing, damaged or not HDF5 (``expected`` says what
+    the caller wanted)."""
+    file = str(path)
+    with _open_checked(file, expected) as f, reading(file, "format"):
+        raw = f.attrs.get("format")
+        return text(raw) if isinstance(raw, (str, bytes)) else None
+
+
 def open_input(path: str | Path, fmt: str, version: int) -> h5py.File:
     """The HDF5 file at ``path``, open for reading, after checking its seal and that it is
     ``fmt`` ``version``."""
     file = str(path)
-    try:
-        if not is_sealed_intact(file):
-            check_structure(file)
-        f = h5py.File(file, "r")
-    except FileNotFoundError:
-        raise InputError("no such file", file=file) from None
-    except (OSError, ValueError, RuntimeError) as exc:
-        raise InputError(f"not an HDF5 file ({exc.__class__.__name__}); expected {fmt!r}", file=file) from None
+    f = _open_checked(file, repr(fmt))
     try:
         with reading(file, "format"):
             raw = f.attrs.get("format")
