@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -17,11 +18,12 @@ from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from aogm_cli.cli import main
+from aogm_cli.core.errors import InputError
 from aogm_cli.core.log import Log
 from aogm_cli.io.importers import wrap_angle
 from aogm_cli.io.importers.rosbag import RosbagOptions, read_bag
 from aogm_cli.io.importers.rosbag_messages import SONAR_ARRAY, SONAR_ARRAY_MSG, group_readings
-from aogm_cli.io.importers.rosbag_tf import compose, invert
+from aogm_cli.io.importers.rosbag_tf import TfTree, compose, invert, planar_mounts
 from aogm_cli.io.logfile import read_log
 from aogm_cli.mapping.modes import map_log
 from aogm_cli.mapping.params import MapParams
@@ -386,3 +388,34 @@ def test_library_reads_a_ros2_bag_file_inside_its_folder(bags, original):
     result = read_bag(db, RosbagOptions(ranges=("/scan",), pose="/odom", kind="sonar"))
     assert result.log.n_scans == original.n_scans
     assert result.topics["/scan"] == ("sensor_msgs/msg/LaserScan", original.n_scans)
+
+
+def tf_message(*transforms):
+    """A tf2_msgs/TFMessage-like object of (parent, child, (x, y, z), (qx, qy, qz, qw), stamp)."""
+    ns = SimpleNamespace
+    return ns(transforms=[
+        ns(header=ns(frame_id=parent, stamp=ns(sec=int(t), nanosec=round((t - int(t)) * 1e9))), child_frame_id=child,
+           transform=ns(translation=ns(x=p[0], y=p[1], z=p[2]), rotation=ns(x=q[0], y=q[1], z=q[2], w=q[3])))
+        for parent, child, p, q, t in transforms])
+
+
+def test_tf_chains_static_mounts_and_an_upside_down_scanner():
+    yaw90 = (0.0, 0.0, math.sin(math.pi / 4), math.cos(math.pi / 4))
+    level = (0.0, 0.0, 0.0, 1.0)
+    tree = TfTree()
+    tree.add(tf_message(("base_link", "mast", (0.1, 0.0, 0.5), yaw90, 0.0),
+                        ("mast", "/laser", (0.2, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), 0.0)), None, static=True)  # rolled by pi
+    t, r = tree.static_transform("base_link", "laser", "k")
+    assert_allclose(t, [0.1, 0.2, 0.5], atol=1e-12)
+    mounts = planar_mounts(t, r, np.array([0.0, 0.5]), math.radians(5), "k")
+    assert_allclose(mounts[:, 2], [math.pi / 2, math.pi / 2 - 0.5], atol=1e-12)  # bearings mirrored
+    tree.add(tf_message(("odom", "base_link", (0.0, 0.0, 0.0), level, 0.0),
+                        ("odom", "base_link", (2.0, 0.0, 0.0), yaw90, 2.0)), None, static=False)
+    pose, covered, edge = tree.poses("odom", "laser", np.array([1.0, 3.0]), 5.0, "k")
+    h = math.sqrt(0.5)  # halfway: base_link at x 1, yaw 45 deg; the mast 0.1 m ahead, yaw 135; the laser 0.2 m along it
+    assert_allclose(pose[0], [1 + 0.1 * h - 0.2 * h, 0.1 * h + 0.2 * h, 3 * math.pi / 4], atol=1e-12)
+    assert covered.tolist() == [True, False] and edge == "odom -> base_link"
+    with pytest.raises(InputError, match="goes through 'base_link', which is only in /tf"):
+        tree.static_transform("base_link", "odom", "k")
+    with pytest.raises(InputError, match="no static transform from 'base_link' to 'sonar'"):
+        tree.static_transform("base_link", "sonar", "k")
