@@ -23,7 +23,7 @@ from aogm_cli.core.log import Log
 from aogm_cli.io.importers import wrap_angle
 from aogm_cli.io.importers.rosbag import RosbagOptions, read_bag
 from aogm_cli.io.importers.rosbag_messages import SONAR_ARRAY, SONAR_ARRAY_MSG, group_readings
-from aogm_cli.io.importers.rosbag_tf import TfTree, compose, invert, planar_mounts
+from aogm_cli.io.importers.rosbag_tf import PoseSeries, TfTree, compose, invert, planar_mounts
 from aogm_cli.io.logfile import read_log
 from aogm_cli.mapping.modes import map_log
 from aogm_cli.mapping.params import MapParams
@@ -419,3 +419,13 @@ def test_tf_chains_static_mounts_and_an_upside_down_scanner():
         tree.static_transform("base_link", "odom", "k")
     with pytest.raises(InputError, match="no static transform from 'base_link' to 'sonar'"):
         tree.static_transform("base_link", "sonar", "k")
+
+
+def test_pose_series_leaves_out_non_finite_samples_and_does_not_bridge_gaps():
+    series = PoseSeries("/odom")
+    for t, p in [(0.0, (0.0, 0.0, 0.0)), (1.0, (math.nan, 0.0, 0.0)), (2.0, (2.0, 0.0, 0.0)), (9.0, (9.0, 0.0, 0.0))]:
+        series.add(t, p)
+    assert series.not_finite == 1
+    pose, covered = series.at(np.array([1.0, 2.0, 5.0, 9.0, 9.5]), max_gap=2.0)
+    assert_allclose(pose[:2, 0], [1.0, 2.0])
+    assert covered.tolist() == [True, True, False, True, False]  # 2 -> 9 is a gap; 9.5 after the end

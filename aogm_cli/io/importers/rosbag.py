@@ -277,6 +277,9 @@ def _read_messages(reader, types, topics, kind, pose_spec, o: RosbagOptions, mou
                 out.base_frame = frame_name(msg.child_frame_id)
         else:
             out.tree.add(msg, None, static=topic.endswith("tf_static"))
+    for series in [out.pose_series, *out.tree.dynamic.values()]:
+        if series is not None and series.not_finite:
+            out.skipped[f"{series.name}: a pose or time that is not finite"] += series.not_finite
     if out.tree.reparented:
         out.skipped[f"tf: {out.tree.reparented} transforms giving a frame a second parent"] += out.tree.reparented
     if not out.readings.time:

@@ -67,8 +67,12 @@ class PoseSeries:
     name: str  # what errors call it: "map -> odom", "/odom"
     time: list[float] = field(default_factory=list)
     pose: list[tuple[float, float, float]] = field(default_factory=list)
+    not_finite: int = 0  # samples left out: a NaN or infinite time or pose
 
     def add(self, t: float, pose: tuple[float, float, float]) -> None:
+        if not (math.isfinite(t) and all(math.isfinite(v) for v in pose)):
+            self.not_finite += 1
+            return
         self.time.append(t)
         self.pose.append(pose)
 
