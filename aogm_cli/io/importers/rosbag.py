@@ -8,9 +8,7 @@ asynchronous Range readings grouped into scans by the rule of ``group_readings``
 
 from __future__ import annotations
 
-import fnmatch
 import math
-import re
 from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,14 +28,16 @@ from aogm_cli.io.importers.rosbag_messages import (
     POSE_TYPES,
     RADIATION,
     RANGE,
-    RANGE_TYPES,
     SONAR_ARRAY,
     SONAR_ARRAY_MSG,
     TF_TYPE,
     Readings,
     collect_ranges,
     group_readings,
+    natural_order,
     pose_of_message,
+    resolve_topics,
+    ros_name,
     stamp,
 )
 from aogm_cli.io.importers.rosbag_tf import PoseSeries, TfTree, frame_name, planar_mounts
@@ -92,45 +92,6 @@ class RosbagImport:
         lines.append(f"poses from {self.pose_source}; mounts from {self.mount_source}")
         lines.extend(f"skipped {n}: {why}" for why, n in self.skipped.items())
         return lines + list(self.notes)
-
-
-def ros_name(msgtype: str | None) -> str:
-    """sensor_msgs/msg/Range as ROS 1 and users write it: sensor_msgs/Range."""
-    return str(msgtype).replace("/msg/", "/")
-
-
-def _natural(name: str) -> list:
-    """Sort key putting /sonar/10 after /sonar/9."""
-    return [int(p) if p.isdigit() else p for p in re.split(r"(\d+)", name)]
-
-
-def resolve_topics(specs: tuple[str, ...], types: dict[str, str | None]) -> list[str]:
-    """The range topics: each spec a topic name, a comma-separated list or a glob (its matches in
-    natural order); an error naming a topic the bag does not have or one of another type."""
-    out: list[str] = []
-    for spec in (s.strip() for item in specs for s in item.split(",")):
-        if not spec:
-            continue
-        if any(c in spec for c in "*?["):
-            found = sorted((t for t in types if fnmatch.fnmatchcase(t, spec)), key=_natural)
-            if not found:
-                raise InputError(f"no topic of the bag matches {spec!r} (topics: {', '.join(sorted(types))})", key=spec)
-        elif spec in types:
-            found = [spec]
-        else:
-            raise InputError(f"no such topic in the bag (topics: {', '.join(sorted(types)) or 'none'})", key=spec)
-        out.extend(t for t in found if t not in out)
-    if not out:
-        raise InputError("expected at least one range topic", key="--ranges")
-    kinds = {types[t] for t in out}
-    for t in out:
-        if types[t] not in RANGE_TYPES:
-            expected = ", ".join(ros_name(k) for k in RANGE_TYPES)
-            raise InputError(f"a topic of type {ros_name(types[t])}; expected one of {expected}", key=t)
-    if len(kinds) > 1 or (kinds != {RANGE} and len(out) > 1):
-        raise InputError(f"one log holds several Range topics or one topic of another type, got {len(out)} topics "
-                         f"of types {', '.join(sorted(ros_name(k) for k in kinds))}", key=out[1])
-    return out
 
 
 def check_options(o: RosbagOptions) -> None:
@@ -364,9 +325,48 @@ def _range_fields(c: _Collected, topics) -> tuple[list[str], np.ndarray, np.ndar
     return radiation, np.array(fov), np.array(lo), np.array(hi)
 
 
+def _ring_scans(c: _Collected, topics, time, pose, order, o: RosbagOptions):
+    """A ring of Range topics: (scan times, poses, ranges (T, S), each sensor's max range, the sensor's
+    fields, what was read, a note), the readings grouped by ``group_readings``."""
+    radiation, fov, lo, hi = _range_fields(c, topics)
+    if o.beam_width is None and np.ptp(fov) > 1e-6:
+        raise InputError(f"the topics' field_of_view differ ({np.degrees(fov.min()):.3g} to "
+                         f"{np.degrees(fov.max()):.3g} deg); a log has one beam width: give --beam-width",
+                         key=topics[int(np.argmax(fov))])
+    sensor = np.asarray(c.readings.sensor)[order]
+    row = group_readings(time, sensor, pose, o.window, o.pose_tolerance)
+    first = np.flatnonzero(np.r_[True, row[1:] != row[:-1]])
+    ranges = np.full((first.size, len(topics)), np.nan)  # a sensor that did not fire in a scan: invalid
+    ranges[row, sensor] = np.asarray(c.readings.values)[order]
+    limit = np.full(len(topics), o.max_range) if o.max_range is not None else hi
+    spec = dict(beam_width=float(fov[0]), min_range=float(lo.min()), max_range=float(limit.max()))
+    kinds = "/".join(sorted(set(radiation)))
+    what = (f"{len(topics)} sensor_msgs/Range topics ({kinds}) {topics[0]}..{topics[-1]}" if len(topics) > 1
+            else f"sensor_msgs/Range topic {topics[0]} ({kinds})")
+    note = (f"{order.size} readings grouped into {first.size} scans (one firing cycle within {o.window:g} s "
+            "and the pose tolerance)")
+    return time[first], pose[first], ranges, limit, spec, what, note
+
+
+def _message_scans(c: _Collected, kind: str, sensor_kind: str, order, o: RosbagOptions):
+    """A scan, cloud or sonar array: (ranges (T, S), max range per sensor, the sensor's fields)."""
+    ranges = np.vstack(c.readings.rows)[order]
+    defaults = SensorSpec(mount=np.zeros((1, 3)))
+    spec = dict(beam_width=defaults.beam_width, min_range=defaults.min_range, max_range=defaults.max_range)
+    if kind == LASER_SCAN:
+        mn, mx = c.readings.geometry[3:]
+        spec = dict(beam_width=LASER_BEAM_WIDTH if sensor_kind == "laser" else defaults.beam_width,
+                    min_range=mn if math.isfinite(mn) and mn >= 0 else LASER_MIN_RANGE, max_range=mx)
+    limit = np.full(ranges.shape[1], o.max_range if o.max_range is not None else spec["max_range"])
+    if kind in (POINT_CLOUD, POINT_CLOUD2):  # points in float32: max range to within their precision
+        limit = limit - POINT_TOLERANCE
+    return ranges, limit, spec
+
+
 def _assemble(c: _Collected, topics, kind, pose_spec, o: RosbagOptions, mounts, source: str) -> RosbagImport:
-    r = c.readings
-    time = np.asarray(r.time, dtype=np.float64)
+    """The log: readings in time order at poses that cover them, grouped into scans, cleaned (REP-117),
+    with the sensor's fields and mounts; ``source`` records what was read."""
+    time = np.asarray(c.readings.time, dtype=np.float64)
     order = np.argsort(time, kind="stable")
     time = time[order]
     pose, covered, what, pose_text = _poses(c, pose_spec, time, o)
@@ -374,61 +374,32 @@ def _assemble(c: _Collected, topics, kind, pose_spec, o: RosbagOptions, mounts, 
     time, pose, order = time[covered], pose[covered], order[covered]
     base = frame_name(o.base_frame or (pose_spec[1] if not isinstance(pose_spec, str) else c.base_frame or "base_link"))
     sensor_kind = o.kind or ("laser" if kind == LASER_SCAN else "sonar")
-    defaults = SensorSpec(mount=np.zeros((1, 3)))
     notes: list[str] = []
     if kind == RANGE:
-        radiation, fov, lo, hi = _range_fields(c, topics)
-        if o.beam_width is None and np.ptp(fov) > 1e-6:
-            raise InputError(f"the topics' field_of_view differ ({np.degrees(fov.min()):.3g} to "
-                             f"{np.degrees(fov.max()):.3g} deg); a log has one beam width: give --beam-width",
-                             key=topics[int(np.argmax(fov))])
-        sensor = np.asarray(r.sensor)[order]
-        row = group_readings(time, sensor, pose, o.window, o.pose_tolerance)
-        first = np.flatnonzero(np.r_[True, row[1:] != row[:-1]])
-        ranges = np.full((first.size, len(topics)), np.nan)
-        ranges[row, sensor] = np.asarray(r.values)[order]
-        time, pose = time[first], pose[first]
-        limit = np.full(len(topics), o.max_range) if o.max_range is not None else hi
-        spec = dict(beam_width=float(fov[0]), min_range=float(lo.min()), max_range=float(limit.max()))
-        kinds = "/".join(sorted(set(radiation)))
-        what = f"{len(topics)} sensor_msgs/Range topics ({kinds}) {topics[0]}..{topics[-1]}" if len(topics) > 1 \
-            else f"sensor_msgs/Range topic {topics[0]} ({kinds})"
-        notes.append(f"{order.size} readings grouped into {first.size} scans (one firing cycle within "
-                     f"{o.window:g} s and the pose tolerance)")
+        time, pose, ranges, limit, spec, what, note = _ring_scans(c, topics, time, pose, order, o)
+        notes.append(note)
     else:
-        ranges = np.vstack(r.rows)[order]
-        if kind == LASER_SCAN:
-            _, _, _, mn, mx = r.geometry
-            spec = dict(beam_width=LASER_BEAM_WIDTH if sensor_kind == "laser" else defaults.beam_width,
-                        min_range=mn if math.isfinite(mn) and mn >= 0 else LASER_MIN_RANGE, max_range=mx)
-        else:
-            spec = dict(beam_width=defaults.beam_width, min_range=defaults.min_range, max_range=defaults.max_range)
-        limit = np.full(ranges.shape[1], o.max_range if o.max_range is not None else spec["max_range"])
-        if kind in (POINT_CLOUD, POINT_CLOUD2):  # points in float32: max range to within their precision
-            limit = limit - POINT_TOLERANCE
+        ranges, limit, spec = _message_scans(c, kind, sensor_kind, order, o)
         what = f"{ros_name(kind)} topic {topics[0]}"
     too_close, invalid = int(np.isneginf(ranges).sum()), int(np.isnan(ranges).sum())
     cleaned = clean_ranges(ranges, limit[None, :])
-    no_echo = int(np.isposinf(cleaned).sum())
-    notes.append(f"REP-117: {no_echo} no echo (+inf or >= max range), {too_close} too close (-inf, stored as "
-                 f"invalid), {invalid} NaN or not fired (invalid)")
+    notes.append(f"REP-117: {int(np.isposinf(cleaned).sum())} no echo (+inf or >= max range), {too_close} too "
+                 f"close (-inf, stored as invalid), {invalid} NaN or not fired (invalid)")
     for key, value in (("max_range", o.max_range), ("min_range", o.min_range), ("beam_width", o.beam_width)):
         if value is not None:
             spec[key] = float(value)
     noise = o.noise_sigma if o.noise_sigma is not None else (
-        LASER_NOISE_SIGMA if sensor_kind == "laser" else defaults.noise_sigma)
+        LASER_NOISE_SIGMA if sensor_kind == "laser" else SensorSpec.noise_sigma)
     mount_source = "--mounts" if mounts is not None else f"/tf_static in {base!r}"
+    sensor_mounts = _sensor_mounts(c, topics, kind, base, o, mounts)
     try:
-        sensor_spec = SensorSpec(mount=_sensor_mounts(c, topics, kind, base, o, mounts), kind=sensor_kind,
-                                 noise_sigma=float(noise), **spec).validate()
+        sensor = SensorSpec(mount=sensor_mounts, kind=sensor_kind, noise_sigma=float(noise), **spec).validate()
     except InputError as exc:
-        if exc.key in ("mounts",) or (exc.key or "").startswith(tuple(topics)):
-            raise
-        raise InputError(exc.message, key=exc.key if exc.key != "mount" else "mounts") from None
+        raise InputError(exc.message, key="mounts" if exc.key == "mount" else exc.key) from None
     skipped = dict(sorted(c.skipped.items()))
     text = f"{source}: {what}; poses from {pose_text}; mounts from {mount_source}"
     if skipped:
         text += f"; skipped {sum(skipped.values())} messages or readings"
-    log = Log(time=time, pose=pose, ranges=cleaned, sensor=sensor_spec, source=text)
-    counts = {t: (c.types[t], c.counts[t]) for t in sorted(c.counts, key=_natural)}
+    log = Log(time=time, pose=pose, ranges=cleaned, sensor=sensor, source=text)
+    counts = {t: (c.types[t], c.counts[t]) for t in sorted(c.counts, key=natural_order)}
     return RosbagImport(log, counts, pose_text, mount_source, skipped, int(order.size), tuple(notes))

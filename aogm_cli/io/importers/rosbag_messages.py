@@ -1,15 +1,18 @@
-"""ROS messages -> readings and poses: the message types the rosbag importer reads, what it takes
-from each (REP-117 ranges, a Range's sensor fields, a scan's geometry, a cloud's echo points), and
-the rule that groups a ring's asynchronous readings into scans.
+"""ROS messages -> readings and poses: the message types the rosbag importer reads and the range
+topics picked by them, what it takes from each message (REP-117 ranges, a Range's sensor fields, a
+scan's geometry, a cloud's echo points), and the rule that groups a ring's readings into scans.
 """
 
 from __future__ import annotations
 
+import fnmatch
 import math
+import re
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from aogm_cli.core.errors import InputError
 from aogm_cli.io.importers.rosbag_tf import pose_of
 
 RANGE = "sensor_msgs/msg/Range"
@@ -27,6 +30,45 @@ RADIATION = {0: "ultrasound", 1: "infrared"}  # sensor_msgs/Range ULTRASOUND, IN
 # p2os_msgs/SonarArray.msg, registered when a bag carries no definition of it (ROS 2 bags may not)
 SONAR_ARRAY_MSG = "std_msgs/Header header\nint32 ranges_count\nfloat64[] ranges\n"
 POINT_TOLERANCE = 1e-4  # m: a recovered echo point this close to max range is a max-range reading
+
+
+def ros_name(msgtype: str | None) -> str:
+    """sensor_msgs/msg/Range as ROS 1 and users write it: sensor_msgs/Range."""
+    return str(msgtype).replace("/msg/", "/")
+
+
+def natural_order(name: str) -> list:
+    """Sort key putting /sonar/10 after /sonar/9."""
+    return [int(p) if p.isdigit() else p for p in re.split(r"(\d+)", name)]
+
+
+def resolve_topics(specs: tuple[str, ...], types: dict[str, str | None]) -> list[str]:
+    """The range topics: each spec a topic name, a comma-separated list or a glob (its matches in
+    natural order); an error naming a topic the bag does not have or one of another type."""
+    out: list[str] = []
+    for spec in (s.strip() for item in specs for s in item.split(",")):
+        if not spec:
+            continue
+        if any(c in spec for c in "*?["):
+            found = sorted((t for t in types if fnmatch.fnmatchcase(t, spec)), key=natural_order)
+            if not found:
+                raise InputError(f"no topic of the bag matches {spec!r} (topics: {', '.join(sorted(types))})", key=spec)
+        elif spec in types:
+            found = [spec]
+        else:
+            raise InputError(f"no such topic in the bag (topics: {', '.join(sorted(types)) or 'none'})", key=spec)
+        out.extend(t for t in found if t not in out)
+    if not out:
+        raise InputError("expected at least one range topic", key="--ranges")
+    kinds = {types[t] for t in out}
+    for t in out:
+        if types[t] not in RANGE_TYPES:
+            expected = ", ".join(ros_name(k) for k in RANGE_TYPES)
+            raise InputError(f"a topic of type {ros_name(types[t])}; expected one of {expected}", key=t)
+    if len(kinds) > 1 or (kinds != {RANGE} and len(out) > 1):
+        raise InputError(f"one log holds several Range topics or one topic of another type, got {len(out)} topics "
+                         f"of types {', '.join(sorted(ros_name(k) for k in kinds))}", key=out[1])
+    return out
 
 
 @dataclass
