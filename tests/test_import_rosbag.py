@@ -21,7 +21,7 @@ from aogm_cli.cli import main
 from aogm_cli.core.errors import InputError
 from aogm_cli.core.log import Log
 from aogm_cli.io.importers import wrap_angle
-from aogm_cli.io.importers.rosbag import RosbagOptions, read_bag
+from aogm_cli.io.importers.rosbag import RosbagOptions, _open, read_bag
 from aogm_cli.io.importers.rosbag_messages import SONAR_ARRAY, SONAR_ARRAY_MSG, group_readings
 from aogm_cli.io.importers.rosbag_tf import PoseSeries, TfTree, compose, invert, planar_mounts
 from aogm_cli.io.logfile import read_log
@@ -334,12 +334,16 @@ def test_missing_topic_and_wrong_type_exit_2_naming_the_topic(bags, tmp_path):
     assert "'/x*'" in errors_of(run(bags["ring"], "--ranges", "/x*", "-o", out), out)
 
 
-def test_no_tf_for_a_sensor_frame_or_a_tilted_sonar_exit_2_naming_the_frame(original, tmp_path):
+def test_no_tf_for_a_sensor_frame_or_a_tilted_sonar_exit_2_naming_the_frame(original, bags, tmp_path):
     short = dataclasses.replace(original, time=original.time[:4], pose=original.pose[:4], ranges=original.ranges[:4])
     bag, out = tmp_path / "no_tf.bag", tmp_path / "x.h5"
     write_ring_bag(bag, "ros1", short, skip_static="sonar_5")
     text = errors_of(run(bag, "--ranges", "/sonar/*", "-o", out), out)
     assert "/sonar/5 (frame 'sonar_5')" in text and "no static transform from 'base_link' to 'sonar_5'" in text
+    mounted = tmp_path / "mounted.h5"  # a mounts file instead of /tf_static
+    assert run(bag, "--ranges", "/sonar/*", "--mounts", bags["mounts"], "-o", mounted).exit_code == 0
+    assert_allclose(read_log(mounted).sensor.mount[:, :2], original.sensor.mount[:, :2], atol=1e-12)
+    assert "mounts from --mounts" in read_log(mounted).source
     tilted = tmp_path / "tilted.bag"
     write_ring_bag(tilted, "ros1", short, tilt=math.radians(20))
     assert "tilted 20.0 deg" in errors_of(run(tilted, "--ranges", "/sonar/*", "-o", out), out)
@@ -381,6 +385,14 @@ def test_poses_that_do_not_cover_the_readings_exit_2_naming_the_frame_or_topic(o
     out = tmp_path / "z.h5"
     text = errors_of(run(odom_bag, "--ranges", "/scan", "--pose", "/odom", "-o", out), out)
     assert "/odom: the poses do not cover 5 of 10 readings" in text
+
+
+def test_p2os_sonar_array_is_known_to_a_bag_without_its_definition(bags):
+    reader = _open(bags["ring"])
+    try:
+        assert "ranges_count" in dict(reader.typestore.fielddefs[SONAR_ARRAY][1])
+    finally:
+        reader.close()
 
 
 def test_library_reads_a_ros2_bag_file_inside_its_folder(bags, original):
