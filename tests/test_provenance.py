@@ -116,6 +116,21 @@ def test_provenance_skips_absent_inputs_and_records_missing_files(tmp_path):
     json.dumps(p)  # JSON as it is
 
 
+def test_imported_log_names_the_imported_file_and_a_folder_its_files(tmp_path):
+    data, out = tmp_path / "plain.txt", tmp_path / "plain.h5"
+    data.write_text("0 0 0 1 2\n0.1 0 0 1 2\n")
+    result = run("import", "text", "--ranges", data, "-o", out, "-q")
+    assert result.exit_code == 0, result.output
+    assert recorded(out)["inputs"] == [{"path": str(data), "sha256": sha256(data)}]
+    assert recorded(out)["command"][:3] == ["aogm", "import", "text"]
+    bag = tmp_path / "bag"  # a ROS 2 bag is a folder: each of its files is an input
+    (bag / "sub").mkdir(parents=True)
+    (bag / "metadata.yaml").write_text("m")
+    (bag / "sub" / "bag_0.db3").write_bytes(b"db")
+    assert provenance([bag])["inputs"] == [{"path": str(bag / "metadata.yaml"), "sha256": sha256(bag / "metadata.yaml")},
+                                           {"path": str(bag / "sub" / "bag_0.db3"), "sha256": sha256(bag / "sub" / "bag_0.db3")}]
+
+
 def test_info_on_a_log_and_a_map(files):
     _, log, m = files
     result = run("info", log)

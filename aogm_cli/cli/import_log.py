@@ -164,6 +164,7 @@ def carmen(
     from aogm_cli.io.importers import file_kilobytes
     from aogm_cli.io.importers.carmen import import_carmen
     from aogm_cli.io.logfile import write_log
+    from aogm_cli.io.provenance import provenance
 
     options = CarmenOptions(
         message=message,
@@ -177,12 +178,13 @@ def carmen(
         mount=None if mount is None else (mount[0], mount[1], math.radians(mount[2])),
     )
     resolve_outputs([log_file], [("-o", output)])
+    made = provenance([log_file])  # the inputs as read, the time the run starts
     with (
         _option_names(tuple(CarmenOptions.__dataclass_fields__)),
         progress_bar(file_kilobytes(log_file), "import", quiet, unit="kB") as advance,
     ):
         result = import_carmen(log_file, options, progress=advance)
-    write_log(output, result.log)
+    write_log(output, result.log, made)
     if result.skipped:
         click.echo(f"aogm: note: {log_file}: {result.skipped_summary()}", err=True)
     if not quiet:
@@ -313,16 +315,18 @@ def text(
     from aogm_cli.io.importers import file_kilobytes
     from aogm_cli.io.importers.text import import_text
     from aogm_cli.io.logfile import write_log
+    from aogm_cli.io.provenance import provenance
 
     if mounts_file and bearings:
         raise click.UsageError("give --bearings or --mounts, not both")
     columns["no_echo"] = tuple(columns["no_echo"])
     options = TextOptions(bearings=bearings or TextOptions.bearings, beam_width=math.radians(beam_width), **columns)
     resolve_outputs([ranges_file, poses_file, mounts_file], [("-o", output)])
+    made = provenance([ranges_file, poses_file, mounts_file])  # the inputs as read, the time the run starts
     names = tuple(TextOptions.__dataclass_fields__) + ("poses", "mounts")
     with _option_names(names), progress_bar(file_kilobytes(ranges_file), "import", quiet, unit="kB") as advance:
         result = import_text(ranges_file, poses_file, options, mounts_path=mounts_file, progress=advance)
-    write_log(output, result.log)
+    write_log(output, result.log, made)
     if not quiet:
         _report(output, result.log, "scans", Path(ranges_file).name, list(result.notes))
 
@@ -387,13 +391,15 @@ def rosbag(bag: str, output: str, ranges: tuple[str, ...], mounts_file: str | No
     from aogm_cli.io.importers.rosbag import read_bag
     from aogm_cli.io.importers.text import read_mounts
     from aogm_cli.io.logfile import write_log
+    from aogm_cli.io.provenance import provenance
 
     options = RosbagOptions(ranges=ranges, tilt_tolerance=math.radians(tilt_tolerance),
                             beam_width=None if beam_width is None else math.radians(beam_width), **settings)
     resolve_outputs([bag, mounts_file], [("-o", output)])
+    made = provenance([bag, mounts_file])  # the inputs as read (a folder's files), the time the run starts
     with _option_names(tuple(RosbagOptions.__dataclass_fields__) + ("mounts",)):
         mounts = read_mounts(mounts_file) if mounts_file else None
         result = read_bag(bag, options, mounts)
-    write_log(output, result.log)
+    write_log(output, result.log, made)
     if not quiet:
         _report(output, result.log, "scans", Path(bag).name, result.summary())

@@ -39,16 +39,17 @@ def file_sha256(path: str | Path) -> str | None:
 
 
 def provenance(inputs, argv: list[str] | None = None) -> dict:
-    """What makes an output from ``inputs`` (paths; None entries are skipped) by the command line
-    ``argv`` (default ``sys.argv``, as run): a JSON-able dict
+    """What makes an output from ``inputs`` (paths; None entries are skipped, a folder stands for
+    the files in it) by the command line ``argv`` (default ``sys.argv``, as run): a JSON-able dict
 
     ``{"command": [...], "inputs": [{"path", "sha256"}], "aogm_version", "git_commit"
     (absent outside a checkout; "-dirty" appended when the checkout has changes),
-    "libraries": {name: version or None}, "platform", "python", "time" (UTC, ISO 8601)}``.
+    "libraries": {name: version or None}, "platform", "python", "time" (now, UTC, ISO 8601)}``.
+    Call it before the work starts: the hashes are of the inputs as read, the time the start.
     """
     record = {
         "command": [str(a) for a in (sys.argv if argv is None else argv)],
-        "inputs": [{"path": str(p), "sha256": file_sha256(p)} for p in inputs if p is not None],
+        "inputs": [{"path": str(p), "sha256": file_sha256(p)} for p in _files(inputs)],
         "aogm_version": __version__,
     }
     commit = git_commit()
@@ -59,6 +60,17 @@ def provenance(inputs, argv: list[str] | None = None) -> dict:
     record["python"] = platform.python_version()
     record["time"] = datetime.now(UTC).isoformat(timespec="seconds").replace("+00:00", "Z")
     return record
+
+
+def _files(inputs) -> list[Path | str]:
+    """The input paths, None skipped, a folder (a ROS 2 bag) replaced by the files in it (sorted)."""
+    files: list[Path | str] = []
+    for p in inputs:
+        if p is not None and Path(p).is_dir():
+            files += sorted(f for f in Path(p).rglob("*") if f.is_file())
+        elif p is not None:
+            files.append(p)
+    return files
 
 
 def _version(name: str) -> str | None:
