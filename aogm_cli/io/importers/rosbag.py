@@ -30,7 +30,7 @@ from aogm_cli.io.importers.rosbag_messages import (
     RANGE,
     SONAR_ARRAY,
     SONAR_ARRAY_MSG,
-    TF_TYPE,
+    TF_TYPES,
     Readings,
     collect_ranges,
     group_readings,
@@ -207,7 +207,7 @@ def _read_messages(reader, types, topics, kind, pose_spec, o: RosbagOptions, mou
     """One pass over the bag: range messages in the time window, every pose and tf message."""
     index = {t: i for i, t in enumerate(topics)}
     label = topics[0] if len(topics) == 1 else f"{topics[0]}..{topics[-1]}"
-    wanted = set(topics) | {t for t in ("/tf", "/tf_static", "tf", "tf_static") if types.get(t) == TF_TYPE}
+    wanted = set(topics) | {t for t in ("/tf", "/tf_static", "tf", "tf_static") if types.get(t) in TF_TYPES}
     if isinstance(pose_spec, str):
         wanted.add(pose_spec)
     first = reader.start_time / 1e9

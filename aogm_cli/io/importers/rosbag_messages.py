@@ -25,7 +25,7 @@ ODOMETRY = "nav_msgs/msg/Odometry"
 POSE_STAMPED = "geometry_msgs/msg/PoseStamped"
 POSE_COVARIANCE = "geometry_msgs/msg/PoseWithCovarianceStamped"
 POSE_TYPES = (ODOMETRY, POSE_STAMPED, POSE_COVARIANCE)
-TF_TYPE = "tf2_msgs/msg/TFMessage"
+TF_TYPES = ("tf2_msgs/msg/TFMessage", "tf/msg/tfMessage")  # tf2, and old ROS 1 tf
 RADIATION = {0: "ultrasound", 1: "infrared"}  # sensor_msgs/Range ULTRASOUND, INFRARED
 # p2os_msgs/SonarArray.msg, registered when a bag carries no definition of it (ROS 2 bags may not)
 SONAR_ARRAY_MSG = "std_msgs/Header header\nint32 ranges_count\nfloat64[] ranges\n"
