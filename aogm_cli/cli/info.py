@@ -17,7 +17,7 @@ def info(file: str, as_json: bool) -> None:
     """Print what FILE (a log, map or detector) holds and what made it.
 
     \b
-    log       sensors, scans, time span, source, seed, the truth's grid and checks
+    log       sensors, scans, source, seed, the truth's grid and checks
     map       mode, grid, layers, runtime, every parameter, the run's stats (EM sweeps,
               clusters, the forward model calibration learned)
     detector  features, network, threshold, metrics, the logs it was trained on
