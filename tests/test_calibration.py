@@ -72,9 +72,8 @@ def test_expectation_sums_match_the_reference_reading_by_reading():
     occupied = wall_map()
     model = (0.07, 0.05, 0.6, 0.04, 4.0, Z_MAX)
     out = np.zeros(F.E_SIZE)
-    first = np.empty(n)
     F.expectation_sums(tpl.kernel_arrays, flat_offsets(tpl, GRID.width), GRID.shape,
-                       F.ExpectationReadings(rows, cols, bins, z), occupied, model, out, first)
+                       F.ExpectationReadings(rows, cols, bins, z), occupied, model, out)
     expected = reference_sums(tpl, rows, cols, bins, z, occupied, model)
     np.testing.assert_allclose(out, expected, rtol=1e-10)
     # every reading's causes add up to one: random + dropout + detections + no detection
@@ -91,7 +90,7 @@ def test_one_reading_one_obstacle_by_hand():
     out = np.zeros(F.E_SIZE)
     F.expectation_sums(tpl.kernel_arrays, flat_offsets(tpl, grid.width), grid.shape,
                        F.ExpectationReadings(np.array([10]), np.array([5]), tpl.heading_bin(np.zeros(1)),
-                                             np.array([1.02])), occupied, model, out, np.empty(1))
+                                             np.array([1.02])), occupied, model, out)
     g = math.exp(-0.5 * (0.02 / 0.05) ** 2) / (math.sqrt(2 * math.pi) * 0.05)  # N(1.02; 1.0, 0.05^2)
     g0 = math.exp(-0.5 * (2.98 / 0.05) ** 2) / (math.sqrt(2 * math.pi) * 0.05)  # N(1.02; 4.0): 0
     hit = 0.9 * 0.5 * g

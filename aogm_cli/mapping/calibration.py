@@ -40,10 +40,9 @@ def expectations(run: Readings, readings: F.ExpectationReadings, occupied: np.nd
     templates = run.templates
     model = (float(forward.p_rand), float(forward.p_max), float(forward.p_hit), float(forward.sigma),
              float(forward.window), float(run.sensor.max_range))
-    first = np.empty(readings.z.shape[0])
     F.expectation_sums(templates.kernel_arrays, flat_offsets(templates, run.grid.width), run.grid.shape, readings,
-                       np.ascontiguousarray(occupied, dtype=np.bool_), model, out, first)
-    return out, first
+                       np.ascontiguousarray(occupied, dtype=np.bool_), model, out)
+    return out
 
 
 def m_step(sums: np.ndarray, forward: F.ForwardModelConfig, config: CalibrationConfig) -> F.ForwardModelConfig:
@@ -93,12 +92,12 @@ def fit_at_map(run: Readings, readings: F.ExpectationReadings, occupied: np.ndar
     iterations = 0
     while iterations < config.fit_iterations:
         iterations += 1
-        new = m_step(expectations(run, readings, occupied, forward)[0], forward, config)
+        new = m_step(expectations(run, readings, occupied, forward), forward, config)
         done = settled(new, forward, config.tolerance / 10)
         forward = new
         if done:
             break
-    sums, first = expectations(run, readings, occupied, forward)
+    sums = expectations(run, readings, occupied, forward)
     n = max(sums[F.E_READINGS], 1.0)
     return Fit(forward, iterations, float(sums[F.E_LOGLIK] / n), int(sums[F.E_READINGS]))
 

@@ -334,7 +334,7 @@ class ExpectationReadings(NamedTuple):
 
 
 @numba.njit(cache=True)
-def expectation_sums(tpl, flat, shape, readings, occupied, model, out, first):
+def expectation_sums(tpl, flat, shape, readings, occupied, model, out):
     """The expectations of every reading's cause under the flat binary map ``occupied``, summed.
 
     ``model`` is (p_rand, p_max, p_hit, sigma, window, z_max). For reading t with obstacles
@@ -343,8 +343,7 @@ def expectation_sums(tpl, flat, shape, readings, occupied, model, out, first):
     e_k = w q^(k-1) p_hit g(d_k) / p and e_0 = w q^K G0 / p, with p = p(z_t | m) (module
     docstring). Adds into ``out`` (E_SIZE,): readings, sum of log p, sum e_rand, sum e_dropout,
     sum_k e_k (detections), sum_k k e_k + K e_0 (obstacles examined), sum_k e_k (z - d_k)^2,
-    sum e_0 (no obstacle detected). ``first`` (readings,) gets each reading's z - d_1 (NaN for
-    a max-range reading or a cone without obstacles).
+    sum e_0 (no obstacle detected).
     """
     p_rand, p_max, p_hit, sigma, window, z_max = model
     height, width = shape
@@ -377,7 +376,6 @@ def expectation_sums(tpl, flat, shape, readings, occupied, model, out, first):
                     d[n_obs] = r[j]
                     gk[n_obs] = gaussian_at(z, r[j], sigma, window)
                     n_obs += 1
-        first[t] = z - d[0] if n_obs > 0 and not at_max else np.nan
         u0 = (z - z_max) / sigma
         g0 = math.exp(-0.5 * u0 * u0) / (math.sqrt(2.0 * math.pi) * sigma)
         s = 0.0
