@@ -13,12 +13,16 @@ from aogm_cli.cli.options import (
     calibrate_option,
     detector_file,
     detector_option,
+    jobs_option,
     limits_of,
     mode_choice,
     modes_option,
     params_option,
     progress_bar,
     quiet_option,
+    report_failures,
+    resume_option,
+    scheduler_option,
     seed_option,
 )
 from aogm_cli.io.outputs import resolve_outputs
@@ -130,8 +134,10 @@ def _source(r) -> str:
               help="Gate, evaluated per log, e.g. 'adaptive.accuracy >= em.accuracy - 0.005'. Repeatable.")
 @click.option("--require-checks", multiple=True, type=mode_choice,
               help="Gate: every world check of every log passes in this mode. Repeatable.")
-@click.option("--jobs", "-j", type=click.IntRange(min=1), default=1, show_default=True,
-              help="Map in this many worker processes (see Timings above).")
+@jobs_option("Map in this many worker processes (see Timings above).")
+@scheduler_option
+@resume_option("With --maps-dir: take the maps already there that are complete and valid for their log, mode and "
+               "parameters (see Resuming above) instead of mapping again.")
 @click.option("--holdout", type=float, metavar="FRACTION",
               help="Hold out every round(1/FRACTION)-th scan (0 < FRACTION <= 0.5), map the rest and score "
                    "each map on the held-out readings (see Held-out scores above).")
@@ -140,7 +146,7 @@ def _source(r) -> str:
 @quiet_option
 @budget_options
 def compare(inputs, modes_text, detector, params_file, json_out, csv_out, figure_out, maps_dir, from_json, requires,
-            require_checks, jobs, holdout, calibrate, seed, quiet, max_memory=16e9, max_work=None):
+            require_checks, jobs, scheduler, resume, holdout, calibrate, seed, quiet, max_memory=16e9, max_work=None):
     """Map every log in every mode, evaluate each map against the log's truth, and print a table
     (accuracy, occupied F1, Brier, checks passed, runtime, runtime relative to the standard map
     of the same log). em and adaptive learn their forward model from each log (--calibrate,
@@ -194,7 +200,21 @@ def compare(inputs, modes_text, detector, params_file, json_out, csv_out, figure
     mapping work only (the mapper excludes file I/O and one-time compilation). With --jobs N > 1
     the workers compete for cores and memory bandwidth, so for fair runtimes use --jobs 1 (the
     default) or N no larger than the number of cores. Runtimes relative to standard are always
-    taken within one log.
+    taken within one log. --scheduler ADDRESS (or AOGM_SCHEDULER) runs each map as one task on
+    a Dask cluster, timed the same way inside its worker; logs and maps are passed as paths,
+    so every worker must see them at the same paths.
+
+    \b
+    Failed tasks: a map that fails (bad input found while mapping, a lost worker) is reported
+    on stderr per log and mode, the others finish and are tabled, written and gated; the exit
+    status is then 2 when every failure was bad input, else 1 (1 too when a gate fails).
+    Inputs checked before any work (an unreadable log, a bad option) still stop the run first.
+
+    \b
+    Resuming (--resume, with --maps-dir): a map DIR/<logstem>_<mode>.h5 already there is taken
+    as given, not made again, when it reads back whole and valid, is of that mode, its
+    provenance records the log's current sha256, and it was made with the same parameters,
+    --holdout split and (adaptive) detector; any other is mapped again and replaced.
 
     \b
     Examples:
@@ -221,6 +241,7 @@ def compare(inputs, modes_text, detector, params_file, json_out, csv_out, figure
     entries = lib.collect_inputs(list(inputs))
     modes = lib.parse_modes(modes_text) if modes_text else lib.default_modes(entries)
     _check_gates(gates, require_checks, modes, split is not None)
+    resumed = _resume(entries, modes, maps_dir, params, detector, split, resume, quiet)
     read = _check_outputs(inputs, entries, modes, params_file, detector, json_out, csv_out, figure_out, maps_dir)
     from aogm_cli.io.provenance import provenance
 
@@ -233,13 +254,14 @@ def compare(inputs, modes_text, detector, params_file, json_out, csv_out, figure
     check_logs([(e.path, mode) for e in entries for mode in modes if mode not in e.maps], params, limits)
     n_tasks = sum(mode not in e.maps for e in entries for mode in modes)
     with using(limits), progress_bar(n_tasks, "compare", quiet, unit="map") as advance:
-        results = lib.run_comparison(
+        results, failures = lib.run_comparison(
             entries, modes, params, detector=detector, jobs=jobs, maps_dir=maps_dir,
-            on_map=lambda i, mode, m: advance(1), holdout=split,
+            on_map=lambda i, mode, m: advance(1), holdout=split, scheduler=scheduler,
         )
 
     for r in results:
-        differs = lib.params_differences(r.map.params, params, r.metrics is not None) if r.reused else []
+        differs = [] if r.map_file in resumed or not r.reused else lib.params_differences(r.map.params, params,
+                                                                                         r.metrics is not None)
         if differs:
             click.echo(f"aogm: note: {r.map_file} was made with other {', '.join(differs)} parameters than "
                        "this comparison's; it is reported as it is", err=True)
@@ -251,12 +273,29 @@ def compare(inputs, modes_text, detector, params_file, json_out, csv_out, figure
 
         figure = comparison_figure_png(entries, results, labels)
     _commit_outputs(results, record, json_out, csv_out, figure_out, figure, maps_dir, quiet)
-    _report_gates(gates, require_checks, results, labels)
+    gate_failed = _report_gates(gates, require_checks, results, labels, exit_now=not failures)
+    report_failures(failures, lambda key: f"{key[0]} ({key[1]})", gate_failed)
+
+
+def _resume(entries, modes, maps_dir, params, detector, split, resume: bool, quiet: bool) -> set[str]:
+    """--resume: the --maps-dir maps taken as they are (``report.compare.resume_maps``)."""
+    if not resume:
+        return set()
+    if not maps_dir:
+        from aogm_cli.core.errors import InputError
+
+        raise InputError("needs --maps-dir (the maps of an earlier run to take up again)", key="--resume")
+    from aogm_cli.report.compare import resume_maps
+
+    taken = resume_maps(entries, modes, maps_dir, params, detector, split)
+    if not quiet:
+        click.echo(f"resume: {len(taken)} map(s) in {maps_dir} already complete, not mapped again", err=True)
+    return set(taken)
 
 
 # options that only mapping uses: refused with --from-json (parameter name -> option)
 MAPPING_OPTIONS = {"figure_out": "--figure", "maps_dir": "--maps-dir", "modes_text": "--modes", "detector": "--detector",
-                   "params_file": "--params", "jobs": "--jobs", "holdout": "--holdout", "calibrate": "--calibrate/--no-calibrate",
+                   "params_file": "--params", "jobs": "--jobs", "scheduler": "--scheduler", "resume": "--resume", "holdout": "--holdout", "calibrate": "--calibrate/--no-calibrate",
                    "seed": "--seed", "max_memory": "--max-memory", "max_work": "--max-work"}
 
 
@@ -268,7 +307,7 @@ def _refuse_mapping_options(ctx: click.Context) -> None:
 
     for name, option in MAPPING_OPTIONS.items():
         source = ctx.get_parameter_source(name)
-        if source is not None and source != ParameterSource.DEFAULT:
+        if source is not None and source not in (ParameterSource.DEFAULT, ParameterSource.ENVIRONMENT):
             need = "the maps" if name in ("figure_out", "maps_dir") else "mapping"
             raise InputError(f"needs {need}; --from-json reads results only (drop {option}, or compare the logs "
                              "or map files instead)", key=option)
@@ -333,9 +372,9 @@ def _commit_outputs(results, record, json_out, csv_out, figure_out, figure, maps
                 click.echo(f"wrote {path}", err=True)
 
 
-def _report_gates(gates, require_checks, results, labels) -> None:
+def _report_gates(gates, require_checks, results, labels, exit_now: bool = True) -> bool:
     """Evaluate --require and --require-checks per log, print each failure and the count; exit 1
-    when one fails."""
+    when one fails (``exit_now``), else leave the exit to the failed tasks' report."""
     from aogm_cli.report.compare import gate_values
     from aogm_cli.report.gates import evaluate_gates, evaluate_required_checks
 
@@ -353,4 +392,6 @@ def _report_gates(gates, require_checks, results, labels) -> None:
         click.echo(f"gates: {total - len(failures)} of {total} passed")
     if failures:
         click.echo(f"aogm: {len(failures)} of {total} gates failed", err=True)
-        click.get_current_context().exit(1)
+        if exit_now:
+            click.get_current_context().exit(1)
+    return bool(failures)

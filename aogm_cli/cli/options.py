@@ -12,6 +12,9 @@ Option                 commands
 --resolution           map, calibrate
 --calibrate/--no-calibrate map, compare (``calibration.enabled``)
 --max-memory/--max-work simulate, map, compare (``budget_options``; ``core.budget``)
+--jobs/-j, --scheduler simulate, compare (``core.executors``: a local process pool, a Dask cluster)
+--resume               simulate, compare (--maps-dir): skip outputs already complete and valid
+LOG arguments as a folder or a glob (``expand_log_paths``): train
 """
 
 from __future__ import annotations
@@ -47,6 +50,60 @@ calibrate_option = click.option(
     help="em and adaptive: learn the forward model's sigma, p_rand, p_hit and p_max from the log being mapped"
          " (section calibration: of --params).  [default: on]",
 )
+
+
+def jobs_option(help_text: str):
+    return click.option("--jobs", "-j", type=click.IntRange(min=1), default=1, show_default=True, help=help_text)
+
+
+scheduler_option = click.option(
+    "--scheduler", metavar="ADDRESS", envvar="AOGM_SCHEDULER", show_envvar=True,
+    help="Run every task on the Dask cluster whose scheduler is at ADDRESS (tcp://host:8786) instead of"
+         " --jobs local processes; needs pip install aogm[dask] (see Running on a cluster in README.md).",
+)
+
+
+def resume_option(help_text: str):
+    return click.option("--resume", is_flag=True, help=help_text)
+
+
+def report_failures(failures, what, other_failure: bool = False) -> None:
+    """One line on stderr per failed task (``core.executors.Failure``; ``what(key)`` names it)
+    and the count; then exit 2 when every failure was bad input, else 1 (``failure_status``;
+    1 also when ``other_failure``, e.g. a failed gate)."""
+    if not failures:
+        return
+    from aogm_cli.core.executors import failure_status
+
+    for f in failures:
+        click.echo(f"aogm: failed: {what(f.key)}: {f.message}", err=True)
+    click.echo(f"aogm: {len(failures)} task(s) failed; the others finished", err=True)
+    click.get_current_context().exit(1 if other_failure else failure_status(failures))
+
+
+def expand_log_paths(args, key: str) -> list[str]:
+    """Log arguments as files: a folder stands for its ``*.h5`` files, a glob (``logs/*_s?.h5``,
+    quoted so that the shell leaves it) for its matches, each sorted by name; anything else is a
+    file as given. InputError (naming ``key``) for a folder or glob that holds no file."""
+    import glob
+    from pathlib import Path
+
+    from aogm_cli.core.errors import InputError
+
+    paths: list[str] = []
+    for arg in args:
+        if Path(arg).is_dir():
+            found = sorted(str(p) for p in Path(arg).glob("*.h5") if p.is_file())
+            if not found:
+                raise InputError("a folder without .h5 files; expected logs (LOG.h5) in it", file=arg, key=key)
+        elif glob.has_magic(arg) and not Path(arg).exists():
+            found = sorted(p for p in glob.glob(arg) if Path(p).is_file())
+            if not found:
+                raise InputError("no file matches this pattern; expected logs (LOG.h5)", file=arg, key=key)
+        else:
+            found = [arg]
+        paths += found
+    return list(dict.fromkeys(paths))
 
 
 class SizeParam(click.ParamType):

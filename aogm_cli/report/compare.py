@@ -20,16 +20,22 @@ from pathlib import Path
 import yaml
 
 from aogm_cli import __version__
+from aogm_cli.core import budget
+from aogm_cli.core.budget import Limits
 from aogm_cli.core.errors import InputError
-from aogm_cli.core.interrupts import end_workers, worker_init
+from aogm_cli.core.executors import Failure, Task, run_tasks
 from aogm_cli.core.log import Truth
 from aogm_cli.core.occupancy_map import MODES, OccupancyMap
 from aogm_cli.evaluation.consistency import map_consistency
 from aogm_cli.evaluation.holdout import SCORE_KEYS, HoldoutSplit, holdout_scores, reference_json, split_log
 from aogm_cli.evaluation.metrics import evaluate
 from aogm_cli.io.detectorfile import detector_identity
+from aogm_cli.io.h5file import open_input
 from aogm_cli.io.logfile import LogReader
+from aogm_cli.io.mapfile import FORMAT as MAP_FORMAT
+from aogm_cli.io.mapfile import FORMAT_VERSION as MAP_FORMAT_VERSION
 from aogm_cli.io.mapfile import is_map_file, map_bytes, read_map_file, read_map_header
+from aogm_cli.io.provenance import file_sha256, read_provenance
 from aogm_cli.mapping.params import MapParams
 
 METRIC_KEYS = ("accuracy", "occupied_precision", "occupied_recall", "occupied_f1", "brier")
@@ -174,15 +180,17 @@ def default_modes(entries: list[LogEntry]) -> tuple[str, ...]:
 
 
 def map_one(path: str, mode: str, params: MapParams, detector: str | None = None,
-            holdout: HoldoutSplit | None = None) -> OccupancyMap:
-    """Map one log in one mode, from the scans ``holdout`` keeps when given. A top-level
-    function, so that worker processes can run it; the mapper measures ``runtime_s`` around the
-    mapping work only, inside the process that maps."""
+            holdout: HoldoutSplit | None = None, limits: Limits | None = None) -> OccupancyMap:
+    """Map one log in one mode, from the scans ``holdout`` keeps when given, under ``limits``
+    (``core.budget``; a Dask worker does not inherit the client's). A top-level function, so that
+    worker processes can run it; the mapper measures ``runtime_s`` around the mapping work only,
+    inside the process that maps."""
     from aogm_cli.mapping.modes import map_file
 
-    if holdout is not None:
-        return map_kept_scans(path, mode, params, detector, holdout)
-    return map_file(path, mode, params, detector)
+    with budget.using(limits or budget.active_limits()):
+        if holdout is not None:
+            return map_kept_scans(path, mode, params, detector, holdout)
+        return map_file(path, mode, params, detector)
 
 
 def map_kept_scans(path: str, mode: str, params: MapParams, detector: str | None, holdout: HoldoutSplit) -> OccupancyMap:
@@ -275,41 +283,18 @@ def compute_maps(
     jobs: int = 1,
     on_map: Callable[[int, str, OccupancyMap], None] | None = None,
     holdout: HoldoutSplit | None = None,
-) -> dict[tuple[int, str], OccupancyMap]:
-    """Map each (log index, mode) of ``tasks`` (from the scans ``holdout`` keeps, when given);
-    with ``jobs`` > 1 in that many worker processes.
+    scheduler: str | None = None,
+) -> tuple[dict[tuple[int, str], OccupancyMap], list[Failure]]:
+    """Map each (log index, mode) of ``tasks`` (from the scans ``holdout`` keeps, when given),
+    each as one task of ``core.executors.run_tasks``: here, in ``jobs`` local worker processes,
+    or on the Dask cluster at ``scheduler``. Returns the maps and the tasks that failed (keyed
+    (log index, mode)); a failed task does not stop the others.
 
     ``on_map`` is called in this process as each map is finished (in order of completion).
     """
-    done: dict[tuple[int, str], OccupancyMap] = {}
-    if jobs <= 1 or len(tasks) <= 1:
-        for i, mode in tasks:
-            m = map_one(entries[i].path, mode, params, detector, holdout)
-            done[(i, mode)] = m
-            if on_map:
-                on_map(i, mode, m)
-        return done
-    from concurrent.futures import FIRST_EXCEPTION, ProcessPoolExecutor, wait
-
-    pool = ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), initializer=worker_init, initargs=(os.getpid(),))
-    try:
-        futures = {pool.submit(map_one, entries[i].path, mode, params, detector, holdout): (i, mode)
-                   for i, mode in tasks}
-        pending = set(futures)
-        while pending:
-            finished, pending = wait(pending, return_when=FIRST_EXCEPTION)
-            for fut in finished:
-                key = futures[fut]
-                m = fut.result()  # re-raises a worker's error here
-                done[key] = m
-                if on_map:
-                    on_map(key[0], key[1], m)
-    except BaseException:
-        pool.shutdown(wait=False, cancel_futures=True)
-        end_workers()  # the maps still running are not waited for
-        raise
-    pool.shutdown()
-    return done
+    limits = budget.active_limits()
+    work = [Task((i, mode), map_one, (entries[i].path, mode, params, detector, holdout, limits)) for i, mode in tasks]
+    return run_tasks(work, jobs, scheduler, on_done=(lambda key, m: on_map(key[0], key[1], m)) if on_map else None)
 
 
 def _map_detector(m: OccupancyMap, reused: bool, identity: dict | None) -> dict | None:
@@ -366,12 +351,14 @@ def run_comparison(
     maps_dir: str | None = None,
     on_map: Callable[[int, str, OccupancyMap], None] | None = None,
     holdout: HoldoutSplit | None = None,
-) -> list[ModeResult]:
-    """Every log in every mode: given maps reused, the others computed (and written to
-    as DIR/<logstem>_<mode>.h5 of ``maps_dir`` when set: ``maps_dir_outputs`` gives their bytes,
-    to commit with the command's other outputs); results per log, then per mode. With
-    ``holdout``, every map is made from (or, given, must record) the kept scans and is scored
-    on the held-out ones."""
+    scheduler: str | None = None,
+) -> tuple[list[ModeResult], list[Failure]]:
+    """Every log in every mode: given maps reused, the others computed (``compute_maps``: here,
+    in ``jobs`` processes or on the Dask cluster at ``scheduler``) and written to
+    DIR/<logstem>_<mode>.h5 of ``maps_dir`` when set (``maps_dir_outputs`` gives their bytes, to
+    commit with the command's other outputs); results per log, then per mode, and the tasks that
+    failed (``Failure.key``: (log path, mode)), which have no result. With ``holdout``, every map
+    is made from (or, given, must record) the kept scans and is scored on the held-out ones."""
     tasks = [(i, mode) for i, e in enumerate(entries) for mode in modes if mode not in e.maps]
     targets = maps_dir_targets(entries, modes, maps_dir) if maps_dir else {}
     given = load_given_maps(entries, modes, holdout)
@@ -384,16 +371,79 @@ def run_comparison(
             on_map(i, mode, m)
 
     identity = detector_identity(detector) if any(mode == "adaptive" for _, mode in tasks) else None
-    computed = compute_maps(entries, tasks, params, detector, jobs, finished, holdout)
+    computed, failed = compute_maps(entries, tasks, params, detector, jobs, finished, holdout, scheduler)
     results = []
     for i, e in enumerate(entries):
         for mode in modes:
+            if (i, mode) not in given and (i, mode) not in computed:
+                continue  # failed
             if (i, mode) in given:
                 results.append(evaluate_result(e, mode, given[(i, mode)], e.maps[mode], True, holdout=holdout))
             else:
                 results.append(evaluate_result(e, mode, computed[(i, mode)], written.get((i, mode)), False, identity,
                                                holdout))
-    return results
+    order = {key: n for n, key in enumerate(tasks)}
+    failures = [Failure((entries[f.key[0]].path, f.key[1]), f.message, f.bad_input)
+                for f in sorted(failed, key=lambda f: order[f.key])]
+    return results, failures
+
+
+def resume_maps(entries: list[LogEntry], modes: tuple[str, ...], maps_dir: str, params: MapParams,
+                detector: str | None = None, holdout: HoldoutSplit | None = None) -> list[str]:
+    """``--resume``: take each DIR/<logstem>_<mode>.h5 of ``maps_dir`` that is complete and valid
+    for its log (``resumable_map``) as a map given for that mode, so it is not made again; the
+    others are mapped (and rewritten) as usual. Returns the map files taken."""
+    targets = maps_dir_targets(entries, modes, maps_dir)
+    wanted_detector = detector_identity(detector)["sha256"] if any(m == "adaptive" for _, m in targets) else None
+    log_sha: dict[int, str | None] = {}
+    taken = []
+    for (i, mode), target in targets.items():
+        if not target.is_file():
+            continue
+        e = entries[i]
+        if i not in log_sha:
+            log_sha[i] = file_sha256(e.path)
+        if resumable_map(str(target), e, mode, params, log_sha[i], holdout, wanted_detector):
+            e.maps[mode] = str(target)
+            taken.append(str(target))
+    return taken
+
+
+def resumable_map(path: str, entry: LogEntry, mode: str, params: MapParams, log_sha256: str | None,
+                  holdout: HoldoutSplit | None, detector_sha256: str | None) -> bool:
+    """Whether the map file ``path`` is what this comparison would make of ``entry`` in ``mode``:
+    it reads back whole and valid (a truncated or damaged file does not), is of that mode, names
+    a log of that file name whose sha256 its provenance records as the log's is now, on the truth
+    grid, made with the same parameters (``params_differences``), the same --holdout split, and
+    for adaptive the same detector (``params["detector_sha256"]``)."""
+    try:
+        m = read_map_file(path)
+        with open_input(path, MAP_FORMAT, MAP_FORMAT_VERSION) as f:
+            record = read_provenance(f, path) or {}
+    except (InputError, OSError):
+        return False
+    if m.mode != mode or Path(m.source_log).name != Path(entry.path).name:
+        return False
+    if log_sha256 is None or log_sha256 not in {i.get("sha256") for i in record.get("inputs", []) if isinstance(i, dict)}:
+        return False
+    if entry.truth is not None and m.grid.shape != entry.truth.grid.shape:
+        return False
+    made = m.params.get("holdout")
+    if made != (None if holdout is None else holdout.as_dict()):
+        return False
+    if mode == "adaptive" and m.params.get("detector_sha256") != detector_sha256:
+        return False
+    return not params_differences(configured_params(m), params, entry.truth is not None)
+
+
+def configured_params(m: OccupancyMap) -> dict:
+    """The parameters a map was made with as configured: for a map whose calibration learned its
+    forward model (``params["em"]`` holds the learned values), the values it started from
+    (``stats["calibration"]["initial"]``) in their place."""
+    initial = (m.stats.get("calibration") or {}).get("initial")
+    if not isinstance(initial, dict) or not isinstance(m.params.get("em"), dict):
+        return m.params
+    return {**m.params, "em": {**m.params["em"], **initial}}
 
 
 def maps_dir_outputs(results: list[ModeResult], provenance: dict | None = None) -> list[tuple[Path, bytes]]:
