@@ -6,18 +6,18 @@ from pathlib import Path
 
 import click
 
-from aogm_cli.cli.options import LazyDefault, output_option, progress_bar, quiet_option, seed_option
+from aogm_cli.cli.options import LazyDefault, expand_log_paths, output_option, progress_bar, quiet_option, seed_option
 from aogm_cli.detector.features import FeatureSpec
 from aogm_cli.io.outputs import resolve_outputs
 from aogm_cli.training.config import TrainingConfig
 
 
 @click.command()
-@click.argument("log_files", metavar="LOG.h5 [LOG.h5 ...]", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@click.argument("log_files", metavar="LOG.h5|DIR|'GLOB' ...", nargs=-1, required=True, type=click.Path())
 @output_option("Detector file to write (HDF5).")
 @seed_option
-@click.option("--validation-logs", "validation_logs", multiple=True, type=click.Path(dir_okay=False),
-              help="A log held out for validation (repeat for more).  [default: the last max(1, n // 4) of n >= 2 logs]")
+@click.option("--validation-logs", "validation_logs", multiple=True, type=click.Path(),
+              help="A log (a folder or a quoted glob of logs) held out for validation (repeat for more).  [default: the last max(1, n // 4) of n >= 2 logs]")
 @click.option("--hidden", type=click.IntRange(min=1, max=256), default=TrainingConfig.hidden, show_default=True, help="Units of the hidden layer.")
 @click.option("--activation", type=click.Choice(["tanh", "relu", "logistic"]), default=TrainingConfig.activation,
               show_default=True,
@@ -64,9 +64,15 @@ def train(log_files, output, seed, validation_logs, hidden, activation, beta, ri
     validation log its file name, world, whether that world is a realistic variant (it has
     an errors: section), its errors, seed, scan count and source.
     \b
-    Example:
+    Logs: files, folders (their *.h5 files, sorted by name) or quoted globs ('logs/*_s?.h5',
+    their matches sorted by name); a log named twice counts once.
+    \b
+    Examples:
       aogm train out/lab.h5 out/hall.h5 out/office.h5 --validation-logs out/office.h5 -o detector.h5 --seed 1
+      aogm train logs/ --validation-logs 'logs/office_doors_s*.h5' -o detector.h5 --seed 1
     """
+    log_files = expand_log_paths(log_files, "LOG.h5")
+    validation_logs = expand_log_paths(validation_logs, "--validation-logs")
     resolve_outputs([*log_files, *validation_logs], [("-o", output)])  # before loading scikit-learn
     from aogm_cli.io.detectorfile import save_detector
     from aogm_cli.io.logfile import read_log
