@@ -159,8 +159,28 @@ def simulate_file(world_file: str, seed: int, output: str, limits, record: dict)
     world = load_world(world_file)
     with budget.using(limits):
         log = run_simulation(world, seed=seed)
+    _remove_temporaries_on_sigterm()
     write_files_atomically([(output, log_bytes(log, record))])
     return log.n_scans
+
+
+def _remove_temporaries_on_sigterm() -> None:
+    """In a --jobs worker process (its main thread, SIGTERM at the default): the SIGTERM that ends
+    it (``core.interrupts.end_workers``) first removes the temporaries it is writing."""
+    import os
+    import signal
+    import threading
+
+    from aogm_cli.io.atomic import remove_temporaries
+
+    if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGTERM) != signal.SIG_DFL:
+        return
+
+    def end(signum, frame):
+        remove_temporaries()
+        os._exit(128 + signum)
+
+    signal.signal(signal.SIGTERM, end)
 
 
 def simulated_log_is_complete(path: Path, world_text: str, seed: int) -> bool:
