@@ -78,6 +78,8 @@ def run_tasks(tasks: list[Task], jobs: int = 1, scheduler: str | None = None,
     ``scheduler`` (a Dask scheduler's address): every task on that cluster; else with ``jobs`` > 1
     in a local process pool (workers end with this process, ``core.interrupts``); else here, one
     after another. ``on_done(key, result)`` is called in this process as each task succeeds.
+    A local worker that dies breaks its pool: the tasks it took down are run again, each in a
+    pool of its own, so that only the one that kills its worker fails (Dask reschedules by itself).
     A signal or an interrupt cancels the tasks not yet started and ends the local workers."""
     results: dict = {}
     failures: list[Failure] = []
@@ -100,9 +102,33 @@ def run_tasks(tasks: list[Task], jobs: int = 1, scheduler: str | None = None,
         with dask_executor(scheduler) as executor:
             _run_on(executor, tasks, record)
         return results, failures
+    from concurrent.futures.process import BrokenProcessPool
+
+    broken: list = []  # keys of the tasks a lost worker took down with the pool
+
+    def record_local(key, outcome: Callable[[], object]) -> None:
+        def checked():
+            try:
+                return outcome()
+            except BrokenProcessPool:
+                broken.append(key)
+                raise
+        record(key, checked)
+
+    _run_in_pool(tasks, min(jobs, len(tasks)), record_local)
+    if broken:  # a worker died (killed, out of memory): each of those tasks again in a pool of its own
+        again = [t for t in tasks if t.key in set(broken)]
+        failures[:] = [f for f in failures if f.key not in set(broken)]
+        for t in again:
+            _run_in_pool([t], 1, record)
+    return results, failures
+
+
+def _run_in_pool(tasks: list[Task], workers: int, record: Callable) -> None:
+    """The tasks in a local process pool of ``workers`` (``core.interrupts.worker_init``)."""
     from concurrent.futures import ProcessPoolExecutor
 
-    pool = ProcessPoolExecutor(max_workers=min(jobs, len(tasks)), initializer=worker_init, initargs=(os.getpid(),))
+    pool = ProcessPoolExecutor(max_workers=workers, initializer=worker_init, initargs=(os.getpid(),))
     try:
         _run_on(pool, tasks, record)
     except BaseException:
@@ -110,7 +136,6 @@ def run_tasks(tasks: list[Task], jobs: int = 1, scheduler: str | None = None,
         end_workers()  # the tasks still running are not waited for
         raise
     pool.shutdown()
-    return results, failures
 
 
 def _run_on(executor, tasks: list[Task], record: Callable) -> None:
