@@ -94,6 +94,8 @@ def run_tasks(tasks: list[Task], jobs: int = 1, scheduler: str | None = None,
         if on_done:
             on_done(key, value)
 
+    if not tasks:
+        return results, failures
     if scheduler is None and (jobs <= 1 or len(tasks) <= 1):
         for t in tasks:
             record(t.key, lambda t=t: t.function(*t.args))
