@@ -256,7 +256,7 @@ def compare(inputs, modes_text, detector, params_file, json_out, csv_out, figure
     with using(limits), progress_bar(n_tasks, "compare", quiet, unit="map") as advance:
         results, failures = lib.run_comparison(
             entries, modes, params, detector=detector, jobs=jobs, maps_dir=maps_dir,
-            on_map=lambda i, mode, m: advance(1), holdout=split, scheduler=scheduler,
+            on_map=lambda i, mode, r: advance(1), holdout=split, scheduler=scheduler, keep_maps=bool(figure_out),
         )
 
     for r in results:

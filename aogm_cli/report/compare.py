@@ -281,20 +281,41 @@ def compute_maps(
     params: MapParams,
     detector: str | None = None,
     jobs: int = 1,
-    on_map: Callable[[int, str, OccupancyMap], None] | None = None,
+    on_map: Callable[[int, str, ModeResult], None] | None = None,
     holdout: HoldoutSplit | None = None,
     scheduler: str | None = None,
-) -> tuple[dict[tuple[int, str], OccupancyMap], list[Failure]]:
-    """Map each (log index, mode) of ``tasks`` (from the scans ``holdout`` keeps, when given),
-    each as one task of ``core.executors.run_tasks``: here, in ``jobs`` local worker processes,
-    or on the Dask cluster at ``scheduler``. Returns the maps and the tasks that failed (keyed
-    (log index, mode)); a failed task does not stop the others.
+    keep_maps: bool = True,
+) -> tuple[dict[tuple[int, str], ModeResult], list[Failure]]:
+    """Map and evaluate each (log index, mode) of ``tasks`` (from the scans ``holdout`` keeps,
+    when given), each as one task of ``core.executors.run_tasks``: here, in ``jobs`` local
+    worker processes, or on the Dask cluster at ``scheduler``. A task takes the log's path and
+    gives back its ``ModeResult``: metrics, consistency or held-out scores are computed where the
+    map was made, and the map itself comes back only with ``keep_maps`` (a figure or --maps-dir
+    needs it), so that a cluster's results are small records. Returns the results and the tasks
+    that failed (keyed (log index, mode)); a failed task does not stop the others.
 
-    ``on_map`` is called in this process as each map is finished (in order of completion).
+    ``on_map`` is called in this process as each result comes in (in order of completion).
     """
     limits = budget.active_limits()
-    work = [Task((i, mode), map_one, (entries[i].path, mode, params, detector, holdout, limits)) for i, mode in tasks]
-    return run_tasks(work, jobs, scheduler, on_done=(lambda key, m: on_map(key[0], key[1], m)) if on_map else None)
+    identity = detector_identity(detector) if any(mode == "adaptive" for _, mode in tasks) else None
+    work = [Task((i, mode), map_and_evaluate, (entries[i].path, entries[i].world, mode, params, detector, holdout,
+                                               limits, identity, keep_maps)) for i, mode in tasks]
+    return run_tasks(work, jobs, scheduler, on_done=(lambda key, r: on_map(key[0], key[1], r)) if on_map else None)
+
+
+def map_and_evaluate(path: str, world: str, mode: str, params: MapParams, detector: str | None,
+                     holdout: HoldoutSplit | None, limits: Limits | None, identity: dict | None,
+                     keep_map: bool) -> ModeResult:
+    """One task of ``compute_maps``, in whichever process runs it: map the log at ``path``
+    (``map_one``), evaluate the map there (``evaluate_result``: the truth read from the log),
+    and drop the map from the result unless ``keep_map``."""
+    m = map_one(path, mode, params, detector, holdout, limits)
+    with LogReader(path) as reader:
+        truth = reader.truth()
+    result = evaluate_result(LogEntry(path, world, truth), mode, m, None, False, identity, holdout)
+    if not keep_map:
+        result.map = None
+    return result
 
 
 def _map_detector(m: OccupancyMap, reused: bool, identity: dict | None) -> dict | None:
@@ -349,39 +370,34 @@ def run_comparison(
     detector: str | None = None,
     jobs: int = 1,
     maps_dir: str | None = None,
-    on_map: Callable[[int, str, OccupancyMap], None] | None = None,
+    on_map: Callable[[int, str, ModeResult], None] | None = None,
     holdout: HoldoutSplit | None = None,
     scheduler: str | None = None,
+    keep_maps: bool = True,
 ) -> tuple[list[ModeResult], list[Failure]]:
     """Every log in every mode: given maps reused, the others computed (``compute_maps``: here,
     in ``jobs`` processes or on the Dask cluster at ``scheduler``) and written to
     DIR/<logstem>_<mode>.h5 of ``maps_dir`` when set (``maps_dir_outputs`` gives their bytes, to
     commit with the command's other outputs); results per log, then per mode, and the tasks that
     failed (``Failure.key``: (log path, mode)), which have no result. With ``holdout``, every map
-    is made from (or, given, must record) the kept scans and is scored on the held-out ones."""
+    is made from (or, given, must record) the kept scans and is scored on the held-out ones.
+    Without ``keep_maps`` (and ``maps_dir``) the results of maps made here hold no map."""
     tasks = [(i, mode) for i, e in enumerate(entries) for mode in modes if mode not in e.maps]
     targets = maps_dir_targets(entries, modes, maps_dir) if maps_dir else {}
     given = load_given_maps(entries, modes, holdout)
-    written: dict[tuple[int, str], str] = {}
-
-    def finished(i: int, mode: str, m: OccupancyMap) -> None:
-        if (i, mode) in targets:
-            written[(i, mode)] = str(targets[(i, mode)])
-        if on_map:
-            on_map(i, mode, m)
-
-    identity = detector_identity(detector) if any(mode == "adaptive" for _, mode in tasks) else None
-    computed, failed = compute_maps(entries, tasks, params, detector, jobs, finished, holdout, scheduler)
+    computed, failed = compute_maps(entries, tasks, params, detector, jobs, on_map, holdout, scheduler,
+                                    keep_maps=keep_maps or bool(maps_dir))
     results = []
     for i, e in enumerate(entries):
         for mode in modes:
-            if (i, mode) not in given and (i, mode) not in computed:
-                continue  # failed
             if (i, mode) in given:
                 results.append(evaluate_result(e, mode, given[(i, mode)], e.maps[mode], True, holdout=holdout))
-            else:
-                results.append(evaluate_result(e, mode, computed[(i, mode)], written.get((i, mode)), False, identity,
-                                               holdout))
+            elif (i, mode) in computed:  # else failed
+                result = computed[(i, mode)]
+                result.log = e.path  # as given here (a worker may see the path otherwise)
+                if (i, mode) in targets:
+                    result.map_file = str(targets[(i, mode)])
+                results.append(result)
     order = {key: n for n, key in enumerate(tasks)}
     failures = [Failure((entries[f.key[0]].path, f.key[1]), f.message, f.bad_input)
                 for f in sorted(failed, key=lambda f: order[f.key])]
