@@ -83,6 +83,23 @@ def test_cluster_gives_the_metrics_of_one_job(logs, cluster, tmp_path):
     assert len(list((tmp_path / "maps").glob("*.h5"))) == 9
 
 
+BUNDLED = ("corridor_door", "t_junction", "l_corridor")  # three of the bundled worlds
+
+
+def test_cluster_gives_the_metrics_of_one_job_on_bundled_worlds(cluster, tmp_path):
+    """The issue's check on bundled worlds: every mode, calibration on, bit for bit."""
+    worlds = [os.path.join(os.path.dirname(__file__), "..", "worlds", f"{w}.yaml") for w in BUNDLED]
+    result = run("simulate", *worlds, "--seeds", "1", "-o", f"{tmp_path}/", "-q")
+    assert result.exit_code == 0, result.output
+    logs = [tmp_path / f"{w}_s1.h5" for w in BUNDLED]
+    args = ["compare", *logs, "--modes", "standard,em,adaptive", "-q"]
+    one = run(*args, "--jobs", 1, "--json", tmp_path / "one.json")
+    dask = run(*args, "--scheduler", cluster, "--json", tmp_path / "dask.json")
+    assert one.exit_code == 0 and dask.exit_code == 0, one.output + dask.output
+    a, b = (json.loads((tmp_path / n).read_text()) for n in ("one.json", "dask.json"))
+    assert len(a["results"]) == 9 and _comparable(a) == _comparable(b)
+
+
 def test_holdout_on_the_cluster(logs, cluster, tmp_path):
     args = ["compare", *logs[:2], "--modes", "standard,em", "--holdout", "0.2", "--seed", 3, "-q"]
     one = run(*args, "--json", tmp_path / "one.json")
