@@ -249,3 +249,16 @@ def test_a_lost_local_worker_fails_its_task_only(logs, tmp_path, monkeypatch):
     assert f"aogm: failed: {logs[1]} (standard): BrokenProcessPool" in result.output
     done = json.loads((tmp_path / "r.json").read_text())["results"]
     assert [r["log"] for r in done] == [str(logs[0]), str(logs[2])]
+
+
+def test_one_executor_per_run(logs, worlds, tmp_path):
+    """--jobs N and --scheduler together exit 2 naming --jobs; --scheduler for a single log
+    simulated alone exits 2 naming it (AOGM_SCHEDULER alone is ignored there)."""
+    both = run("compare", *logs, "--modes", "standard", "--jobs", 2, "--scheduler", "tcp://127.0.0.1:1", "-q")
+    assert both.exit_code == 2 and "--jobs" in both.output
+    both = run("simulate", *worlds, "-o", f"{tmp_path}/", "--jobs", 2, "--scheduler", "tcp://127.0.0.1:1", "-q")
+    assert both.exit_code == 2 and "--jobs" in both.output
+    one = run("simulate", worlds[0], "-o", tmp_path / "one.h5", "--scheduler", "tcp://127.0.0.1:1", "-q")
+    assert one.exit_code == 2 and "--scheduler" in one.output and not (tmp_path / "one.h5").exists()
+    env = run("simulate", worlds[0], "-o", tmp_path / "one.h5", "-q", env={"AOGM_SCHEDULER": "tcp://127.0.0.1:1"})
+    assert env.exit_code == 0 and (tmp_path / "one.h5").exists()

@@ -11,6 +11,7 @@ import click
 from aogm_cli.cli.options import (
     budget_options,
     calibrate_option,
+    check_executor,
     detector_file,
     detector_option,
     jobs_option,
@@ -237,6 +238,7 @@ def compare(inputs, modes_text, detector, params_file, json_out, csv_out, figure
     from aogm_cli.report import compare as lib
 
     split = None if holdout is None else HoldoutSplit(holdout, seed).validate()
+    check_executor(jobs, scheduler)
     params = resolve_params(params_file, {"calibration": {"enabled": calibrate}})
     entries = lib.collect_inputs(list(inputs))
     modes = lib.parse_modes(modes_text) if modes_text else lib.default_modes(entries)

@@ -205,3 +205,21 @@ def progress_bar(total: int, desc: str, quiet: bool, unit: str = "it"):
 
     with tqdm(total=total, desc=desc, unit=unit, leave=False, file=sys.stderr) as bar:
         yield bar.update
+
+
+def check_executor(jobs: int, scheduler: str | None, batch: bool = True) -> None:
+    """One executor per run: ``--jobs N`` (N > 1) and a ``--scheduler`` given on the command line
+    are refused together (exit 2), and so is ``--scheduler`` where there is no batch of tasks to
+    send (``batch`` false); a scheduler that comes from AOGM_SCHEDULER alone is then ignored."""
+    from click.core import ParameterSource
+
+    from aogm_cli.core.errors import InputError
+
+    ctx = click.get_current_context()
+    explicit = scheduler is not None and ctx.get_parameter_source("scheduler") == ParameterSource.COMMANDLINE
+    if explicit and not batch:
+        raise InputError("runs a batch of tasks; give several worlds, --seeds or -o DIR/ (one log is simulated here)",
+                         key="--scheduler")
+    if scheduler is not None and batch and jobs > 1:
+        raise InputError(f"--jobs {jobs} and a Dask scheduler ({scheduler}): choose one executor", key="--jobs")
+

@@ -8,6 +8,7 @@ import click
 
 from aogm_cli.cli.options import (
     budget_options,
+    check_executor,
     jobs_option,
     limits_of,
     png_option,
@@ -73,6 +74,7 @@ def simulate(world_files: tuple[str, ...], output: str, seed: int, seeds_text: s
     from aogm_cli.core.errors import InputError
 
     batch = len(world_files) > 1 or seeds_text is not None or output.endswith(("/", "\\"))
+    check_executor(jobs, scheduler, batch)
     if not batch:
         if resume:
             raise InputError("needs several worlds or seeds written to -o DIR/", key="--resume")
