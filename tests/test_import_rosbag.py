@@ -416,13 +416,13 @@ def test_tf_chains_static_mounts_and_an_upside_down_scanner():
     level = (0.0, 0.0, 0.0, 1.0)
     tree = TfTree()
     tree.add(tf_message(("base_link", "mast", (0.1, 0.0, 0.5), yaw90, 0.0),
-                        ("mast", "/laser", (0.2, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), 0.0)), None, static=True)  # rolled by pi
+                        ("mast", "/laser", (0.2, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0), 0.0)), static=True)  # rolled by pi
     t, r = tree.static_transform("base_link", "laser", "k")
     assert_allclose(t, [0.1, 0.2, 0.5], atol=1e-12)
     mounts = planar_mounts(t, r, np.array([0.0, 0.5]), math.radians(5), "k")
     assert_allclose(mounts[:, 2], [math.pi / 2, math.pi / 2 - 0.5], atol=1e-12)  # bearings mirrored
     tree.add(tf_message(("odom", "base_link", (0.0, 0.0, 0.0), level, 0.0),
-                        ("odom", "base_link", (2.0, 0.0, 0.0), yaw90, 2.0)), None, static=False)
+                        ("odom", "base_link", (2.0, 0.0, 0.0), yaw90, 2.0)), static=False)
     pose, covered, edge = tree.poses("odom", "laser", np.array([1.0, 3.0]), 5.0, "k")
     h = math.sqrt(0.5)  # halfway: base_link at x 1, yaw 45 deg; the mast 0.1 m ahead, yaw 135; the laser 0.2 m along it
     assert_allclose(pose[0], [1 + 0.1 * h - 0.2 * h, 0.1 * h + 0.2 * h, 3 * math.pi / 4], atol=1e-12)

@@ -7,8 +7,6 @@ import json
 
 import click
 
-LOG, MAP, DETECTOR = "aogm-log", "aogm-map", "aogm-detector"
-
 
 @click.command()
 @click.argument("file", metavar="FILE", type=click.Path(dir_okay=False))
@@ -43,18 +41,17 @@ def describe(file: str) -> dict:
     """The summary of ``file`` as a JSON-able dict: ``kind``, the kind's fields, ``provenance``
     (None when none is recorded). InputError for a missing, damaged or non-aogm file."""
     from aogm_cli.core.errors import InputError
-    from aogm_cli.io.h5file import file_format, open_input
+    from aogm_cli.io import detectorfile, logfile, mapfile
+    from aogm_cli.io.h5file import file_format
     from aogm_cli.io.provenance import read_provenance
 
     expected = "an aogm log, map or detector"
-    fmt = file_format(file, expected)
-    kinds = {LOG: _log, MAP: _map, DETECTOR: _detector}
+    kinds = {logfile.FORMAT: _log, mapfile.FORMAT: _map, detectorfile.FORMAT: _detector}
+    fmt, provenance = file_format(file, expected, lambda f: read_provenance(f, file))
     if fmt not in kinds:
         raise InputError(f"expected {expected} ({', '.join(map(repr, kinds))}), got {fmt!r}", file=file, key="format")
-    summary = {"file": file, "kind": fmt.removeprefix("aogm-"), **kinds[fmt](file)}
-    with open_input(file, fmt, 1) as f:
-        summary["provenance"] = read_provenance(f, file)
-    return summary
+    # the kind's reader checks the file's version and contents
+    return {"file": file, "kind": fmt.removeprefix("aogm-"), **kinds[fmt](file), "provenance": provenance}
 
 
 def _grid(grid) -> dict:

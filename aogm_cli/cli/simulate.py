@@ -215,16 +215,9 @@ def _simulate_many(world_files: list[str], seeds: list[int], folder: str, jobs: 
                              key="WORLD.yaml")
         worlds[stem] = (world_file, *_load_checked(world_file, limits))
     targets = {(stem, s): Path(folder) / f"{stem}_s{s}.h5" for stem in worlds for s in seeds}
-    made = [f for f in (Path(folder), *Path(folder).parents) if not f.exists()]
+    resolve_outputs([f for _, _, inputs in worlds.values() for f in inputs],
+                    [("-o", str(t)) for t in targets.values()], [("-o", folder)])
     Path(folder).mkdir(parents=True, exist_ok=True)
-    try:
-        resolve_outputs([f for _, _, inputs in worlds.values() for f in inputs],
-                        [("-o", str(t)) for t in targets.values()])
-    except BaseException:
-        for f in made:  # the folders made here, innermost first
-            if f.exists() and not any(f.iterdir()):
-                f.rmdir()
-        raise
     done = {key for key, t in targets.items() if resume and simulated_log_is_complete(t, worlds[key[0]][1].text, key[1])}
     records = {stem: provenance(inputs) for stem, (_, _, inputs) in worlds.items()}  # as read, at the start
     tasks = [Task(key, simulate_file, (worlds[key[0]][0], key[1], str(t), limits, records[key[0]]))

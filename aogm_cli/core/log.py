@@ -10,10 +10,12 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
+import yaml
 
 from aogm_cli.core.errors import InputError
 from aogm_cli.core.grid import GridSpec
 
+SIMULATED_SOURCE = "aogm simulate "  # a simulated log's source: this, then the world file
 CAUSE_ECHO = 0  # echo of the nearest surface in the cone
 CAUSE_NO_ECHO = 1  # no echo: a max-range reading
 CAUSE_RANDOM = 2  # a random reading
@@ -90,6 +92,21 @@ class Truth:
     world: str = ""  # the world file's text
     checks: tuple[dict, ...] = ()  # JSON-able checks, as in the world file
 
+    def world_mapping(self) -> dict | None:
+        """The world file's text parsed (None without it, or when it is not a YAML mapping)."""
+        if not self.world:
+            return None
+        try:
+            raw = yaml.safe_load(self.world)
+        except yaml.YAMLError:
+            return None
+        return raw if isinstance(raw, dict) else None
+
+    def world_name(self) -> str | None:
+        """The world file's ``name:`` (None without one)."""
+        name = (self.world_mapping() or {}).get("name")
+        return name.strip() if isinstance(name, str) and name.strip() else None
+
 
 @dataclass(frozen=True)
 class Log:
@@ -120,6 +137,10 @@ class Log:
         for start in range(0, self.n_scans, size):
             stop = min(self.n_scans, start + size)
             yield start, self.time[start:stop], self.pose[start:stop], self.ranges[start:stop]
+
+    def scan_ranges(self, start: int, stop: int) -> np.ndarray:
+        """Ranges of scans start:stop (as ``io.logfile.LogReader.scan_ranges``)."""
+        return self.ranges[start:stop]
 
     def read(self) -> Log:
         return self

@@ -38,8 +38,7 @@ from aogm_cli.core.frames import sensor_poses
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import SensorSpec
 from aogm_cli.io.logfile import LogReader
-from aogm_cli.mapping.beam import is_narrow_beam
-from aogm_cli.mapping.pipeline import cone_templates, echo_ranges
+from aogm_cli.mapping.pipeline import cone_templates, echo_ranges, is_narrow_beam
 from aogm_cli.mapping.sensor_models.cone import ConeReadings, ConeTemplates, range_search, reading_geometry
 from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig, occupied_arc
 

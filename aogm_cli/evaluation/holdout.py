@@ -56,8 +56,8 @@ from aogm_cli.core.frames import sensor_poses
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import Log, SensorSpec
 from aogm_cli.evaluation.consistency import reading_endpoints
-from aogm_cli.mapping.beam import is_narrow_beam, ray_cells
-from aogm_cli.mapping.pipeline import cone_templates, echo_ranges, lay_out_readings
+from aogm_cli.mapping.beam import ray_cells
+from aogm_cli.mapping.pipeline import cone_templates, echo_ranges, is_narrow_beam, lay_out_readings
 from aogm_cli.mapping.sensor_models.cone import (
     SPARE_MASK,
     ConeReadings,

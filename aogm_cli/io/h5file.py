@@ -259,14 +259,17 @@ def _open_checked(file: str, expected: str) -> h5py.File:
         raise InputError(f"not an HDF5 file ({exc.__class__.__name__}); expected {expected}", file=file) from None
 
 
-def file_format(path: str | Path, expected: str) -> str | None:
+def file_format(path: str | Path, expected: str, read: Callable[[h5py.File], object] | None = None):
     """The ``format`` attribute of the HDF5 file at ``path`` (None when it has none, or not a
     string); InputError when the file is missing, damaged or not HDF5 (``expected`` says what
-    the caller wanted)."""
+    the caller wanted). With ``read``, (format, ``read(file)``) from the same open (one check
+    of the seal for both)."""
     file = str(path)
-    with _open_checked(file, expected) as f, reading(file, "format"):
-        raw = f.attrs.get("format")
-        return text(raw) if isinstance(raw, (str, bytes)) else None
+    with _open_checked(file, expected) as f:
+        with reading(file, "format"):
+            raw = f.attrs.get("format")
+            fmt = text(raw) if isinstance(raw, (str, bytes)) else None
+        return fmt if read is None else (fmt, read(f))
 
 
 def open_input(path: str | Path, fmt: str, version: int) -> h5py.File:

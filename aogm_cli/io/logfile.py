@@ -203,6 +203,10 @@ class LogReader:
     def poses(self) -> np.ndarray:
         return read_dataset(self._f, "scans/pose", self.path)
 
+    def scan_ranges(self, start: int, stop: int) -> np.ndarray:
+        """Ranges of scans start:stop, checked (a log source's interface, ``mapping.pipeline``)."""
+        return self._ranges(start, stop)
+
     def _ranges(self, start: int, stop: int) -> np.ndarray:
         """Ranges of scans start:stop as float32, checked: >= 0, +inf or NaN."""
         r = read_dataset(self._f, "scans/ranges", self.path, slice(start, stop)).astype(np.float32, copy=False)

@@ -1,7 +1,8 @@
 """Standard mapping of narrow-beam sensors (lasers): one ray per reading instead of a cone template.
 
-Owns the Amanatides-Woo grid traversal (``ray_cells``) and ``BeamMapper`` (the dispatch rule,
-``is_narrow_beam``, lives in ``pipeline``, whose cone templates need it too), the log-odds update along rays with the state and clamping of ``standard``.
+Owns the Amanatides-Woo grid traversal (``ray_cells``) and ``BeamMapper``, the log-odds update
+along rays with the state and clamping of ``standard``; the dispatch rule (``is_narrow_beam``)
+lives in ``pipeline``, whose cone templates need it too.
 
 The model along a ray (Amanatides & Woo 1987, traversed from the sensor's true position)
 -----------------------------------------------------------------------------------------
@@ -41,7 +42,6 @@ import numpy as np
 from aogm_cli.core.frames import sensor_poses
 from aogm_cli.core.grid import GridSpec, dda_steps
 from aogm_cli.core.log import SensorSpec
-from aogm_cli.mapping.pipeline import is_narrow_beam  # noqa: F401 - re-exported: its callers import it from here
 from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig, inverse_update, occupied_arc
 
 # a ray that stays in a cell for at most this many cells' length only touches it (a corner,

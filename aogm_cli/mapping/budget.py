@@ -10,9 +10,8 @@ import math
 import numpy as np
 
 from aogm_cli.core.budget import Estimate
-from aogm_cli.mapping.beam import is_narrow_beam
 from aogm_cli.mapping.params import MapParams
-from aogm_cli.mapping.pipeline import log_grid
+from aogm_cli.mapping.pipeline import is_narrow_beam, log_grid
 
 BYTES_PER_CELL = 40  # log-odds, probability, observed, EM state, the map file in memory
 BYTES_PER_PADDED_CELL = 4  # the standard mapper's padded float32 state
@@ -35,7 +34,7 @@ def mean_reach(reader, params: MapParams, resolution: float) -> float:
     n = reader.n_scans
     sensor = reader.sensor
     starts = np.unique(np.linspace(0, max(0, n - BLOCK_SCANS), min(SAMPLE_BLOCKS, max(1, n))).astype(np.int64))
-    blocks = [reader._ranges(int(s), int(min(n, s + BLOCK_SCANS))) for s in starts] if n else []
+    blocks = [reader.scan_ranges(int(s), int(min(n, s + BLOCK_SCANS))) for s in starts] if n else []
     if not blocks:
         return 0.0
     z = np.concatenate([b.reshape(-1) for b in blocks]).astype(np.float64)

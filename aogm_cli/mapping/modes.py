@@ -24,7 +24,7 @@ from aogm_cli.mapping.params import MapParams
 from aogm_cli.mapping.pipeline import Progress, log_grid
 from aogm_cli.mapping.standard import map_standard
 
-__all__ = ["BASELINE_DETECTORS", "map_file", "map_log", "resolve_detector", "warm_up"]
+__all__ = ["BASELINE_DETECTORS", "map_file", "map_log", "map_source", "resolve_detector", "warm_up"]
 
 
 def resolve_detector(spec: str | None):
@@ -67,16 +67,23 @@ def map_file(path: str | Path, mode: str, params: MapParams, detector: str | Non
     The map's ``runtime_s`` is its mapping work; ``stats["untimed_seconds"]`` says what was
     left out: ``compile`` (the warm-up) and ``read_and_set_up`` (reading the log, cached
     one-time templates)."""
-    flagger, name = resolve_detector(detector) if mode == "adaptive" else (None, "")
     with LogReader(path) as reader:
-        params = resolved_params(reader, params)
-        check(map_estimate(reader, mode, params), limits, file=str(path))
-        t0 = time.perf_counter()
-        warm_up(reader.sensor, params, mode)
-        t_compile = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        m = map_log(reader, mode, params, flagger, name, progress)
-        t_total = time.perf_counter() - t0
+        return map_source(reader, mode, params, detector, progress, limits, file=str(path))
+
+
+def map_source(log, mode: str, params: MapParams, detector: str | None = None, progress: Progress | None = None,
+               limits: Limits | None = None, file: str | None = None) -> OccupancyMap:
+    """``map_file`` on a log source (an open ``LogReader`` or an in-memory ``Log``, such as the
+    scans a held-out split keeps); ``file`` names it in a refusal."""
+    flagger, name = resolve_detector(detector) if mode == "adaptive" else (None, "")
+    params = resolved_params(log, params)
+    check(map_estimate(log, mode, params), limits, file=file)
+    t0 = time.perf_counter()
+    warm_up(log.sensor, params, mode)
+    t_compile = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    m = map_log(log, mode, params, flagger, name, progress)
+    t_total = time.perf_counter() - t0
     m.stats["untimed_seconds"] = {"compile": t_compile, "read_and_set_up": max(0.0, t_total - m.runtime_s)}
     return m
 

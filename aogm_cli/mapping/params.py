@@ -117,8 +117,9 @@ class CalibrationConfig:
     tolerance: float = 0.02
     # the first EM map is made with sigma at least this broad: a broad model puts each wall at
     # the readings' mean, and the sigma fitted there comes down to the data's; a narrow start
-    # lets EM's map follow the noise and the fitted sigma stays narrow (measured on
-    # corridor_door at noise 0.12 m: start 0.03 -> sigma 0.051, 0.06 -> 0.082, 0.1 -> 0.100)
+    # lets EM's map follow the noise and the fitted sigma stays narrow (corridor_door at noise
+    # 0.12 m: start 0.03 -> sigma 0.064, 0.1 -> 0.101; python bench/calibration_recovery.py
+    # [--params with calibration: {start_sigma: 0.03}])
     start_sigma: float = 0.1
     start_sweeps: int = 3  # the first (broad) EM run's sweep limit: its map only serves the first fit
     # bounds: sigma from a tenth of a typical 5 cm cell to half a metre; p_rand, p_max below one

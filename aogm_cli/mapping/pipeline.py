@@ -2,7 +2,7 @@
 (``echo_ranges``), the readings laid out as flat arrays, and timing that leaves out reading I/O.
 
 A *log source* is an open ``io.logfile.LogReader`` or an in-memory ``core.log.Log``: both
-have ``sensor``, ``n_scans``, ``truth_grid()``, ``poses()``, ``chunks()`` and ``read()``.
+have ``sensor``, ``n_scans``, ``truth_grid()``, ``poses()``, ``chunks()``, ``scan_ranges()`` and ``read()``.
 """
 
 from __future__ import annotations

@@ -58,9 +58,17 @@ import numpy as np
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import SensorSpec
 from aogm_cli.core.occupancy_map import OccupancyMap
-from aogm_cli.mapping.beam import BeamMapper, is_narrow_beam
+from aogm_cli.mapping.beam import BeamMapper
 from aogm_cli.mapping.params import MapParams
-from aogm_cli.mapping.pipeline import Progress, Timed, cone_templates, echo_ranges, log_grid, params_json
+from aogm_cli.mapping.pipeline import (
+    Progress,
+    Timed,
+    cone_templates,
+    echo_ranges,
+    is_narrow_beam,
+    log_grid,
+    params_json,
+)
 from aogm_cli.mapping.sensor_models.cone import (
     SPARE_MASK,
     ConeReadings,

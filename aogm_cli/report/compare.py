@@ -17,8 +17,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import yaml
-
 from aogm_cli import __version__
 from aogm_cli.core import budget
 from aogm_cli.core.budget import Limits
@@ -103,14 +101,7 @@ def parse_modes(text: str) -> tuple[str, ...]:
 
 def world_name(truth: Truth | None, log_path: str) -> str:
     """The ``name`` of the world file inside the log's truth; else the log's file stem."""
-    if truth is not None and truth.world:
-        try:
-            raw = yaml.safe_load(truth.world)
-        except yaml.YAMLError:
-            raw = None
-        if isinstance(raw, dict) and isinstance(raw.get("name"), str) and raw["name"].strip():
-            return raw["name"].strip()
-    return Path(log_path).stem
+    return (truth.world_name() if truth is not None else None) or Path(log_path).stem
 
 
 def _find_log(source_log: str, map_path: str, given_logs: list[str]) -> str:
@@ -194,17 +185,14 @@ def map_one(path: str, mode: str, params: MapParams, detector: str | None = None
 
 
 def map_kept_scans(path: str, mode: str, params: MapParams, detector: str | None, holdout: HoldoutSplit) -> OccupancyMap:
-    """Map the scans of the log at ``path`` that ``holdout`` keeps (``evaluation.holdout.split_log``),
-    timed as ``mapping.modes.map_file`` times a log: compilation (the warm-up) and reading left
-    out. The map names the log as its source and records the split in ``params["holdout"]``."""
-    from aogm_cli.mapping.modes import map_log, resolve_detector, resolved_params, warm_up
+    """Map the scans of the log at ``path`` that ``holdout`` keeps (``evaluation.holdout.split_log``)
+    through ``mapping.modes.map_source``, as ``map_file`` maps a whole log (budget, warm-up,
+    timing). The map names the log as its source and records the split in ``params["holdout"]``."""
+    from aogm_cli.mapping.modes import map_source
 
-    flagger, name = resolve_detector(detector) if mode == "adaptive" else (None, "")
     with LogReader(path) as reader:
         kept, _held = split_log(reader, holdout)
-    params = resolved_params(kept, params)
-    warm_up(kept.sensor, params, mode)
-    m = map_log(kept, mode, params, flagger, name)
+    m = map_source(kept, mode, params, detector, file=str(path))
     m.source_log = str(path)
     m.params["holdout"] = holdout.as_dict()
     return m

@@ -16,7 +16,16 @@ import numpy as np
 
 from aogm_cli.core.budget import check
 from aogm_cli.core.errors import InputError
-from aogm_cli.core.log import CAUSE_ECHO, CAUSE_NO_ECHO, CAUSE_RANDOM, CAUSE_SPECULAR, Log, SensorSpec, Truth
+from aogm_cli.core.log import (
+    CAUSE_ECHO,
+    CAUSE_NO_ECHO,
+    CAUSE_RANDOM,
+    CAUSE_SPECULAR,
+    SIMULATED_SOURCE,
+    Log,
+    SensorSpec,
+    Truth,
+)
 from aogm_cli.simulation.odometry import dead_reckoning
 from aogm_cli.simulation.raycast import geometry, trace_sub_ray
 from aogm_cli.world.budget import simulation_estimate
@@ -93,12 +102,11 @@ def readings_from_echoes(
     noise: np.ndarray,
     sonar: Sonar,
     noise_per_metre: float = 0.0,
-    crossed: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Turn noise-free echoes into readings (float32) and their causes (int8).
 
-    Cause: no echo -> 1 (+inf); an echo after a bounce, farther than ``ideal +
-    cause_tolerance`` or ``crossed`` (a neighbour's, see ``crosstalk``) -> 3; else 0. Then a
+    Cause: no echo -> 1 (+inf); an echo after a bounce (``multipath``, which includes a
+    neighbour's echo, see ``crosstalk``) or farther than ``ideal + cause_tolerance`` -> 3; else 0. Then a
     reading with ``u_random < random_rate`` becomes ``min_range + u_range * (max_range -
     min_range)`` (cause 2); ``(noise_sigma + noise_per_metre * z) * noise`` is added (z the
     reading so far); readings are clipped to >= min_range and those >= max_range become +inf
@@ -106,8 +114,6 @@ def readings_from_echoes(
     """
     cause = np.full(echo.shape, CAUSE_ECHO, dtype=np.int8)
     cause[multipath | (echo > ideal + sonar.cause_tolerance)] = CAUSE_SPECULAR
-    if crossed is not None:
-        cause[crossed] = CAUSE_SPECULAR
     no_echo = ~np.isfinite(echo)
     cause[no_echo] = CAUSE_NO_ECHO
     reading = echo.astype(np.float64, copy=True)
@@ -115,11 +121,8 @@ def readings_from_echoes(
     reading[random] = sonar.min_range + u_range[random] * (sonar.max_range - sonar.min_range)
     cause[random] = CAUSE_RANDOM
     with np.errstate(invalid="ignore"):
-        if noise_per_metre == 0.0:
-            reading = reading + sonar.noise_sigma * noise
-        else:
-            sigma = sonar.noise_sigma + noise_per_metre * np.where(np.isfinite(reading), reading, 0.0)
-            reading = reading + sigma * noise
+        sigma = sonar.noise_sigma + noise_per_metre * np.where(np.isfinite(reading), reading, 0.0)
+        reading = reading + sigma * noise
     reading = np.maximum(reading, sonar.min_range)
     too_far = reading >= sonar.max_range
     reading[too_far] = np.inf
@@ -194,15 +197,14 @@ def simulate(world: World, seed: int, progress: Callable[[int], None] | None = N
         if progress is not None:
             progress(stop)
 
-    crossed = None
     if errors.crosstalk_rate > 0.0:
         rng_crosstalk = error_stream(seed, CROSSTALK_STREAM)
         u_crosstalk = rng_crosstalk.random((n_scans, n_sensors))
         right = rng_crosstalk.random((n_scans, n_sensors)) < 0.5
         echo, crossed = crosstalk(echo, u_crosstalk, right, errors.crosstalk_rate)
-    ranges, cause = readings_from_echoes(
-        echo, ideal, multipath, u_random, u_range, noise, sonar, errors.noise_per_metre, crossed
-    )
+        multipath = multipath | crossed  # a neighbour's echo is recorded as cause 3, as a bounce is
+    ranges, cause = readings_from_echoes(echo, ideal, multipath, u_random, u_range, noise, sonar,
+                                         errors.noise_per_metre)
     logged_pose = dead_reckoning(pose, errors.odometry, error_stream(seed, ODOMETRY_STREAM))
     truth = Truth(
         grid=grid,
@@ -225,7 +227,7 @@ def simulate(world: World, seed: int, progress: Callable[[int], None] | None = N
         pose=logged_pose,
         ranges=ranges,
         sensor=sensor,
-        source=f"aogm simulate {world.source}",
+        source=f"{SIMULATED_SOURCE}{world.source}",
         truth=truth,
         seed=int(seed),
     )

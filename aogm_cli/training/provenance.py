@@ -8,11 +8,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
-import yaml
-
-from aogm_cli.core.log import Log
-
-SIMULATED_SOURCE = "aogm simulate "  # the source of a simulated log: this, then the world file
+from aogm_cli.core.log import SIMULATED_SOURCE, Log
 
 
 def log_provenance(name: str, log: Log) -> dict:
@@ -20,11 +16,11 @@ def log_provenance(name: str, log: Log) -> dict:
     world text in its truth, else the world file named by its source, else its source),
     ``realistic`` (the world has a non-empty ``errors:`` section; None without the world text),
     ``errors`` (that section's keys), ``seed``, ``scans`` and ``source``."""
-    world = _world_of(log)
+    world = log.truth.world_mapping() if log.truth is not None else None
     errors = world.get("errors") if isinstance(world, dict) else None
     return {
         "file": Path(name).name if name else "",
-        "world": _world_name(world, log.source, name),
+        "world": _world_name(log, name),
         "realistic": bool(errors) if isinstance(world, dict) else None,
         "errors": sorted(map(str, errors)) if isinstance(errors, dict) else [],
         "seed": None if log.seed is None else int(log.seed),
@@ -41,20 +37,12 @@ def training_logs(train: Sequence[tuple[str, Log]], validation: Sequence[tuple[s
     }
 
 
-def _world_of(log: Log):
-    """The world file's YAML in the log's truth, parsed; None without it (or when it is not YAML)."""
-    text = log.truth.world if log.truth is not None else ""
-    if not text:
-        return None
-    try:
-        return yaml.safe_load(text)
-    except yaml.YAMLError:
-        return None
-
-
-def _world_name(world, source: str, name: str) -> str:
-    if isinstance(world, dict) and isinstance(world.get("name"), str) and world["name"].strip():
-        return world["name"].strip()
+def _world_name(log: Log, name: str) -> str:
+    """The world's ``name:``, else the world file a simulated log's source names, else the source."""
+    found = log.truth.world_name() if log.truth is not None else None
+    if found:
+        return found
+    source = log.source
     if source.startswith(SIMULATED_SOURCE) and source[len(SIMULATED_SOURCE):].strip():
         return Path(source[len(SIMULATED_SOURCE):].strip()).stem
     return source or Path(name).stem

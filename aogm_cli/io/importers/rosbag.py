@@ -18,7 +18,15 @@ import numpy as np
 from aogm_cli.core.errors import InputError
 from aogm_cli.core.log import Log, SensorSpec
 from aogm_cli.io.importers import clean_ranges
-from aogm_cli.io.importers.carmen import LASER_BEAM_WIDTH, LASER_MIN_RANGE, LASER_NOISE_SIGMA
+from aogm_cli.io.importers.carmen import (
+    LASER_BEAM_WIDTH,
+    LASER_MIN_RANGE,
+    LASER_NOISE_SIGMA,
+    SONAR_BEAM_WIDTH,
+    SONAR_MAX_RANGE,
+    SONAR_MIN_RANGE,
+    SONAR_NOISE_SIGMA,
+)
 from aogm_cli.io.importers.rosbag_messages import (
     LASER_SCAN,
     ODOMETRY,
@@ -38,9 +46,8 @@ from aogm_cli.io.importers.rosbag_messages import (
     pose_of_message,
     resolve_topics,
     ros_name,
-    stamp,
 )
-from aogm_cli.io.importers.rosbag_tf import PoseSeries, TfTree, frame_name, planar_mounts
+from aogm_cli.io.importers.rosbag_tf import PoseSeries, TfTree, frame_name, planar_mounts, stamp
 
 
 @dataclass(frozen=True)
@@ -76,7 +83,6 @@ class RosbagImport:
     pose_source: str
     mount_source: str
     skipped: dict[str, int] = field(default_factory=dict)
-    readings: int = 0
     notes: tuple[str, ...] = ()
 
     def summary(self) -> list[str]:
@@ -154,8 +160,7 @@ def _deserialize(reader, raw, connection):
         return None, f"{connection.topic}: cannot decode a {connection.msgtype} message ({exc.__class__.__name__})"
 
 
-def read_bag(path: str | Path, options: RosbagOptions, mounts: np.ndarray | None = None,
-             source: str | None = None) -> RosbagImport:
+def read_bag(path: str | Path, options: RosbagOptions, mounts: np.ndarray | None = None) -> RosbagImport:
     """Import the bag at ``path`` (ROS 1 .bag, ROS 2 folder with sqlite3 or MCAP storage) into a
     ``Log``. ``mounts`` (S, 3): the sensors' x, y, yaw in the robot frame instead of /tf_static.
     Errors are InputErrors naming the bag and the topic, frame or option."""
@@ -187,7 +192,7 @@ def read_bag(path: str | Path, options: RosbagOptions, mounts: np.ndarray | None
         reader.close()
     try:
         return _assemble(collected, topics, kind, pose_spec, options, mounts,
-                         source or f"aogm import rosbag {path.name}")
+                         f"aogm import rosbag {path.name}")
     except InputError as exc:
         raise exc.in_file(str(path)) from None
 
@@ -237,7 +242,7 @@ def _read_messages(reader, types, topics, kind, pose_spec, o: RosbagOptions, mou
             if types[topic] == ODOMETRY and out.base_frame is None and msg.child_frame_id:
                 out.base_frame = frame_name(msg.child_frame_id)
         else:
-            out.tree.add(msg, None, static=topic.endswith("tf_static"))
+            out.tree.add(msg, static=topic.endswith("tf_static"))
     for series in [out.pose_series, *out.tree.dynamic.values()]:
         if series is not None and series.not_finite:
             out.skipped[f"{series.name}: a pose or time that is not finite"] += series.not_finite
@@ -351,11 +356,10 @@ def _ring_scans(c: _Collected, topics, time, pose, order, o: RosbagOptions):
 def _message_scans(c: _Collected, kind: str, sensor_kind: str, order, o: RosbagOptions):
     """A scan, cloud or sonar array: (ranges (T, S), max range per sensor, the sensor's fields)."""
     ranges = np.vstack(c.readings.rows)[order]
-    defaults = SensorSpec(mount=np.zeros((1, 3)))
-    spec = dict(beam_width=defaults.beam_width, min_range=defaults.min_range, max_range=defaults.max_range)
+    spec = dict(beam_width=SONAR_BEAM_WIDTH, min_range=SONAR_MIN_RANGE, max_range=SONAR_MAX_RANGE)
     if kind == LASER_SCAN:
         mn, mx = c.readings.geometry[3:]
-        spec = dict(beam_width=LASER_BEAM_WIDTH if sensor_kind == "laser" else defaults.beam_width,
+        spec = dict(beam_width=LASER_BEAM_WIDTH if sensor_kind == "laser" else SONAR_BEAM_WIDTH,
                     min_range=mn if math.isfinite(mn) and mn >= 0 else LASER_MIN_RANGE, max_range=mx)
     limit = np.full(ranges.shape[1], o.max_range if o.max_range is not None else spec["max_range"])
     if kind in (POINT_CLOUD, POINT_CLOUD2):  # points in float32: max range to within their precision
@@ -389,7 +393,7 @@ def _assemble(c: _Collected, topics, kind, pose_spec, o: RosbagOptions, mounts, 
         if value is not None:
             spec[key] = float(value)
     noise = o.noise_sigma if o.noise_sigma is not None else (
-        LASER_NOISE_SIGMA if sensor_kind == "laser" else SensorSpec.noise_sigma)
+        LASER_NOISE_SIGMA if sensor_kind == "laser" else SONAR_NOISE_SIGMA)
     mount_source = "--mounts" if mounts is not None else f"/tf_static in {base!r}"
     sensor_mounts = _sensor_mounts(c, topics, kind, base, o, mounts)
     try:
@@ -402,4 +406,4 @@ def _assemble(c: _Collected, topics, kind, pose_spec, o: RosbagOptions, mounts, 
         text += f"; skipped {sum(skipped.values())} messages or readings"
     log = Log(time=time, pose=pose, ranges=cleaned, sensor=sensor, source=text)
     counts = {t: (c.types[t], c.counts[t]) for t in sorted(c.counts, key=natural_order)}
-    return RosbagImport(log, counts, pose_text, mount_source, skipped, int(order.size), tuple(notes))
+    return RosbagImport(log, counts, pose_text, mount_source, skipped, tuple(notes))

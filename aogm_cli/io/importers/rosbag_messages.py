@@ -89,11 +89,6 @@ def decimal(value: float) -> float:
     return float(str(np.float32(value)))
 
 
-def stamp(msg) -> float:
-    s = msg.header.stamp
-    return s.sec + s.nanosec / 1e9
-
-
 def group_readings(time: np.ndarray, sensor: np.ndarray, pose: np.ndarray, window: float,
                    tolerance: tuple[float, float]) -> np.ndarray:
     """Scan (row) index of each reading of a ring of Range topics, readings in time order.

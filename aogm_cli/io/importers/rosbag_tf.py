@@ -91,6 +91,12 @@ class PoseSeries:
         return pose, inside
 
 
+
+def stamp(msg) -> float:
+    """A stamped message's (or transform's) header time, in seconds."""
+    s = msg.header.stamp
+    return s.sec + s.nanosec / 1e9
+
 class TfTree:
     """The transforms of /tf (dynamic, interpolated) and /tf_static of a bag, child -> parent."""
 
@@ -100,8 +106,8 @@ class TfTree:
         self.dynamic: dict[str, PoseSeries] = {}  # child -> its poses in its parent's frame
         self.reparented = 0  # transforms naming a second parent for a child (ignored, as tf2 refuses them)
 
-    def add(self, message, t: float | None, static: bool) -> None:
-        """Add every transform of a tf2_msgs/TFMessage; ``t`` None takes each one's own stamp."""
+    def add(self, message, static: bool) -> None:
+        """Add every transform of a tf2_msgs/TFMessage, each at its own stamp."""
         for tr in message.transforms:
             parent, child = frame_name(tr.header.frame_id), frame_name(tr.child_frame_id)
             if self.parent.setdefault(child, parent) != parent:
@@ -111,9 +117,8 @@ class TfTree:
             if static:
                 self.static[child] = (np.array([v.x, v.y, v.z], dtype=np.float64), rotation_matrix(q.x, q.y, q.z, q.w))
             else:
-                stamp = tr.header.stamp
                 series = self.dynamic.setdefault(child, PoseSeries(f"{parent} -> {child}"))
-                series.add(stamp.sec + stamp.nanosec / 1e9 if t is None else t, pose_of(v, q))
+                series.add(stamp(tr), pose_of(v, q))
 
     def frames(self) -> set[str]:
         return set(self.parent) | set(self.parent.values())
