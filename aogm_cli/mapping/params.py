@@ -45,7 +45,7 @@ class EMConfig:
     # at most hidden_gain: a wall's far layers, hidden behind the obstacles the readings
     # detect) keep the standard map's estimate. Measured on the 13 bundled worlds (README,
     # "Walls hidden behind walls"): "standard" raises EM's occupied recall 1.5-4x (corridor_door
-    # 0.39 -> 0.58, office_doors_real 0.11 -> 0.46) but moves accuracy by -0.015 .. +0.012
+    # 0.39 -> 0.58, office_doors_real 0.11 -> 0.46) but moves accuracy by -0.014 .. +0.012
     hidden: str = "prior"
     hidden_gain: float = 0.05
 
