@@ -39,7 +39,7 @@ def detector_with_threshold(tmp_path, threshold):
 
 
 def test_no_flagged_reading_gives_the_standard_map(door_log, tmp_path):
-    params = resolve_params()
+    params = resolve_params(overrides={"adaptive": {"contested": 0.0}})  # no contested cells either
     never = detector_with_threshold(tmp_path, 1.0)  # p(y = 1) stays below 1 on these readings
     adaptive = map_file(door_log, "adaptive", params, str(never))
     standard = map_file(door_log, "standard", params)
@@ -58,10 +58,24 @@ def test_em_changes_nothing_outside_the_clusters(door_log):
     assert adaptive.stats["clusters"] > 0
     assert np.array_equal(adaptive.probability[outside], standard.probability[outside])
     assert np.array_equal(adaptive.occupied[outside], ((standard.log_odds > 0) & standard.observed)[outside])
-    # clusters lie in observed cells that the standard map does not hold at its free clamp
+    # clusters lie in cells the standard map observed; EM reports the cells it cannot decide
+    # (and the standard map holds free) unobserved
     inside = adaptive.clusters > 0
-    assert np.all(adaptive.observed[inside])
-    assert np.all(standard.log_odds[inside] > params.inverse_model.clamp_min)
+    assert np.all(standard.observed[inside])
+    unseen = standard.observed & ~adaptive.observed
+    assert unseen.any() and np.all(inside[unseen]) and np.all(standard.probability[unseen] <= 0.5)
+
+
+def test_contested_cells_alone_make_clusters(door_log, tmp_path):
+    """With no flagged reading, the cells whose occupied evidence alone reaches
+    ``adaptive.contested`` but which the standard map holds free are still clustered."""
+    never = detector_with_threshold(tmp_path, 1.0)
+    params = resolve_params()
+    adaptive = map_file(door_log, "adaptive", params, str(never))
+    standard = map_file(door_log, "standard", params)
+    assert adaptive.stats["flagged_readings"] == 0 and adaptive.stats["clusters"] > 0
+    inside = adaptive.clusters > 0
+    assert np.all(standard.log_odds[inside] <= 0)
 
 
 def test_adaptive_cli_writes_clusters_and_stats(door_log, tmp_path):

@@ -176,9 +176,11 @@ def test_leaving_out_cells_held_free_changes_no_likelihood():
 
 
 def test_hidden_cells_keep_the_standard_estimate_only_when_asked():
-    """EM's residual at the candidates the data decides; with hidden: standard, a cell EM leaves
-    free though occupancy costs the data nothing (evidence 0, residual = the prior 0.3) keeps
-    what the probability held (the standard map's), one the data objects to does not."""
+    """EM's residual at the candidates the data decides; a cell EM leaves free though occupancy
+    costs the data nothing (evidence 0, residual = the prior 0.3) or next to nothing keeps what
+    the probability held (the standard map's) with hidden: standard, gets the prior with
+    hidden: prior, and with hidden: unobserved (the default) keeps a standard estimate above 0.5
+    and is returned to be reported unobserved otherwise; one the data objects to never is."""
     from aogm_cli.mapping.em import EMResult, decided, residual_into
 
     prior = CONFIG.prior_occupied
@@ -188,8 +190,13 @@ def test_hidden_cells_keep_the_standard_estimate_only_when_asked():
     hidden = dataclasses.replace(CONFIG, hidden="standard")
     assert decided(result, hidden).tolist() == [False, True, True, False]
     probability = np.full(5, 0.8)
-    residual_into(probability, result, hidden)
+    assert residual_into(probability, result, hidden).size == 0
     np.testing.assert_allclose(probability, [0.8, residual[1], 0.9, 0.8, 0.8])
     probability = np.full(5, 0.8)
-    residual_into(probability, result, CONFIG)  # the default: the residual everywhere
+    assert residual_into(probability, result, dataclasses.replace(CONFIG, hidden="prior")).size == 0
     np.testing.assert_allclose(probability, [*residual, 0.8])
+    assert EMConfig().hidden == "unobserved"
+    probability = np.array([0.8, 0.8, 0.8, 0.4, 0.8])  # cell 3: hidden, the standard map has it free
+    unseen = residual_into(probability, result, dataclasses.replace(CONFIG, hidden="unobserved"))
+    assert unseen.tolist() == [3]
+    np.testing.assert_allclose(probability, [0.8, residual[1], 0.9, 0.4, 0.8])

@@ -13,6 +13,7 @@ import time
 
 import numpy as np
 
+from aogm_cli.core.log import Log
 from aogm_cli.core.occupancy_map import OccupancyMap
 from aogm_cli.mapping.calibration import em_with_model
 from aogm_cli.mapping.cluster import cone_bands, label_clusters, near_occupied, readings_near_clusters
@@ -40,24 +41,37 @@ def coupled_groups(problem: EMProblem, n_clusters: int) -> int:
     return len(roots)
 
 
+def contested_cells(log: Log, grid, params: MapParams, log_odds: np.ndarray) -> tuple[np.ndarray, float]:
+    """(cells (H, W) whose occupied evidence alone reaches ``adaptive.contested`` log-odds but
+    which the standard map holds free, seconds): where the readings disagree and the standard
+    map cannot explain them (walls that specular or multipath readings, too long, cleared).
+    One more standard pass, with the inverse model's free evidence set to nothing."""
+    inverse = dataclasses.replace(params.inverse_model, l_free=params.inverse_model.l0)
+    hits, _, seconds = standard_pass(log, grid, dataclasses.replace(params, inverse_model=inverse))
+    return (hits - params.inverse_model.l0 >= params.adaptive.contested) & (log_odds <= 0), seconds
+
+
 def find_clusters(run: Readings, flags: np.ndarray, log_odds: np.ndarray, observed: np.ndarray,
-                  params: MapParams) -> tuple[np.ndarray, int]:
+                  params: MapParams, contested: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """(cluster ids (H, W), count): a flagged cone's band near its range, z - band_below ..
     z + alpha (where the standard map thickens walls towards the robot), next to cells the
-    standard map holds occupied, minus cells it holds at its free clamp."""
+    standard map holds occupied, minus cells it holds at its free clamp; and the ``contested``
+    cells (``contested_cells``) when given."""
     region, _ = cone_bands(run.grid, run.templates, run.rows[flags], run.cols[flags], run.bins[flags], run.z[flags],
                            params.adaptive.band_below, params.inverse_model.alpha)
     region &= observed & (log_odds > params.inverse_model.clamp_min)
     region &= near_occupied(log_odds, params.adaptive.near_occupied)
+    if contested is not None:
+        region |= contested & observed
     return label_clusters(region)
 
 
 def em_in_clusters(run: Readings, clusters: np.ndarray, n_clusters: int, occupied: np.ndarray,
-                   probability: np.ndarray, params: MapParams, progress: Progress | None = None) -> dict:
-    """EM over every cluster cell at once, every other cell held at ``occupied``; ``occupied``
-    and ``probability`` (flat) are updated in place. Clusters that share no reading are
-    independent (as the paper has them): one run over all of them gives each its own result.
-    Returns the stats of the run and the seconds spent setting it up (``t_index``)."""
+                   params: MapParams, progress: Progress | None = None) -> dict:
+    """EM over every cluster cell at once, every other cell held at ``occupied`` (flat, updated
+    in place). Clusters that share no reading are independent (as the paper has them): one run
+    over all of them gives each its own result. Returns the stats of the run, the seconds spent
+    setting it up (``t_index``) and EM's result (``result``: its residuals, for ``residual_into``)."""
     config = params.em
     t0 = time.perf_counter()
     cells = np.flatnonzero(clusters.reshape(-1) > 0)
@@ -71,8 +85,7 @@ def em_in_clusters(run: Readings, clusters: np.ndarray, n_clusters: int, occupie
             progress("em sweep", sweep, config.max_sweeps)
 
     result = run_em(problem, occupied, cells, config, on_sweep)
-    residual_into(probability, result, config)
-    return {"cluster_groups": coupled_groups(problem, n_clusters), "em_readings": int(problem.readings.z.size),
+    return {"result": result, "cluster_groups": coupled_groups(problem, n_clusters), "em_readings": int(problem.readings.z.size),
             "em_sweeps": result.sweeps, "em_flips_per_sweep": result.flips, "em_scored_per_sweep": result.scored,
             "em_objective_per_sweep": result.objective, "index_entries": result.peak_pairs,
             "scratch_bytes": result.scratch_bytes, "t_index": t_index}
@@ -96,7 +109,8 @@ def map_adaptive(log, params: MapParams, detector, detector_name: str = "package
     t_detect = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    clusters, n_clusters = find_clusters(run, flags, log_odds, observed, params)
+    contested, t_hits = contested_cells(whole, grid, params, log_odds) if params.adaptive.contested > 0 else (None, 0.0)
+    clusters, n_clusters = find_clusters(run, flags, log_odds, observed, params, contested)
     t_cluster = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -111,8 +125,7 @@ def map_adaptive(log, params: MapParams, detector, detector_name: str = "package
 
         def em_step(em_config: EMConfig, occ: np.ndarray):
             nonlocal t_index
-            stats = em_in_clusters(run, clusters, n_clusters, occ, probability,
-                                   dataclasses.replace(params, em=em_config), progress)
+            stats = em_in_clusters(run, clusters, n_clusters, occ, dataclasses.replace(params, em=em_config), progress)
             t_index += stats.pop("t_index")
             return stats["em_objective_per_sweep"][-1], stats["em_sweeps"], stats
 
@@ -124,6 +137,9 @@ def map_adaptive(log, params: MapParams, detector, detector_name: str = "package
                                     params.em.forward)] = True
         config, em_stats, calibration = em_with_model(run, occupied, params, em_step, select=near)
         em_stats["t_index"] = t_index
+        unseen = residual_into(probability, em_stats.pop("result"), config)
+        observed = observed.copy()
+        observed.reshape(-1)[unseen] = False
     probability = probability.reshape(grid.shape)
     probability[~observed] = 0.5
     t_index = em_stats.pop("t_index")

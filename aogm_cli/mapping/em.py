@@ -54,15 +54,25 @@ def decided(result: EMResult, config: EMConfig) -> np.ndarray:
     return (result.residual > 0.5) | (evidence < -config.hidden_gain)
 
 
-def residual_into(probability: np.ndarray, result: EMResult, config: EMConfig) -> None:
+def residual_into(probability: np.ndarray, result: EMResult, config: EMConfig) -> np.ndarray:
     """Write EM's residual occupancy into the flat ``probability`` at the candidates the data
-    decides (``decided``); the hidden ones keep what ``probability`` holds (the standard map's
-    estimate, ``config.hidden == "standard"``) or get the residual too (``"prior"``)."""
+    decides (``decided``); the hidden ones (undecided: the prior alone puts them free) keep what
+    ``probability`` holds (the standard map's estimate) with ``config.hidden == "standard"``,
+    get the residual too with ``"prior"``, and with ``"unobserved"`` (the default) keep the
+    standard estimate where it is above 0.5 and are returned, to be reported unobserved, where
+    it is not: a planner must not drive where no reading says the way is free.
+
+    Returns the flat ids of the cells to report unobserved (empty but for ``"unobserved"``)."""
+    none = np.zeros(0, dtype=np.int64)
     if config.hidden == "prior":
         probability[result.candidates] = result.residual
-        return
+        return none
     keep = decided(result, config)
     probability[result.candidates[keep]] = result.residual[keep]
+    if config.hidden == "standard":
+        return none
+    hidden = result.candidates[~keep]
+    return hidden[probability[hidden] <= 0.5]
 
 
 def em_readings(rows, cols, bins, z, templates, grid, z_max: float, config: ForwardModelConfig,
@@ -307,7 +317,9 @@ def map_em(log, params: MapParams, progress: Progress | None = None) -> Occupanc
     t_calibration = time.perf_counter() - t0 - seconds["index"] - seconds["em"]
     t0 = time.perf_counter()
     probability = probability_from_log_odds(log_odds, observed).reshape(-1)
-    residual_into(probability, result, config)
+    unseen = residual_into(probability, result, config)
+    observed = observed.copy()
+    observed.reshape(-1)[unseen] = False
     probability = probability.reshape(grid.shape)
     probability[~observed] = 0.5
     t_em = seconds["em"] + time.perf_counter() - t0

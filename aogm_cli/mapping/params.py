@@ -40,13 +40,15 @@ class EMConfig:
     prior_occupied: float = 0.3  # prior p(m_x = 1) of every cell
     max_sweeps: int = 20
     start: str = "standard"  # "standard": the thresholded standard map; "empty": all free
-    # "prior" (Thrun's residual everywhere) or "standard": cells EM leaves free though no
-    # reading objects to an obstacle there (occupancy would lower the data log-likelihood by
-    # at most hidden_gain: a wall's far layers, hidden behind the obstacles the readings
-    # detect) keep the standard map's estimate. Measured on the 13 bundled worlds (README,
-    # "Walls hidden behind walls"): "standard" raises EM's occupied recall 1.5-4x (corridor_door
-    # 0.39 -> 0.58, office_doors_real 0.11 -> 0.46) but moves accuracy by -0.014 .. +0.012
-    hidden: str = "prior"
+    # What EM reports at the cells it leaves free although no reading objects to an obstacle
+    # there (occupancy would lower the data log-likelihood by at most hidden_gain: a wall's far
+    # layers, the space behind a wall, a gap in a wall that the prior alone keeps open): "prior"
+    # (Thrun's residual, the prior 0.3, which a planner reads as free), "standard" (the standard
+    # map's estimate) or "unobserved" (the standard map's estimate where it is above 0.5, else
+    # unobserved: p 0.5, /map/observed false). Measured on the 13 bundled worlds (README, "What
+    # EM reports where the data say nothing"): "unobserved" cuts EM's planner leak from
+    # 0.04-0.34 to 0.00-0.07 and lifts its wall-surface recall to the standard map's or above
+    hidden: str = "unobserved"
     hidden_gain: float = 0.05
 
     def validate(self) -> EMConfig:
@@ -59,8 +61,8 @@ class EMConfig:
             raise InputError(f"expected a probability in (0, 1), got {self.prior_occupied:g}", key="prior_occupied")
         if self.max_sweeps < 1:
             raise InputError(f"expected a whole number >= 1, got {self.max_sweeps}", key="max_sweeps")
-        if self.hidden not in ("standard", "prior"):
-            raise InputError(f"expected 'standard' or 'prior', got {self.hidden!r}", key="hidden")
+        if self.hidden not in ("unobserved", "standard", "prior"):
+            raise InputError(f"expected 'unobserved', 'standard' or 'prior', got {self.hidden!r}", key="hidden")
         if not self.hidden_gain >= 0:
             raise InputError(f"expected a number >= 0, got {self.hidden_gain!r}", key="hidden_gain")
         if self.start not in ("standard", "empty"):
@@ -88,9 +90,16 @@ class AdaptiveConfig:
     # openings); measured against 1 on the nine bundled worlds (bench/params_sweep.py
     # adaptive): as accurate or more on each, clusters 35-45% smaller, 10-20% faster
     near_occupied: int = 0
+    # also cluster the cells whose occupied evidence alone (the inverse model's arcs) reaches
+    # this many log-odds but which the standard map holds free: walls that too-long specular or
+    # multipath readings cleared, which no flagged band reaches (0: none). README, "What EM
+    # reports where the data say nothing"
+    contested: float = 1.0
 
     def validate(self) -> AdaptiveConfig:
         check_field_types(self)
+        if not self.contested >= 0:
+            raise InputError(f"expected a number >= 0 (log-odds), got {self.contested!r}", key="contested")
         if not self.band_below >= 0:
             raise InputError(f"expected a number >= 0 (m), got {self.band_below!r}", key="band_below")
         if isinstance(self.near_occupied, bool) or not isinstance(self.near_occupied, int) or self.near_occupied < 0:
