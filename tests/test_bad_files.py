@@ -147,6 +147,10 @@ BAD_LOGS = [
     ("checks_not_json", set_attr("truth", "checks", "[{"), "/truth.checks"),
     ("checks_object", set_attr("truth", "checks", "{}"), "/truth.checks"),
     ("checks_no_to", set_attr("truth", "checks", '[{"name": "a", "passable": {"from": [0, 0]}}]'), "/truth.checks[0]"),
+    ("blocked_radius", set_attr("truth", "checks", '[{"name": "a", "blocked": {"from": [0, 0], "to": [1, 1], '
+                                                   '"robot_radius": -1}}]'), "/truth.checks[0].blocked.robot_radius"),
+    ("check_both_kinds", set_attr("truth", "checks", '[{"name": "a", "blocked": {}, "passable": {}}]'),
+     "/truth.checks[0]"),
     ("seed_string", lambda f: f.attrs.__setitem__("seed", "one"), "seed"),
 ]
 

@@ -1,4 +1,4 @@
-"""Metrics and passable checks on hand-made maps."""
+"""Metrics and passable / blocked checks on hand-made maps."""
 
 import numpy as np
 import pytest
@@ -57,3 +57,12 @@ def test_run_checks_reads_the_world_check_format():
     grid, prob, obs = door_map(gap_cells=8)
     checks = [{"name": "door", "passable": {"from": [1.05, 0.25], "to": [1.05, 0.95], "robot_radius": 0.25}}]
     assert run_checks(grid, prob, obs, checks) == [{"name": "door", "passed": True}]
+
+
+def test_a_blocked_check_passes_when_there_is_no_path():
+    checks = [{"name": "wall", "blocked": {"from": [1.05, 0.25], "to": [1.05, 0.95], "robot_radius": 0.25}},
+              {"name": "door", "passable": {"from": [1.05, 0.25], "to": [1.05, 0.95], "robot_radius": 0.25}}]
+    grid, prob, obs = door_map(gap_cells=8)  # the 0.8 m gap lets the robot through
+    assert run_checks(grid, prob, obs, checks) == [{"name": "wall", "passed": False}, {"name": "door", "passed": True}]
+    grid, prob, obs = door_map(gap_cells=0)  # the wall holds
+    assert run_checks(grid, prob, obs, checks) == [{"name": "wall", "passed": True}, {"name": "door", "passed": False}]

@@ -3,11 +3,18 @@
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
+import yaml
+from click.testing import CliRunner
 
+from aogm_cli.cli import main
 from aogm_cli.core.errors import InputError
 from aogm_cli.core.log import SensorSpec
+from aogm_cli.evaluation.metrics import run_checks
+from aogm_cli.world.config import BlockedCheck
 from aogm_cli.world.loader import load_world, parse_world
+from aogm_cli.world.truth import truth_occupancy
 
 WORLDS = sorted((Path(__file__).resolve().parents[1] / "worlds").glob("*.yaml"))
 
@@ -41,10 +48,10 @@ def test_seed_worlds_are_the_papers():
     assert door.robot.radius == 0.25
     (wall,) = [w for w in door.walls if w.openings]
     assert wall.openings[0].width == pytest.approx(2 * 2 * door.robot.radius)
-    assert [c.name for c in door.checks] == ["door_passable"]
+    assert [c.name for c in door.checks] == ["door_passable", "behind_wall_west", "behind_wall_east"]
     spec = load_world(WORLDS[0].parent / "corridor_specular.yaml")
     assert min(s.specular_threshold for s in spec.surfaces.values()) < math.radians(25)
-    assert [c.name for c in spec.checks] == ["corridor_passable"]
+    assert [c.name for c in spec.checks] == ["corridor_passable", "behind_upper_wall", "behind_lower_wall"]
 
 
 def test_defaults_give_a_24_sonar_ring():
@@ -117,3 +124,33 @@ def test_malformed_yaml_names_the_file_and_line(tmp_path):
 def test_missing_file():
     with pytest.raises(InputError, match="no such file"):
         load_world("does/not/exist.yaml")
+
+
+def test_every_bundled_world_has_a_blocked_check_and_its_truth_passes_every_check():
+    """Each bundled world says where a map must hold a wall (``blocked``), and the truth raster
+    itself, as a map (observed everywhere), passes every passable and blocked check."""
+    for path in WORLDS:
+        world = load_world(path)
+        assert any(isinstance(c, BlockedCheck) for c in world.checks), f"{path.name} has no blocked check"
+        grid, occupancy = truth_occupancy(world)
+        checks = [c.as_json() for c in world.checks]
+        failed = [c["name"] for c in run_checks(grid, occupancy, np.ones(grid.shape, bool), checks) if not c["passed"]]
+        assert not failed, f"{path.name}: {failed} fail on the truth"
+
+
+def test_a_blocked_check_reads_and_bad_ones_name_the_key_path(tmp_path):
+    check = {"name": "wall", "blocked": {"from": [1, 1], "to": [1, 4]}}
+    (parsed,) = parse_world(minimal(checks=[check]), file="w.yaml").checks
+    assert isinstance(parsed, BlockedCheck) and parsed.robot_radius == 0.25  # the robot's, as for passable
+    assert parsed.as_json() == {"name": "wall", "blocked": {"from": [1.0, 1.0], "to": [1.0, 4.0], "robot_radius": 0.25}}
+    assert "checks[0].blocked.to: expected a point inside bounds" in error_of(
+        minimal(checks=[{"name": "a", "blocked": {"from": [1, 1], "to": [20, 1]}}]))
+    both = {"name": "a", "blocked": check["blocked"], "passable": check["blocked"]}
+    assert "checks[0]: expected exactly one of 'passable' or 'blocked'" in error_of(minimal(checks=[both]))
+    assert "checks[0]: expected exactly one" in error_of(minimal(checks=[{"name": "a"}]))
+    world = minimal(checks=[{"name": "a", "blocked": {"from": [1, 1], "to": [1, 4], "robot_radius": -0.2}}])
+    path = tmp_path / "bad.yaml"
+    path.write_text(yaml.safe_dump(world))
+    result = CliRunner().invoke(main, ["simulate", str(path), "-o", str(tmp_path / "log.h5")])
+    assert result.exit_code == 2 and "Traceback" not in result.output
+    assert f"{path}: checks[0].blocked.robot_radius: " in result.output and not (tmp_path / "log.h5").exists()

@@ -81,6 +81,14 @@ class SensorSpec:
         }
 
 
+CHECK_KINDS = ("passable", "blocked")  # a world check's key beside its name: a path must exist / must not
+
+
+def check_kind(check: dict) -> str:
+    """Which of ``CHECK_KINDS`` a check (a JSON dict as in the world file) is."""
+    return next(k for k in CHECK_KINDS if k in check)
+
+
 @dataclass(frozen=True)
 class Truth:
     """Ground truth of a simulated log: occupancy on ``grid``, and per reading its cause and ideal range."""

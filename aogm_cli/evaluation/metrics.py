@@ -10,6 +10,8 @@ import numpy as np
 from scipy import ndimage
 
 from aogm_cli.core.grid import GridSpec
+from aogm_cli.core.log import check_kind
+from aogm_cli.evaluation.planner import EIGHT, drivable, map_free
 
 
 def map_metrics(probability: np.ndarray, observed: np.ndarray, truth: np.ndarray) -> dict:
@@ -42,25 +44,24 @@ def passable(grid: GridSpec, probability, observed, start, goal, robot_radius: f
     """Is there an 8-connected path from ``start`` to ``goal`` (world x, y) through cells that are
     observed, believed free (p < 0.5) and farther than ``robot_radius`` from every cell that is not?
     Cells outside the grid count as not free."""
-    free = np.asarray(observed, dtype=bool) & (np.asarray(probability) < 0.5)
-    padded = np.pad(free, 1, constant_values=False)
-    clearance = ndimage.distance_transform_edt(padded)[1:-1, 1:-1] * grid.resolution
-    ok = free & (clearance > robot_radius)
+    ok = drivable(map_free(probability, observed), grid.resolution, robot_radius)
     r0, c0 = (int(v) for v in grid.world_to_cell(*start))
     r1, c1 = (int(v) for v in grid.world_to_cell(*goal))
     if not (grid.contains(r0, c0) and grid.contains(r1, c1)) or not (ok[r0, c0] and ok[r1, c1]):
         return False
-    labels, _ = ndimage.label(ok, structure=np.ones((3, 3), dtype=int))
+    labels, _ = ndimage.label(ok, structure=EIGHT)
     return bool(labels[r0, c0] == labels[r1, c1])
 
 
 def run_checks(grid: GridSpec, probability, observed, checks) -> list[dict]:
-    """Evaluate the world's checks (JSON dicts as in the world file) on a map."""
+    """Evaluate the world's checks (JSON dicts as in the world file) on a map: a ``passable``
+    check passes when the path exists, a ``blocked`` one when it does not."""
     results = []
     for check in checks:
-        p = check["passable"]
+        kind = check_kind(check)
+        p = check[kind]
         ok = passable(grid, probability, observed, p["from"], p["to"], float(p["robot_radius"]))
-        results.append({"name": check["name"], "passed": ok})
+        results.append({"name": check["name"], "passed": ok == (kind == "passable")})
     return results
 
 

@@ -17,7 +17,7 @@ import numpy as np
 from aogm_cli import __version__
 from aogm_cli.core.errors import InputError
 from aogm_cli.core.grid import GridSpec
-from aogm_cli.core.log import CAUSE_ECHO, CAUSE_SPECULAR, Log, SensorSpec, Truth
+from aogm_cli.core.log import CAUSE_ECHO, CAUSE_SPECULAR, CHECK_KINDS, Log, SensorSpec, Truth
 from aogm_cli.io.atomic import write_files_atomically
 from aogm_cli.io.h5file import (
     attribute,
@@ -132,7 +132,7 @@ class LogReader:
 
     def _read_truth(self, dims: dict) -> Truth:
         """The truth, checked: occupancy (H, W) 0/1, cause (T, S) 0..3, ideal_range (T, S)
-        >= 0 or +inf, resolution > 0, origin (x, y), checks a JSON list of passable checks."""
+        >= 0 or +inf, resolution > 0, origin (x, y), checks a JSON list of passable/blocked checks."""
         f, file = self._f, self.path
         with reading(file, "/truth"):
             g = f["truth"]
@@ -241,8 +241,8 @@ class LogReader:
 
 
 def _check_checks(checks: list, file: str) -> list[dict]:
-    """The truth's checks, each ``{"name": str, "passable": {"from": [x, y], "to": [x, y],
-    "robot_radius": r >= 0}}`` as ``aogm simulate`` writes them."""
+    """The truth's checks, each ``{"name": str, "passable" or "blocked": {"from": [x, y],
+    "to": [x, y], "robot_radius": r >= 0}}`` as ``aogm simulate`` writes them."""
 
     def point(v) -> bool:
         return (isinstance(v, list) and len(v) == 2
@@ -250,17 +250,19 @@ def _check_checks(checks: list, file: str) -> list[dict]:
 
     for i, c in enumerate(checks):
         key = f"/truth.checks[{i}]"
-        if not isinstance(c, dict) or not isinstance(c.get("name"), str):
-            raise InputError("expected {\"name\": ..., \"passable\": {...}}", file=file, key=key)
-        p = c.get("passable")
+        kinds = [k for k in CHECK_KINDS if isinstance(c, dict) and k in c]
+        if not isinstance(c, dict) or not isinstance(c.get("name"), str) or len(kinds) != 1:
+            raise InputError("expected {\"name\": ..., \"passable\" or \"blocked\": {...}}", file=file, key=key)
+        kind = kinds[0]
+        p = c[kind]
         if not isinstance(p, dict):
-            raise InputError("expected an object {from, to, robot_radius}", file=file, key=f"{key}.passable")
+            raise InputError("expected an object {from, to, robot_radius}", file=file, key=f"{key}.{kind}")
         for end in ("from", "to"):
             if not point(p.get(end)):
-                raise InputError(f"expected [x, y] (finite), got {p.get(end)!r}", file=file, key=f"{key}.passable.{end}")
+                raise InputError(f"expected [x, y] (finite), got {p.get(end)!r}", file=file, key=f"{key}.{kind}.{end}")
         r = p.get("robot_radius")
         if isinstance(r, bool) or not isinstance(r, (int, float)) or not (math.isfinite(r) and r >= 0):
-            raise InputError(f"expected a number >= 0 (m), got {r!r}", file=file, key=f"{key}.passable.robot_radius")
+            raise InputError(f"expected a number >= 0 (m), got {r!r}", file=file, key=f"{key}.{kind}.robot_radius")
     return checks
 
 

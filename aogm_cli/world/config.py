@@ -173,11 +173,21 @@ class PassableCheck:
     goal: Point
     robot_radius: float
 
+    kind = "passable"  # the check's key in the world file and in a log's /truth checks
+
     def as_json(self) -> dict:
         return {
             "name": self.name,
-            "passable": {"from": list(self.start), "to": list(self.goal), "robot_radius": self.robot_radius},
+            self.kind: {"from": list(self.start), "to": list(self.goal), "robot_radius": self.robot_radius},
         }
+
+
+@dataclass(frozen=True)
+class BlockedCheck(PassableCheck):
+    """No robot of ``robot_radius`` can go from ``start`` to ``goal``: the map holds the wall
+    between them (the path ``PassableCheck`` looks for does not exist)."""
+
+    kind = "blocked"
 
 
 @dataclass(frozen=True)
@@ -199,5 +209,5 @@ class World:
     trajectory: Trajectory = field(default_factory=Trajectory)
     sonar: Sonar | None = None
     errors: SimulationErrors = field(default_factory=SimulationErrors)
-    checks: tuple[PassableCheck, ...] = ()
+    checks: tuple[PassableCheck | BlockedCheck, ...] = ()
     description: str = ""

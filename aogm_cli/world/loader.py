@@ -13,6 +13,7 @@ from typing import Any
 from aogm_cli.core.errors import InputError
 from aogm_cli.io.yamlfile import read_yaml
 from aogm_cli.world.config import (
+    BlockedCheck,
     Box,
     Circle,
     EchoStrength,
@@ -327,23 +328,29 @@ def _robot(n: Node) -> Robot:
     return Robot(n.get_number("radius", Robot.radius, positive=True))
 
 
+CHECK_CLASSES = {c.kind: c for c in (PassableCheck, BlockedCheck)}  # a check's key (core.log.CHECK_KINDS)
+
+
 def _checks(checks: Node, bounds, robot: Robot) -> list[PassableCheck]:
     out = []
     names = set()
     for n in checks.items():
-        n.mapping({"name", "passable"}, required={"name", "passable"})
+        n.mapping({"name", *CHECK_CLASSES}, required={"name"})
+        kinds = [k for k in CHECK_CLASSES if k in n.value]
+        if len(kinds) != 1:
+            raise n.error(f"expected exactly one of {' or '.join(repr(k) for k in CHECK_CLASSES)} beside 'name'")
         cname = n.child("name").string()
         if cname in names:
             raise n.child("name").error(f"duplicate check name {cname!r}")
         names.add(cname)
-        p = n.child("passable").mapping({"from", "to", "robot_radius"}, required={"from", "to"})
+        p = n.child(kinds[0]).mapping({"from", "to", "robot_radius"}, required={"from", "to"})
         start = p.child("from").vector(2)
         goal = p.child("to").vector(2)
         for key, pt in (("from", start), ("to", goal)):
             if not _inside(pt, bounds):
                 raise p.child(key).error(f"expected a point inside bounds {list(bounds)}, got {list(pt)}")
         radius = p.get_number("robot_radius", robot.radius, minimum=0.0)
-        out.append(PassableCheck(cname, start, goal, radius))
+        out.append(CHECK_CLASSES[kinds[0]](cname, start, goal, radius))
     return out
 
 
