@@ -14,6 +14,7 @@ from click.testing import CliRunner
 from aogm_cli.cli import main
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.evaluation.metrics import map_metrics, run_checks
+from aogm_cli.evaluation.planner import planner_metrics
 from aogm_cli.io.logfile import read_log, write_log
 from aogm_cli.mapping import modes
 from aogm_cli.simulation.sonar import simulate
@@ -42,6 +43,7 @@ checks:
     passable: {from: [1.0, 1.0], to: [1.0, -0.3], robot_radius: 0.1}
 """
 METRICS = ("accuracy", "occupied_precision", "occupied_recall", "occupied_f1", "brier")
+PLANNER = ("leak", "block", "surface_recall")  # against the truth, for the default --robot-radius 0.2
 
 
 def run(*args):
@@ -85,9 +87,11 @@ def independent_metrics(map_path, log_path):
     with h5py.File(log_path) as f:
         truth = f["truth/occupancy"][...]
         checks = json.loads(f["truth"].attrs["checks"])
+        poses = f["scans/pose"][...]
     metrics = map_metrics(probability, observed, truth)
     grid = GridSpec(float(origin[0]), float(origin[1]), resolution, *probability.shape)
     metrics["checks"] = run_checks(grid, probability, observed, checks)
+    metrics.update(planner_metrics(grid, probability, observed, truth, poses, 0.2))
     return metrics, runtime
 
 
@@ -108,10 +112,10 @@ def test_json_follows_the_contract_and_matches_the_map_files(logs, compared):
             assert r["calibration"] is None
         assert r["params"]["mode"] == r["mode"] and r["detector"] is None  # no adaptive map here
         assert r["world"] == "tiny_door"
-        assert set(r["metrics"]) == set(METRICS) | {"checks"}
+        assert set(r["metrics"]) == set(METRICS) | set(PLANNER) | {"checks"}
         stem = r["log"].rsplit("/", 1)[-1][:-3]
         expected, runtime = independent_metrics(out / "maps" / f"{stem}_{r['mode']}.h5", r["log"])
-        for key in METRICS:
+        for key in METRICS + PLANNER:
             assert r["metrics"][key] == pytest.approx(expected[key], abs=1e-12)
         assert r["metrics"]["checks"] == expected["checks"]
         assert [c["name"] for c in r["metrics"]["checks"]] == ["door_passable", "through_wall"]
@@ -225,7 +229,7 @@ def test_a_map_whose_log_is_missing_exits_2(compared, tmp_path):
     assert result.exit_code == 2 and "source_log" in result.output and "ghost.h5" in result.output
 
 
-def test_a_log_without_truth_reports_runtime_only(logs, tmp_path):
+def test_a_log_without_truth_has_no_truth_metrics(logs, tmp_path):
     log = read_log(logs[0])
     bare = tmp_path / "bare.h5"
     write_log(bare, dataclasses.replace(log, truth=None))
@@ -236,7 +240,8 @@ def test_a_log_without_truth_reports_runtime_only(logs, tmp_path):
     assert result.exit_code == 1
     assert "FAILED bare: standard.accuracy > 0.5  (n/a > 0.5; standard.accuracy not available)" in result.output
     (r,) = json.loads((tmp_path / "r.json").read_text())["results"]
-    assert r["world"] == "bare" and r["metrics"] is None and r["runtime_s"] > 0
+    assert r["world"] == "bare" and r["runtime_s"] > 0
+    assert r["metrics"] == {"walls_kept": 1.0, "leak_vs_standard": 0.0}  # the standard map against itself
     assert "n/a" in result.output
 
 

@@ -40,7 +40,8 @@ checks:
     passable: {from: [0.6, 0.8], to: [0.6, 2.8], robot_radius: 0.1}
 """
 FIXED = ["log", "world", "mode", "truth", "runtime_s", "runtime_vs_standard", "accuracy", "occupied_precision",
-         "occupied_recall", "occupied_f1", "brier", "checks_passed", "consistency_method", "consistency_readings",
+         "occupied_recall", "occupied_f1", "brier", "checks_passed", "leak", "block", "surface_recall", "walls_kept",
+         "leak_vs_standard", "consistency_method", "consistency_readings",
          "consistency_endpoint_occupied", "consistency_endpoint_occupied_8", "consistency_endpoint_free",
          "consistency_free_cells", "consistency_free_contradicted", "holdout_auc", "holdout_loglik",
          "holdout_readings", "holdout_scans", "learned_sigma", "learned_p_rand", "learned_p_hit", "learned_p_max",
@@ -118,8 +119,10 @@ def test_the_csv_has_a_row_per_log_and_mode_equal_to_the_json(runs):
         assert row["world"] == result["world"] == "tiny_hall" and row["truth"] == "true"
         assert float(row["runtime_s"]) == result["runtime_s"]
         assert float(row["runtime_vs_standard"]) == result["runtime_s"] / standard_runtime
-        for key in ("accuracy", "occupied_precision", "occupied_recall", "occupied_f1", "brier"):
+        for key in ("accuracy", "occupied_precision", "occupied_recall", "occupied_f1", "brier", "leak", "block",
+                    "surface_recall"):
             assert float(row[key]) == metrics[key]
+        assert row["walls_kept"] == row["leak_vs_standard"] == ""  # against the standard map: logs without truth
         checks = {c["name"]: c["passed"] for c in metrics["checks"]}
         assert float(row["checks_passed"]) == sum(checks.values()) / 2
         assert {n: row[f"check:{n}"] for n in checks} == {n: "true" if p else "false" for n, p in checks.items()}
@@ -186,14 +189,17 @@ def test_without_truth_and_with_holdout_the_csv_and_json_come_back_the_same(logs
     header, rows = read_csv(tmp_path / "h.csv")
     assert header == FIXED  # no truth: no check columns
     for row in rows:
-        assert row["truth"] == "false" and row["accuracy"] == "" and row["checks_passed"] == ""
+        assert row["truth"] == "false" and row["accuracy"] == "" and row["checks_passed"] == "" and row["leak"] == ""
+        assert 0 < number(row["walls_kept"]) <= 1 and number(row["leak_vs_standard"]) >= 0
+        if row["mode"] == "standard":  # against itself
+            assert (number(row["walls_kept"]), number(row["leak_vs_standard"])) == (1, 0)
         assert row["consistency_method"] == "arc" and 0 < number(row["consistency_endpoint_occupied"]) <= 1
         assert 0 < number(row["holdout_auc"]) <= 1 and int(row["holdout_readings"]) > 0
     no_mapping(monkeypatch)
     back = run("compare", "--from-json", tmp_path / "h.json", "--json", tmp_path / "h2.json", "--csv",
                tmp_path / "h2.csv", "--require", "em.holdout_loglik > -100", "-q")
     assert back.exit_code == 0, back.output
-    assert "Held-out AUC" in back.output and "Ends on occ." in back.output
+    assert "Held-out AUC" in back.output and "Ends on occ." in back.output and "Walls kept" in back.output
     assert without_provenance(json.loads((tmp_path / "h2.json").read_text())) == without_provenance(
         json.loads((tmp_path / "h.json").read_text()))
     assert (tmp_path / "h2.csv").read_bytes() == (tmp_path / "h.csv").read_bytes()

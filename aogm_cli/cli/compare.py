@@ -56,15 +56,18 @@ def _print_table(results, labels, quiet: bool) -> None:
 
     consistency = any(r.consistency is not None for r in results)  # some log has no truth
     holdout = any(r.holdout is not None for r in results)
+    planner = [k for k in PLANNER_COLUMNS if any(k in (r.planner or {}) for r in results)]  # older JSON: none
     console = Console()
     if not console.is_terminal:  # wide enough for every column, the held-out ones too
-        console = Console(width=max(console.width, 260 if holdout else 200), no_color=True, highlight=False)
+        console = Console(width=max(console.width, (260 if holdout else 200) + 12 * len(planner)), no_color=True,
+                          highlight=False)
     relative = relative_runtimes(results)
     table = Table(title=None if quiet else "aogm compare")
     columns = [("World", "left"), ("Mode", "left"), ("Accuracy", "right"), ("Occ. F1", "right"), ("Brier", "right"),
                ("Checks", "right")]
     if consistency:
         columns += [("Ends on occ.", "right"), ("±1 cell", "right"), ("Free contra.", "right")]
+    columns += [(PLANNER_COLUMNS[k], "right") for k in planner]
     if holdout:
         columns += [("Held-out AUC", "right"), ("Held-out loglik", "right"), ("Held-out readings", "right"),
                     ("Held-out scans", "right")]
@@ -91,6 +94,7 @@ def _print_table(results, labels, quiet: bool) -> None:
             c = r.consistency or {}
             row += [_share(c.get("endpoint_occupied")), _share(c.get("endpoint_occupied_8")),
                     _share(c.get("free_contradicted"))]
+        row += [_share((r.planner or {}).get(k)) for k in planner]
         if holdout:
             h = r.holdout or {}
             row += [_share(h.get("holdout_auc")), _share(h.get("holdout_loglik")), str(h.get("holdout_readings", "n/a")),
@@ -98,6 +102,11 @@ def _print_table(results, labels, quiet: bool) -> None:
         row += [f"{r.runtime_s:.3f}", "–" if rel is None else f"x{rel:.2f}", _source(r)]
         table.add_row(*row)
     console.print(table)
+
+
+# what a planner sees (``evaluation.planner``) -> its column: with truth, then without
+PLANNER_COLUMNS = {"leak": "Leak", "block": "Block", "surface_recall": "Surface", "walls_kept": "Walls kept",
+                   "leak_vs_standard": "Leak vs std"}
 
 
 def _share(v) -> str:
@@ -142,15 +151,19 @@ def _source(r) -> str:
 @click.option("--holdout", type=float, metavar="FRACTION",
               help="Hold out every round(1/FRACTION)-th scan (0 < FRACTION <= 0.5), map the rest and score "
                    "each map on the held-out readings (see Held-out scores above).")
+@click.option("--robot-radius", type=float, metavar="M",
+              help="The disk robot whose planner leak, block, surface_recall, walls_kept and leak_vs_standard "
+                   "measure (see What a planner sees above; world checks keep their own radius).  [default: 0.2]")
 @calibrate_option
 @seed_option
 @quiet_option
 @budget_options
 def compare(inputs, modes_text, detector, params_file, json_out, csv_out, figure_out, maps_dir, from_json, requires,
-            require_checks, jobs, scheduler, resume, holdout, calibrate, seed, quiet, max_memory=16e9, max_work=None):
+            require_checks, jobs, scheduler, resume, holdout, robot_radius, calibrate, seed, quiet, max_memory=16e9,
+            max_work=None):
     """Map every log in every mode, evaluate each map against the log's truth, and print a table
-    (accuracy, occupied F1, Brier, checks passed, runtime, runtime relative to the standard map
-    of the same log). em and adaptive learn their forward model from each log (--calibrate,
+    (accuracy, occupied F1, Brier, checks passed, leak, block, surface recall, runtime, runtime
+    relative to the standard map of the same log). em and adaptive learn their forward model from each log (--calibrate,
     the default; `aogm calibrate --help`).
 
     A log without truth (an imported real log) is scored by re-casting its in-range readings
@@ -160,6 +173,18 @@ def compare(inputs, modes_text, detector, params_file, json_out, csv_out, figure
 
     Arguments may also be map files made earlier (aogm map, or --maps-dir): each is used for
     its mode instead of mapping again; its source_log attribute names the log with the truth.
+
+    \b
+    What a planner sees (a disk robot of --robot-radius, starting within 0.3 m of the
+    trajectory, driving on observed cells below 0.5 with room for it):
+      leak             cells it reaches that the robot cannot reach in truth, over the
+                       truth-reachable observed cells (a wall the map lost)
+      block            share of the truth-reachable observed cells it cannot reach
+      surface_recall   truth wall-surface cells with a map cell above 0.5 within 0.1 m
+    Without truth, against the standard map of the same log and grid (made for the purpose
+    when it is not at hand; its own values are 1 and 0):
+      walls_kept       share of its cells at p >= 0.9 with a cell above 0.5 within 0.15 m
+      leak_vs_standard cells reached beyond those reached in it, over the latter
 
     \b
     Held-out scores (--holdout FRACTION, with or without truth):
@@ -176,7 +201,8 @@ def compare(inputs, modes_text, detector, params_file, json_out, csv_out, figure
     Gates (exit status 1 when one fails, after --json, --csv and --figure are written):
       --require EXPR       MODE.METRIC names, numbers, + - * /, ( ), one of < <= > >= == !=
                            METRIC: accuracy, occupied_precision, occupied_recall,
-                           occupied_f1, brier, runtime (= runtime_s), checks_passed (fraction);
+                           occupied_f1, brier, runtime (= runtime_s), checks_passed (fraction),
+                           leak, block, surface_recall, walls_kept, leak_vs_standard;
                            with --holdout: holdout_auc, holdout_loglik, holdout_readings,
                            holdout_scans
       --require-checks M   every check of every log passes in mode M
@@ -184,8 +210,9 @@ def compare(inputs, modes_text, detector, params_file, json_out, csv_out, figure
     \b
     CSV (--csv): one row per log and mode, always these columns in this order, empty where a
     value does not apply: log, world, mode, truth, runtime_s, runtime_vs_standard, accuracy,
-    occupied_precision, occupied_recall, occupied_f1, brier, checks_passed, consistency_*
-    (logs without truth), holdout_* (--holdout), learned_sigma, learned_p_rand,
+    occupied_precision, occupied_recall, occupied_f1, brier, checks_passed, leak, block,
+    surface_recall (truth), walls_kept, leak_vs_standard (no truth), consistency_* (logs
+    without truth), holdout_* (--holdout), learned_sigma, learned_p_rand,
     learned_p_hit, learned_p_max, learned_from_readings (the forward model an em or adaptive
     map's calibration learned); then one check:NAME column (true/false) per world check.
 
@@ -193,8 +220,8 @@ def compare(inputs, modes_text, detector, params_file, json_out, csv_out, figure
     Merging (--from-json): the arguments are --json files of earlier runs; their results are
     merged (one log and mode in two files: exit 2 naming both; every file must hold the same
     --holdout split, or none), printed and gated as if compared here, and written again with
-    --json and --csv. Nothing is mapped: --figure, --maps-dir and the mapping options are
-    refused (exit 2).
+    --json and --csv. Nothing is mapped: --figure, --maps-dir, --robot-radius and the mapping
+    options are refused (exit 2).
 
     \b
     Timings: each map's runtime_s is measured inside the process that builds it, around the
@@ -221,6 +248,7 @@ def compare(inputs, modes_text, detector, params_file, json_out, csv_out, figure
     Examples:
       aogm compare door.h5 hall.h5 --modes standard,em --json results.json --figure cmp.png
       aogm compare door.h5 --maps-dir maps/ --require "em.accuracy >= standard.accuracy"
+      aogm compare door.h5 --robot-radius 0.25 --require "em.leak <= 0.02"
       aogm compare maps/door_standard.h5 maps/door_em.h5 --require-checks em
       aogm compare door.h5 --holdout 0.1 --require "em.holdout_loglik >= standard.holdout_loglik"
       aogm compare --from-json door.json hall.json --csv all.csv --require-checks em
@@ -238,6 +266,7 @@ def compare(inputs, modes_text, detector, params_file, json_out, csv_out, figure
     from aogm_cli.report import compare as lib
 
     split = None if holdout is None else HoldoutSplit(holdout, seed).validate()
+    radius = _robot_radius(robot_radius)
     check_executor(jobs, scheduler)
     params = resolve_params(params_file, {"calibration": {"enabled": calibrate}})
     entries = lib.collect_inputs(list(inputs))
@@ -259,6 +288,7 @@ def compare(inputs, modes_text, detector, params_file, json_out, csv_out, figure
         results, failures = lib.run_comparison(
             entries, modes, params, detector=detector, jobs=jobs, maps_dir=maps_dir,
             on_map=lambda i, mode, r: advance(1), holdout=split, scheduler=scheduler, keep_maps=bool(figure_out),
+            robot_radius=radius,
         )
 
     for r in results:
@@ -273,10 +303,25 @@ def compare(inputs, modes_text, detector, params_file, json_out, csv_out, figure
     if figure_out:
         from aogm_cli.report.figure import comparison_figure_png
 
-        figure = comparison_figure_png(entries, results, labels)
+        figure = comparison_figure_png(entries, results, labels, radius)
     _commit_outputs(results, record, json_out, csv_out, figure_out, figure, maps_dir, quiet)
     gate_failed = _report_gates(gates, require_checks, results, labels, exit_now=not failures)
     report_failures(failures, lambda key: f"{key[0]} ({key[1]})", gate_failed)
+
+
+def _robot_radius(value: float | None) -> float:
+    """--robot-radius, checked: a positive number of metres (default ``evaluation.planner.ROBOT_RADIUS``)."""
+    import math
+
+    from aogm_cli.evaluation.planner import ROBOT_RADIUS
+
+    if value is None:
+        return ROBOT_RADIUS
+    if not (math.isfinite(value) and value > 0):
+        from aogm_cli.core.errors import InputError
+
+        raise InputError(f"expected a positive number of metres, got {value:g}", key="--robot-radius")
+    return value
 
 
 def _resume(entries, modes, maps_dir, params, detector, split, resume: bool, quiet: bool) -> set[str]:
@@ -297,7 +342,7 @@ def _resume(entries, modes, maps_dir, params, detector, split, resume: bool, qui
 
 # options that only mapping uses: refused with --from-json (parameter name -> option)
 MAPPING_OPTIONS = {"figure_out": "--figure", "maps_dir": "--maps-dir", "modes_text": "--modes", "detector": "--detector",
-                   "params_file": "--params", "jobs": "--jobs", "scheduler": "--scheduler", "resume": "--resume", "holdout": "--holdout", "calibrate": "--calibrate/--no-calibrate",
+                   "params_file": "--params", "jobs": "--jobs", "scheduler": "--scheduler", "resume": "--resume", "holdout": "--holdout", "robot_radius": "--robot-radius", "calibrate": "--calibrate/--no-calibrate",
                    "seed": "--seed", "max_memory": "--max-memory", "max_work": "--max-work"}
 
 
@@ -310,7 +355,7 @@ def _refuse_mapping_options(ctx: click.Context) -> None:
     for name, option in MAPPING_OPTIONS.items():
         source = ctx.get_parameter_source(name)
         if source is not None and source not in (ParameterSource.DEFAULT, ParameterSource.ENVIRONMENT):
-            need = "the maps" if name in ("figure_out", "maps_dir") else "mapping"
+            need = "the maps" if name in ("figure_out", "maps_dir", "robot_radius") else "mapping"
             raise InputError(f"needs {need}; --from-json reads results only (drop {option}, or compare the logs "
                              "or map files instead)", key=option)
 

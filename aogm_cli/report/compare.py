@@ -3,12 +3,15 @@ mode (optionally in worker processes), evaluate against the truth, and build the
 CONTRACT.md ("Metrics") and the CSV table. Maps of logs without truth are scored by their
 consistency with the log instead (``aogm_cli.consistency``). With a ``HoldoutSplit`` every map
 is made from the kept scans and also scored on the held-out ones (``evaluation.holdout``), truth
-or not. Results JSON files read back and merge (``merge_results_files``) without mapping again.
+or not. Every map is also measured as a planner sees it (``evaluation.planner``): against the
+truth, or without truth against the standard map of the same log and grid. Results JSON files
+read back and merge (``merge_results_files``) without mapping again.
 """
 
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
 import json
 import math
@@ -27,6 +30,14 @@ from aogm_cli.core.occupancy_map import MODES, OccupancyMap
 from aogm_cli.evaluation.consistency import map_consistency
 from aogm_cli.evaluation.holdout import SCORE_KEYS, HoldoutSplit, holdout_scores, reference_json, split_log
 from aogm_cli.evaluation.metrics import evaluate
+from aogm_cli.evaluation.planner import (
+    ROBOT_RADIUS,
+    STANDARD_ITSELF,
+    STANDARD_KEYS,
+    TRUTH_KEYS,
+    against_standard,
+    planner_metrics,
+)
 from aogm_cli.io.detectorfile import detector_identity
 from aogm_cli.io.h5file import open_input
 from aogm_cli.io.logfile import LogReader
@@ -37,6 +48,7 @@ from aogm_cli.io.provenance import file_sha256, read_provenance
 from aogm_cli.mapping.params import MapParams
 
 METRIC_KEYS = ("accuracy", "occupied_precision", "occupied_recall", "occupied_f1", "brier")
+PLANNER_KEYS = (*TRUTH_KEYS, *STANDARD_KEYS)  # ``evaluation.planner``: with truth the first, without the others
 CONSISTENCY_KEYS = ("method", "readings", "endpoint_occupied", "endpoint_occupied_8", "endpoint_free", "free_cells",
                     "free_contradicted")  # ``evaluation.consistency.summarize``
 LEARNED_KEYS = ("sigma", "p_rand", "p_hit", "p_max")  # ``mapping.calibration.LEARNED``: stats["calibration"]["final"]
@@ -63,7 +75,9 @@ class LogEntry:
 class ModeResult:
     """One (log, mode): the map, its runtime, its metrics (None without truth), where it came
     from, and for a log without truth its consistency with the log (``consistency.log_consistency``).
-    A result read back from a --json file (``read_results_file``) has no map."""
+    ``planner``: what a planner sees (``evaluation.planner``): leak, block and surface_recall with
+    truth, walls_kept and leak_vs_standard without (a result read back from an older file may
+    lack them). A result read back from a --json file (``read_results_file``) has no map."""
 
     log: str
     world: str
@@ -79,6 +93,7 @@ class ModeResult:
     params: dict = field(default_factory=dict)  # the parameters the map records
     calibration: dict | None = None  # the map's stats["calibration"]: the forward model it learned
     results_file: str | None = None  # the --json file it was read back from
+    planner: dict | None = None  # PLANNER_KEYS -> value (NaN: nothing to measure)
 
     @property
     def truth(self) -> bool:
@@ -273,34 +288,38 @@ def compute_maps(
     holdout: HoldoutSplit | None = None,
     scheduler: str | None = None,
     keep_maps: bool = True,
+    robot_radius: float = ROBOT_RADIUS,
 ) -> tuple[dict[tuple[int, str], ModeResult], list[Failure]]:
     """Map and evaluate each (log index, mode) of ``tasks`` (from the scans ``holdout`` keeps,
     when given), each as one task of ``core.executors.run_tasks``: here, in ``jobs`` local
     worker processes, or on the Dask cluster at ``scheduler``. A task takes the log's path and
-    gives back its ``ModeResult``: metrics, consistency or held-out scores are computed where the
-    map was made, and the map itself comes back only with ``keep_maps`` (a figure or --maps-dir
-    needs it), so that a cluster's results are small records. Returns the results and the tasks
-    that failed (keyed (log index, mode)); a failed task does not stop the others.
+    gives back its ``ModeResult``: metrics, consistency, held-out scores and what a planner with
+    a robot of ``robot_radius`` sees are computed where the map was made, and the map itself
+    comes back only with ``keep_maps`` (a figure or --maps-dir needs it), so that a cluster's
+    results are small records. Returns the results and the tasks that failed (keyed (log index,
+    mode)); a failed task does not stop the others.
 
     ``on_map`` is called in this process as each result comes in (in order of completion).
     """
     limits = budget.active_limits()
     identity = detector_identity(detector) if any(mode == "adaptive" for _, mode in tasks) else None
     work = [Task((i, mode), map_and_evaluate, (entries[i].path, entries[i].world, mode, params, detector, holdout,
-                                               limits, identity, keep_maps)) for i, mode in tasks]
+                                               limits, identity, keep_maps, robot_radius)) for i, mode in tasks]
     return run_tasks(work, jobs, scheduler, on_done=(lambda key, r: on_map(key[0], key[1], r)) if on_map else None)
 
 
 def map_and_evaluate(path: str, world: str, mode: str, params: MapParams, detector: str | None,
                      holdout: HoldoutSplit | None, limits: Limits | None, identity: dict | None,
-                     keep_map: bool) -> ModeResult:
+                     keep_map: bool, robot_radius: float = ROBOT_RADIUS) -> ModeResult:
     """One task of ``compute_maps``, in whichever process runs it: map the log at ``path``
-    (``map_one``), evaluate the map there (``evaluate_result``: the truth read from the log),
-    and drop the map from the result unless ``keep_map``."""
+    (``map_one``), evaluate the map there (``evaluate_result``: the truth read from the log; a
+    log without truth also gets its standard map made here for the planner's comparison), and
+    drop the map from the result unless ``keep_map``."""
     m = map_one(path, mode, params, detector, holdout, limits)
     with LogReader(path) as reader:
         truth = reader.truth()
-    result = evaluate_result(LogEntry(path, world, truth), mode, m, None, False, identity, holdout)
+    result = evaluate_result(LogEntry(path, world, truth), mode, m, None, False, identity, holdout,
+                             Planning(robot_radius, params, limits))
     if not keep_map:
         result.map = None
     return result
@@ -320,11 +339,25 @@ def _map_detector(m: OccupancyMap, reused: bool, identity: dict | None) -> dict 
     return found if recorded is None else {"path": found["path"], "sha256": recorded}
 
 
+@dataclass(frozen=True)
+class Planning:
+    """How ``evaluate_result`` measures what a planner sees (``evaluation.planner``): the robot's
+    radius, and for a log without truth how to make the standard map to compare with when none
+    is at hand (``standard``): ``params`` (at the map's resolution) under ``limits``."""
+
+    robot_radius: float = ROBOT_RADIUS
+    params: MapParams = field(default_factory=MapParams)
+    limits: Limits | None = None
+    standard: OccupancyMap | None = None  # the standard map of the same log, scans and grid, when at hand
+
+
 def evaluate_result(entry: LogEntry, mode: str, m: OccupancyMap, map_file: str | None, reused: bool,
-                    detector: dict | None = None, holdout: HoldoutSplit | None = None) -> ModeResult:
+                    detector: dict | None = None, holdout: HoldoutSplit | None = None,
+                    planning: Planning | None = None) -> ModeResult:
     """Metrics against the truth; without truth, the map's consistency with its log instead;
-    with ``holdout``, also the scores on the held-out scans (``evaluation.holdout.holdout_scores``).
-    ``detector``: this run's detector identity (``detector_identity``)."""
+    with ``holdout``, also the scores on the held-out scans (``evaluation.holdout.holdout_scores``);
+    and what a planner sees (``planner_values``). ``detector``: this run's detector identity
+    (``detector_identity``)."""
     metrics = None
     consistency = None
     if entry.truth is not None:
@@ -335,11 +368,39 @@ def evaluate_result(entry: LogEntry, mode: str, m: OccupancyMap, map_file: str |
     else:
         consistency = map_consistency(entry.path, m)
     scores = None
-    if holdout is not None:
-        with LogReader(entry.path) as reader:
+    with LogReader(entry.path) as reader:
+        poses = reader.poses()
+        if holdout is not None:
             scores = holdout_scores(reader, m, holdout)
+    planner = planner_values(entry, mode, m, poses, planning or Planning(), holdout, map_file)
     return ModeResult(entry.path, entry.world, mode, float(m.runtime_s), metrics, m, map_file, reused, consistency,
-                      _map_detector(m, reused, detector), scores, m.params, _plain(m.stats.get("calibration")))
+                      _map_detector(m, reused, detector), scores, m.params, _plain(m.stats.get("calibration")),
+                      planner=planner)
+
+
+def planner_values(entry: LogEntry, mode: str, m: OccupancyMap, poses, planning: Planning,
+                   holdout: HoldoutSplit | None = None, map_file: str | None = None) -> dict:
+    """What a planner with a robot of ``planning.robot_radius`` sees in map ``m`` (``evaluation.planner``),
+    starting at the log's ``poses``: leak, block and surface_recall against the log's truth;
+    without truth, walls_kept and leak_vs_standard against the standard map of the same log and
+    grid (``planning.standard`` when it is on that grid, else made here from the same scans:
+    ``holdout`` keeps the same ones), which itself has 1 and 0."""
+    if entry.truth is not None:
+        values = planner_metrics(m.grid, m.probability, m.observed, entry.truth.occupancy, poses, planning.robot_radius)
+        return {k: values[k] for k in TRUTH_KEYS}
+    if mode == "standard":
+        return dict(STANDARD_ITSELF)
+    standard = planning.standard
+    if standard is None or standard.grid != m.grid:
+        params = dataclasses.replace(planning.params, resolution=m.grid.resolution)
+        standard = map_one(entry.path, "standard", params, None, holdout, planning.limits)
+    if standard.grid != m.grid:
+        raise InputError(f"grid {m.grid.height}x{m.grid.width} at {m.grid.origin} does not match the grid "
+                         f"{standard.grid.height}x{standard.grid.width} at {standard.grid.origin} of the standard map "
+                         f"of {entry.path}, which the map is compared with", file=map_file or entry.path,
+                         key="/map/probability")
+    return against_standard(m.grid, m.probability, m.observed, standard.probability, standard.observed, poses,
+                            planning.robot_radius)
 
 
 def _plain(value):
@@ -362,6 +423,7 @@ def run_comparison(
     holdout: HoldoutSplit | None = None,
     scheduler: str | None = None,
     keep_maps: bool = True,
+    robot_radius: float = ROBOT_RADIUS,
 ) -> tuple[list[ModeResult], list[Failure]]:
     """Every log in every mode: given maps reused, the others computed (``compute_maps``: here,
     in ``jobs`` processes or on the Dask cluster at ``scheduler``) and written to
@@ -369,17 +431,22 @@ def run_comparison(
     commit with the command's other outputs); results per log, then per mode, and the tasks that
     failed (``Failure.key``: (log path, mode)), which have no result. With ``holdout``, every map
     is made from (or, given, must record) the kept scans and is scored on the held-out ones.
-    Without ``keep_maps`` (and ``maps_dir``) the results of maps made here hold no map."""
+    Without ``keep_maps`` (and ``maps_dir``) the results of maps made here hold no map. What a
+    planner sees is measured for a robot of ``robot_radius``; a given map of a log without truth
+    is compared with that log's standard map when it is at hand (given, or made here and kept)."""
     tasks = [(i, mode) for i, e in enumerate(entries) for mode in modes if mode not in e.maps]
     targets = maps_dir_targets(entries, modes, maps_dir) if maps_dir else {}
     given = load_given_maps(entries, modes, holdout)
     computed, failed = compute_maps(entries, tasks, params, detector, jobs, on_map, holdout, scheduler,
-                                    keep_maps=keep_maps or bool(maps_dir))
+                                    keep_maps=keep_maps or bool(maps_dir), robot_radius=robot_radius)
     results = []
     for i, e in enumerate(entries):
         for mode in modes:
             if (i, mode) in given:
-                results.append(evaluate_result(e, mode, given[(i, mode)], e.maps[mode], True, holdout=holdout))
+                standard = given.get((i, "standard")) or getattr(computed.get((i, "standard")), "map", None)
+                planning = Planning(robot_radius, params, standard=standard)
+                results.append(evaluate_result(e, mode, given[(i, mode)], e.maps[mode], True, holdout=holdout,
+                                               planning=planning))
             elif (i, mode) in computed:  # else failed
                 result = computed[(i, mode)]
                 result.log = e.path  # as given here (a worker may see the path otherwise)
@@ -465,11 +532,12 @@ def checks_passed(metrics: dict | None) -> float | None:
 
 
 def metric_values(result: ModeResult) -> dict[str, float | None]:
-    """The values a gate can name for one (log, mode): metrics, runtime, checks_passed and the
-    held-out scores (None when not computed)."""
+    """The values a gate can name for one (log, mode): metrics, runtime, checks_passed, what a
+    planner sees and the held-out scores (None when not computed)."""
     values: dict[str, float | None] = {k: (None if result.metrics is None else result.metrics[k]) for k in METRIC_KEYS}
     values["runtime"] = result.runtime_s
     values["checks_passed"] = checks_passed(result.metrics)
+    values.update({k: (result.planner or {}).get(k) for k in PLANNER_KEYS})
     for k in SCORE_KEYS:
         values[k] = None if result.holdout is None else result.holdout[k]
     return values
@@ -528,17 +596,18 @@ def _finite(v):
     return None if isinstance(v, float) and not math.isfinite(v) else v
 
 
-def metrics_json(metrics: dict | None, holdout: dict | None = None) -> dict | None:
-    """The metrics object of CONTRACT.md (NaN, e.g. nothing observed, becomes null), plus the
-    held-out scores when given; only those without truth, None with neither."""
-    out = None
+def metrics_json(metrics: dict | None, holdout: dict | None = None, planner: dict | None = None) -> dict | None:
+    """The metrics object of CONTRACT.md (NaN, e.g. nothing observed, becomes null), plus what a
+    planner sees and the held-out scores when given; only those without truth, None with none."""
+    out = {}
     if metrics is not None:
         out = {k: _finite(float(metrics[k])) for k in METRIC_KEYS}
+    out.update({k: _finite(float(v)) for k, v in (planner or {}).items()})
+    if metrics is not None:
         out["checks"] = [{"name": c["name"], "passed": bool(c["passed"])} for c in metrics["checks"]]
     if holdout is not None:
-        out = out or {}
         out.update({k: _finite(holdout[k]) for k in SCORE_KEYS})
-    return out
+    return out or None
 
 
 def consistency_json(consistency: dict | None) -> dict | None:
@@ -556,9 +625,10 @@ def results_json(results: list[ModeResult], holdout: dict | None = None, provena
     (``{"path", "sha256"}`` for an adaptive map, else null) and ``calibration`` (the map's
     ``stats["calibration"]``: the forward model it learned, per round and ``final``, else null).
 
-    A result of a log without truth has ``metrics`` null and a ``consistency`` object beside
-    it (``aogm_cli.consistency``: method, readings, endpoint_occupied, endpoint_occupied_8,
-    endpoint_free, free_cells, free_contradicted).
+    A result of a log with truth has in ``metrics`` also what a planner sees (leak, block,
+    surface_recall); one of a log without truth has there walls_kept and leak_vs_standard only,
+    and a ``consistency`` object beside it (``aogm_cli.consistency``: method, readings,
+    endpoint_occupied, endpoint_occupied_8, endpoint_free, free_cells, free_contradicted).
 
     With held-out scores, each result's ``metrics`` also holds ``evaluation.holdout.SCORE_KEYS``
     (and without truth only those), its ``params["holdout"]`` the split, and the top level a
@@ -568,7 +638,7 @@ def results_json(results: list[ModeResult], holdout: dict | None = None, provena
     out = []
     for r in results:
         item = {"log": r.log, "world": r.world, "mode": r.mode, "truth": r.truth, "runtime_s": _finite(float(r.runtime_s)),
-                "metrics": metrics_json(r.metrics, r.holdout), "params": r.params, "detector": r.detector,
+                "metrics": metrics_json(r.metrics, r.holdout, r.planner), "params": r.params, "detector": r.detector,
                 "calibration": r.calibration}
         if r.consistency is not None:
             item["consistency"] = consistency_json(r.consistency)
@@ -595,14 +665,15 @@ def json_bytes(results: list[ModeResult], holdout: dict | None = None, provenanc
 # Every run writes these columns in this order (empty cells where a value does not apply), then one
 # ``check:<name>`` column per world check, in order of first appearance.
 CSV_COLUMNS = ("log", "world", "mode", "truth", "runtime_s", "runtime_vs_standard", *METRIC_KEYS, "checks_passed",
-               *(f"consistency_{k}" for k in CONSISTENCY_KEYS), *SCORE_KEYS,
+               *PLANNER_KEYS, *(f"consistency_{k}" for k in CONSISTENCY_KEYS), *SCORE_KEYS,
                *(f"learned_{k}" for k in LEARNED_KEYS), "learned_from_readings")
 
 
 def csv_table(results: list[ModeResult]) -> tuple[list[str], list[dict]]:
     """(columns, one row per result {column: value, None where it does not apply}) of ``--csv``:
-    ``CSV_COLUMNS`` (the truth metrics, the consistency of a log without truth, the held-out
-    scores, the forward model the map's calibration learned), then ``check:<name>`` columns."""
+    ``CSV_COLUMNS`` (the truth metrics, what a planner sees, the consistency of a log without
+    truth, the held-out scores, the forward model the map's calibration learned), then
+    ``check:<name>`` columns."""
     relative = relative_runtimes(results)
     checks = list(dict.fromkeys(f"check:{c['name']}" for r in results if r.metrics for c in r.metrics["checks"]))
     rows = []
@@ -612,6 +683,7 @@ def csv_table(results: list[ModeResult]) -> tuple[list[str], list[dict]]:
         row = {"log": r.log, "world": r.world, "mode": r.mode, "truth": r.truth, "runtime_s": r.runtime_s,
                "runtime_vs_standard": relative[(r.log, r.mode)], "checks_passed": checks_passed(r.metrics),
                **{k: (r.metrics or {}).get(k) for k in METRIC_KEYS},
+               **{k: (r.planner or {}).get(k) for k in PLANNER_KEYS},
                **{f"consistency_{k}": (r.consistency or {}).get(k) for k in CONSISTENCY_KEYS},
                **{k: (r.holdout or {}).get(k) for k in SCORE_KEYS},
                **{f"learned_{k}": final.get(k) for k in LEARNED_KEYS},
@@ -781,16 +853,19 @@ class _ResultsReader:
             ok = (lambda v: isinstance(v, str)) if k == "method" else _number_or_null
             get(consistency, k, f"{where}.consistency", ok, "a string" if k == "method" else "a number or null")
         wanted = truth or holdout  # metrics hold the truth metrics, the held-out scores, or both
-        metrics = get(item, "metrics", where, lambda v: isinstance(v, dict) if wanted else v is None,
-                      "an object" if wanted else "null (no truth and no held-out scores)")
+        metrics = get(item, "metrics", where, lambda v: isinstance(v, dict) or (v is None and not wanted),
+                      "an object" if wanted else "an object or null (no truth and no held-out scores)")
         scores = None
         if holdout:
             scores = {k: _nan(get(metrics, k, f"{where}.metrics", _number_or_null, "a number or null"))
                       for k in SCORE_KEYS}
         truth_metrics = self.truth_metrics(metrics, f"{where}.metrics") if truth else None
+        # what a planner sees: optional, as files written before it was measured lack it
+        found = {k: get(metrics, k, f"{where}.metrics", _number_or_null, "a number or null")
+                 for k in (TRUTH_KEYS if truth else STANDARD_KEYS) if k in (metrics or {})}
         return ModeResult(log, world, mode, _nan(runtime), truth_metrics, None, consistency=consistency,
                           detector=detector, holdout=scores, params=params, calibration=calibration,
-                          results_file=self.path)
+                          results_file=self.path, planner={k: _nan(v) for k, v in found.items()} or None)
 
     def truth_metrics(self, metrics: dict, where: str) -> dict:
         out = {k: _nan(self.get(metrics, k, where, _number_or_null, "a number or null")) for k in METRIC_KEYS}

@@ -1,12 +1,15 @@
 """The comparison figure of ``aogm compare``, laid out like the paper's: one row per log, panels
-truth | standard | em | adaptive (clusters outlined), each map titled with its accuracy and runtime.
+truth | standard | em | adaptive (clusters outlined), each map titled with its accuracy, leak and
+runtime and tinted where a planner reaches in it (``evaluation.planner``), with what it reaches
+beyond the truth's reach in red.
 """
 
 from __future__ import annotations
 
+from aogm_cli.evaluation.planner import ROBOT_RADIUS, map_reach, truth_reach
 from aogm_cli.io.logfile import LogReader
 from aogm_cli.report.compare import LogEntry, ModeResult
-from aogm_cli.report.picture import draw_map, draw_truth, figure_png
+from aogm_cli.report.picture import draw_map, draw_reach, draw_truth, figure_png
 
 PANEL_WIDTH = 4.0  # inches
 
@@ -21,16 +24,23 @@ def _pyplot():
 
 
 def panel_title(result: ModeResult) -> str:
-    """``em  acc 0.973  0.21 s``; accuracy omitted without truth."""
+    """``em  acc 0.973  leak 0.012  0.21 s``; accuracy omitted without truth, and leak there
+    leak_vs_standard (``lvs``)."""
     parts = [result.mode]
     if result.metrics is not None:
         parts.append(f"acc {result.metrics['accuracy']:.3f}")
+    planner = result.planner or {}
+    for key, short in (("leak", "leak"), ("leak_vs_standard", "lvs")):
+        if planner.get(key) is not None:
+            parts.append(f"{short} {planner[key]:.3f}")
     parts.append(f"{result.runtime_s:.3g} s")
     return "  ".join(parts)
 
 
-def comparison_figure_png(entries: list[LogEntry], results: list[ModeResult], labels: dict[str, str]) -> bytes:
-    """The PNG: a truth panel and one panel per mode for every log."""
+def comparison_figure_png(entries: list[LogEntry], results: list[ModeResult], labels: dict[str, str],
+                          robot_radius: float = ROBOT_RADIUS) -> bytes:
+    """The PNG: a truth panel and one panel per mode for every log; each map tinted where the
+    planner of a robot of ``robot_radius`` reaches, leaked cells (truth logs) in red."""
     plt = _pyplot()
     by_log: dict[str, list[ModeResult]] = {}
     for r in results:
@@ -48,9 +58,11 @@ def comparison_figure_png(entries: list[LogEntry], results: list[ModeResult], la
     try:
         for row, e in zip(axes, entries, strict=True):
             label = labels.get(e.path, e.world)
+            with LogReader(e.path) as reader:
+                pose = reader.poses()
+            in_truth = None
             if e.truth is not None:
-                with LogReader(e.path) as reader:
-                    pose = reader.poses()
+                in_truth = truth_reach(e.truth.grid, e.truth.occupancy, pose, robot_radius)
                 draw_truth(row[0], e.truth.grid, e.truth.occupancy, pose, e.truth.checks, title=f"{label}: truth")
             else:
                 row[0].set_axis_off()
@@ -59,6 +71,8 @@ def comparison_figure_png(entries: list[LogEntry], results: list[ModeResult], la
             for ax, r in zip(row[1:], mode_results, strict=False):
                 m = r.map
                 draw_map(ax, m.grid, m.probability, m.observed, m.clusters, title=panel_title(r))
+                reach = map_reach(m.grid, m.probability, m.observed, pose, robot_radius)
+                draw_reach(ax, m.grid, reach, None if in_truth is None else reach & ~in_truth)
             for ax in row[1 + len(mode_results):]:
                 ax.set_axis_off()
         fig.tight_layout()

@@ -14,12 +14,14 @@ from dataclasses import dataclass
 from aogm_cli.core.errors import InputError
 from aogm_cli.core.occupancy_map import MODES
 from aogm_cli.evaluation.holdout import SCORE_KEYS
+from aogm_cli.evaluation.planner import STANDARD_KEYS, TRUTH_KEYS
 
-# metric names of a gate -> what they mean; runtime is runtime_s, checks_passed a fraction; the
-# held-out scores (``evaluation.holdout``) exist only with --holdout
+# metric names of a gate -> what they mean; runtime is runtime_s, checks_passed a fraction; what a
+# planner sees (``evaluation.planner``: leak, block, surface_recall with truth, walls_kept and
+# leak_vs_standard without); the held-out scores (``evaluation.holdout``) exist only with --holdout
 HOLDOUT_METRICS = SCORE_KEYS
 METRICS = ("accuracy", "occupied_precision", "occupied_recall", "occupied_f1", "brier", "runtime", "checks_passed",
-           *HOLDOUT_METRICS)
+           *TRUTH_KEYS, *STANDARD_KEYS, *HOLDOUT_METRICS)
 COMPARISONS = ("<=", ">=", "==", "!=", "<", ">")
 OPTION = "--require"
 MAX_LENGTH = 500  # characters of one expression

@@ -2,6 +2,8 @@
 
 Free is white, occupied black, grey levels between; unobserved cells are drawn in a pale
 blue so that unknown never looks like p = 0.5; clusters are outlined in orange; axes in metres.
+A world's checks are drawn green (passable) or red (blocked); where a planner drives in a map
+is tinted green, and red where it leaks past what the robot can reach in truth.
 """
 
 from __future__ import annotations
@@ -11,9 +13,13 @@ import io
 import numpy as np
 
 from aogm_cli.core.grid import GridSpec
+from aogm_cli.core.log import check_kind
 
 UNKNOWN_RGB = (0.80, 0.87, 0.96)
 CLUSTER_COLOUR = "#ff7f0e"
+CHECK_COLOURS = {"passable": "#2ca02c", "blocked": "#d62728"}  # a world check's endpoints, by kind
+REACH_RGBA = (0.17, 0.63, 0.17, 0.25)  # translucent green: cells the planner reaches
+LEAK_RGBA = (0.84, 0.15, 0.16, 0.75)  # red: cells it reaches that the robot cannot reach in truth
 
 
 def _pyplot():
@@ -84,13 +90,22 @@ def draw_truth(ax, grid: GridSpec, occupancy, pose=None, checks=(), title: str |
         ax.plot(pose[:, 0], pose[:, 1], "-", color="#1f77b4", linewidth=1.0, label="trajectory")
         ax.plot(pose[0, 0], pose[0, 1], "o", color="#1f77b4", markersize=4)
     for check in checks:
-        p = check.get("passable")
-        if not p:
-            continue
-        (x0, y0), (x1, y1) = p["from"], p["to"]
-        ax.plot([x0, x1], [y0, y1], ":", color="#2ca02c", linewidth=1.0)
-        ax.plot([x0, x1], [y0, y1], "s", color="#2ca02c", markersize=4)
-        ax.annotate(check["name"], (x1, y1), fontsize=7, color="#2ca02c")
+        kind = check_kind(check)
+        colour = CHECK_COLOURS[kind]
+        (x0, y0), (x1, y1) = check[kind]["from"], check[kind]["to"]
+        ax.plot([x0, x1], [y0, y1], ":", color=colour, linewidth=1.0)
+        ax.plot([x0, x1], [y0, y1], "s" if kind == "passable" else "x", color=colour, markersize=4)
+        ax.annotate(check["name"], (x1, y1), fontsize=7, color=colour)
+
+
+def draw_reach(ax, grid: GridSpec, reach, leaked=None) -> None:
+    """Tint the cells a planner reaches (``planner.map_reach``) over a drawn map, and the cells of
+    them that it cannot reach in truth (``leaked``) in another colour."""
+    rgba = np.zeros((*grid.shape, 4))
+    rgba[np.asarray(reach, dtype=bool)] = REACH_RGBA
+    if leaked is not None:
+        rgba[np.asarray(leaked, dtype=bool)] = LEAK_RGBA
+    ax.imshow(rgba, origin="lower", extent=grid.extent, interpolation="nearest")
 
 
 def truth_png(log, title: str | None = None) -> bytes:
