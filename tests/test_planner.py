@@ -2,16 +2,15 @@
 leak_vs_standard on hand-made grids with hand-counted cells, and ``aogm compare`` reporting them
 (table, JSON, CSV, gates, --robot-radius, --from-json of older files, logs without truth)."""
 
-import csv
 import dataclasses
 import json
 
 import numpy as np
 import pytest
 import yaml
-from click.testing import CliRunner
+from test_compare import WORLD as DOOR  # a ~20-scan corridor with a door into a room
+from test_compare_tables import read_csv, run
 
-from aogm_cli.cli import main
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.evaluation.planner import against_standard, map_reach, planner_metrics
 from aogm_cli.io.logfile import read_log, write_log
@@ -97,43 +96,18 @@ def test_against_the_standard_map():
 
 # --- aogm compare ---------------------------------------------------------------------------------
 
-WORLD = """
-name: tiny_room
-bounds: [-0.5, -0.5, 5.5, 3.5]
-truth_resolution: 0.1
-walls:
-  - points: [[0, 0], [5, 0], [5, 2], [0, 2], [0, 0]]
-  - points: [[0, 2], [0, 3.2], [5, 3.2], [5, 2]]
-trajectory:
-  waypoints: [[0.6, 1.0], [4.4, 1.0]]
-  speed: 0.5
-  scan_period: 0.4
-sonar: {count: 12, max_range: 3.0}
-checks:
-  - name: along
-    passable: {from: [0.6, 1.0], to: [4.4, 1.0], robot_radius: 0.2}
-  - name: through_the_wall
-    blocked: {from: [2.5, 1.0], to: [2.5, 2.6], robot_radius: 0.2}
+WORLD = DOOR + """  - name: behind_the_wall
+    blocked: {from: [1.0, 1.0], to: [1.0, 3.0], robot_radius: 0.2}
 """
 TRUTH_KEYS = ("leak", "block", "surface_recall")
 STANDARD_KEYS = ("walls_kept", "leak_vs_standard")
 
 
-def run(*args):
-    return CliRunner().invoke(main, [str(a) for a in args])
-
-
-def read_csv(path):
-    with open(path, newline="") as fh:
-        rows = list(csv.reader(fh))
-    return rows[0], [dict(zip(rows[0], row, strict=True)) for row in rows[1:]]
-
-
 @pytest.fixture(scope="module")
 def logs(tmp_path_factory):
-    """A short log of a corridor below a closed room (truth), and the same log without its truth."""
+    """A short log of a corridor with a door into a room (truth), and the same log without its truth."""
     folder = tmp_path_factory.mktemp("planner")
-    world = parse_world(yaml.safe_load(WORLD), file="tiny_room.yaml", text=WORLD)
+    world = parse_world(yaml.safe_load(WORLD), file="tiny_door.yaml", text=WORLD)
     log = simulate(world, seed=1)
     write_log(folder / "room.h5", log)
     write_log(folder / "bare.h5", dataclasses.replace(log, truth=None))
@@ -160,7 +134,7 @@ def test_compare_reports_leak_block_and_surface_recall(logs, compared):
         m = read_map_file(out / "maps" / f"room_{r['mode']}.h5")
         expected = planner_metrics(m.grid, m.probability, m.observed, truth.occupancy, poses, 0.2)
         assert {k: r["metrics"][k] for k in TRUTH_KEYS} == pytest.approx({k: expected[k] for k in TRUTH_KEYS})
-        assert {c["name"] for c in r["metrics"]["checks"]} == {"along", "through_the_wall"}
+        assert [c["name"] for c in r["metrics"]["checks"]] == ["door_passable", "through_wall", "behind_the_wall"]
     header, rows = read_csv(out / "r.csv")
     assert header[header.index("checks_passed") + 1:][:5] == [*TRUTH_KEYS, *STANDARD_KEYS]
     for row, r in zip(rows, doc["results"], strict=True):
@@ -190,7 +164,7 @@ def test_a_gate_on_a_planner_metric_fails_with_its_numbers(compared):
     leak = doc["results"][1]["metrics"]["leak"]
     result = run("compare", "--from-json", out / "r.json", "--require", "em.leak > 2", "-q")
     assert result.exit_code == 1
-    assert f"FAILED tiny_room: em.leak > 2  ({leak:.6g} > 2)" in result.output
+    assert f"FAILED tiny_door: em.leak > 2  ({leak:.6g} > 2)" in result.output
 
 
 def test_from_json_reads_older_files_without_the_planner_metrics(compared, tmp_path, monkeypatch):
