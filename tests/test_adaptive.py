@@ -12,11 +12,12 @@ from click.testing import CliRunner
 from aogm_cli.cli import main
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.io.detectorfile import load_detector, save_detector
+from aogm_cli.io.logfile import LogReader
 from aogm_cli.io.mapfile import read_map_file
 from aogm_cli.mapping import cluster
 from aogm_cli.mapping.adaptive import coupled_groups
 from aogm_cli.mapping.cluster import label_clusters
-from aogm_cli.mapping.em import em_problem, em_readings, find_root
+from aogm_cli.mapping.em import em_problem, em_readings, find_root, footprint
 from aogm_cli.mapping.modes import map_file
 from aogm_cli.mapping.params import resolve_params
 from aogm_cli.mapping.sensor_models.cone import build_cone_templates
@@ -54,7 +55,10 @@ def test_em_changes_nothing_outside_the_clusters(door_log):
     params = resolve_params()
     adaptive = map_file(door_log, "adaptive", params)
     standard = map_file(door_log, "standard", params)
-    outside = adaptive.clusters == 0
+    # outside the clusters and the robot's footprint (cleared, as EM's map is)
+    with LogReader(door_log) as r:
+        body = footprint(standard.grid, r.poses(), r.sensor)
+    outside = (adaptive.clusters == 0) & ~body
     assert adaptive.stats["clusters"] > 0
     assert np.array_equal(adaptive.probability[outside], standard.probability[outside])
     assert np.array_equal(adaptive.occupied[outside], ((standard.log_odds > 0) & standard.observed)[outside])
@@ -64,6 +68,7 @@ def test_em_changes_nothing_outside_the_clusters(door_log):
     assert np.all(standard.observed[inside])
     unseen = standard.observed & ~adaptive.observed
     assert unseen.any() and np.all(inside[unseen]) and np.all(standard.probability[unseen] <= 0.5)
+    assert np.all(adaptive.observed[body]) and np.all(adaptive.probability[body] < 0.5)
 
 
 def test_contested_cells_alone_make_clusters(door_log, tmp_path):

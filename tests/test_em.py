@@ -200,3 +200,22 @@ def test_hidden_cells_keep_the_standard_estimate_only_when_asked():
     unseen = residual_into(probability, result, dataclasses.replace(CONFIG, hidden="unobserved"))
     assert unseen.tolist() == [3]
     np.testing.assert_allclose(probability, [0.8, residual[1], 0.9, 0.4, 0.8])
+
+
+
+def test_planner_view_reports_unseen_cells_unobserved_and_clears_the_footprint():
+    """On a 3 x 4 grid: the unseen cells become unobserved, the footprint's cells observed and
+    at most the free probability, whatever EM or the standard map held there."""
+    from aogm_cli.core.log import SensorSpec
+    from aogm_cli.mapping.em import footprint, planner_view
+
+    grid = GridSpec(0.0, 0.0, 1.0, 3, 4)
+    sensor = SensorSpec(mount=np.array([[1.0, 0.0, 0.0], [0.0, 1.5, 1.6]]))
+    body = footprint(grid, np.array([[0.5, 0.5, 0.0]]), sensor)  # ring radius 1: cell (0, 0) and its 4-neighbours
+    assert body.astype(int).tolist() == [[1, 1, 0, 0], [1, 0, 0, 0], [0, 0, 0, 0]]
+    probability = np.array([0.9, 0.3, 0.6, 0.5, 0.2, 0.5, 0.4, 0.8, 0.3, 0.3, 0.3, 0.3])
+    observed = np.ones((3, 4), dtype=bool)
+    observed[0, 1] = False
+    out = planner_view(probability, observed, np.array([2, 4, 6]), body, 0.12)
+    assert out.astype(int).tolist() == [[1, 1, 0, 1], [1, 1, 0, 1], [1, 1, 1, 1]]
+    np.testing.assert_allclose(probability, [0.12, 0.12, 0.6, 0.5, 0.12, 0.5, 0.4, 0.8, 0.3, 0.3, 0.3, 0.3])

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
+from scipy import ndimage
 
 
 @dataclass(frozen=True)
@@ -71,6 +72,20 @@ class GridSpec:
         row = np.asarray(row)
         col = np.asarray(col)
         return (row >= 0) & (row < self.height) & (col >= 0) & (col < self.width)
+
+    def cells_near(self, x, y, distance: float) -> np.ndarray:
+        """Bool (H, W): cells whose centre lies within ``distance`` (m) of the cell of some point
+        (x, y) (non-finite points and points outside the grid are left out)."""
+        x = np.asarray(x, dtype=np.float64).reshape(-1)
+        y = np.asarray(y, dtype=np.float64).reshape(-1)
+        keep = np.isfinite(x) & np.isfinite(y)
+        rows, cols = self.world_to_cell(x[keep], y[keep])
+        inside = self.contains(rows, cols)
+        marks = np.zeros(self.shape, dtype=bool)
+        marks[rows[inside], cols[inside]] = True
+        if not marks.any():
+            return marks
+        return ndimage.distance_transform_edt(~marks) * self.resolution <= distance + 1e-9
 
     def attrs(self) -> dict:
         """Attributes written beside a grid in every file: resolution and origin."""

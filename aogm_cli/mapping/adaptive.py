@@ -17,7 +17,16 @@ from aogm_cli.core.log import Log
 from aogm_cli.core.occupancy_map import OccupancyMap
 from aogm_cli.mapping.calibration import em_with_model
 from aogm_cli.mapping.cluster import cone_bands, label_clusters, near_occupied, readings_near_clusters
-from aogm_cli.mapping.em import EMProblem, em_problem, em_readings, find_root, residual_into, run_em
+from aogm_cli.mapping.em import (
+    EMProblem,
+    em_problem,
+    em_readings,
+    find_root,
+    footprint,
+    planner_view,
+    residual_into,
+    run_em,
+)
 from aogm_cli.mapping.params import EMConfig, MapParams
 from aogm_cli.mapping.pipeline import Progress, Readings, forward_templates, lay_out_readings, log_grid, params_json
 from aogm_cli.mapping.standard import probability_from_log_odds, standard_pass
@@ -137,9 +146,9 @@ def map_adaptive(log, params: MapParams, detector, detector_name: str = "package
                                     params.em.forward)] = True
         config, em_stats, calibration = em_with_model(run, occupied, params, em_step, select=near)
         em_stats["t_index"] = t_index
-        unseen = residual_into(probability, em_stats.pop("result"), config)
-        observed = observed.copy()
-        observed.reshape(-1)[unseen] = False
+        free = probability_from_log_odds(np.float64(params.inverse_model.clamp_min))
+        observed = planner_view(probability, observed, residual_into(probability, em_stats.pop("result"), config),
+                                footprint(grid, whole.pose, sensor), free)
     probability = probability.reshape(grid.shape)
     probability[~observed] = 0.5
     t_index = em_stats.pop("t_index")

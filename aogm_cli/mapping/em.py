@@ -75,6 +75,29 @@ def residual_into(probability: np.ndarray, result: EMResult, config: EMConfig) -
     return hidden[probability[hidden] <= 0.5]
 
 
+def footprint(grid, poses: np.ndarray, sensor) -> np.ndarray:
+    """Bool (H, W): cells inside the sensor ring at some pose (within the smallest mount radius
+    of its position): the robot's own body stood there."""
+    radius = np.hypot(sensor.mount[:, 0], sensor.mount[:, 1])
+    return grid.cells_near(poses[:, 0], poses[:, 1], float(np.min(radius[np.isfinite(radius)])))
+
+
+def planner_view(probability: np.ndarray, observed: np.ndarray, unseen: np.ndarray, body: np.ndarray,
+                 free: float) -> np.ndarray:
+    """What EM's map claims, for a planner: the flat cells ``unseen`` (``residual_into``)
+    reported unobserved, and the robot's ``footprint`` ``body`` observed and free (probability
+    at most ``free``) whatever the readings say, as a costmap clears its footprint (no cone
+    covers those cells well, and a short random or crosstalk reading can leave an obstacle
+    there). ``probability`` (flat) is updated in place; returns the new observed (H, W)."""
+    out = observed.copy()
+    flat = out.reshape(-1)
+    flat[unseen] = False
+    cells = np.flatnonzero(body)
+    flat[cells] = True
+    probability[cells] = np.minimum(probability[cells], free)
+    return out
+
+
 def em_readings(rows, cols, bins, z, templates, grid, z_max: float, config: ForwardModelConfig,
                 select: np.ndarray | None = None) -> K.EMReadings:
     """The readings (sensor cells, heading bins, template ranges; flat arrays of one length, as
@@ -317,9 +340,9 @@ def map_em(log, params: MapParams, progress: Progress | None = None) -> Occupanc
     t_calibration = time.perf_counter() - t0 - seconds["index"] - seconds["em"]
     t0 = time.perf_counter()
     probability = probability_from_log_odds(log_odds, observed).reshape(-1)
-    unseen = residual_into(probability, result, config)
-    observed = observed.copy()
-    observed.reshape(-1)[unseen] = False
+    free = probability_from_log_odds(np.float64(params.inverse_model.clamp_min))
+    observed = planner_view(probability, observed, residual_into(probability, result, config),
+                            footprint(grid, whole.pose, log.sensor), free)
     probability = probability.reshape(grid.shape)
     probability[~observed] = 0.5
     t_em = seconds["em"] + time.perf_counter() - t0
