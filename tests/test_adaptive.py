@@ -40,7 +40,7 @@ def detector_with_threshold(tmp_path, threshold):
 
 
 def test_no_flagged_reading_gives_the_standard_map(door_log, tmp_path):
-    params = resolve_params(overrides={"adaptive": {"contested": 0.0}})  # no contested cells either
+    params = resolve_params(overrides={"adaptive": {"contested": 0.0, "weak": 0.0}})  # no contested or weak cells either
     never = detector_with_threshold(tmp_path, 1.0)  # p(y = 1) stays below 1 on these readings
     adaptive = map_file(door_log, "adaptive", params, str(never))
     standard = map_file(door_log, "standard", params)
@@ -75,12 +75,23 @@ def test_contested_cells_alone_make_clusters(door_log, tmp_path):
     """With no flagged reading, the cells whose occupied evidence alone reaches
     ``adaptive.contested`` but which the standard map holds free are still clustered."""
     never = detector_with_threshold(tmp_path, 1.0)
-    params = resolve_params()
+    params = resolve_params(overrides={"adaptive": {"weak": 0.0}})
     adaptive = map_file(door_log, "adaptive", params, str(never))
     standard = map_file(door_log, "standard", params)
     assert adaptive.stats["flagged_readings"] == 0 and adaptive.stats["clusters"] > 0
     inside = adaptive.clusters > 0
     assert np.all(standard.log_odds[inside] <= 0)
+
+
+def test_weak_cells_alone_make_clusters(door_log, tmp_path):
+    """With no flagged reading and no contested cell, the cells whose standard log-odds lie
+    within ``adaptive.weak`` of the prior are clustered, and only they."""
+    never = detector_with_threshold(tmp_path, 1.0)
+    params = resolve_params(overrides={"adaptive": {"contested": 0.0}})
+    adaptive = map_file(door_log, "adaptive", params, str(never))
+    standard = map_file(door_log, "standard", params)
+    weak = standard.observed & (np.abs(standard.log_odds) < params.adaptive.weak)
+    assert np.array_equal(adaptive.clusters > 0, weak)
 
 
 def test_adaptive_cli_writes_clusters_and_stats(door_log, tmp_path):

@@ -64,14 +64,18 @@ def find_clusters(run: Readings, flags: np.ndarray, log_odds: np.ndarray, observ
                   params: MapParams, contested: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """(cluster ids (H, W), count): a flagged cone's band near its range, z - band_below ..
     z + alpha (where the standard map thickens walls towards the robot), next to cells the
-    standard map holds occupied, minus cells it holds at its free clamp; and the ``contested``
-    cells (``contested_cells``) when given."""
+    standard map holds occupied, minus cells it holds at its free clamp; the ``contested``
+    cells (``contested_cells``) when given; and the cells whose log-odds lie within
+    ``adaptive.weak`` of the prior (the standard map barely knows them: space behind a wall
+    that one random reading crossed, which a wall EM opens would let a planner into)."""
     region, _ = cone_bands(run.grid, run.templates, run.rows[flags], run.cols[flags], run.bins[flags], run.z[flags],
                            params.adaptive.band_below, params.inverse_model.alpha)
     region &= observed & (log_odds > params.inverse_model.clamp_min)
     region &= near_occupied(log_odds, params.adaptive.near_occupied)
     if contested is not None:
         region |= contested & observed
+    if params.adaptive.weak > 0:
+        region |= observed & (np.abs(log_odds - params.inverse_model.l0) < params.adaptive.weak)
     return label_clusters(region)
 
 

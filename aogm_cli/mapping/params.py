@@ -95,11 +95,15 @@ class AdaptiveConfig:
     # multipath readings cleared, which no flagged band reaches (0: none). README, "What EM
     # reports where the data say nothing"
     contested: float = 1.0
+    # also cluster the cells whose standard log-odds lie within this of the prior (0: none):
+    # about one free reading's worth (l_free -0.41) or less, where EM decides free or unknown
+    weak: float = 0.45
 
     def validate(self) -> AdaptiveConfig:
         check_field_types(self)
-        if not self.contested >= 0:
-            raise InputError(f"expected a number >= 0 (log-odds), got {self.contested!r}", key="contested")
+        for key in ("contested", "weak"):
+            if not getattr(self, key) >= 0:
+                raise InputError(f"expected a number >= 0 (log-odds), got {getattr(self, key)!r}", key=key)
         if not self.band_below >= 0:
             raise InputError(f"expected a number >= 0 (m), got {self.band_below!r}", key="band_below")
         if isinstance(self.near_occupied, bool) or not isinstance(self.near_occupied, int) or self.near_occupied < 0:
