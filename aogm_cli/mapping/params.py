@@ -94,7 +94,7 @@ class AdaptiveConfig:
     # this many log-odds but which the standard map holds free: walls that too-long specular or
     # multipath readings cleared, which no flagged band reaches (0: none). README, "What EM
     # reports where the data say nothing"
-    contested: float = 1.0
+    contested: float = 0.5
     # also cluster the cells whose standard log-odds lie within this of the prior (0: none):
     # about one free reading's worth (l_free -0.41) or less, where EM decides free or unknown
     weak: float = 0.45
