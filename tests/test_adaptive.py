@@ -75,7 +75,7 @@ def test_contested_cells_alone_make_clusters(door_log, tmp_path):
     """With no flagged reading, the cells whose occupied evidence alone reaches
     ``adaptive.contested`` but which the standard map holds free are still clustered."""
     never = detector_with_threshold(tmp_path, 1.0)
-    params = resolve_params(overrides={"adaptive": {"weak": 0.0}})
+    params = resolve_params(overrides={"adaptive": {"weak": 0.0, "grow": 0}})
     adaptive = map_file(door_log, "adaptive", params, str(never))
     standard = map_file(door_log, "standard", params)
     assert adaptive.stats["flagged_readings"] == 0 and adaptive.stats["clusters"] > 0
@@ -87,11 +87,15 @@ def test_weak_cells_alone_make_clusters(door_log, tmp_path):
     """With no flagged reading and no contested cell, the cells whose standard log-odds lie
     within ``adaptive.weak`` of the prior are clustered, and only they."""
     never = detector_with_threshold(tmp_path, 1.0)
-    params = resolve_params(overrides={"adaptive": {"contested": 0.0}})
+    params = resolve_params(overrides={"adaptive": {"contested": 0.0, "grow": 0}})
     adaptive = map_file(door_log, "adaptive", params, str(never))
     standard = map_file(door_log, "standard", params)
     weak = standard.observed & (np.abs(standard.log_odds) < params.adaptive.weak)
     assert np.array_equal(adaptive.clusters > 0, weak)
+    # grown by one cell (8-connected), within the observed cells
+    params = resolve_params(overrides={"adaptive": {"contested": 0.0, "grow": 1}})
+    adaptive = map_file(door_log, "adaptive", params, str(never))
+    assert np.array_equal(adaptive.clusters > 0, standard.observed & cluster.grown(weak, 1))
 
 
 def test_adaptive_cli_writes_clusters_and_stats(door_log, tmp_path):

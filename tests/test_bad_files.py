@@ -269,6 +269,10 @@ def test_a_bad_detector_is_refused(good, tmp_path, edit, key):
         ("em: {p_hit: high}", "em.p_hit"),
         ("inverse_model: {l_occ: .inf}", "inverse_model.l_occ"),
         ("adaptive: {near_occupied: 1.5}", "adaptive.near_occupied"),
+        ("adaptive: {contested: -1}", "adaptive.contested"),
+        ("adaptive: {weak: .nan}", "adaptive.weak"),
+        ("adaptive: {grow: 1.5}", "adaptive.grow"),
+        ("em: {hidden: sometimes}", "em.hidden"),
         ("resolution: .nan", "resolution"),
     ],
 )

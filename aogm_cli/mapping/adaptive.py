@@ -16,7 +16,7 @@ import numpy as np
 from aogm_cli.core.log import Log
 from aogm_cli.core.occupancy_map import OccupancyMap
 from aogm_cli.mapping.calibration import em_with_model
-from aogm_cli.mapping.cluster import cone_bands, label_clusters, near_occupied, readings_near_clusters
+from aogm_cli.mapping.cluster import cone_bands, grown, label_clusters, near_occupied, readings_near_clusters
 from aogm_cli.mapping.em import (
     EMProblem,
     em_problem,
@@ -67,7 +67,9 @@ def find_clusters(run: Readings, flags: np.ndarray, log_odds: np.ndarray, observ
     standard map holds occupied, minus cells it holds at its free clamp; the ``contested``
     cells (``contested_cells``) when given; and the cells whose log-odds lie within
     ``adaptive.weak`` of the prior (the standard map barely knows them: space behind a wall
-    that one random reading crossed, which a wall EM opens would let a planner into)."""
+    that one random reading crossed, which a wall EM opens would let a planner into); all
+    grown by ``adaptive.grow`` cells (8-connected), so that a wall's back layers, which the
+    standard map holds free where too-long readings crossed them, are EM's to decide too."""
     region, _ = cone_bands(run.grid, run.templates, run.rows[flags], run.cols[flags], run.bins[flags], run.z[flags],
                            params.adaptive.band_below, params.inverse_model.alpha)
     region &= observed & (log_odds > params.inverse_model.clamp_min)
@@ -76,7 +78,7 @@ def find_clusters(run: Readings, flags: np.ndarray, log_odds: np.ndarray, observ
         region |= contested & observed
     if params.adaptive.weak > 0:
         region |= observed & (np.abs(log_odds - params.inverse_model.l0) < params.adaptive.weak)
-    return label_clusters(region)
+    return label_clusters(observed & grown(region, params.adaptive.grow))
 
 
 def em_in_clusters(run: Readings, clusters: np.ndarray, n_clusters: int, occupied: np.ndarray,

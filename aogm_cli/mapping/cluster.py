@@ -91,12 +91,17 @@ def cone_bands(grid: GridSpec, templates, rows, cols, bins, z_model, below: floa
     return swept.reshape(grid.shape), counts
 
 
+def grown(mask: np.ndarray, cells: int) -> np.ndarray:
+    """(H, W) bool: cells within ``cells`` steps (8-connected) of a cell of ``mask``."""
+    mask = np.asarray(mask, dtype=bool)
+    if cells <= 0 or not mask.any():
+        return mask
+    return ndimage.binary_dilation(mask, structure=np.ones((3, 3), dtype=bool), iterations=cells)
+
+
 def near_occupied(log_odds: np.ndarray, cells: int = 1) -> np.ndarray:
     """(H, W) bool: cells within ``cells`` steps (8-connected) of a cell with log-odds > 0."""
-    occupied = np.asarray(log_odds) > 0
-    if cells <= 0:
-        return occupied
-    return ndimage.binary_dilation(occupied, structure=np.ones((3, 3), dtype=bool), iterations=cells)
+    return grown(np.asarray(log_odds) > 0, cells)
 
 
 def label_clusters(region: np.ndarray) -> tuple[np.ndarray, int]:
