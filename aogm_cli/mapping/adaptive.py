@@ -28,7 +28,15 @@ from aogm_cli.mapping.em import (
     run_em,
 )
 from aogm_cli.mapping.params import EMConfig, MapParams
-from aogm_cli.mapping.pipeline import Progress, Readings, forward_templates, lay_out_readings, log_grid, params_json
+from aogm_cli.mapping.pipeline import (
+    Progress,
+    Readings,
+    forward_templates,
+    is_narrow_beam,
+    lay_out_readings,
+    log_grid,
+    params_json,
+)
 from aogm_cli.mapping.standard import probability_from_log_odds, standard_pass
 
 
@@ -69,7 +77,8 @@ def find_clusters(run: Readings, flags: np.ndarray, log_odds: np.ndarray, observ
     ``adaptive.weak`` of the prior (the standard map barely knows them: space behind a wall
     that one random reading crossed, which a wall EM opens would let a planner into); all
     grown by ``adaptive.grow`` cells (8-connected), so that a wall's back layers, which the
-    standard map holds free where too-long readings crossed them, are EM's to decide too."""
+    standard map holds free where too-long readings crossed them, are EM's to decide too (for
+    cones only: on the intel laser log growing cost adaptive's held-out AUC 0.9863 -> 0.9737)."""
     region, _ = cone_bands(run.grid, run.templates, run.rows[flags], run.cols[flags], run.bins[flags], run.z[flags],
                            params.adaptive.band_below, params.inverse_model.alpha)
     region &= observed & (log_odds > params.inverse_model.clamp_min)
@@ -78,7 +87,8 @@ def find_clusters(run: Readings, flags: np.ndarray, log_odds: np.ndarray, observ
         region |= contested & observed
     if params.adaptive.weak > 0:
         region |= observed & (np.abs(log_odds - params.inverse_model.l0) < params.adaptive.weak)
-    return label_clusters(observed & grown(region, params.adaptive.grow))
+    grow = 0 if is_narrow_beam(run.sensor, run.grid.resolution) else params.adaptive.grow
+    return label_clusters(observed & grown(region, grow))
 
 
 def em_in_clusters(run: Readings, clusters: np.ndarray, n_clusters: int, occupied: np.ndarray,
