@@ -1,8 +1,9 @@
 """The sonar simulator: a world in, a log with its truth out (``simulate``).
 
-Each reading casts a fan of sub-rays across the cone; the nearest echo strong enough to be
-detected (after specular bounces) is the reading, then crosstalk, random readings, Gaussian
-noise and the range limits apply. The cause and the noise-free range of the nearest surface of
+Each reading casts a fan of sub-rays across the cone (and its side lobes, when they are on)
+from the robot's pose when its sonar fires; the nearest echo strong enough to be detected
+(after specular bounces) is the reading, then crosstalk, random readings, Gaussian noise and
+the range limits apply. The cause and the noise-free range of the nearest surface of
 every reading are kept as truth; the logged poses are the odometry's (``simulation.odometry``).
 """
 
@@ -26,12 +27,13 @@ from aogm_cli.core.log import (
     SensorSpec,
     Truth,
 )
+from aogm_cli.simulation import firing
 from aogm_cli.simulation.odometry import dead_reckoning
 from aogm_cli.simulation.raycast import geometry, trace_sub_ray
 from aogm_cli.world.budget import simulation_estimate
-from aogm_cli.world.config import SimulationErrors, Sonar, World
+from aogm_cli.world.config import SideLobes, SimulationErrors, Sonar, World
 from aogm_cli.world.scene import build_scene
-from aogm_cli.world.trajectory import trajectory_poses
+from aogm_cli.world.trajectory import poses_before, trajectory_poses
 from aogm_cli.world.truth import truth_occupancy
 
 BLOCK_SCANS = 2048  # scans per kernel call (progress is reported between blocks)
@@ -50,7 +52,8 @@ def sub_ray_offsets(beam_width: float, sub_rays: int) -> np.ndarray:
 
 @numba.njit(cache=True, _nrt=False)
 def echo_block(pose, mount, cos_off, sin_off, max_range, max_bounces, geo, echo, ideal, multipath,
-               min_strength=0.0, beam=1.0, incidence_exponent=2.0):
+               min_strength=0.0, beam=1.0, incidence_exponent=2.0, reading_pose=None, cos_side=None,
+               sin_side=None, side_range=0.0):
     """Noise-free readings of a block of scans (every sensor, every sub-ray), in one call.
 
     pose (B, 3) robot poses; mount (S, 3) sensor mounts; cos_off, sin_off (R,) sub-ray
@@ -59,16 +62,25 @@ def echo_block(pose, mount, cos_off, sin_off, max_range, max_bounces, geo, echo,
     regardless of angle (inf if none) and ``multipath`` whether that echo came after a bounce.
     With ``min_strength`` > 0 a sub-ray's echo is detected only when its strength
     ``exp(-2 theta^2 / beam^2) cos(incidence)^incidence_exponent / path^2`` (theta the sub-ray's
-    angle off the axis) is at least ``min_strength``; 0 detects every echo.
+    angle off the axis) is at least ``min_strength``; 0 detects every echo. ``reading_pose``
+    (B, S, 3), when given, is each reading's own robot pose (then ``pose`` is unused). The
+    side-lobe sub-rays ``cos_side``, ``sin_side`` (R2,), when given, add echoes detected when
+    ``cos(incidence)^incidence_exponent / path^2 >= 1 / side_range^2``; they change ``echo``
+    only (``ideal`` is the cone's).
     """
     n_sub = cos_off.shape[0]
     for i in range(pose.shape[0]):
         c = math.cos(pose[i, 2])
         s = math.sin(pose[i, 2])
         for j in range(mount.shape[0]):
-            sx = pose[i, 0] + c * mount[j, 0] - s * mount[j, 1]
-            sy = pose[i, 1] + s * mount[j, 0] + c * mount[j, 1]
-            yaw = pose[i, 2] + mount[j, 2]
+            if reading_pose is None:
+                px, py, pyaw, cj, sj = pose[i, 0], pose[i, 1], pose[i, 2], c, s
+            else:
+                px, py, pyaw = reading_pose[i, j, 0], reading_pose[i, j, 1], reading_pose[i, j, 2]
+                cj, sj = math.cos(pyaw), math.sin(pyaw)
+            sx = px + cj * mount[j, 0] - sj * mount[j, 1]
+            sy = py + sj * mount[j, 0] + cj * mount[j, 1]
+            yaw = pyaw + mount[j, 2]
             ca = math.cos(yaw)
             sa = math.sin(yaw)
             best = np.inf
@@ -88,6 +100,16 @@ def echo_block(pose, mount, cos_off, sin_off, max_range, max_bounces, geo, echo,
                 if path < best or (path == best and bounces < best_bounces):
                     best = path
                     best_bounces = bounces
+            if cos_side is not None:
+                for r in range(cos_side.shape[0]):
+                    dx = ca * cos_side[r] - sa * sin_side[r]
+                    dy = sa * cos_side[r] + ca * sin_side[r]
+                    # a side-lobe echo beyond side_range is never detected
+                    _, path, bounces, cos_inc = trace_sub_ray(sx, sy, dx, dy, min(max_range, best, side_range),
+                                                              max_bounces, geo)
+                    if path < best and cos_inc**incidence_exponent * side_range * side_range >= path * path:
+                        best = path
+                        best_bounces = bounces
             echo[i, j] = best
             ideal[i, j] = nearest
             multipath[i, j] = best_bounces > 0
@@ -106,14 +128,16 @@ def readings_from_echoes(
     """Turn noise-free echoes into readings (float32) and their causes (int8).
 
     Cause: no echo -> 1 (+inf); an echo after a bounce (``multipath``, which includes a
-    neighbour's echo, see ``crosstalk``) or farther than ``ideal + cause_tolerance`` -> 3; else 0. Then a
+    neighbour's echo, see ``crosstalk``) or farther than ``cause_tolerance`` from ``ideal`` (too
+    long, or too short: a side lobe's) -> 3; else 0. Then a
     reading with ``u_random < random_rate`` becomes ``min_range + u_range * (max_range -
     min_range)`` (cause 2); ``(noise_sigma + noise_per_metre * z) * noise`` is added (z the
     reading so far); readings are clipped to >= min_range and those >= max_range become +inf
     (cause 1 unless random).
     """
     cause = np.full(echo.shape, CAUSE_ECHO, dtype=np.int8)
-    cause[multipath | (echo > ideal + sonar.cause_tolerance)] = CAUSE_SPECULAR
+    with np.errstate(invalid="ignore"):
+        cause[multipath | (np.abs(echo - ideal) > sonar.cause_tolerance)] = CAUSE_SPECULAR
     no_echo = ~np.isfinite(echo)
     cause[no_echo] = CAUSE_NO_ECHO
     reading = echo.astype(np.float64, copy=True)
@@ -150,6 +174,12 @@ def error_stream(seed: int, stream: int) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(stream,)))
 
 
+def side_lobe_offsets(lobes: SideLobes) -> np.ndarray:
+    """Angles (rad) of the side-lobe sub-rays relative to the sensor axis, both sides."""
+    one = sub_ray_offsets(lobes.width, lobes.sub_rays) + lobes.angle
+    return np.concatenate([one, -one])
+
+
 def simulate(world: World, seed: int, progress: Callable[[int], None] | None = None) -> Log:
     """Simulate the world's sonar along its trajectory: the log, with its truth.
 
@@ -158,7 +188,10 @@ def simulate(world: World, seed: int, progress: Callable[[int], None] | None = N
     arrays bit for bit; the errors of ``world.errors`` draw from their own streams
     (``error_stream``), only when they are on, so a world without errors gives the same log
     as before they existed. The readings are cast from the true poses; the log holds the
-    odometry's estimate of them (``odometry.dead_reckoning``). ``progress(n_scans_done)`` is called after each block of scans. A world
+    odometry's estimate of them (``odometry.dead_reckoning``); with ``errors.firing`` each
+    reading is cast from the true pose when its sonar last fired (``firing.schedule``,
+    ``trajectory.poses_before``) and repeated while it has not fired again, while the log keeps
+    one pose per scan. ``progress(n_scans_done)`` is called after each block of scans. A world
     whose estimate exceeds the limits in force (``core.budget``) is refused first.
     """
     sonar = world.sonar
@@ -183,6 +216,13 @@ def simulate(world: World, seed: int, progress: Callable[[int], None] | None = N
     # the central sub-rays first: their echoes bound the search of the others
     offsets = offsets[np.argsort(np.abs(offsets), kind="stable")]
     cos_off, sin_off = np.cos(offsets), np.sin(offsets)
+    reading_pose = None
+    if errors.firing.on:
+        ages, source = firing.schedule(errors.firing, time, n_sensors)
+        reading_pose = poses_before(world, ages)
+    lobes = errors.side_lobes
+    side = side_lobe_offsets(lobes) if lobes.range > 0 else None
+    cos_side, sin_side = (None, None) if side is None else (np.cos(side), np.sin(side))
 
     echo = np.empty((n_scans, n_sensors))
     ideal = np.empty((n_scans, n_sensors))
@@ -193,6 +233,7 @@ def simulate(world: World, seed: int, progress: Callable[[int], None] | None = N
             pose[start:stop], mount, cos_off, sin_off, float(sonar.max_range), int(sonar.max_bounces), geo,
             echo[start:stop], ideal[start:stop], multipath[start:stop],
             float(strength.min_strength), float(strength.beam), float(strength.incidence_exponent),
+            None if reading_pose is None else reading_pose[start:stop], cos_side, sin_side, float(lobes.range),
         )
         if progress is not None:
             progress(stop)
@@ -205,6 +246,8 @@ def simulate(world: World, seed: int, progress: Callable[[int], None] | None = N
         multipath = multipath | crossed  # a neighbour's echo is recorded as cause 3, as a bounce is
     ranges, cause = readings_from_echoes(echo, ideal, multipath, u_random, u_range, noise, sonar,
                                          errors.noise_per_metre)
+    if errors.firing.on:  # a scan repeats the reading of a sonar that has not fired since an earlier scan
+        ranges, cause, ideal = (np.take_along_axis(a, source, axis=0) for a in (ranges, cause, ideal))
     logged_pose = dead_reckoning(pose, errors.odometry, error_stream(seed, ODOMETRY_STREAM))
     truth = Truth(
         grid=grid,

@@ -88,13 +88,15 @@ class Trajectory:
     """Either waypoints driven at ``speed`` with a scan every ``scan_period`` s, or explicit poses.
 
     ``poses`` holds (x, y, yaw) with yaw in radians; when it is non-empty, waypoints are empty
-    and scans are ``scan_period`` seconds apart.
+    and scans are ``scan_period`` seconds apart. ``turn_rate`` (rad/s) > 0 turns the robot in
+    place at each waypoint at that rate; 0 (the default) turns it at once.
     """
 
     waypoints: tuple[Point, ...] = ()
     speed: float = 0.3
     scan_period: float = 0.5
     poses: tuple[tuple[float, float, float], ...] = ()
+    turn_rate: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -124,15 +126,27 @@ class Odometry:
 
     ``translation`` m/m, ``rotation`` rad/rad, ``rotation_per_metre`` rad/m; all zero (the
     default) logs the true poses.
+
+    The systematic errors of UMBmark (Borenstein & Feng 1996) add the same bias to every step:
+    ``heading_bias_per_metre`` (rad/m, signed; unequal wheel diameters, E_d) turns the logged
+    heading by that much per metre driven, half before and half after the step, and
+    ``turn_bias`` (rad/rad, signed; a wrong wheelbase, E_b) scales every logged turn by
+    ``1 + turn_bias``.
     """
 
     translation: float = 0.0
     rotation: float = 0.0
     rotation_per_metre: float = 0.0
+    heading_bias_per_metre: float = 0.0
+    turn_bias: float = 0.0
+
+    @property
+    def random_off(self) -> bool:
+        return self.translation == 0.0 and self.rotation == 0.0 and self.rotation_per_metre == 0.0
 
     @property
     def off(self) -> bool:
-        return self.translation == 0.0 and self.rotation == 0.0 and self.rotation_per_metre == 0.0
+        return self.random_off and self.heading_bias_per_metre == 0.0 and self.turn_bias == 0.0
 
 
 @dataclass(frozen=True)
@@ -150,18 +164,55 @@ class EchoStrength:
 
 
 @dataclass(frozen=True)
+class Firing:
+    """The ring fires in a fixed cycle, one slot after another ``interval`` seconds apart, and
+    each scan holds every sonar's latest reading: cast from the true pose when that sonar last
+    fired, repeated unchanged by the scans until it fires again, logged with the scan's pose.
+    ``slots`` holds each sonar's slot in the order of the mounts (sonars sharing a slot fire
+    together); empty means 0, 1, ..., one sonar after another. ``interval`` 0 (the default) fires
+    the whole ring at each scan's pose.
+    """
+
+    interval: float = 0.0
+    slots: tuple[int, ...] = ()
+
+    @property
+    def on(self) -> bool:
+        return self.interval > 0.0
+
+
+@dataclass(frozen=True)
+class SideLobes:
+    """A weak side lobe on either side of the beam, ``angle`` (rad) off the axis and ``width``
+    (rad) wide, cast with ``sub_rays`` sub-rays each side: its echo is detected when
+    ``cos(incidence)^n / path^2 >= 1 / range^2`` (n the echo strength's incidence exponent), so
+    only near surfaces are heard through it. ``range`` 0 (the default) has no side lobes. The
+    default angle and width are the first side lobe of a circular piston of radius 19.2 mm at
+    49.4 kHz (a Polaroid transducer) where its two-way strength is within half of its peak.
+    """
+
+    range: float = 0.0
+    angle: float = math.radians(17.5)
+    width: float = math.radians(5.5)
+    sub_rays: int = 3
+
+
+@dataclass(frozen=True)
 class SimulationErrors:
     """The errors of a real robot that the simulator adds; the defaults are all off.
 
     ``noise_per_metre`` (m/m) makes the range noise's std ``noise_sigma + noise_per_metre * z``;
     ``crosstalk_rate`` is the probability that a reading takes a neighbouring sonar's echo when
-    that one is nearer (logged as cause 3, specular or multipath).
+    that one is nearer (logged as cause 3, specular or multipath); ``firing`` spreads the ring's
+    readings over time while the robot moves; ``side_lobes`` hear near surfaces off the cone.
     """
 
     odometry: Odometry = field(default_factory=Odometry)
     noise_per_metre: float = 0.0
     crosstalk_rate: float = 0.0
     echo_strength: EchoStrength = field(default_factory=EchoStrength)
+    firing: Firing = field(default_factory=Firing)
+    side_lobes: SideLobes = field(default_factory=SideLobes)
 
 
 @dataclass(frozen=True)

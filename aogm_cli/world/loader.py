@@ -17,12 +17,14 @@ from aogm_cli.world.config import (
     Box,
     Circle,
     EchoStrength,
+    Firing,
     Floorplan,
     Odometry,
     Opening,
     PassableCheck,
     Polygon,
     Robot,
+    SideLobes,
     SimulationErrors,
     Sonar,
     Surface,
@@ -38,6 +40,7 @@ ROUGH = Surface("rough", math.pi / 2)
 MAX_MAGNITUDE = 1e6
 MIN_TRUTH_RESOLUTION = 1e-4
 MAX_SONARS = 100_000  # sonar.count; larger work sizes are refused by world.budget
+MAX_FIRING_INTERVAL = 10.0  # s between a ring's firing slots (errors.firing.interval)
 
 
 class Node:
@@ -359,10 +362,12 @@ def _inside(pt, bounds) -> bool:
 
 
 def _trajectory(n: Node, bounds) -> Trajectory:
-    n.mapping({"waypoints", "speed", "scan_period", "poses"})
+    n.mapping({"waypoints", "speed", "scan_period", "poses", "turn_rate_deg"})
     scan_period = n.get_number("scan_period", Trajectory.scan_period, positive=True)
     if n.has("poses") == n.has("waypoints"):
         raise n.error("expected exactly one of 'waypoints' (with speed) or 'poses'")
+    if n.has("poses") and n.has("turn_rate_deg"):
+        raise n.child("turn_rate_deg").error("expected only with 'waypoints' (explicit poses turn as they are written)")
     if n.has("poses"):
         poses = []
         for p in n.child("poses").items():
@@ -379,7 +384,8 @@ def _trajectory(n: Node, bounds) -> Trajectory:
             raise n.child("waypoints").child(i).error(f"expected a point inside bounds {list(bounds)}, got {list(pt)}")
     if all(math.dist(waypoints[0], p) == 0 for p in waypoints):
         raise n.child("waypoints").error("expected waypoints that span a distance, got one repeated point")
-    return Trajectory(waypoints=waypoints, speed=n.get_number("speed", Trajectory.speed, positive=True), scan_period=scan_period)
+    return Trajectory(waypoints=waypoints, speed=n.get_number("speed", Trajectory.speed, positive=True), scan_period=scan_period,
+                      turn_rate=n.get_angle("turn_rate_deg", 0.0, positive=True, maximum=3600.0))
 
 
 def _sonar(n: Node, robot: Robot) -> Sonar:
@@ -424,14 +430,18 @@ def _sonar(n: Node, robot: Robot) -> Sonar:
 
 def _errors(n: Node, sonar: Sonar) -> SimulationErrors:
     """The ``errors:`` section: every error of a real robot, each off by default."""
-    n.mapping({"odometry", "noise_per_metre", "crosstalk_rate", "echo_strength"})
+    n.mapping({"odometry", "noise_per_metre", "crosstalk_rate", "echo_strength", "firing", "side_lobes"})
     odometry = Odometry()
     if n.has("odometry"):
-        o = n.child("odometry").mapping({"translation", "rotation", "rotation_per_metre_deg"})
+        o = n.child("odometry").mapping({
+            "translation", "rotation", "rotation_per_metre_deg", "heading_bias_per_metre_deg", "turn_bias",
+        })
         odometry = Odometry(
             translation=o.get_number("translation", 0.0, minimum=0.0, maximum=1.0),
             rotation=o.get_number("rotation", 0.0, minimum=0.0, maximum=1.0),
             rotation_per_metre=o.get_angle("rotation_per_metre_deg", 0.0, minimum=0.0, maximum=90.0),
+            heading_bias_per_metre=o.get_angle("heading_bias_per_metre_deg", 0.0, minimum=-90.0, maximum=90.0),
+            turn_bias=o.get_number("turn_bias", 0.0, minimum=-0.5, maximum=0.5),
         )
     e = n.child("echo_strength") if n.has("echo_strength") else Node({}, f"{n.path}.echo_strength", n.file)
     e.mapping({"min_strength", "beam_deg", "incidence_exponent"})
@@ -445,4 +455,34 @@ def _errors(n: Node, sonar: Sonar) -> SimulationErrors:
         noise_per_metre=n.get_number("noise_per_metre", 0.0, minimum=0.0, maximum=1.0),
         crosstalk_rate=n.get_number("crosstalk_rate", 0.0, minimum=0.0, maximum=1.0),
         echo_strength=echo_strength,
+        firing=_firing(n.child("firing"), sonar) if n.has("firing") else Firing(),
+        side_lobes=_side_lobes(n.child("side_lobes")) if n.has("side_lobes") else SideLobes(),
+    )
+
+
+def _firing(n: Node, sonar: Sonar) -> Firing:
+    """``errors.firing``: the ring's firing cycle, slot after slot ``interval`` seconds apart."""
+    n.mapping({"interval", "slots"})
+    slots: tuple[int, ...] = ()
+    if n.has("slots"):
+        slots = tuple(s.integer(minimum=0, maximum=MAX_SONARS) for s in n.child("slots").items())
+        if len(slots) != len(sonar.mounts):
+            raise n.child("slots").error(f"expected one slot per sonar ({len(sonar.mounts)}), got {len(slots)}")
+    return Firing(n.get_number("interval", 0.0, minimum=0.0, maximum=MAX_FIRING_INTERVAL), slots)
+
+
+def _side_lobes(n: Node) -> SideLobes:
+    """``errors.side_lobes``: a weak lobe either side of the beam that hears near surfaces."""
+    n.mapping({"range", "angle_deg", "width_deg", "sub_rays"})
+    angle = n.get_angle("angle_deg", SideLobes.angle, positive=True, maximum=90.0)
+    width = n.get_angle("width_deg", SideLobes.width, minimum=0.0, maximum=90.0)
+    if not width / 2 < angle:
+        raise n.child("width_deg").error(
+            f"expected a lobe clear of the axis (width_deg < 2 angle_deg = {2 * math.degrees(angle):g}), "
+            f"got {math.degrees(width):g}")
+    return SideLobes(
+        range=n.get_number("range", 0.0, minimum=0.0),
+        angle=angle,
+        width=width,
+        sub_rays=n.child("sub_rays").integer(minimum=1, maximum=100) if n.has("sub_rays") else SideLobes.sub_rays,
     )
