@@ -64,12 +64,13 @@ lint: $(STAMP)
 	@status=0; $(BIN)/ruff check . || status=1; $(BIN)/lint-imports --no-cache || status=1; exit $$status
 
 # The packaged detector: simulate every bundled world, clean and realistic (*_real: an errors:
-# section), except the two test worlds of the paper's figures and their realistic variants, hold
+# section), except the two test worlds of the paper's figures and their realistic variants
+# (*_real, *_pioneer), hold
 # out two (a specular corridor and a furnished room) for validation, train (seeded). The file's
 # training_logs attribute records each log's world, realistic flag, seed and scans.
 # DETECTOR_OUT=FILE writes the detector there instead of into the package.
 DETECTOR_TEST_WORLDS := corridor_door corridor_specular
-DETECTOR_WORLDS     := $(filter-out $(foreach n,$(DETECTOR_TEST_WORLDS),worlds/$(n).yaml worlds/$(n)_real.yaml),$(WORLDS))
+DETECTOR_WORLDS     := $(filter-out $(foreach n,$(DETECTOR_TEST_WORLDS),worlds/$(n).yaml worlds/$(n)_real.yaml worlds/$(n)_pioneer.yaml),$(WORLDS))
 DETECTOR_VALIDATION := l_corridor furnished_room
 DETECTOR_OUT        ?= aogm_cli/data/detector.h5
 .PHONY: detector

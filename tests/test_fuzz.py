@@ -47,7 +47,7 @@ HANG_SECONDS = float(os.environ.get("AOGM_FUZZ_HANG_SECONDS", "30"))
 # makes the HDF5 library spin is refused after this long, so that it does not dominate the run.
 WATCHDOG_SECONDS = os.environ.get("AOGM_FUZZ_WATCHDOG_SECONDS", "3")
 WORLDS = sorted((Path(__file__).resolve().parent.parent / "worlds").glob("*.yaml"))
-BUDGET = ["--max-work", "3e5", "--max-memory", "256M"]  # every bundled world fits (<= 1.2e5 ray casts)
+BUDGET = ["--max-work", "3e5", "--max-memory", "256M"]  # every bundled world fits (<= 2.7e5 ray casts)
 MAP_BUDGET = ["--max-work", "1e8", "--max-memory", "512M"]
 
 SETTINGS = settings(
