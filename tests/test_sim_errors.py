@@ -435,8 +435,13 @@ def test_a_side_lobe_hears_a_near_post_off_the_cone():
     ],
 )
 def test_bad_errors_exit_2_naming_the_key(tmp_path, errors, key, what):
+    assert_refused(tmp_path, {**BOX, "errors": errors}, key, what)
+
+
+def assert_refused(tmp_path, raw, key, what):
+    """``aogm simulate`` of the world ``raw`` exits 2 naming the file, ``key`` and ``what``, writing nothing."""
     path = tmp_path / "w.yaml"
-    path.write_text(yaml.safe_dump({**BOX, "errors": errors}))
+    path.write_text(yaml.safe_dump(raw))
     out = tmp_path / "log.h5"
     r = CliRunner().invoke(main, ["simulate", str(path), "-o", str(out), "-q"])
     assert r.exit_code == 2, r.output
@@ -453,8 +458,5 @@ def test_bad_errors_exit_2_naming_the_key(tmp_path, errors, key, what):
     ],
 )
 def test_bad_turn_rates_exit_2_naming_the_key(tmp_path, trajectory, key, what):
-    raw = {**BOX, "trajectory": {k: v for k, v in {**BOX["trajectory"], **trajectory}.items() if v is not None}}
-    path = tmp_path / "w.yaml"
-    path.write_text(yaml.safe_dump(raw))
-    r = CliRunner().invoke(main, ["simulate", str(path), "-o", str(tmp_path / "log.h5"), "-q"])
-    assert r.exit_code == 2 and f"{path}: {key}: " in r.output and what in r.output, r.output
+    traj = {k: v for k, v in {**BOX["trajectory"], **trajectory}.items() if v is not None}
+    assert_refused(tmp_path, {**BOX, "trajectory": traj}, key, what)
