@@ -18,6 +18,7 @@ import numpy as np
 from aogm_cli.core.errors import InputError
 from aogm_cli.core.log import Log, SensorSpec
 from aogm_cli.io.importers import Progress, clean_ranges, interpolate_poses, read_lines, wrap_angle
+from aogm_cli.io.importers.mounts import load_mounts
 
 LENGTH_UNITS = {"mm": 0.001, "cm": 0.01, "m": 1.0}
 ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180, "ddeg": math.pi / 1800}  # ddeg: tenths of a degree
@@ -437,7 +438,8 @@ def import_text(
     mounts_path: str | Path | None = None,
     progress: Progress | None = None,
 ) -> TextImport:
-    """Read readings (and poses, from the same file when ``poses_path`` is None) into a ``Log``.
+    """Read readings (and poses, from the same file when ``poses_path`` is None) into a ``Log``;
+    ``mounts_path``: a mounts table (``read_mounts``) or a preset's name (``importers.mounts``).
 
     The log's ``source`` reads ``aogm import text <ranges file> [<poses file>]``.
     """
@@ -445,6 +447,13 @@ def import_text(
     range_table = read_table(ranges_path, delimiter, progress)
     same = poses_path is None or Path(poses_path) == Path(ranges_path)
     pose_table = None if same else read_table(poses_path, delimiter)
-    mounts = read_mounts(mounts_path, options.position_unit, options.bearing_unit, delimiter) if mounts_path else None
+    mounts = None
+    if mounts_path:  # a file (in the options' units) or a packaged preset's name
+        mounts = load_mounts(str(mounts_path), options.position_unit, options.bearing_unit, delimiter)[0]
     source = f"aogm import text {Path(ranges_path).name}" + ("" if same else f" {Path(poses_path).name}")
-    return build_text_log(range_table, pose_table, options, mounts, source=source)
+    try:
+        return build_text_log(range_table, pose_table, options, mounts, source=source)
+    except InputError as exc:
+        if exc.key == "mounts" and mounts_path:  # the wrong number of rows: name the mounts file (or preset)
+            raise exc.in_file(str(mounts_path)) from None
+        raise
