@@ -81,6 +81,19 @@ class SensorSpec:
         }
 
 
+def sensor_names(indices) -> str:
+    """Sensors by index as people read them: "sensor 3", "sensors 8-15", "sensors 0, 2, 8-15"."""
+    idx = sorted({int(i) for i in indices})
+    runs: list[list[int]] = []
+    for i in idx:
+        if runs and i == runs[-1][1] + 1:
+            runs[-1][1] = i
+        else:
+            runs.append([i, i])
+    text = ", ".join(f"{a}" if a == b else f"{a}-{b}" for a, b in runs)
+    return f"sensor {text}" if len(idx) == 1 else f"sensors {text}"
+
+
 CHECK_KINDS = ("passable", "blocked")  # a world check's key beside its name: a path must exist / must not
 
 

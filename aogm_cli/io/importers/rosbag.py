@@ -10,13 +10,14 @@ from __future__ import annotations
 
 import math
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from aogm_cli.core.errors import InputError
-from aogm_cli.core.log import Log, SensorSpec
+from aogm_cli.core.log import Log, SensorSpec, sensor_names
 from aogm_cli.io.importers import clean_ranges
 from aogm_cli.io.importers.carmen import (
     LASER_BEAM_WIDTH,
@@ -29,6 +30,7 @@ from aogm_cli.io.importers.carmen import (
 )
 from aogm_cli.io.importers.rosbag_messages import (
     LASER_SCAN,
+    NOT_ECHO,
     ODOMETRY,
     POINT_CLOUD,
     POINT_CLOUD2,
@@ -43,11 +45,14 @@ from aogm_cli.io.importers.rosbag_messages import (
     collect_ranges,
     group_readings,
     natural_order,
+    not_echoes,
     pose_of_message,
     resolve_topics,
     ros_name,
 )
 from aogm_cli.io.importers.rosbag_tf import PoseSeries, TfTree, frame_name, planar_mounts, stamp
+
+PROGRESS_EVERY = 100  # messages read between two calls of the progress callback
 
 
 @dataclass(frozen=True)
@@ -84,6 +89,7 @@ class RosbagImport:
     mount_source: str
     skipped: dict[str, int] = field(default_factory=dict)
     notes: tuple[str, ...] = ()
+    not_echoes: dict[str, np.ndarray] = field(default_factory=dict)  # why -> echo points per sensor stored as invalid
 
     def summary(self) -> list[str]:
         """Lines: the topics read and their message counts (a ring of Range topics on one line),
@@ -160,10 +166,13 @@ def _deserialize(reader, raw, connection):
         return None, f"{connection.topic}: cannot decode a {connection.msgtype} message ({exc.__class__.__name__})"
 
 
-def read_bag(path: str | Path, options: RosbagOptions, mounts: np.ndarray | None = None) -> RosbagImport:
+def read_bag(path: str | Path, options: RosbagOptions, mounts: np.ndarray | None = None,
+             mounts_source: str = "--mounts", progress: Callable[..., object] | None = None) -> RosbagImport:
     """Import the bag at ``path`` (ROS 1 .bag, ROS 2 folder with sqlite3 or MCAP storage) into a
-    ``Log``. ``mounts`` (S, 3): the sensors' x, y, yaw in the robot frame instead of /tf_static.
-    Errors are InputErrors naming the bag and the topic, frame or option."""
+    ``Log``. ``mounts`` (S, 3): the sensors' x, y, yaw in the robot frame instead of /tf_static
+    (``mounts_source`` says where they came from, for the log's source). ``progress(n, total)``
+    is called as messages are read (n read since the last call, of ``total`` to read). Errors are
+    InputErrors naming the bag and the topic, frame or option."""
     path = Path(path)
     check_options(options)
     pose_spec = parse_pose(options.pose)
@@ -181,7 +190,7 @@ def read_bag(path: str | Path, options: RosbagOptions, mounts: np.ndarray | None
                                  key=pose_spec)
         if mounts is None and kind in (POINT_CLOUD, POINT_CLOUD2, SONAR_ARRAY):
             raise InputError(f"{ros_name(kind)} carries no sensor mounts: give --mounts FILE", key="mounts")
-        collected = _read_messages(reader, types, topics, kind, pose_spec, options, mounts)
+        collected = _read_messages(reader, types, topics, kind, pose_spec, options, mounts, progress)
     except InputError as exc:
         raise exc.in_file(str(path)) from None
     except Exception as exc:
@@ -192,7 +201,7 @@ def read_bag(path: str | Path, options: RosbagOptions, mounts: np.ndarray | None
         reader.close()
     try:
         return _assemble(collected, topics, kind, pose_spec, options, mounts,
-                         f"aogm import rosbag {path.name}")
+                         f"aogm import rosbag {path.name}", mounts_source)
     except InputError as exc:
         raise exc.in_file(str(path)) from None
 
@@ -208,8 +217,9 @@ class _Collected:
     skipped: Counter
 
 
-def _read_messages(reader, types, topics, kind, pose_spec, o: RosbagOptions, mounts) -> _Collected:
-    """One pass over the bag: range messages in the time window, every pose and tf message."""
+def _read_messages(reader, types, topics, kind, pose_spec, o: RosbagOptions, mounts, progress=None) -> _Collected:
+    """One pass over the bag: range messages in the time window, every pose and tf message
+    (``progress(n, total)`` every ``PROGRESS_EVERY`` messages)."""
     index = {t: i for i, t in enumerate(topics)}
     label = topics[0] if len(topics) == 1 else f"{topics[0]}..{topics[-1]}"
     wanted = set(topics) | {t for t in ("/tf", "/tf_static", "tf", "tf_static") if types.get(t) in TF_TYPES}
@@ -221,7 +231,11 @@ def _read_messages(reader, types, topics, kind, pose_spec, o: RosbagOptions, mou
     out = _Collected(types, Readings(), TfTree(), PoseSeries(pose_spec) if isinstance(pose_spec, str) else None,
                      None, Counter(), Counter())
     connections = [c for c in reader.connections if c.topic in wanted]
+    total, done = sum(int(getattr(c, "msgcount", 0) or 0) for c in connections), 0
     for connection, _received, raw in reader.messages(connections=connections):
+        done += 1
+        if progress is not None and done % PROGRESS_EVERY == 0:
+            progress(PROGRESS_EVERY, total)
         topic = connection.topic
         msg, why = _deserialize(reader, raw, connection)
         if msg is None:
@@ -243,6 +257,8 @@ def _read_messages(reader, types, topics, kind, pose_spec, o: RosbagOptions, mou
                 out.base_frame = frame_name(msg.child_frame_id)
         else:
             out.tree.add(msg, static=topic.endswith("tf_static"))
+    if progress is not None:
+        progress(done % PROGRESS_EVERY, total)
     for series in [out.pose_series, *out.tree.dynamic.values()]:
         if series is not None and series.not_finite:
             out.skipped[f"{series.name}: a pose or time that is not finite"] += series.not_finite
@@ -367,7 +383,22 @@ def _message_scans(c: _Collected, kind: str, sensor_kind: str, order, o: RosbagO
     return ranges, limit, spec
 
 
-def _assemble(c: _Collected, topics, kind, pose_spec, o: RosbagOptions, mounts, source: str) -> RosbagImport:
+def _not_echo_note(counts: dict[str, np.ndarray]) -> str:
+    """The echo points stored as invalid, per reason and sensor: "663 at the robot's origin (sensors
+    8-15: 663 each)"."""
+    parts = []
+    for why, per_sensor in counts.items():
+        groups: dict[int, list[int]] = {}
+        for sensor, n in enumerate(per_sensor.tolist()):
+            if n:
+                groups.setdefault(n, []).append(sensor)
+        detail = "; ".join(f"{sensor_names(s)}: {n}" + (" each" if len(s) > 1 else "") for n, s in groups.items())
+        parts.append(f"{int(per_sensor.sum())} {why}" + (f" ({detail})" if detail else ""))
+    return "echo points that are no echo, stored as invalid: " + ", ".join(parts)
+
+
+def _assemble(c: _Collected, topics, kind, pose_spec, o: RosbagOptions, mounts, source: str,
+              mounts_source: str = "--mounts") -> RosbagImport:
     """The log: readings in time order at poses that cover them, grouped into scans, cleaned (REP-117),
     with the sensor's fields and mounts; ``source`` records what was read."""
     time = np.asarray(c.readings.time, dtype=np.float64)
@@ -389,12 +420,19 @@ def _assemble(c: _Collected, topics, kind, pose_spec, o: RosbagOptions, mounts, 
     cleaned = clean_ranges(ranges, limit[None, :])
     notes.append(f"REP-117: {int(np.isposinf(cleaned).sum())} no echo (+inf or >= max range), {too_close} too "
                  f"close (-inf, stored as invalid), {invalid} NaN or not fired (invalid)")
+    not_echo: dict[str, np.ndarray] = {}
+    if kind in (POINT_CLOUD, POINT_CLOUD2, SONAR_ARRAY):
+        why = not_echoes(np.vstack(c.readings.off_axis)[order], np.vstack(c.readings.at_origin)[order],
+                         o.beam_width if o.beam_width is not None else spec["beam_width"])
+        cleaned[why > 0] = np.nan
+        not_echo = {text: (why == code).sum(axis=0) for code, text in enumerate(NOT_ECHO, start=1)}
+        notes.append(_not_echo_note(not_echo))
     for key, value in (("max_range", o.max_range), ("min_range", o.min_range), ("beam_width", o.beam_width)):
         if value is not None:
             spec[key] = float(value)
     noise = o.noise_sigma if o.noise_sigma is not None else (
         LASER_NOISE_SIGMA if sensor_kind == "laser" else SONAR_NOISE_SIGMA)
-    mount_source = "--mounts" if mounts is not None else f"/tf_static in {base!r}"
+    mount_source = mounts_source if mounts is not None else f"/tf_static in {base!r}"
     sensor_mounts = _sensor_mounts(c, topics, kind, base, o, mounts)
     try:
         sensor = SensorSpec(mount=sensor_mounts, kind=sensor_kind, noise_sigma=float(noise), **spec).validate()
@@ -406,4 +444,4 @@ def _assemble(c: _Collected, topics, kind, pose_spec, o: RosbagOptions, mounts, 
         text += f"; skipped {sum(skipped.values())} messages or readings"
     log = Log(time=time, pose=pose, ranges=cleaned, sensor=sensor, source=text)
     counts = {t: (c.types[t], c.counts[t]) for t in sorted(c.counts, key=natural_order)}
-    return RosbagImport(log, counts, pose_text, mount_source, skipped, tuple(notes))
+    return RosbagImport(log, counts, pose_text, mount_source, skipped, tuple(notes), not_echo)

@@ -30,6 +30,9 @@ RADIATION = {0: "ultrasound", 1: "infrared"}  # sensor_msgs/Range ULTRASOUND, IN
 # p2os_msgs/SonarArray.msg, registered when a bag carries no definition of it (ROS 2 bags may not)
 SONAR_ARRAY_MSG = "std_msgs/Header header\nint32 ranges_count\nfloat64[] ranges\n"
 POINT_TOLERANCE = 1e-4  # m: a recovered echo point this close to max range is a max-range reading
+ORIGIN_TOLERANCE = 1e-3  # m: an echo point this near the robot's origin is RosAria's disabled or unfired sonar
+CONE_TOLERANCE = math.radians(5.0)  # an echo point further off its sonar's axis than half the beam plus this
+NOT_ECHO = ("at the robot's origin", "outside its sonar's cone")  # why an echo point is not an echo (codes 1, 2)
 
 
 def ros_name(msgtype: str | None) -> str:
@@ -79,6 +82,8 @@ class Readings:
     sensor: list[int] = field(default_factory=list)  # Range topics: the topic's index
     rows: list[np.ndarray] = field(default_factory=list)  # whole-message types: one row per message
     values: list[float] = field(default_factory=list)
+    off_axis: list[np.ndarray] = field(default_factory=list)  # clouds, sonar arrays: each point's angle off its sonar's axis
+    at_origin: list[np.ndarray] = field(default_factory=list)  # and whether it lies at the robot's origin
     frames: dict[int, str] = field(default_factory=dict)  # sensor (or 0) -> its message's frame_id
     fields: dict[int, tuple] = field(default_factory=dict)  # sensor -> (radiation, fov, min, max) of its first message
     geometry: tuple | None = None  # LaserScan: (angle_min, angle_increment, count, range_min, range_max)
@@ -130,12 +135,25 @@ def cloud_points(msg, kind: str) -> np.ndarray:
     return np.column_stack([data["x"], data["y"]]).astype(np.float64)
 
 
-def _sonar_ranges(points: np.ndarray, mounts: np.ndarray) -> np.ndarray:
-    """Ranges of echo points (n, 2) in the robot frame, one per sonar in mount order: each point's
-    distance from its sonar (its bearing is the sonar's)."""
+def _sonar_ranges(points: np.ndarray, mounts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Echo points (n, 2) in the robot frame, one per sonar in mount order -> (each point's distance
+    from its sonar (the range; its bearing is taken as the sonar's), its angle off the sonar's axis,
+    whether it lies at the robot's origin). Whether those make it an echo: ``not_echoes``."""
     if points.shape[0] != mounts.shape[0]:
         raise ValueError(f"{points.shape[0]} points for {mounts.shape[0]} sonar mounts")
-    return np.hypot(points[:, 0] - mounts[:, 0], points[:, 1] - mounts[:, 1])
+    dx, dy = points[:, 0] - mounts[:, 0], points[:, 1] - mounts[:, 1]
+    off_axis = np.abs((np.arctan2(dy, dx) - mounts[:, 2] + math.pi) % (2 * math.pi) - math.pi)
+    off_axis[np.hypot(dx, dy) == 0] = 0.0  # a point on the sonar itself: no bearing to judge
+    return np.hypot(dx, dy), off_axis, np.hypot(points[:, 0], points[:, 1]) < ORIGIN_TOLERANCE
+
+
+def not_echoes(off_axis: np.ndarray, at_origin: np.ndarray, beam_width: float) -> np.ndarray:
+    """Why each echo point is not an echo (0: it is one; 1, 2: ``NOT_ECHO``): at the robot's origin
+    (RosAria's point for a disabled or unfired sonar), or off its sonar's axis by more than half the
+    beam width plus ``CONE_TOLERANCE`` (a sonar hears nothing there)."""
+    with np.errstate(invalid="ignore"):
+        outside = off_axis > 0.5 * beam_width + CONE_TOLERANCE
+    return np.where(at_origin, 1, np.where(outside, 2, 0)).astype(np.int8)
 
 
 def collect_ranges(msg, kind: str, sensor: int, t: float, into: Readings, mounts: np.ndarray | None) -> None:
@@ -161,12 +179,29 @@ def collect_ranges(msg, kind: str, sensor: int, t: float, into: Readings, mounts
         row[row >= msg.range_max] = np.inf
     elif kind == SONAR_ARRAY:
         row = np.asarray(msg.ranges, dtype=np.float64)
+        off_axis, at_origin = _array_points(row, mounts)
     else:
-        row = _sonar_ranges(cloud_points(msg, kind), mounts)
+        row, off_axis, at_origin = _sonar_ranges(cloud_points(msg, kind), mounts)
     if into.rows and row.size != into.rows[0].size:
         raise ValueError(f"{row.size} readings, the first message has {into.rows[0].size}")
     into.time.append(t)
     into.rows.append(row)
+    if kind != LASER_SCAN:
+        into.off_axis.append(off_axis)
+        into.at_origin.append(at_origin)
+
+
+def _array_points(row: np.ndarray, mounts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A sonar array's readings as ``_sonar_ranges`` judges echo points: each lies on its sonar's
+    axis (off by 0), at the robot's origin when the mount and the range put it there."""
+    off_axis = np.zeros(row.size)
+    if row.size != mounts.shape[0]:  # refused with the mounts (``rosbag._sensor_mounts``)
+        return off_axis, np.zeros(row.size, dtype=bool)
+    with np.errstate(invalid="ignore"):
+        reach = np.where(np.isfinite(row) & (row > 0), row, 0.0)
+    x = mounts[:, 0] + reach * np.cos(mounts[:, 2])
+    y = mounts[:, 1] + reach * np.sin(mounts[:, 2])
+    return off_axis, np.hypot(x, y) < ORIGIN_TOLERANCE
 
 
 
