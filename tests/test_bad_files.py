@@ -4,6 +4,7 @@ file, the input unchanged; every valid input still maps (exit 0)."""
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import math
 import shutil
@@ -360,3 +361,92 @@ def test_a_damaged_detector_ends_soon(good, tmp_path, how, monkeypatch):
         assert_not_a_crash(result, bad, [out])
     else:
         assert_refused(result, bad, None, [out])
+
+
+# --- bad inputs named (issue 23): exit 2 naming the option, key or file ----------------------------
+
+
+def assert_named(result, *names):
+    """Exit 2, one line naming every one of ``names``, no traceback and no internal error."""
+    text = result.output
+    assert result.exit_code == 2, text
+    assert "Traceback" not in text and "failed:" not in text, text
+    for name in names:
+        assert name in text, (name, text)
+
+
+WORLD = Path(__file__).resolve().parents[1] / "worlds" / "corridor_door.yaml"
+
+
+def bad_world(tmp_path, old, new) -> Path:
+    path = tmp_path / "world.yaml"
+    text = WORLD.read_text()
+    assert old in text
+    path.write_text(text.replace(old, new))
+    return path
+
+
+def no_truth_log(tmp_path) -> Path:
+    path = tmp_path / "no_truth.h5"
+    write_log(path, dataclasses.replace(tiny_log(), truth=None))
+    return path
+
+
+def zero_scan_log(tmp_path) -> Path:
+    log = tiny_log()
+    t = log.truth
+    path = tmp_path / "empty.h5"
+    write_log(path, dataclasses.replace(log, time=log.time[:0], pose=log.pose[:0], ranges=log.ranges[:0],
+                                        truth=dataclasses.replace(t, cause=t.cause[:0], ideal_range=t.ideal_range[:0])))
+    return path
+
+
+def params(tmp_path, text) -> Path:
+    path = tmp_path / "params.yaml"
+    path.write_text(text)
+    return path
+
+
+def wrong_mounts(tmp_path):
+    ranges, mounts = tmp_path / "lab.txt", tmp_path / "mounts.txt"
+    ranges.write_text("0 0 0 1 2 3\n1 0 0 1 2 3\n")
+    mounts.write_text("0.1 0 0\n0 0.1 90\n")  # two rows for three range columns
+    return ["import", "text", "--ranges", ranges, "--mounts", mounts, "-o", tmp_path / "x.h5"], [str(mounts), "--mounts"]
+
+
+# (id, args and the names the message must hold, from tmp_path)
+BAD_INPUTS = [
+    ("train_zero_scans", lambda d: (["train", zero_scan_log(d), "-o", d / "det.h5"],
+                                    [str(d / "empty.h5"), "/scans", "no scans"])),
+    ("simulate_seed_2_64", lambda d: (["simulate", WORLD, "--seed", str(2**64), "-o", d / "x.h5"], ["'--seed'"])),
+    ("simulate_seeds_2_64", lambda d: (["simulate", WORLD, "--seeds", f"1,{2**64}", "-o", f"{d}/"], ["--seeds"])),
+    *[(f"map_resolution_{v}", lambda d, v=v: (["map", no_truth_log(d), "--mode", "standard", "--resolution", v,
+                                               "-o", d / "m.h5"], ["'--resolution'"]))
+      for v in ("0", "nan", "inf", "-1", "1e-300")],
+    ("map_grid_too_large", lambda d: (["map", no_truth_log(d), "--mode", "em", "--resolution", "0.0001",
+                                       "-o", d / "m.h5"], ["--resolution: 0.0001 m is too fine", "no_truth.h5"])),
+    ("calibrate_grid_too_large", lambda d: (["calibrate", no_truth_log(d), "--resolution", "0.0001"],
+                                            ["--resolution: 0.0001 m is too fine"])),
+    ("compare_resolution_1e-300", lambda d: (["compare", no_truth_log(d), "--modes", "standard", "--params",
+                                              params(d, "resolution: 1.0e-300\n")],
+                                             [str(d / "params.yaml"), "resolution: 1e-300 m is too fine"])),
+    ("compare_resolution_0", lambda d: (["compare", no_truth_log(d), "--params", params(d, "resolution: 0\n")],
+                                        [str(d / "params.yaml"), "resolution: expected a positive number"])),
+    ("world_speed", lambda d: (["simulate", bad_world(d, "speed: 0.3", "speed: 1.0e-9"), "-o", d / "x.h5"],
+                               ["world.yaml: trajectory: speed 1e-09 m/s", "3.6e+10 scans"])),
+    ("world_scan_period", lambda d: (["simulate", bad_world(d, "scan_period: 0.5", "scan_period: 1.0e-7"),
+                                      "-o", d / "x.h5"], ["world.yaml: trajectory: ", "scan_period 1e-07 s"])),
+    ("world_sub_rays", lambda d: (["simulate", bad_world(d, "count: 24", "count: 24\n  sub_rays: 100000000"),
+                                   "-o", d / "x.h5"], ["world.yaml: sonar.sub_rays: expected a whole number <= 1000"])),
+    *[(f"world_truth_resolution_{v}", lambda d, v=v: (["simulate", bad_world(d, "truth_resolution: 0.05",
+                                                                             f"truth_resolution: {v}"),
+                                                        "-o", d / "x.h5"], ["world.yaml: truth_resolution: "]))
+      for v in ("1.0e-9", "0.0002", "0", "1000")],
+    ("import_text_mounts_rows", wrong_mounts),
+]
+
+
+@pytest.mark.parametrize("make", [c[1] for c in BAD_INPUTS], ids=[c[0] for c in BAD_INPUTS])
+def test_a_bad_input_exits_2_naming_the_option_key_or_file(tmp_path, make):
+    args, names = make(tmp_path)
+    assert_named(run(*args), *names)

@@ -64,15 +64,19 @@ def test_parse_size():
         parse_size("lots")
 
 
-def test_tiny_speed_is_refused_with_the_estimate(tmp_path, no_work):
-    r, dt = run("simulate", world(tmp_path, "speed: 0.3", "speed: 1.0e-9"), "-o", tmp_path / "x.h5")
+def test_a_slow_speed_is_refused_with_the_estimate(tmp_path, no_work):
+    # 9e6 scans, under the loader's 1e7 (speed: 1.0e-9 is refused by it, naming trajectory: test_bad_files)
+    r, dt = run("simulate", world(tmp_path, "speed: 0.3", "speed: 4.0e-6"), "-o", tmp_path / "x.h5")
     assert r.exit_code == 2 and dt < 3, r.output
-    assert "TB of memory (limit 16 GB)" in r.output and "--max-memory" in r.output
+    assert "GB of memory (limit 16 GB)" in r.output and "--max-memory" in r.output
     assert "Traceback" not in r.output and not (tmp_path / "x.h5").exists()
 
 
-def test_huge_sub_rays_are_refused_by_the_work_limit(tmp_path, no_work):
-    r, dt = run("simulate", world(tmp_path, "count: 24", "count: 24\n  sub_rays: 100000000"), "-o", tmp_path / "x.h5")
+def test_many_sub_rays_are_refused_by_the_work_limit(tmp_path, no_work):
+    # the loader's most sub-rays (1000) on a slow drive (3e6 scans, 8.7 GB): 2e11 ray casts
+    slow = world(tmp_path, "count: 24", "count: 24\n  sub_rays: 1000")
+    slow.write_text(slow.read_text().replace("speed: 0.3", "speed: 1.2e-5"))
+    r, dt = run("simulate", slow, "-o", tmp_path / "x.h5")
     assert r.exit_code == 2 and dt < 3, r.output
     assert "ray casts" in r.output and "--max-work" in r.output
 
@@ -101,7 +105,8 @@ def test_a_log_with_a_huge_max_range_is_refused_before_mapping(tmp_path, no_work
 def test_a_fine_resolution_is_refused_and_max_memory_raises_the_limit(tmp_path, no_work):
     log = a_log(tmp_path)
     r, _ = run("map", log, "--mode", "em", "--resolution", "1e-4", "-o", tmp_path / "m.h5")
-    assert r.exit_code == 2 and "would need about" in r.output and "0.0001 m" in r.output
+    assert r.exit_code == 2 and "--resolution: 0.0001 m is too fine" in r.output  # the option that set it
+    assert "of memory (limit 16 GB)" in r.output
     r, _ = run("map", log, "--mode", "standard", "-o", tmp_path / "m.h5", "--max-memory", "1k")
     assert r.exit_code == 2 and "limit 1 kB" in r.output
 

@@ -16,6 +16,7 @@ from aogm_cli.cli.options import (
     params_option,
     progress_bar,
     quiet_option,
+    refuse_huge_grids,
     resolution_option,
 )
 from aogm_cli.io.outputs import resolve_outputs
@@ -62,6 +63,7 @@ def calibrate(log_file, mode, output, detector, params_file, resolution, quiet, 
 
     made = provenance(inputs) if output else None  # the inputs as read, the time the run starts
     params = resolve_params(params_file, parameter_overrides(resolution, True, options))
+    refuse_huge_grids([log_file], params, params_file, resolution is not None, max_memory)
     with progress_bar(params.em.max_sweeps * (params.calibration.rounds + 1), f"calibrate ({mode})", quiet,
                       unit="sweep") as advance:
         result = map_file(log_file, mode, params, detector, lambda phase, done, total: advance(1),

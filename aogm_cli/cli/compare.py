@@ -21,6 +21,7 @@ from aogm_cli.cli.options import (
     params_option,
     progress_bar,
     quiet_option,
+    refuse_huge_grids,
     report_failures,
     resume_option,
     scheduler_option,
@@ -282,6 +283,8 @@ def compare(inputs, modes_text, detector, params_file, json_out, csv_out, figure
     from aogm_cli.mapping.budget import check_logs
 
     limits = limits_of(max_memory, max_work)
+    refuse_huge_grids(list(dict.fromkeys(e.path for e in entries for mode in modes if mode not in e.maps)), params,
+                      params_file, False, max_memory)
     check_logs([(e.path, mode) for e in entries for mode in modes if mode not in e.maps], params, limits)
     n_tasks = sum(mode not in e.maps for e in entries for mode in modes)
     with using(limits), progress_bar(n_tasks, "compare", quiet, unit="map") as advance:

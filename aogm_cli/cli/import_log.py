@@ -12,7 +12,7 @@ from pathlib import Path
 
 import click
 
-from aogm_cli.cli.options import output_option, progress_bar, quiet_option
+from aogm_cli.cli.options import FiniteFloat, output_option, progress_bar, quiet_option
 from aogm_cli.core.errors import InputError
 from aogm_cli.io.importers.carmen import (
     LASER_MAX_RANGE,
@@ -28,17 +28,6 @@ from aogm_cli.io.importers.carmen import (
 from aogm_cli.io.importers.rosbag import RosbagOptions
 from aogm_cli.io.importers.text import ANGLE_UNITS, DELIMITERS, LENGTH_UNITS, TIME_UNITS, TextOptions
 from aogm_cli.io.outputs import resolve_outputs
-
-
-class FiniteFloat(click.FloatRange):
-    """A float range that also refuses nan and +-inf (which compare false with every bound)."""
-
-    def convert(self, value, param, ctx):
-        v = super().convert(value, param, ctx)
-        if not math.isfinite(v):
-            self.fail(f"expected a finite number, got {value!r}", param, ctx)
-        return v
-
 
 _finite = FiniteFloat()
 _positive = FiniteFloat(min=0, min_open=True)

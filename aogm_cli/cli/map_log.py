@@ -16,6 +16,7 @@ from aogm_cli.cli.options import (
     png_option,
     progress_bar,
     quiet_option,
+    refuse_huge_grids,
     resolution_option,
 )
 from aogm_cli.io.outputs import resolve_outputs
@@ -115,6 +116,7 @@ def map_log(log_file, mode, output, png, detector, params_file, resolution, cali
 
     record = provenance(inputs)  # the inputs as read, the time the run starts
     params = resolve_params(params_file, parameter_overrides(resolution, calibrate, options))
+    refuse_huge_grids([log_file], params, params_file, resolution is not None, max_memory)
     with progress_bar(params.em.max_sweeps, f"map ({mode})", quiet, unit="sweep") as advance:
         def progress(phase, done, total):
             advance(1)

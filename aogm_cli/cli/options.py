@@ -19,6 +19,7 @@ LOG arguments as a folder or a glob (``expand_log_paths``): train
 
 from __future__ import annotations
 
+import math
 import sys
 from contextlib import contextmanager
 
@@ -28,9 +29,29 @@ from aogm_cli.core.occupancy_map import MODES
 from aogm_cli.mapping.params import MapParams
 
 quiet_option = click.option("--quiet", "-q", is_flag=True, help="No progress bar and no summary on stderr.")
-seed_option = click.option(
-    "--seed", type=click.IntRange(min=0), default=0, show_default=True, help="Random seed; the same seed gives identical outputs."
-)
+SEED_LIMIT = 2**64  # seeds are stored as unsigned 64-bit integers (a log's seed attribute)
+
+
+def seed_option_below(limit: int):
+    """``--seed`` from 0 to ``limit`` - 1 (scikit-learn's random_state takes seeds below 2**32)."""
+    return click.option("--seed", type=click.IntRange(min=0, max=limit - 1), default=0, show_default=True,
+                        help="Random seed; the same seed gives identical outputs.")
+
+
+seed_option = seed_option_below(SEED_LIMIT)
+
+
+class FiniteFloat(click.FloatRange):
+    """A float range that also refuses nan and +-inf (which compare false with every bound)."""
+
+    def convert(self, value, param, ctx):
+        v = super().convert(value, param, ctx)
+        if not math.isfinite(v):
+            self.fail(f"expected a finite number, got {value!r}", param, ctx)
+        return v
+
+
+MIN_RESOLUTION = 1e-4  # m: a cell no finer than a world's finest truth_resolution
 mode_choice = click.Choice(MODES)
 mode_option = click.option("--mode", type=mode_choice, required=True, help="Which mapper.")
 modes_option = click.option(
@@ -42,7 +63,8 @@ params_option = click.option(
     help="YAML with sections inverse_model:, em:, adaptive: and key resolution:, used by every map made.",
 )
 resolution_option = click.option(
-    "--resolution", type=float, help=f"Cell size (m) for logs without truth.  [default: {MapParams().resolution}]"
+    "--resolution", type=FiniteFloat(min=MIN_RESOLUTION),
+    help=f"Cell size (m) for logs without truth.  [default: {MapParams().resolution}]"
 )
 
 calibrate_option = click.option(
@@ -50,6 +72,36 @@ calibrate_option = click.option(
     help="em and adaptive: learn the forward model's sigma, p_rand, p_hit and p_max from the log being mapped"
          " (section calibration: of --params).  [default: on]",
 )
+
+
+def refuse_huge_grids(log_files, params, params_file: str | None, resolution_given: bool, max_memory: float) -> None:
+    """Refuse (InputError) the first log without truth whose grid alone, at the run's resolution,
+    would take more than ``max_memory``, naming what set the resolution: ``--resolution``, else the
+    params file's ``resolution``, else the log (poses or max range in the wrong unit?). Before the
+    budget's estimate, which would otherwise overflow on an absurd grid."""
+    from aogm_cli.core.budget import format_bytes
+    from aogm_cli.core.errors import InputError
+    from aogm_cli.evaluation.log_check import grid_need
+    from aogm_cli.io.logfile import LogReader
+    from aogm_cli.mapping.budget import BYTES_PER_CELL
+
+    res = params.resolution
+    for path in log_files:
+        with LogReader(path) as reader:
+            grid = grid_need(reader, res)
+        need = grid.get("cells", 0.0) * BYTES_PER_CELL
+        if not need > max_memory:
+            continue
+        what = (f"would be {grid['height']:.3g} x {grid['width']:.3g} cells at {res:g} m, about "
+                f"{format_bytes(need)} of memory (limit {format_bytes(max_memory)}) for the grid alone")
+        if resolution_given:
+            raise InputError(f"{res:g} m is too fine for {path}: its grid (the poses plus the sensor's reach) {what}; "
+                             "expected a coarser resolution", key="--resolution")
+        if params_file and res != MapParams().resolution:
+            raise InputError(f"{res:g} m is too fine for {path}: its grid {what}; expected a coarser resolution",
+                             file=params_file, key="resolution")
+        raise InputError(f"the grid covering the poses plus the sensor's reach (max range {reader.sensor.max_range:g} "
+                         f"m) {what}: poses or max range in the wrong unit? (or a coarser --resolution)", file=path)
 
 
 def jobs_option(help_text: str):

@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from aogm_cli.cli.options import (
+    SEED_LIMIT,
     budget_options,
     check_executor,
     jobs_option,
@@ -104,6 +105,8 @@ def parse_seeds(text: str) -> list[int]:
         if not lo.isdigit() or (hi and not hi.isdigit()) or (hi and int(hi) < int(lo)):
             raise InputError(f"expected seeds >= 0 as N, N-M (M >= N) or a comma list of them, e.g. 1-100, got {text!r}",
                              key="--seeds")
+        if int(hi or lo) >= SEED_LIMIT:
+            raise InputError(f"expected seeds below 2**64 ({SEED_LIMIT}), got {int(hi or lo)}", key="--seeds")
         seeds += range(int(lo), int(hi or lo) + 1)
     if len(set(seeds)) != len(seeds):
         raise InputError(f"a seed is repeated in {text!r}", key="--seeds")

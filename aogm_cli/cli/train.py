@@ -6,7 +6,14 @@ from pathlib import Path
 
 import click
 
-from aogm_cli.cli.options import LazyDefault, expand_log_paths, output_option, progress_bar, quiet_option, seed_option
+from aogm_cli.cli.options import (
+    LazyDefault,
+    expand_log_paths,
+    output_option,
+    progress_bar,
+    quiet_option,
+    seed_option_below,
+)
 from aogm_cli.detector.features import FeatureSpec
 from aogm_cli.io.outputs import resolve_outputs
 from aogm_cli.training.config import TrainingConfig
@@ -15,7 +22,7 @@ from aogm_cli.training.config import TrainingConfig
 @click.command()
 @click.argument("log_files", metavar="LOG.h5|DIR|'GLOB' ...", nargs=-1, required=True, type=click.Path())
 @output_option("Detector file to write (HDF5).")
-@seed_option
+@seed_option_below(2**32)  # scikit-learn's random_state
 @click.option("--validation-logs", "validation_logs", multiple=True, type=click.Path(),
               help="A log (a folder or a quoted glob of logs) held out for validation (repeat for more).  [default: the last max(1, n // 4) of n >= 2 logs]")
 @click.option("--hidden", type=click.IntRange(min=1, max=256), default=TrainingConfig.hidden, show_default=True, help="Units of the hidden layer.")
@@ -74,6 +81,7 @@ def train(log_files, output, seed, validation_logs, hidden, activation, beta, ri
     log_files = expand_log_paths(log_files, "LOG.h5")
     validation_logs = expand_log_paths(validation_logs, "--validation-logs")
     resolve_outputs([*log_files, *validation_logs], [("-o", output)])  # before loading scikit-learn
+    from aogm_cli.core.errors import InputError
     from aogm_cli.io.detectorfile import save_detector
     from aogm_cli.io.logfile import read_log
     from aogm_cli.io.provenance import provenance
@@ -87,6 +95,10 @@ def train(log_files, output, seed, validation_logs, hidden, activation, beta, ri
     with progress_bar(len(train_paths) + len(validation_paths) + 1, "train", quiet, unit="step") as advance:
         train_logs = [(p, read_log(p)) for p in train_paths]
         validation_logs_read = [(p, read_log(p)) for p in validation_paths]
+        for p, log in train_logs + validation_logs_read:
+            if log.n_scans == 0:
+                raise InputError("no scans (/scans/time is empty); a detector learns from readings", file=p,
+                                 key="/scans")
         detector = train_detector(train_logs, validation_logs_read, spec, LabelDefinition(arc_wrong_min=arc_wrong_min), config,
                                   advance)
     save_detector(output, detector, record)

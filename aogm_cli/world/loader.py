@@ -41,6 +41,9 @@ MAX_MAGNITUDE = 1e6
 MIN_TRUTH_RESOLUTION = 1e-4
 MAX_SONARS = 100_000  # sonar.count; larger work sizes are refused by world.budget
 MAX_FIRING_INTERVAL = 10.0  # s between a ring's firing slots (errors.firing.interval)
+MAX_SCANS = 10_000_000  # scans a waypoint trajectory makes (make bench-scale's largest office: 200,000)
+MAX_SUB_RAYS = 1000  # sonar.sub_rays per cone (the default 11)
+MAX_TRUTH_RESOLUTION = 1.0  # m per truth cell: coarser holds no wall (walls are 0.1 m thick)
 
 
 class Node:
@@ -230,7 +233,8 @@ def _bounds(n: Node) -> tuple[float, float, float, float]:
 
 
 def _truth_resolution(top: Node, bounds: tuple[float, float, float, float]) -> float:
-    truth_resolution = top.get_number("truth_resolution", 0.05, minimum=MIN_TRUTH_RESOLUTION)
+    truth_resolution = top.get_number("truth_resolution", 0.05, minimum=MIN_TRUTH_RESOLUTION,
+                                      maximum=MAX_TRUTH_RESOLUTION)
     if (bounds[2] - bounds[0]) * (bounds[3] - bounds[1]) / truth_resolution**2 > 2.5e8:
         raise top.child("truth_resolution").error("the truth grid would exceed 250 million cells; expected a coarser resolution")
     return truth_resolution
@@ -384,8 +388,17 @@ def _trajectory(n: Node, bounds) -> Trajectory:
             raise n.child("waypoints").child(i).error(f"expected a point inside bounds {list(bounds)}, got {list(pt)}")
     if all(math.dist(waypoints[0], p) == 0 for p in waypoints):
         raise n.child("waypoints").error("expected waypoints that span a distance, got one repeated point")
-    return Trajectory(waypoints=waypoints, speed=n.get_number("speed", Trajectory.speed, positive=True), scan_period=scan_period,
+    traj = Trajectory(waypoints=waypoints, speed=n.get_number("speed", Trajectory.speed, positive=True), scan_period=scan_period,
                       turn_rate=n.get_angle("turn_rate_deg", 0.0, positive=True, maximum=3600.0))
+    from aogm_cli.world.trajectory import Polyline  # the drive's length and turns, as the simulator drives it
+
+    path = Polyline(waypoints)
+    seconds = path.length / traj.speed + (float(abs(path.turns()).sum()) / traj.turn_rate if traj.turn_rate else 0.0)
+    if seconds / scan_period > MAX_SCANS:
+        raise n.error(f"speed {traj.speed:g} m/s and scan_period {scan_period:g} s make {seconds / scan_period:.3g} "
+                      f"scans of the {path.length:g} m drive; expected at most {MAX_SCANS:g} (a faster speed or a "
+                      "longer scan_period)")
+    return traj
 
 
 def _sonar(n: Node, robot: Robot) -> Sonar:
@@ -422,7 +435,7 @@ def _sonar(n: Node, robot: Robot) -> Sonar:
         max_range=max_range,
         noise_sigma=n.get_number("noise_sigma", Sonar.noise_sigma, minimum=0.0),
         random_rate=n.get_number("random_rate", Sonar.random_rate, minimum=0.0, maximum=1.0),
-        sub_rays=n.child("sub_rays").integer(minimum=1) if n.has("sub_rays") else Sonar.sub_rays,
+        sub_rays=n.child("sub_rays").integer(minimum=1, maximum=MAX_SUB_RAYS) if n.has("sub_rays") else Sonar.sub_rays,
         max_bounces=n.child("max_bounces").integer(minimum=0) if n.has("max_bounces") else Sonar.max_bounces,
         cause_tolerance=n.get_number("cause_tolerance", Sonar.cause_tolerance, positive=True),
     )
