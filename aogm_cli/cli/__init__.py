@@ -111,6 +111,7 @@ def _register() -> None:
         ("import_log", "import_log"),
         ("compare", "compare"),
         ("info", "info"),
+        ("check", "check"),
     ):
         main.add_command(getattr(importlib.import_module(f"aogm_cli.cli.{module}"), name))
 

@@ -62,11 +62,20 @@ def _degrees(radians: float) -> float:
     return round(math.degrees(radians), 9)
 
 
-def _report(output: str, log, what: str, origin: str, extra: list[str]) -> None:
+def _report(output: str, log, what: str, origin: str, extra: list[str], quiet: bool) -> None:
+    """What was imported (unless quiet), then ``aogm check``'s summary of the log (quiet: its warnings only)."""
+    from aogm_cli.evaluation.log_check import check_log
+
     s = log.sensor
-    click.echo(f"{output}: {log.n_scans} {what} x {s.count} {s.kind} beams from {origin}", err=True)
-    for line in extra:
-        click.echo(f"  {line}", err=True)
+    if not quiet:
+        click.echo(f"{output}: {log.n_scans} {what} x {s.count} {s.kind} beams from {origin}", err=True)
+        for line in extra:
+            click.echo(f"  {line}", err=True)
+    result = check_log(log, name=output)
+    for line in (result.lines()[1:] if not quiet else []):
+        click.echo(line, err=True)
+    for w in (result.warnings if quiet else []):
+        click.echo(f"aogm: warning: {output}: {w['message']}", err=True)
 
 
 @import_log.command("carmen")
@@ -176,10 +185,9 @@ def carmen(
     write_log(output, result.log, made)
     if result.skipped:
         click.echo(f"aogm: note: {log_file}: {result.skipped_summary()}", err=True)
-    if not quiet:
-        extra = [f"poses from {result.pose_source if result.pose_source != 'line' else result.message + ' lines'}"]
-        extra.extend(result.notes)
-        _report(output, result.log, f"{result.message} scans", Path(log_file).name, extra)
+    extra = [f"poses from {result.pose_source if result.pose_source != 'line' else result.message + ' lines'}"]
+    extra.extend(result.notes)
+    _report(output, result.log, f"{result.message} scans", Path(log_file).name, extra, quiet)
 
 
 @import_log.command("text")
@@ -256,7 +264,9 @@ def carmen(
     "--mounts",
     "mounts_file",
     type=click.Path(dir_okay=False),
-    help="Table of sensor mounts x y yaw (one row per range column) instead of --bearings.",
+    metavar="FILE|PRESET",
+    help="Table of sensor mounts x y yaw (one row per range column) instead of --bearings, or a robot preset "
+    "(p3dx, p3at, peoplebot, nomad200: in m and deg whatever the units).",
 )
 @click.option("--kind", type=click.Choice(["sonar", "laser"]), default=TextOptions.kind, show_default=True)
 @click.option("--beam-width", type=_angle_deg, default=_degrees(TextOptions.beam_width), show_default=True,
@@ -302,6 +312,7 @@ def text(
           --no-echo 5000 --max-range 4.9 --sensor-radius 0.2 -o lab.h5
     """
     from aogm_cli.io.importers import file_kilobytes
+    from aogm_cli.io.importers.mounts import mounts_path
     from aogm_cli.io.importers.text import import_text
     from aogm_cli.io.logfile import write_log
     from aogm_cli.io.provenance import provenance
@@ -310,14 +321,15 @@ def text(
         raise click.UsageError("give --bearings or --mounts, not both")
     columns["no_echo"] = tuple(columns["no_echo"])
     options = TextOptions(bearings=bearings or TextOptions.bearings, beam_width=math.radians(beam_width), **columns)
-    resolve_outputs([ranges_file, poses_file, mounts_file], [("-o", output)])
-    made = provenance([ranges_file, poses_file, mounts_file])  # the inputs as read, the time the run starts
     names = tuple(TextOptions.__dataclass_fields__) + ("poses", "mounts")
+    with _option_names(names):
+        table = mounts_path(mounts_file)[0] if mounts_file else None  # a file, or a preset's packaged table
+    resolve_outputs([ranges_file, poses_file, table], [("-o", output)])
+    made = provenance([ranges_file, poses_file, table])  # the inputs as read, the time the run starts
     with _option_names(names), progress_bar(file_kilobytes(ranges_file), "import", quiet, unit="kB") as advance:
         result = import_text(ranges_file, poses_file, options, mounts_path=mounts_file, progress=advance)
     write_log(output, result.log, made)
-    if not quiet:
-        _report(output, result.log, "scans", Path(ranges_file).name, list(result.notes))
+    _report(output, result.log, "scans", Path(ranges_file).name, list(result.notes), quiet)
 
 
 @import_log.command("rosbag")
@@ -335,9 +347,10 @@ def text(
               help="Sensor kind. Default: laser for a LaserScan (--kind sonar: a sonar ring published as a scan), sonar otherwise.")
 @click.option("--base-frame", help="The robot's frame for the mounts. Default: the CHILD of --pose tf:..., an "
               "Odometry's child_frame_id, else base_link.")
-@click.option("--mounts", "mounts_file", type=click.Path(dir_okay=False),
+@click.option("--mounts", "mounts_file", type=click.Path(dir_okay=False), metavar="FILE|PRESET",
               help="Table of sensor mounts x y yaw (m, m, deg), one row per sensor (a LaserScan: one row for "
-              "the scanner, or one per beam), instead of /tf_static. Needed for PointCloud and SonarArray.")
+              "the scanner, or one per beam), instead of /tf_static; or a robot preset: p3dx, p3at, peoplebot "
+              "(ARIA's tables), nomad200 (a 16-sonar ring). Needed for PointCloud and SonarArray.")
 @click.option("--start", type=_non_negative, help="Import readings from this many seconds after the bag's first message.")
 @click.option("--end", type=_positive, help="Import readings up to this many seconds after the bag's first message.")
 @click.option("--window", type=_positive, default=RosbagOptions.window, show_default=True,
@@ -375,20 +388,21 @@ def rosbag(bag: str, output: str, ranges: tuple[str, ...], mounts_file: str | No
     Example:
       aogm import rosbag run.bag --ranges '/sonar/*' --pose tf:map.base_link -o run.h5
       aogm import rosbag run_ros2/ --ranges /scan --kind sonar --pose /odom -o run.h5
-      aogm import rosbag pioneer.bag --ranges /RosAria/sonar --pose /RosAria/pose --mounts p3dx.txt -o p3dx.h5
+      aogm import rosbag pioneer.bag --ranges /RosAria/sonar --pose /RosAria/pose --mounts p3dx -o p3dx.h5
     """
+    from aogm_cli.io.importers.mounts import load_mounts, mounts_path
     from aogm_cli.io.importers.rosbag import read_bag
-    from aogm_cli.io.importers.text import read_mounts
     from aogm_cli.io.logfile import write_log
     from aogm_cli.io.provenance import provenance
 
     options = RosbagOptions(ranges=ranges, tilt_tolerance=math.radians(tilt_tolerance),
                             beam_width=None if beam_width is None else math.radians(beam_width), **settings)
-    resolve_outputs([bag, mounts_file], [("-o", output)])
-    made = provenance([bag, mounts_file])  # the inputs as read (a folder's files), the time the run starts
     with _option_names(tuple(RosbagOptions.__dataclass_fields__) + ("mounts",)):
-        mounts = read_mounts(mounts_file) if mounts_file else None
-        result = read_bag(bag, options, mounts)
+        table = mounts_path(mounts_file)[0] if mounts_file else None  # a file, or a preset's packaged table
+        resolve_outputs([bag, table], [("-o", output)])
+        made = provenance([bag, table])  # the inputs as read (a folder's files), the time the run starts
+        mounts, mounts_source = load_mounts(mounts_file) if mounts_file else (None, "")
+        with progress_bar(None, "import", quiet, unit="msg") as advance:
+            result = read_bag(bag, options, mounts, mounts_source, progress=advance)
     write_log(output, result.log, made)
-    if not quiet:
-        _report(output, result.log, "scans", Path(bag).name, result.summary())
+    _report(output, result.log, "scans", Path(bag).name, result.summary(), quiet)

@@ -245,18 +245,24 @@ def detector_file(detector: str | None, modes) -> str | None:
 
 
 @contextmanager
-def progress_bar(total: int, desc: str, quiet: bool, unit: str = "it"):
+def progress_bar(total: int | None, desc: str, quiet: bool, unit: str = "it"):
     """A tqdm bar on a terminal; nothing when quiet or when stderr is not a terminal.
 
-    Yields a callback ``advance(n)`` that moves the bar by n.
+    Yields a callback ``advance(n, total=None)`` that moves the bar by n (and sets its total when
+    it was not known at the start: a bag's message count once it is open).
     """
     if quiet or not sys.stderr.isatty():
-        yield lambda n: None
+        yield lambda n, total=None: None
         return
     from tqdm import tqdm
 
     with tqdm(total=total, desc=desc, unit=unit, leave=False, file=sys.stderr) as bar:
-        yield bar.update
+        def advance(n: int, total: int | None = None) -> None:
+            if total is not None and bar.total != total:
+                bar.total = total
+            bar.update(n)
+
+        yield advance
 
 
 def check_executor(jobs: int, scheduler: str | None, batch: bool = True) -> None:
