@@ -107,6 +107,15 @@ class Bag:
         data = self.ts.serialize_ros1(message, msgtype) if self.ros1 else self.ts.serialize_cdr(message, msgtype)
         self.writer.write(self.connections[topic], round(t * 1e9), data)
 
+    def odometry(self, t: float, pose):
+        """A nav_msgs/Odometry of ``pose`` at ``t`` (odom -> base_link, standing still)."""
+        cov = self.msg("geometry_msgs/msg/PoseWithCovariance", pose=self.pose(pose), covariance=np.zeros(36))
+        zero = self.msg("geometry_msgs/msg/Vector3", x=0.0, y=0.0, z=0.0)
+        twist = self.msg("geometry_msgs/msg/TwistWithCovariance",
+                         twist=self.msg("geometry_msgs/msg/Twist", linear=zero, angular=zero), covariance=np.zeros(36))
+        return self.msg("nav_msgs/msg/Odometry", header=self.header(t, "odom"), child_frame_id="base_link", pose=cov,
+                        twist=twist)
+
     def tf(self, topic: str, t: float, transforms) -> None:
         self.write(topic, "tf2_msgs/msg/TFMessage", t, self.msg("tf2_msgs/msg/TFMessage", transforms=transforms))
 
@@ -163,14 +172,8 @@ def write_scan_bag(path: Path, kind: str, log: Log, odom_until: float | None = N
         bag.tf("/tf_static", T0, [bag.transform(T0, "base_link", "sonar_ring", (0.0, 0.0, 0.0), z=0.3)])
         for k, (t, pose, row) in enumerate(zip(log.time, log.pose, log.ranges, strict=True)):
             stamp = T0 + t
-            cov = bag.msg("geometry_msgs/msg/PoseWithCovariance", pose=bag.pose(pose), covariance=np.zeros(36))
-            zero = bag.msg("geometry_msgs/msg/Vector3", x=0.0, y=0.0, z=0.0)
-            twist = bag.msg("geometry_msgs/msg/TwistWithCovariance",
-                            twist=bag.msg("geometry_msgs/msg/Twist", linear=zero, angular=zero), covariance=np.zeros(36))
             if odom_until is None or t <= odom_until:
-                bag.write("/odom", "nav_msgs/msg/Odometry", stamp,
-                          bag.msg("nav_msgs/msg/Odometry", header=bag.header(stamp, "odom"),
-                                  child_frame_id="base_link", pose=cov, twist=twist))
+                bag.write("/odom", "nav_msgs/msg/Odometry", stamp, bag.odometry(stamp, pose))
             values = np.array([bag_value(r, k + i, s.max_range) for i, r in enumerate(row)], dtype=np.float32)
             bag.write("/scan", "sensor_msgs/msg/LaserScan", stamp, bag.msg(
                 "sensor_msgs/msg/LaserScan", header=bag.header(stamp, "sonar_ring"), angle_min=0.0,

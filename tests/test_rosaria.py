@@ -58,13 +58,7 @@ def write_rosaria_bag(path: Path, log, disabled=REAR, kind: str = "ros1") -> Non
     with Bag(path, kind) as bag:
         for t, pose, row in zip(log.time, log.pose, log.ranges, strict=True):
             stamp = T0 + t
-            cov = bag.msg("geometry_msgs/msg/PoseWithCovariance", pose=bag.pose(pose), covariance=np.zeros(36))
-            zero = bag.msg("geometry_msgs/msg/Vector3", x=0.0, y=0.0, z=0.0)
-            twist = bag.msg("geometry_msgs/msg/TwistWithCovariance",
-                            twist=bag.msg("geometry_msgs/msg/Twist", linear=zero, angular=zero), covariance=np.zeros(36))
-            bag.write("/RosAria/pose", "nav_msgs/msg/Odometry", stamp,
-                      bag.msg("nav_msgs/msg/Odometry", header=bag.header(stamp, "odom"), child_frame_id="base_link",
-                              pose=cov, twist=twist))
+            bag.write("/RosAria/pose", "nav_msgs/msg/Odometry", stamp, bag.odometry(stamp, pose))
             reach = np.where(np.isfinite(row), row, s.max_range).astype(np.float64)
             px = s.mount[:, 0] + reach * np.cos(s.mount[:, 2])
             py = s.mount[:, 1] + reach * np.sin(s.mount[:, 2])

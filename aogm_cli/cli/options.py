@@ -3,13 +3,13 @@ read from the config dataclasses), and the progress bar. Every command checks it
 with ``io.outputs.resolve_outputs`` before any work.
 
 Option                 commands
--o/--output            simulate, map, train, render, export (a PREFIX), import carmen, import text
--q/--quiet             simulate, map, train, render, export, compare, import carmen, import text
---seed                 simulate, train, compare (--holdout)
+-o/--output            simulate, map, train, render, export (a PREFIX), import carmen, import text, import rosbag
+-q/--quiet             simulate, map, train, render, export, compare, import carmen, import text, import rosbag
+--seed                 simulate, train (below 2**32), compare (--holdout)
 --png                  simulate, map
 --mode / --modes       map / compare (choices from core.occupancy_map.MODES; also --require-checks)
 --params, --detector   map, compare
---resolution           map, calibrate
+--resolution           map, calibrate (check: its own, 0.05 by default); refuse_huge_grids: map, calibrate, compare
 --calibrate/--no-calibrate map, compare (``calibration.enabled``)
 --max-memory/--max-work simulate, map, compare (``budget_options``; ``core.budget``)
 --jobs/-j, --scheduler simulate, compare (``core.executors``: a local process pool, a Dask cluster)

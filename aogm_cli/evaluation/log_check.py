@@ -172,6 +172,17 @@ def _steps(time: np.ndarray) -> np.ndarray:
         return np.diff(time)
 
 
+def _first(found: np.ndarray) -> int | None:
+    """The first index found, None for none."""
+    return int(found[0]) if found.size else None
+
+
+def _largest(values: np.ndarray) -> float:
+    """The largest finite value, 0 for none (a step in no time is infinitely fast: counted, not shown)."""
+    finite = values[np.isfinite(values)]
+    return float(finite.max()) if finite.size else 0.0
+
+
 def _time(time: np.ndarray, limits: CheckLimits) -> dict:
     dt = _steps(time)
     forward = dt[dt > 0]
@@ -182,11 +193,11 @@ def _time(time: np.ndarray, limits: CheckLimits) -> dict:
         "first": float(time[0]) if time.size else 0.0,
         "last": float(time[-1]) if time.size else 0.0,
         "median_period": median,
-        "longest_step": float(dt.max()) if dt.size and np.isfinite(dt).any() else 0.0,
+        "longest_step": _largest(dt),
         "gaps": int(gaps.size),
-        "first_gap": int(gaps[0]) if gaps.size else None,
+        "first_gap": _first(gaps),
         "backwards": int(backwards.size),
-        "first_backwards": int(backwards[0]) if backwards.size else None,
+        "first_backwards": _first(backwards),
         "not_finite": int((~np.isfinite(time)).sum()),
     }
 
@@ -202,14 +213,13 @@ def _poses(time: np.ndarray, pose: np.ndarray, limits: CheckLimits) -> dict:
         rate = np.where(forward & (turn > 0), turn / np.where(dt > 0, dt, 0.0), 0.0)
         jumps = np.flatnonzero(speed > limits.max_speed)
         turns = np.flatnonzero(rate > limits.max_turn)
-    finite_speed, finite_rate = speed[np.isfinite(speed)], rate[np.isfinite(rate)]
     return {
-        "fastest_speed": float(finite_speed.max()) if finite_speed.size else 0.0,
-        "fastest_turn": float(finite_rate.max()) if finite_rate.size else 0.0,
+        "fastest_speed": _largest(speed),
+        "fastest_turn": _largest(rate),
         "jumps": int(jumps.size),
-        "first_jump": int(jumps[0]) if jumps.size else None,
+        "first_jump": _first(jumps),
         "turns": int(turns.size),
-        "first_turn": int(turns[0]) if turns.size else None,
+        "first_turn": _first(turns),
         "not_finite": int((~np.isfinite(pose).all(axis=1)).sum()),
     }
 
