@@ -16,6 +16,7 @@ import pytest
 
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.mapping import em as E
+from aogm_cli.mapping import pipeline
 from aogm_cli.mapping.em import em_problem, em_readings, find_root, run_em
 from aogm_cli.mapping.params import EMConfig
 from aogm_cli.mapping.sensor_models.cone import build_cone_templates
@@ -303,6 +304,28 @@ def test_scratch_grown_mid_sweep_gives_the_same_run(seed, monkeypatch):
     monkeypatch.setattr(E, "_grown", lambda work: grown.append(1) or ORIGINAL_GROWN(work))
     result, occupied, problem = run_case(case)
     assert len(grown) >= 3
+    assert np.array_equal(occupied, expected_map) and result.flips == expected.flips
+    assert result.objective == expected.objective
+    assert np.array_equal(result.residual, expected.residual)
+    check_against_reference(case, result, occupied, problem)
+
+
+@pytest.mark.parametrize("seed, tiny", [(3, False), (11, True), (12, False), (20, True)])
+def test_sweeps_paused_before_every_tile_give_the_same_run(seed, tiny, monkeypatch):
+    # with a budget of one pair the kernel returns (PAUSED) before every row and tile but the first
+    # of each call, and resumes there; the cone walks run a few readings per call; with ``tiny``
+    # the scratch grows mid-sweep too
+    case = random_case(seed, n_readings=(30, 80))
+    expected, expected_map, _ = run_case(case)
+    statuses, sweep = [], E.K._sweep_tiles
+    monkeypatch.setattr(E.K, "PAUSE_WORK", 1)
+    monkeypatch.setattr(pipeline, "READINGS_PER_CALL", 3)
+    monkeypatch.setattr(E.K, "_sweep_tiles", lambda *args: statuses.append(sweep(*args)) or statuses[-1])
+    if tiny:
+        monkeypatch.setattr(E, "_work", tiny_work)
+    result, occupied, problem = run_case(case)
+    assert statuses.count(E.K.PAUSED) >= 10 * (result.sweeps + 1)
+    assert (E.K.NEED_BUFFERS in statuses) == tiny
     assert np.array_equal(occupied, expected_map) and result.flips == expected.flips
     assert result.objective == expected.objective
     assert np.array_equal(result.residual, expected.residual)

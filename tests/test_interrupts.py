@@ -114,6 +114,18 @@ def test_a_signal_ends_the_command_cleanly(data, tmp_path, args, sig, delay, out
     check_interrupted(res, sig, tmp_path, outputs)
 
 
+def test_a_signal_during_em_sweeps_ends_the_map_within_seconds(data, tmp_path):
+    # the sweeps return to Python every few tiles (em_kernels.PAUSE_WORK), where the handler runs;
+    # before, one call of the sweep kernel on this log ran for up to 8 s. 8 s in, EM sweeps (its
+    # calibration's first round); the bound is generous for a loaded machine
+    os.symlink(data / "long.h5", tmp_path / "long.h5")
+    start = time.monotonic()
+    res = interrupt(["map", "long.h5", "--mode", "em", "-o", "m.h5"], tmp_path, signal.SIGINT, 8.0)
+    ended = time.monotonic() - start - 8.0
+    check_interrupted(res, signal.SIGINT, tmp_path, ["m.h5"])
+    assert ended < 3.0
+
+
 @pytest.mark.parametrize("sig, group", [(signal.SIGTERM, False), (signal.SIGINT, True)])
 def test_compare_with_two_jobs_ends_its_workers(data, tmp_path, sig, group):
     os.symlink(data / "long.h5", tmp_path / "long.h5")

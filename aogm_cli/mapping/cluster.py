@@ -16,6 +16,7 @@ import numpy as np
 from scipy import ndimage
 
 from aogm_cli.core.grid import GridSpec
+from aogm_cli.mapping.pipeline import reading_spans
 from aogm_cli.mapping.sensor_models.cone import cone_cells
 
 
@@ -39,9 +40,9 @@ class BandGrid(NamedTuple):
 
 
 @numba.njit(cache=True)
-def _band(tpl, grid, readings, counts):
-    """Mark each reading's band in ``grid.swept`` and count its cells of ``grid.cell_mask``
-    into ``counts``; ``tpl`` is ``ConeTemplates.kernel_arrays``."""
+def _band(tpl, grid, readings, counts, span):
+    """Mark the band of each reading span[0] <= t < span[1] in ``grid.swept`` and count its
+    cells of ``grid.cell_mask`` into ``counts``; ``tpl`` is ``ConeTemplates.kernel_arrays``."""
     height = grid.height
     width = grid.width
     cell_mask = grid.cell_mask
@@ -54,7 +55,7 @@ def _band(tpl, grid, readings, counts):
     offsets = tpl.offsets
     scratch_cell = np.empty(offsets[-1], dtype=np.int64)
     scratch_range = np.empty(offsets[-1], dtype=np.float64)
-    for t in range(rows.shape[0]):
+    for t in range(span[0], span[1]):
         if not upper[t] >= 0.0:  # no band (max-range or invalid reading)
             continue
         n = cone_cells(tpl, height, width, rows[t], cols[t], bins[t], upper[t], scratch_cell, scratch_range,
@@ -87,7 +88,8 @@ def cone_bands(grid: GridSpec, templates, rows, cols, bins, z_model, below: floa
     counts = np.zeros(z.shape[0], dtype=np.int64)
     swept = np.zeros(grid.height * grid.width, dtype=np.bool_)
     readings = BandReadings(*(np.ascontiguousarray(a, np.int64).reshape(-1) for a in (rows, cols, bins)), lower, upper)
-    _band(templates.kernel_arrays, BandGrid(grid.height, grid.width, mask, swept), readings, counts)
+    for span in reading_spans(z.shape[0]):
+        _band(templates.kernel_arrays, BandGrid(grid.height, grid.width, mask, swept), readings, counts, span)
     return swept.reshape(grid.shape), counts
 
 

@@ -22,7 +22,14 @@ from aogm_cli.core.occupancy_map import OccupancyMap
 from aogm_cli.mapping import em_kernels as K
 from aogm_cli.mapping.calibration import em_with_model
 from aogm_cli.mapping.params import EMConfig, MapParams
-from aogm_cli.mapping.pipeline import Progress, forward_templates, lay_out_readings, log_grid, params_json
+from aogm_cli.mapping.pipeline import (
+    Progress,
+    forward_templates,
+    lay_out_readings,
+    log_grid,
+    params_json,
+    reading_spans,
+)
 from aogm_cli.mapping.sensor_models.cone import flat_offsets
 from aogm_cli.mapping.sensor_models.forward_model import ForwardModelConfig, reading_constants
 from aogm_cli.mapping.standard import probability_from_log_odds, standard_pass
@@ -124,15 +131,17 @@ def em_readings(rows, cols, bins, z, templates, grid, z_max: float, config: Forw
     box = ints[:, K.I_BOX:K.I_BOX + 4].T
     reach2 = ints[:, K.I_REACH2:K.I_REACH2 + 2].T
     inside = ints[:, K.I_INSIDE]
-    K._reading_extent(templates.kernel_arrays, K.row_groups(templates), (rows, cols, bins, z_eff, limits, lower),
-                      (float(config.sigma), float(config.window)), grid.shape, (m, jlo, box, reach2, inside))
+    for span in reading_spans(n):
+        K._reading_extent(templates.kernel_arrays, K.row_groups(templates), (rows, cols, bins, z_eff, limits, lower),
+                          (float(config.sigma), float(config.window)), grid.shape, (m, jlo, box, reach2, inside), span)
     g0, const, _ = reading_constants(z, z_max, config)
     floats[:, K.F_G0] = g0
     floats[:, K.F_CONST] = const
     window_hi = ints[:, K.I_WINDOW_HI]
     rd = K.EMReadings(rows, cols, bins, z_eff, floats[:, K.F_G0], floats[:, K.F_CONST], m, jlo, box, reach2, inside,
                       window_hi, _order(box[0]), _order(box[1]), np.zeros(0, dtype=np.int32), ints, floats)
-    K._window_rows(templates.kernel_arrays, rd, grid.height, window_hi)  # needs the fields above only
+    for span in reading_spans(n):
+        K._window_rows(templates.kernel_arrays, rd, grid.height, window_hi, span)  # needs the fields above only
     return rd._replace(window_leave=_order(window_hi))
 
 
@@ -176,7 +185,9 @@ def em_problem(rd: K.EMReadings, templates, shape: tuple[int, int], occupied: np
     else:
         labels = np.ascontiguousarray(labels, dtype=np.int64).reshape(-1)
         marks = (seen, labels, np.arange(int(labels.max(initial=0)) + 1, dtype=np.int64), np.empty((4, n), dtype=np.int64))
-    K._init_state(templates.kernel_arrays, flat_offsets(templates, shape[1]), rd, model, _flat_bool(occupied), shape, marks, state)
+    flat, occupied = flat_offsets(templates, shape[1]), _flat_bool(occupied)
+    for span in reading_spans(n):
+        K._init_state(templates.kernel_arrays, flat, rd, model, occupied, shape, marks, state, span)
     parent = None
     if labels is not None:
         box = rd.ints[:, K.I_BOX:K.I_BOX + 4].T
@@ -248,6 +259,7 @@ def _grown(work: K.TileWork) -> K.TileWork:
             grow[name] = np.empty(size, dtype=old.dtype)
             grow[name][:used] = old[:used]
     ctl[K.CTL_NEED_LIST] = ctl[K.CTL_NEED_PAIRS] = ctl[K.CTL_NEED_ROOM] = 0
+    ctl[K.CTL_LISTED] = -1  # the row is listed again (into the new buffers)
     return work._replace(**grow)
 
 
@@ -275,11 +287,18 @@ def run_em(problem: EMProblem, occupied: np.ndarray, candidates: np.ndarray, con
         before = ctl[K.CTL_FLIPS], ctl[K.CTL_SCORED], ctl[K.CTL_PAIRS]
         ctl[K.CTL_MODE], ctl[K.CTL_ROW], ctl[K.CTL_SEG], ctl[K.CTL_ENTER], ctl[K.CTL_LEAVE] = mode, 0, 0, 0, 0
         ctl[K.CTL_BUMP] = ctl[K.CTL_WINDOW_LEAVE] = 0
+        ctl[K.CTL_LISTED] = -1
         work.active.fill(0)
         work.slot.fill(-1)
-        while K._sweep_tiles(tpl, flat, groups, rd, model, cand, state, work) == K.NEED_BUFFERS:
-            work = _grown(work)
-            peak[1] = max(peak[1], _scratch_bytes(work))
+        while True:
+            ctl[K.CTL_BUDGET] = K.PAUSE_WORK
+            status = K._sweep_tiles(tpl, flat, groups, rd, model, cand, state, work)
+            if status == K.DONE:
+                break
+            if status == K.NEED_BUFFERS:
+                work = _grown(work)
+                peak[1] = max(peak[1], _scratch_bytes(work))
+            # PAUSED: back in Python, where a pending signal's handler runs (core.interrupts); resume
         peak[0] = max(peak[0], work.pair_pos.shape[0])
         return tuple(int(ctl[i] - b) for i, b in zip((K.CTL_FLIPS, K.CTL_SCORED, K.CTL_PAIRS), before, strict=True))
 

@@ -50,8 +50,13 @@ CTL_MODE, CTL_ROW, CTL_SEG = 0, 1, 2
 CTL_NEED_LIST, CTL_NEED_PAIRS, CTL_NEED_ROOM = 3, 4, 5
 CTL_ENTER, CTL_LEAVE, CTL_CLOCK, CTL_FLIPS, CTL_SCORED, CTL_PAIRS = 6, 7, 8, 9, 10, 11
 CTL_BUMP, CTL_WINDOW_LEAVE = 12, 13
-CTL_SIZE = 14
-DONE, NEED_BUFFERS = 0, 1
+CTL_BUDGET, CTL_LISTED = 14, 15
+CTL_SIZE = 16
+DONE, NEED_BUFFERS, PAUSED = 0, 1, 2
+# the work (in window pairs: see _sweep_tiles) after which a sweep pauses, so that the caller is
+# back in Python, where a signal's handler runs, many times a second: on the 50k-scan office a
+# call took 0.04 s (median; 0.1 s at the 99th percentile, 0.2 s at most: a tile is not divided)
+PAUSE_WORK = 1 << 21
 
 
 class RowGroups(NamedTuple):
@@ -232,17 +237,18 @@ def _entry_cell(tpl, k, j, row0, col0, height, width):
 
 
 @numba.njit(cache=True)
-def _reading_extent(tpl, groups, readings, gauss, grid_shape, out):
-    """Per reading of ``readings`` = (rows, cols, bins, z, limits, lower): the entries of its
-    cone (m: up to ``limits``, and beyond z only while the Gaussian, ``gauss`` = (sigma,
-    window), is not 0, as ``forward_model.cone_entries``), the first entry at range >=
-    ``lower`` (jlo), the grid rows and columns its cone spans (row_lo > row_hi: none) and the
-    squared offsets (cells) of entries m - 1 and jlo - 1 (``EMReadings.reach2``)."""
+def _reading_extent(tpl, groups, readings, gauss, grid_shape, out, span):
+    """Per reading span[0] <= t < span[1] of ``readings`` = (rows, cols, bins, z, limits,
+    lower): the entries of its cone (m: up to ``limits``, and beyond z only while the
+    Gaussian, ``gauss`` = (sigma, window), is not 0, as ``forward_model.cone_entries``), the
+    first entry at range >= ``lower`` (jlo), the grid rows and columns its cone spans (row_lo >
+    row_hi: none) and the squared offsets (cells) of entries m - 1 and jlo - 1
+    (``EMReadings.reach2``)."""
     rows, cols, bins, z, limits, lower = readings
     sigma, window = gauss
     height, width = grid_shape
     out_m, out_jlo, out_box, out_reach2, out_inside = out
-    for t in range(rows.shape[0]):
+    for t in range(span[0], span[1]):
         k = bins[t]
         b = tpl.base_bin[k]
         s = tpl.offsets[b]
@@ -286,9 +292,10 @@ def _reading_extent(tpl, groups, readings, gauss, grid_shape, out):
 
 
 @numba.njit(cache=True)
-def _window_rows(tpl, rd, height, out):
-    """The last grid row of each reading's window cells (entries jlo .. m - 1; -1: none)."""
-    for t in range(rd.z.shape[0]):
+def _window_rows(tpl, rd, height, out, span):
+    """The last grid row of the window cells (entries jlo .. m - 1; -1: none) of each reading
+    span[0] <= t < span[1]."""
+    for t in range(span[0], span[1]):
         k = rd.bin[t]
         s0 = tpl.offsets[tpl.base_bin[k]]
         tc, td = tpl.transform[k, 2], tpl.transform[k, 3]
@@ -331,8 +338,9 @@ def _find(parent, x):
 # _nrt=False (a private numba option): the kernel allocates nothing, and without numba's
 # reference counting its tuples' arrays cost nothing per reading
 @numba.njit(cache=True, _nrt=False)
-def _init_state(tpl, flat, rd, model, occupied, grid_shape, marks, state):
-    """Every reading's ``EMState`` under ``occupied`` (one walk of its cone, nearest first).
+def _init_state(tpl, flat, rd, model, occupied, grid_shape, marks, state, span):
+    """The ``EMState`` of each reading span[0] <= t < span[1] under ``occupied`` (one walk of
+    its cone, nearest first).
 
     ``marks`` = (seen, labels, parent, box): with a non-empty ``seen`` (flat bool) every
     cone cell is marked in it; with non-empty ``labels`` (flat int, 0 outside every cluster)
@@ -346,7 +354,7 @@ def _init_state(tpl, flat, rd, model, occupied, grid_shape, marks, state):
     p_hit = model.p_hit
     mark = seen.shape[0] > 0
     join = labels.shape[0] > 0
-    for t in range(rd.z.shape[0]):
+    for t in range(span[0], span[1]):
         state.stamp[t] = 0
         far = 0
         k = 0
@@ -814,11 +822,13 @@ def _list_segments(tpl, groups, rd, cand, work, r, n_seg):
         col = cand.cell[c] - r * width
         mask[col // SEGMENT] |= np.int64(1) << np.int64(col % SEGMENT)
     n = 0
+    visited = 0
     for wi in range(active.shape[0]):
         word = active[wi]
         while word != np.uint64(0):
             t = (wi << 6) + np.int64(_trailing_zeros(word))
             word &= word - np.uint64(1)  # the lowest set bit off
+            visited += 1
             span = _row_span(tpl, groups, rd, t, r)
             if span.o_hi >= span.o_lo:
                 col0 = rd.col0[t]
@@ -842,6 +852,7 @@ def _list_segments(tpl, groups, rd, cand, work, r, n_seg):
                             listed = True
                     if listed:
                         n += 1
+    work.ctl[CTL_BUDGET] -= active.shape[0] + 2 * visited  # a listed reading costs about two window pairs
     for s in range(n_seg):
         seg_ptr[s + 1] += seg_ptr[s]
         fill[s] = seg_ptr[s]
@@ -896,7 +907,12 @@ def _sweep_tiles(tpl, flat, groups, rd, model, cand, state, work):
     since the tile's last visit: the result equals a full sweep's. The clock counts accepted
     flips. Starts at (ctl[CTL_ROW], ctl[CTL_SEG]); returns NEED_BUFFERS, with the sizes
     needed in ctl, before a tile's first change when the scratch is too small (grow it and
-    call again: the pass resumes there), else DONE.
+    call again: the pass resumes there), PAUSED before a row or a tile once the work done in
+    this call (subtracted from ctl[CTL_BUDGET], in window pairs: a listed reading counts 2, a
+    scored candidate 8, a window built its entries, a flip the tile's readings and the cell's
+    pairs) exhausts the budget the caller set (set it again and call again: the pass resumes
+    there, with the row's listing kept, ctl[CTL_LISTED]), else DONE. Every call does at least
+    one tile or row before it pauses; where it pauses changes nothing computed.
     """
     ctl = work.ctl
     height, n_seg = cand.tile_clock.shape
@@ -905,17 +921,26 @@ def _sweep_tiles(tpl, flat, groups, rd, model, cand, state, work):
     occupied = cand.occupied
     seg_list = work.seg_list
     cnt = work.count
+    fresh = True  # nothing done yet in this call: no pause
     for r in range(ctl[CTL_ROW], height):
         ca = cand.row_first[r]
         cb = cand.row_first[r + 1]
         if ca == cb:
             continue
+        if ctl[CTL_SEG] == 0 and ctl[CTL_BUDGET] <= 0 and not fresh:
+            ctl[CTL_ROW] = r
+            return PAUSED
         ctl[CTL_ROW] = r
         _advance(rd, work, r)
-        if mode == SWEEP and ctl[CTL_SEG] == 0 and _row_unchanged(rd, cand, state, work, r, n_seg):
-            continue  # no reading whose cone crosses the row changed since its last visit
-        if not _list_segments(tpl, groups, rd, cand, work, r, n_seg):
-            return NEED_BUFFERS
+        if mode == SWEEP and ctl[CTL_SEG] == 0:
+            ctl[CTL_BUDGET] -= work.active.shape[0]
+            if _row_unchanged(rd, cand, state, work, r, n_seg):
+                fresh = False
+                continue  # no reading whose cone crosses the row changed since its last visit
+        if ctl[CTL_LISTED] != r:  # else listed before a pause, and still so
+            if not _list_segments(tpl, groups, rd, cand, work, r, n_seg):
+                return NEED_BUFFERS
+            ctl[CTL_LISTED] = r
         c_pos = ca
         row_base = r * width
         for sg in range(ctl[CTL_SEG], n_seg):
@@ -929,8 +954,13 @@ def _sweep_tiles(tpl, flat, groups, rd, model, cand, state, work):
             c_stop = c_pos
             if c_start == c_stop:
                 continue
+            if ctl[CTL_BUDGET] <= 0 and not fresh:
+                ctl[CTL_SEG] = sg
+                return PAUSED
+            fresh = False
             list_lo = work.seg_ptr[sg]
             list_hi = work.seg_ptr[sg + 1]
+            ctl[CTL_BUDGET] -= list_hi - list_lo
             clock0 = ctl[CTL_CLOCK]
             if mode == SWEEP:
                 since = cand.tile_clock[r, sg]
@@ -990,6 +1020,7 @@ def _sweep_tiles(tpl, flat, groups, rd, model, cand, state, work):
                 ctl[CTL_SEG] = sg
                 return NEED_BUFFERS
             ctl[CTL_PAIRS] += n_pairs
+            ctl[CTL_BUDGET] -= n_pairs + 8 * nc
             for i in range(list_lo, list_hi):
                 span = _span_at(work, seg_list[i])
                 t = work.spans[8, seg_list[i]]
@@ -1004,6 +1035,7 @@ def _sweep_tiles(tpl, flat, groups, rd, model, cand, state, work):
                     t = work.tile_t[work.pair_pos[p]]
                     if work.pair_g[p] != 0.0 and work.slot[t] < 0:
                         _build_window(t, tpl, flat, rd, model, cand, work)
+                        ctl[CTL_BUDGET] -= _room(rd, t)
                 ctl[CTL_SCORED] += 1
                 d = _flip_gain(c, x, lo_pair, hi_pair, rd, model, cand, state, work)
                 cand.last_gain[c] = d
@@ -1016,6 +1048,7 @@ def _sweep_tiles(tpl, flat, groups, rd, model, cand, state, work):
                     cand.last_gain[c] = -cand.last_gain[c]  # flipping back undoes exactly this gain
                     ctl[CTL_FLIPS] += 1
                     ctl[CTL_CLOCK] += 1
+                    ctl[CTL_BUDGET] -= n_list + hi_pair - lo_pair
                     adding = occupied[cell]
                     now = ctl[CTL_CLOCK]
                     for i in range(n_list):  # the readings that hold the cell before their windows

@@ -20,6 +20,8 @@ from aogm_cli.mapping.params import MapParams
 from aogm_cli.mapping.sensor_models.cone import ConeTemplates, build_cone_templates, flat_offsets, reading_geometry
 
 Progress = Callable[[str, int, int], None]  # (phase, done, total)
+# readings per call of the kernels that walk every reading's cone once (``reading_spans``)
+READINGS_PER_CALL = 1 << 14
 
 
 def log_grid(log, resolution: float) -> GridSpec:
@@ -102,6 +104,14 @@ def readings_of(pose: np.ndarray, ranges: np.ndarray, sensor: SensorSpec, grid: 
     rows, cols, bins, valid, offset = reading_geometry(pose, sensor, grid, templates)
     z = np.where(valid, echo_ranges(ranges, grid), np.nan) + offset
     return rows.reshape(-1), cols.reshape(-1), bins.reshape(-1), z.reshape(-1)
+
+
+def reading_spans(n: int) -> list[tuple[int, int]]:
+    """(start, stop) of readings 0 .. n - 1 in spans of ``READINGS_PER_CALL``: the kernels that
+    walk every reading's cone once take a span per call and so return to Python between spans,
+    where a signal's handler runs (``core.interrupts``): a signal ends a run within a second
+    whatever the log's size."""
+    return [(a, min(a + READINGS_PER_CALL, n)) for a in range(0, n, READINGS_PER_CALL)]
 
 
 @dataclass
