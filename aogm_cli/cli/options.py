@@ -88,6 +88,8 @@ def refuse_huge_grids(log_files, params, params_file: str | None, resolution_giv
     res = params.resolution
     for path in log_files:
         with LogReader(path) as reader:
+            if reader.has_truth:  # mapped on its truth grid: no resolution makes it larger
+                continue
             grid = grid_need(reader, res)
         need = grid.get("cells", 0.0) * BYTES_PER_CELL
         if not need > max_memory:
