@@ -94,7 +94,8 @@ def fit_mlp(data: Dataset, config: TrainingConfig):
         from sklearn.exceptions import ConvergenceWarning
         from sklearn.neural_network import MLPClassifier
     except ImportError:
-        raise RuntimeError("aogm train needs scikit-learn: pip install 'aogm[train]'") from None
+        raise RuntimeError("aogm train needs scikit-learn, a dependency of aogm: reinstall aogm "
+                           "(pip install .) or pip install scikit-learn") from None
     if data.y.size == 0:
         raise InputError("no readings to train on", key="logs")
     if data.y.all() or not data.y.any():
