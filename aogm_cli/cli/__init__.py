@@ -30,6 +30,18 @@ class AogmGroup(click.Group):
             if previous is not None:
                 interrupts.restore(previous)
 
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return sorted(COMMANDS)
+
+    def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
+        """The subcommand ``name`` (``COMMANDS``), its module imported now."""
+        if name not in COMMANDS:
+            return None
+        import importlib
+
+        module, attr = COMMANDS[name]
+        return getattr(importlib.import_module(f"aogm_cli.cli.{module}"), attr)
+
     def invoke(self, ctx: click.Context):
         with warnings.catch_warnings():
             if ctx.params.get("debug"):
@@ -97,26 +109,21 @@ def main(ctx: click.Context, debug: bool) -> None:
     ctx.obj["debug"] = debug
 
 
-def _register() -> None:
-    """Add each subcommand module's command (one module per subcommand)."""
-    import importlib
+# each subcommand's module and object, imported when the command runs (or --help lists them):
+# a command loads only what it uses (``aogm map`` neither rosbags nor Pillow's importers)
+COMMANDS = {
+    "simulate": ("simulate", "simulate"),
+    "map": ("map_log", "map_log"),
+    "calibrate": ("calibrate", "calibrate"),
+    "train": ("train", "train"),
+    "render": ("render", "render"),
+    "export": ("export", "export"),
+    "import": ("import_log", "import_log"),
+    "compare": ("compare", "compare"),
+    "info": ("info", "info"),
+    "check": ("check", "check"),
+}
 
-    for module, name in (
-        ("simulate", "simulate"),
-        ("map_log", "map_log"),
-        ("calibrate", "calibrate"),
-        ("train", "train"),
-        ("render", "render"),
-        ("export", "export"),
-        ("import_log", "import_log"),
-        ("compare", "compare"),
-        ("info", "info"),
-        ("check", "check"),
-    ):
-        main.add_command(getattr(importlib.import_module(f"aogm_cli.cli.{module}"), name))
-
-
-_register()
 
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(main())

@@ -11,7 +11,6 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
-from scipy import ndimage
 
 
 @dataclass(frozen=True)
@@ -85,6 +84,8 @@ class GridSpec:
         marks[rows[inside], cols[inside]] = True
         if not marks.any():
             return marks
+        from scipy import ndimage  # here, not at start-up: importing scipy.ndimage takes about 0.2 s
+
         return ndimage.distance_transform_edt(~marks) * self.resolution <= distance + 1e-9
 
     def attrs(self) -> dict:

@@ -13,7 +13,6 @@ from typing import NamedTuple
 
 import numba
 import numpy as np
-from scipy import ndimage
 
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.mapping.pipeline import reading_spans
@@ -98,6 +97,8 @@ def grown(mask: np.ndarray, cells: int) -> np.ndarray:
     mask = np.asarray(mask, dtype=bool)
     if cells <= 0 or not mask.any():
         return mask
+    from scipy import ndimage  # not at start-up (``core.grid.GridSpec.cells_near``)
+
     return ndimage.binary_dilation(mask, structure=np.ones((3, 3), dtype=bool), iterations=cells)
 
 
@@ -108,6 +109,8 @@ def near_occupied(log_odds: np.ndarray, cells: int = 1) -> np.ndarray:
 
 def label_clusters(region: np.ndarray) -> tuple[np.ndarray, int]:
     """8-connected components of ``region``: (int32 ids, 0 outside; number of clusters)."""
+    from scipy import ndimage
+
     labels, n = ndimage.label(region, structure=np.ones((3, 3), dtype=int))
     return labels.astype(np.int32), int(n)
 

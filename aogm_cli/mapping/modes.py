@@ -17,9 +17,7 @@ from aogm_cli.core.occupancy_map import MODES, OccupancyMap
 from aogm_cli.detector.network import ConstantDetector
 from aogm_cli.io.detectorfile import BASELINE_DETECTORS, file_sha256, load_detector
 from aogm_cli.io.logfile import LogReader
-from aogm_cli.mapping.adaptive import map_adaptive
 from aogm_cli.mapping.budget import map_estimate
-from aogm_cli.mapping.em import map_em
 from aogm_cli.mapping.params import MapParams
 from aogm_cli.mapping.pipeline import Progress, log_grid
 from aogm_cli.mapping.standard import map_standard
@@ -38,12 +36,17 @@ def resolve_detector(spec: str | None):
 
 def map_log(log, mode: str, params: MapParams, detector=None, detector_name: str = "packaged",
             progress: Progress | None = None) -> OccupancyMap:
-    """Map a log source (an open ``LogReader`` or a ``Log``) in ``mode``; adaptive needs ``detector``."""
+    """Map a log source (an open ``LogReader`` or a ``Log``) in ``mode``; adaptive needs ``detector``.
+    EM's and adaptive's modules are imported here, when used (a standard map's start-up is most of its time)."""
     if mode == "standard":
         m = map_standard(log, params, progress)
     elif mode == "em":
+        from aogm_cli.mapping.em import map_em
+
         m = map_em(log, params, progress)
     elif mode == "adaptive":
+        from aogm_cli.mapping.adaptive import map_adaptive
+
         m = map_adaptive(log, params, detector, detector_name, progress)
     else:
         raise ValueError(f"unknown mode {mode!r}; expected one of {', '.join(MODES)}")
