@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from aogm_cli.core import jit_cache
 from aogm_cli.core.budget import Limits, check
 from aogm_cli.core.log import Log, SensorSpec
 from aogm_cli.core.occupancy_map import MODES, OccupancyMap
@@ -104,7 +105,9 @@ def tiny_log(sensor: SensorSpec) -> Log:
 def warm_up(sensor: SensorSpec, params: MapParams, mode: str) -> None:
     """Compile (or load from numba's cache) the kernels ``mode`` runs, by running the mode's
     own pipeline on ``tiny_log(sensor)``, so that ``runtime_s`` leaves compilation out. EM
-    modes run twice: to convergence and stopped by the sweep limit (each ends in its own kernel)."""
+    modes run twice: to convergence and stopped by the sweep limit (each ends in its own kernel).
+    Cached kernels are loaded without numba's full start-up (``core.jit_cache``)."""
+    jit_cache.load_lean()
     log = tiny_log(sensor)
     map_log(log, mode, params, ConstantDetector(True), "all")
     if mode != "standard":

@@ -1,0 +1,44 @@
+"""aogm's compiled kernels loaded from numba's on-disk cache without numba's full start-up.
+
+Before it loads any cached kernel, numba initialises its whole CPU target
+(``BaseContext.refresh``: every typing and lowering registry, numba.np.*, numba.cpython.*),
+which only compiling needs: 0.6-0.8 s on the development machine, more than the rest of
+``aogm map`` of a small log. ``load_lean()`` makes numba load aogm's own kernels (functions
+of ``aogm_cli`` modules) with only what their machine code links to, numba's runtime (the
+NRT); compiling still initialises the target in full (numba's compiler does so itself),
+other packages' kernels load as numba loads them, and a kernel that fails to load this way
+is loaded numba's way.
+"""
+
+from __future__ import annotations
+
+_installed: list[bool] = []
+
+
+def load_lean() -> None:
+    """Install the lean loading of aogm's cached kernels (once; nothing when numba's cache
+    has not the shape it was written for: ``Cache.load_overload``, ``_load_overload``)."""
+    if _installed:
+        return
+    _installed.append(True)
+    try:
+        from numba.core.caching import Cache
+        from numba.core.runtime import nrt
+    except ImportError:
+        return
+    numba_way = getattr(Cache, "load_overload", None)
+    if numba_way is None or not hasattr(Cache, "_load_overload") or not hasattr(nrt, "rtsys"):
+        return
+
+    def load_overload(self, sig, target_context):
+        module = getattr(getattr(self, "_py_func", None), "__module__", None) or ""
+        if not module.startswith("aogm_cli."):
+            return numba_way(self, sig, target_context)
+        try:
+            nrt.rtsys.initialize(target_context)
+            with self._guard_against_spurious_io_errors():
+                return self._load_overload(sig, target_context)
+        except Exception:  # noqa: BLE001 - then numba's own way, which initialises everything
+            return numba_way(self, sig, target_context)
+
+    Cache.load_overload = load_overload
