@@ -134,14 +134,10 @@ def simulate(world_path: str | Path, seed: int = 0) -> Log:
     >>> bool((simulate(bundled_world("corridor_door"), seed=1).ranges == log.ranges).all())
     True
     """
-    from aogm_cli.core import budget
     from aogm_cli.simulation.sonar import simulate as run_simulation
-    from aogm_cli.world.budget import simulation_estimate
-    from aogm_cli.world.loader import load_world
+    from aogm_cli.world.budget import load_checked_world
 
-    world = load_world(world_path)
-    budget.check(simulation_estimate(world), None, file=str(world_path))
-    return run_simulation(world, seed=seed)
+    return run_simulation(load_checked_world(world_path), seed=seed)
 
 
 def map_params(**params: Any):

@@ -116,12 +116,9 @@ def parse_seeds(text: str) -> list[int]:
 def _load_checked(world_file: str, limits):
     """The world of ``world_file`` and the files it is read from, its estimate checked against
     ``limits`` (before any work)."""
-    from aogm_cli.core import budget
-    from aogm_cli.world.budget import simulation_estimate
-    from aogm_cli.world.loader import load_world
+    from aogm_cli.world.budget import load_checked_world
 
-    world = load_world(world_file)
-    budget.check(simulation_estimate(world), limits, file=world_file)
+    world = load_checked_world(world_file, limits)
     return world, world_inputs(world_file, world)
 
 

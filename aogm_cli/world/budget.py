@@ -53,3 +53,15 @@ def simulation_estimate(world: World) -> Estimate:
     detail = (f"{n_scans:.3g} scans x {n_sensors:.0f} sonars x {sub_rays:.0f} sub-rays, "
               f"{cells:.3g} truth cells")
     return Estimate("simulating this world", memory, work, "ray casts", detail)
+
+
+def load_checked_world(path, limits=None) -> World:
+    """The world of the file at ``path``, refused (``InputError`` naming the file) before any work
+    when simulating it would exceed ``limits`` (default: the limits in force,
+    ``core.budget.active_limits``). ``aogm simulate`` and ``aogm_cli.simulate`` load worlds here."""
+    from aogm_cli.core.budget import check
+    from aogm_cli.world.loader import load_world
+
+    world = load_world(path)
+    check(simulation_estimate(world), limits, file=str(path))
+    return world
