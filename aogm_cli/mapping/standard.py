@@ -68,6 +68,7 @@ from aogm_cli.mapping.pipeline import (
     is_narrow_beam,
     log_grid,
     params_json,
+    reading_spans,
 )
 from aogm_cli.mapping.sensor_models.cone import (
     SPARE_MASK,
@@ -181,8 +182,9 @@ class StandardMapper:
         z = np.where(valid, np.asarray(ranges, dtype=np.float32), np.float32(np.nan)).astype(np.float32)
         readings = ConeReadings(rows.reshape(-1) + self.pad, cols.reshape(-1) + self.pad, bins.reshape(-1),
                                 z.reshape(-1), offset.reshape(-1))
-        _standard_kernel(self._grid, readings, self.templates.kernel_arrays, self.flat_offsets, self.entries,
-                         self.update_constants)
+        for span in reading_spans(z.size):  # back in Python between spans, where a signal's handler runs
+            _standard_kernel(self._grid, readings, self.templates.kernel_arrays, self.flat_offsets, self.entries,
+                             self.update_constants, span)
 
     def result(self) -> tuple[np.ndarray, np.ndarray]:
         """(log_odds float32 (H, W), observed bool (H, W)); unobserved cells hold the prior l0."""
@@ -263,8 +265,9 @@ def map_standard(log, params: MapParams, progress: Progress | None = None) -> Oc
 # _nrt=False (a private numba option, as em_kernels._sweep): the kernel allocates nothing, and
 # without reference counting its tuples' arrays cost nothing per reading
 @numba.njit(cache=True, _nrt=False)
-def _standard_kernel(grid, readings, tpl, flat, entries, update):
-    """Compiled log-odds update of readings t = 0, 1, ... in order on the flat ``grid.state``.
+def _standard_kernel(grid, readings, tpl, flat, entries, update, span):
+    """Compiled log-odds update of readings t = span[0], span[0] + 1, ... < span[1] in order on
+    the flat ``grid.state``.
 
     ``grid`` is a ``PaddedGrid``, ``readings`` ``cone.ConeReadings`` (cells of the padded
     grid), ``tpl`` ``ConeTemplates.kernel_arrays``, ``flat`` its ``cone.FlatOffsets`` for the
@@ -305,7 +308,7 @@ def _standard_kernel(grid, readings, tpl, flat, entries, update):
     l0 = np.float32(update.l0)
     elfes = update.elfes
     zero = np.float32(0.0)
-    for t in range(z.size):
+    for t in range(span[0], span[1]):
         zt = np.float64(z[t])
         if not zt >= 0.0:  # NaN or negative: no information
             continue
