@@ -82,11 +82,17 @@ class GridSpec:
         inside = self.contains(rows, cols)
         marks = np.zeros(self.shape, dtype=bool)
         marks[rows[inside], cols[inside]] = True
-        if not marks.any():
-            return marks
+        return self.within(marks, distance)
+
+    def within(self, mask: np.ndarray, distance: float) -> np.ndarray:
+        """Bool (H, W): cells whose centre lies within ``distance`` (m) of the centre of some cell
+        of ``mask`` (bool (H, W)); none when the mask is empty."""
+        mask = np.asarray(mask, dtype=bool)
+        if not mask.any():
+            return np.zeros(self.shape, dtype=bool)
         from scipy import ndimage  # here, not at start-up: importing scipy.ndimage takes about 0.2 s
 
-        return ndimage.distance_transform_edt(~marks) * self.resolution <= distance + 1e-9
+        return ndimage.distance_transform_edt(~mask) * self.resolution <= distance + 1e-9
 
     def attrs(self) -> dict:
         """Attributes written beside a grid in every file: resolution and origin."""

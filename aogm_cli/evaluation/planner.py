@@ -36,23 +36,9 @@ def map_free(probability: np.ndarray, observed: np.ndarray) -> np.ndarray:
 
 
 def near_trajectory(grid: GridSpec, poses: np.ndarray, distance: float = START_DISTANCE) -> np.ndarray:
-    """Bool (H, W): cells whose centre lies within ``distance`` of some pose's (x, y)."""
-    marks = np.zeros(grid.shape, dtype=bool)
+    """Bool (H, W): cells whose centre lies within ``distance`` of the cell of some pose's (x, y)."""
     poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
-    poses = poses[np.isfinite(poses[:, :2]).all(axis=1)]
-    rows, cols = grid.world_to_cell(poses[:, 0], poses[:, 1])
-    inside = grid.contains(rows, cols)
-    marks[rows[inside], cols[inside]] = True
-    if not marks.any():
-        return marks
-    return within(marks, grid.resolution, distance)
-
-
-def within(mask: np.ndarray, resolution: float, distance: float) -> np.ndarray:
-    """Cells whose centre lies within ``distance`` (m) of the centre of some cell of ``mask``."""
-    if not mask.any():
-        return np.zeros_like(mask, dtype=bool)
-    return ndimage.distance_transform_edt(~mask) * resolution <= distance + 1e-9
+    return grid.cells_near(poses[:, 0], poses[:, 1], distance)
 
 
 def reachable(drive: np.ndarray, start: np.ndarray) -> np.ndarray:
@@ -95,7 +81,7 @@ def planner_metrics(grid: GridSpec, probability, observed, truth_occupancy, pose
     in_map = map_reach(grid, probability, observed, poses, robot_radius)
     in_truth = truth_reach(grid, truth_occupancy, poses, robot_radius) & observed
     surface = wall_surface(truth_occupancy, observed)
-    found = within(np.asarray(probability) > 0.5, grid.resolution, SURFACE_DISTANCE)
+    found = grid.within(np.asarray(probability) > 0.5, SURFACE_DISTANCE)
     n_truth = int(in_truth.sum())
     return {
         "leak": _share(int(np.sum(in_map & ~in_truth)), n_truth),
@@ -112,7 +98,7 @@ def against_standard(grid: GridSpec, probability, observed, standard_probability
     and grid (for logs without truth)."""
     standard_probability = np.asarray(standard_probability)
     walls = np.asarray(standard_observed, dtype=bool) & (standard_probability >= CONFIDENT)
-    kept = within(np.asarray(probability) > 0.5, grid.resolution, WALL_DISTANCE)
+    kept = grid.within(np.asarray(probability) > 0.5, WALL_DISTANCE)
     in_map = map_reach(grid, probability, observed, poses, robot_radius)
     in_standard = map_reach(grid, standard_probability, standard_observed, poses, robot_radius)
     return {
