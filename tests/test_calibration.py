@@ -193,3 +193,37 @@ def test_bad_calibration_params_exit_2_naming_the_key(door_log, tmp_path, text, 
     result = run("map", door_log, "--mode", "em", "--params", params, "-o", tmp_path / "m.h5", "-q")
     assert result.exit_code == 2 and key in result.output and "Traceback" not in result.output
     assert not (tmp_path / "m.h5").exists()
+
+
+def test_calibration_maps_the_whole_log_once_and_part_of_it_before(door_log):
+    """The fits are made at maps of every 4th, then every 2nd scan; only the final EM run maps
+    every scan (issue 22: calibration at the cost of at most one extra EM over part of the log)."""
+    from aogm_cli.io.logfile import LogReader
+    from aogm_cli.mapping.params import EMConfig
+    from aogm_cli.mapping.pipeline import lay_out_readings, log_grid
+
+    with LogReader(door_log) as reader:
+        log, grid = reader.read(), log_grid(reader, 0.05)
+    run_ = lay_out_readings(log.pose, log.ranges, log.sensor, grid)
+    calls = []
+
+    def em_step(config, occupied, subset):
+        calls.append((config.forward.sigma, config.max_sweeps, None if subset is None else subset.copy()))
+        occupied[:] = truth  # the map EM would find
+        return 0.0, 1.0, 1, "result"
+
+    truth = log.truth.occupancy.reshape(-1).astype(bool)
+    occupied = np.zeros(grid.height * grid.width, dtype=bool)
+    config = CalibrationConfig(rounds=3)
+    used, result, record = C.calibrated_em(run_, occupied, EMConfig(), config, em_step)
+    assert result == "result" and record["final"] == C.model_values(used.forward)
+    assert len(calls) == 3  # the broad map, a map for the second fit (at which the model settles), the final
+    assert [c[2] is None for c in calls] == [False] * (len(calls) - 1) + [True]  # one run over every scan, the last
+    scans = log.ranges.shape[0]
+    first = calls[0][2].reshape(scans, -1)[:, 0]
+    assert np.array_equal(np.flatnonzero(first), np.arange(0, scans, 4))  # the broad map: every 4th scan
+    assert calls[0][0] == config.start_sigma and calls[0][1] == config.start_sweeps
+    for _sigma, sweeps, subset in calls[1:-1]:  # maps made for a fit: every 2nd scan, few sweeps
+        assert np.array_equal(np.flatnonzero(subset.reshape(scans, -1)[:, 0]), np.arange(0, scans, 2))
+        assert sweeps == config.fit_sweeps
+    assert calls[-1][1] == EMConfig().max_sweeps and record["rounds"][-1]["scans"] == "all"

@@ -40,11 +40,14 @@ from aogm_cli.mapping.pipeline import (
 from aogm_cli.mapping.standard import probability_from_log_odds, standard_pass
 
 
-def cluster_problem(run: Readings, clusters: np.ndarray, occupied: np.ndarray, config: EMConfig) -> EMProblem:
+def cluster_problem(run: Readings, clusters: np.ndarray, occupied: np.ndarray, config: EMConfig,
+                    subset: np.ndarray | None = None) -> EMProblem:
     """EM's problem inside ``clusters`` (ids, 0 outside): the readings whose cones could reach a
-    cluster cell (``cluster.readings_near_clusters``), under the flat map ``occupied``, with
-    which clusters share a reading."""
+    cluster cell (``cluster.readings_near_clusters``; of those ``subset`` marks, if given), under
+    the flat map ``occupied``, with which clusters share a reading."""
     near = readings_near_clusters(clusters, run.rows, run.cols, run.z, run.grid, run.sensor.max_range, config.forward)
+    if subset is not None:
+        near = near[subset[near]]
     rd = em_readings(run.rows, run.cols, run.bins, run.z, run.templates, run.grid, run.sensor.max_range,
                      config.forward, select=near)
     return em_problem(rd, run.templates, run.grid.shape, occupied, config, labels=clusters.reshape(-1))
@@ -92,7 +95,7 @@ def find_clusters(run: Readings, flags: np.ndarray, log_odds: np.ndarray, observ
 
 
 def em_in_clusters(run: Readings, clusters: np.ndarray, n_clusters: int, occupied: np.ndarray,
-                   params: MapParams, progress: Progress | None = None) -> dict:
+                   params: MapParams, progress: Progress | None = None, subset: np.ndarray | None = None) -> dict:
     """EM over every cluster cell at once, every other cell held at ``occupied`` (flat, updated
     in place). Clusters that share no reading are independent (as the paper has them): one run
     over all of them gives each its own result. Returns the stats of the run, the seconds spent
@@ -102,14 +105,14 @@ def em_in_clusters(run: Readings, clusters: np.ndarray, n_clusters: int, occupie
     cells = np.flatnonzero(clusters.reshape(-1) > 0)
     if config.start == "empty":
         occupied[cells] = False
-    problem = cluster_problem(run, clusters, occupied, config)
+    problem = cluster_problem(run, clusters, occupied, config, subset)
     t_index = time.perf_counter() - t0
 
     def on_sweep(sweep, flips, objective):
         if progress:
             progress("em sweep", sweep, config.max_sweeps)
 
-    result = run_em(problem, occupied, cells, config, on_sweep)
+    result = run_em(problem, occupied, cells, config, on_sweep, final=subset is None)
     return {"result": result, "cluster_groups": coupled_groups(problem, n_clusters), "em_readings": int(problem.readings.z.size),
             "em_sweeps": result.sweeps, "em_flips_per_sweep": result.flips, "em_scored_per_sweep": result.scored,
             "em_objective_per_sweep": result.objective, "index_entries": result.peak_pairs,
@@ -148,11 +151,13 @@ def map_adaptive(log, params: MapParams, detector, detector_name: str = "package
     if n_clusters:
         t_index = 0.0
 
-        def em_step(em_config: EMConfig, occ: np.ndarray):
+        def em_step(em_config: EMConfig, occ: np.ndarray, subset: np.ndarray | None):
             nonlocal t_index
-            stats = em_in_clusters(run, clusters, n_clusters, occ, dataclasses.replace(params, em=em_config), progress)
+            stats = em_in_clusters(run, clusters, n_clusters, occ, dataclasses.replace(params, em=em_config), progress,
+                                   subset)
             t_index += stats.pop("t_index")
-            return stats["em_objective_per_sweep"][-1], stats["em_sweeps"], stats
+            objective = stats["em_objective_per_sweep"]
+            return objective[0], objective[-1], stats["em_sweeps"], stats
 
         # the model is fitted on the readings EM explains: those whose cones reach a cluster
         # (outside the clusters the thresholded standard map stands, and readings crossing its

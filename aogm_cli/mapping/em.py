@@ -268,11 +268,13 @@ def _scratch_bytes(work: K.TileWork) -> int:
 
 
 def run_em(problem: EMProblem, occupied: np.ndarray, candidates: np.ndarray, config: EMConfig,
-           progress: Callable[[int, int, float], None] | None = None) -> EMResult:
+           progress: Callable[[int, int, float], None] | None = None, final: bool = True) -> EMResult:
     """Hill-climb the binary map over ``candidates`` (flat ids); ``occupied`` (flat bool, the map
     ``problem`` was set up under) is updated in place, every other cell stays as it is. Sweeps
     until no flip improves the objective or ``config.max_sweeps``; ``progress(sweep, flips,
-    objective)`` after each."""
+    objective)`` after each. ``final``: a run stopped by ``max_sweeps`` scores every candidate
+    once more, so that its residuals describe the map it leaves (not needed between the sweeps
+    of a calibration)."""
     occupied = _flat_bool(occupied)
     rd, model, state = problem.readings, problem.model, problem.state
     tpl, groups = problem.templates.kernel_arrays, K.row_groups(problem.templates)
@@ -314,7 +316,7 @@ def run_em(problem: EMProblem, occupied: np.ndarray, candidates: np.ndarray, con
             progress(sweep, n_flips, objective[-1])
         if n_flips == 0:
             break
-    if not (flips and flips[-1] == 0):  # stopped by max_sweeps: score every candidate once more
+    if final and not (flips and flips[-1] == 0):  # stopped by max_sweeps: score every candidate once more
         one_pass(K.SCORE)
     residual = K._residual_from_gains(cand.cell, occupied, cand.last_gain, model.l_prior)
     return EMResult(len(flips), flips, [float(v) for v in objective], cand.cell, residual, scored, pairs,
@@ -342,17 +344,17 @@ def map_em(log, params: MapParams, progress: Progress | None = None) -> Occupanc
         if progress:
             progress("em sweep", sweep, config.max_sweeps)
 
-    def em_step(em_config: EMConfig, occ: np.ndarray):
+    def em_step(em_config: EMConfig, occ: np.ndarray, subset: np.ndarray | None):
         t0 = time.perf_counter()
         rd = em_readings(run.rows, run.cols, run.bins, run.z, templates, grid, log.sensor.max_range,
-                         em_config.forward, select=keep)
+                         em_config.forward, select=keep if subset is None else keep & subset)
         problem = em_problem(rd, templates, grid.shape, occ, em_config)
         candidates = np.flatnonzero(problem.seen)
         t1 = time.perf_counter()
-        result = run_em(problem, occ, candidates, em_config, on_sweep)
+        result = run_em(problem, occ, candidates, em_config, on_sweep, final=subset is None)
         seconds["index"] += t1 - t0
         seconds["em"] += time.perf_counter() - t1
-        return result.objective[-1], result.sweeps, result
+        return result.objective[0], result.objective[-1], result.sweeps, result
 
     t0 = time.perf_counter()
     config, result, calibration = em_with_model(run, occupied, params, em_step)

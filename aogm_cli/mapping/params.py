@@ -142,6 +142,13 @@ class CalibrationConfig:
     # [--params with calibration: {start_sigma: 0.03}])
     start_sigma: float = 0.1
     start_sweeps: int = 3  # the first (broad) EM run's sweep limit: its map only serves the first fit
+    fit_sweeps: int = 4  # the sweep limit of the later maps made for a fit (the final map: em.max_sweeps)
+    # the maps the parameters are fitted at are made from every n-th scan (the broad first map
+    # from every start_subsample-th), the final map from every scan: the fits need the walls'
+    # places, not every reading's detail (every 3rd scan: sigma +51% at noise 0.05, every 2nd
+    # +17%; bench/calibration_recovery.py)
+    subsample: int = 2
+    start_subsample: int = 4
     # bounds: sigma from a tenth of a typical 5 cm cell to half a metre; p_rand, p_max below one
     # half each (a model that calls most readings random or dropped explains nothing); p_hit
     # away from 0 and 1 (EM needs q = 1 - p_hit > 0, and a wall missed by every reading is no wall)
@@ -161,7 +168,7 @@ class CalibrationConfig:
         if unknown or not self.learned:
             raise InputError(f"expected a comma-separated list of sigma, p_rand, p_hit, p_max, got {self.learn!r}",
                              key="learn")
-        for key in ("rounds", "fit_iterations", "max_readings", "start_sweeps"):
+        for key in ("rounds", "fit_iterations", "max_readings", "start_sweeps", "fit_sweeps", "subsample", "start_subsample"):
             if getattr(self, key) < 1:
                 raise InputError(f"expected a whole number >= 1, got {getattr(self, key)}", key=key)
         if not 0 < self.tolerance < 1:
