@@ -131,7 +131,7 @@ class CalibrationConfig:
 
     enabled: bool = True
     learn: str = "sigma,p_rand,p_hit,p_max"  # which of the forward model's parameters are learned
-    rounds: int = 3
+    rounds: int = 4
     fit_iterations: int = 30
     max_readings: int = 200_000
     tolerance: float = 0.02
