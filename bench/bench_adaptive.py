@@ -32,7 +32,7 @@ def bench(world_name: str, log_path: Path) -> None:
     print(f"\n{world_name}: {stats['readings']} readings, {stats['flagged_readings']} flagged, "
           f"{stats['cells_in_clusters']} cluster cells of {stats['observed_cells']} observed, "
           f"{stats['em_readings']} readings in EM, at most {stats['index_entries']} window pairs in a tile, "
-          f"EM sweeps {stats['em_sweeps']}, candidates scored per sweep {stats['em_scored_per_sweep']}")
+          f"EM sweeps {stats['sweeps']}, candidates scored per sweep {stats['scored_per_sweep']}")
     print(f"  standard map (ceiling)  {t_std * 1e3:8.2f} ms")
     for name, seconds in phases.items():
         print(f"  {name:22s}  {seconds * 1e3:8.2f} ms  = {seconds / t_std:5.2f} x standard map")

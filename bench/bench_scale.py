@@ -164,7 +164,7 @@ def map_row(log: Path, scans: int, label: str, folder: Path, args) -> Row:
         stats = m.stats
         row.runtime_s = float(m.runtime_s)
         row.index_entries = stats.get("index_entries")
-        row.sweeps = stats.get("sweeps", stats.get("em_sweeps"))
+        row.sweeps = stats.get("sweeps")
         row.phase_seconds = stats.get("phase_seconds")
         row.stats = summarised(stats)
     return row

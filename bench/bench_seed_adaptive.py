@@ -59,6 +59,9 @@ def measure(log_path: Path, runs: int) -> dict[str, dict]:
             "cluster_share": (stats["cells_in_clusters"] / stats["observed_cells"]
                               if stats.get("observed_cells") else None),
             "index_entries": stats.get("index_entries"),
+            # each phase's best over the runs (standard, readings, detector, clusters, index,
+            # calibration, sweeps, view: the map's /stats phase_seconds)
+            "phases": {k: min(x.stats["phase_seconds"][k] for x in made) for k in m.stats["phase_seconds"]},
         }
     return out
 
@@ -78,6 +81,9 @@ def report(world: str, rows: dict[str, dict]) -> dict:
         entries = "" if r["index_entries"] is None else f"{r['index_entries']:,}"
         print(f"  {label:<14} {r['runtime_s'] * 1e3:>9.2f} {r['runtime_s'] / std:>7.2f} {r['accuracy']:>9.4f} "
               f"{r['occupied_f1']:>8.4f} {r['checks_passed']:>3}/{r['checks']:<2} {share:>8} {clusters:>9} {entries:>13}")
+    print("  where the time goes (best ms per phase):")
+    for label, r in rows.items():
+        print(f"  {label:<14} " + ", ".join(f"{k} {v * 1e3:.2f}" for k, v in r["phases"].items()))
     ad, em, every = rows["adaptive"], rows["em"], rows["adaptive:all"]
     ratio = ad["runtime_s"] / std
     vs_em = ad["accuracy"] - em["accuracy"]

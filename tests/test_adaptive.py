@@ -112,10 +112,22 @@ def test_adaptive_cli_writes_clusters_and_stats(door_log, tmp_path):
             assert key in f["stats"].attrs
     m = read_map_file(out)
     assert m.stats["clusters"] == int(m.clusters.max())
-    # the runtime is the sum of the phases, each recorded
+    # the runtime is the sum of the phases, each recorded, named as the em mode names its own
     phases = m.stats["phase_seconds"]
-    assert set(phases) == {"standard", "readings", "detector", "clusters", "index", "em"}
+    assert set(phases) == {"standard", "readings", "detector", "clusters", "index", "calibration", "sweeps", "view"}
     assert m.runtime_s == pytest.approx(sum(phases.values()), rel=1e-12)
+    em = read_map_file(_em_map(door_log, tmp_path))
+    assert set(em.stats["phase_seconds"]) == set(phases) - {"detector", "clusters"}
+    shared = {"sweeps", "flips_per_sweep", "objective_per_sweep", "scored_per_sweep", "pairs_per_sweep",
+              "candidate_cells", "em_readings", "index_entries", "scratch_bytes", "calibration"}
+    assert shared <= set(m.stats) and shared <= set(em.stats)  # one stats format for both modes
+    assert m.stats["sweeps"] == len(m.stats["flips_per_sweep"]) >= 1
+
+
+def _em_map(log, tmp_path):
+    out = tmp_path / "em.h5"
+    assert CliRunner().invoke(main, ["map", str(log), "--mode", "em", "-o", str(out), "-q"]).exit_code == 0
+    return out
 
 
 def test_bad_detector_file_exits_2(door_log, tmp_path):

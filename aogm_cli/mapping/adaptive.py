@@ -15,18 +15,8 @@ import numpy as np
 
 from aogm_cli.core.log import Log
 from aogm_cli.core.occupancy_map import OccupancyMap
-from aogm_cli.mapping.calibration import em_with_model
 from aogm_cli.mapping.cluster import cone_bands, grown, label_clusters, near_occupied, readings_near_clusters
-from aogm_cli.mapping.em import (
-    EMProblem,
-    em_problem,
-    em_readings,
-    find_root,
-    footprint,
-    planner_view,
-    residual_into,
-    run_em,
-)
+from aogm_cli.mapping.em import EMProblem, em_problem, em_readings, em_stats, em_view, em_with_phases, find_root
 from aogm_cli.mapping.params import EMConfig, MapParams
 from aogm_cli.mapping.pipeline import (
     Progress,
@@ -37,7 +27,7 @@ from aogm_cli.mapping.pipeline import (
     log_grid,
     params_json,
 )
-from aogm_cli.mapping.standard import probability_from_log_odds, standard_pass
+from aogm_cli.mapping.standard import standard_pass
 
 
 def cluster_problem(run: Readings, clusters: np.ndarray, occupied: np.ndarray, config: EMConfig,
@@ -94,31 +84,6 @@ def find_clusters(run: Readings, flags: np.ndarray, log_odds: np.ndarray, observ
     return label_clusters(observed & grown(region, grow))
 
 
-def em_in_clusters(run: Readings, clusters: np.ndarray, n_clusters: int, occupied: np.ndarray,
-                   params: MapParams, progress: Progress | None = None, subset: np.ndarray | None = None) -> dict:
-    """EM over every cluster cell at once, every other cell held at ``occupied`` (flat, updated
-    in place). Clusters that share no reading are independent (as the paper has them): one run
-    over all of them gives each its own result. Returns the stats of the run, the seconds spent
-    setting it up (``t_index``) and EM's result (``result``: its residuals, for ``residual_into``)."""
-    config = params.em
-    t0 = time.perf_counter()
-    cells = np.flatnonzero(clusters.reshape(-1) > 0)
-    if config.start == "empty":
-        occupied[cells] = False
-    problem = cluster_problem(run, clusters, occupied, config, subset)
-    t_index = time.perf_counter() - t0
-
-    def on_sweep(sweep, flips, objective):
-        if progress:
-            progress("em sweep", sweep, config.max_sweeps)
-
-    result = run_em(problem, occupied, cells, config, on_sweep, final=subset is None)
-    return {"result": result, "cluster_groups": coupled_groups(problem, n_clusters), "em_readings": int(problem.readings.z.size),
-            "em_sweeps": result.sweeps, "em_flips_per_sweep": result.flips, "em_scored_per_sweep": result.scored,
-            "em_objective_per_sweep": result.objective, "index_entries": result.peak_pairs,
-            "scratch_bytes": result.scratch_bytes, "t_index": t_index}
-
-
 def map_adaptive(log, params: MapParams, detector, detector_name: str = "packaged",
                  progress: Progress | None = None) -> OccupancyMap:
     """The adaptive mode on a log source (``pipeline``) with ``detector`` (anything with
@@ -141,23 +106,15 @@ def map_adaptive(log, params: MapParams, detector, detector_name: str = "package
     clusters, n_clusters = find_clusters(run, flags, log_odds, observed, params, contested)
     t_cluster = time.perf_counter() - t0
 
-    t0 = time.perf_counter()
     occupied = np.ascontiguousarray((log_odds > 0).reshape(-1))  # the thresholded standard map
-    probability = probability_from_log_odds(log_odds, observed).reshape(-1)
-    em_stats = {"cluster_groups": 0, "em_readings": 0, "em_sweeps": 0, "em_flips_per_sweep": [],
-                "em_scored_per_sweep": [], "em_objective_per_sweep": [], "index_entries": 0, "scratch_bytes": 0,
-                "t_index": 0.0}
-    config, calibration = params.em, None
+    outcome, groups = None, 0
     if n_clusters:
-        t_index = 0.0
+        cells = np.flatnonzero(clusters.reshape(-1) > 0)
 
-        def em_step(em_config: EMConfig, occ: np.ndarray, subset: np.ndarray | None):
-            nonlocal t_index
-            stats = em_in_clusters(run, clusters, n_clusters, occ, dataclasses.replace(params, em=em_config), progress,
-                                   subset)
-            t_index += stats.pop("t_index")
-            objective = stats["em_objective_per_sweep"]
-            return objective[0], objective[-1], stats["em_sweeps"], stats
+        def problem_for(config: EMConfig, occ: np.ndarray, subset: np.ndarray | None):
+            if config.start == "empty":
+                occ[cells] = False
+            return cluster_problem(run, clusters, occ, config, subset), cells
 
         # the model is fitted on the readings EM explains: those whose cones reach a cluster
         # (outside the clusters the thresholded standard map stands, and readings crossing its
@@ -165,35 +122,31 @@ def map_adaptive(log, params: MapParams, detector, detector_name: str = "package
         near = np.zeros(run.z.size, dtype=bool)
         near[readings_near_clusters(clusters, run.rows, run.cols, run.z, run.grid, sensor.max_range,
                                     params.em.forward)] = True
-        config, em_stats, calibration = em_with_model(run, occupied, params, em_step, select=near)
-        em_stats["t_index"] = t_index
-        free = probability_from_log_odds(np.float64(params.inverse_model.clamp_min))
-        observed = planner_view(probability, observed, residual_into(probability, em_stats.pop("result"), config),
-                                footprint(grid, whole.pose, sensor), free)
-    probability = probability.reshape(grid.shape)
-    probability[~observed] = 0.5
-    t_index = em_stats.pop("t_index")
-    t_em = time.perf_counter() - t0 - t_index
+        outcome = em_with_phases(run, occupied, params, problem_for, select=near, progress=progress)
+        groups = coupled_groups(outcome.problem, n_clusters)
+    t0 = time.perf_counter()
+    probability, observed = em_view(log_odds, observed, outcome, grid, whole.pose, sensor, params)
+    seconds = outcome.seconds if outcome else {"index": 0.0, "calibration": 0.0, "sweeps": 0.0}
     phases = {"standard": t_standard, "readings": t_readings, "detector": t_detect, "clusters": t_cluster,
-              "index": t_index, "em": t_em}
+              **seconds, "view": time.perf_counter() - t0}
     stats = {
         "clusters": n_clusters,
         "cells_in_clusters": int((clusters > 0).sum()),
+        "cluster_groups": groups,
         "observed_cells": int(observed.sum()),
         "flagged_readings": int(flags.sum()),
         "readings": int(flags.size),
-        **em_stats,
+        **em_stats(outcome),
         "phase_seconds": phases,
         "detector": detector_name,
     }
-    if calibration is not None:
-        stats["calibration"] = calibration
     return OccupancyMap(
         grid=grid,
         probability=probability,
         observed=observed,
         mode="adaptive",
-        params=params_json(dataclasses.replace(params, em=config), "adaptive", grid) | {"detector": detector_name},
+        params=params_json(dataclasses.replace(params, em=outcome.config if outcome else params.em), "adaptive", grid)
+        | {"detector": detector_name},
         runtime_s=sum(phases.values()),
         source_log=log.path,
         log_odds=log_odds,

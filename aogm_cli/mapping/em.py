@@ -323,10 +323,82 @@ def run_em(problem: EMProblem, occupied: np.ndarray, candidates: np.ndarray, con
                     int(peak[0]), int(peak[1]))
 
 
+@dataclass
+class EMOutcome:
+    """What ``em_with_phases`` leaves: the model the final map was made with, its EM result and
+    problem, the calibration's record (None without), and the seconds of its phases."""
+
+    config: EMConfig
+    result: EMResult
+    problem: EMProblem
+    calibration: dict | None
+    seconds: dict  # index and sweeps: the final run's set-up and sweeps; calibration: all before it
+
+
+# (EM config, flat occupied map, bool mask of the readings to use or None for all) -> (EM's
+# problem under that map, the flat ids of its candidate cells)
+ProblemFor = Callable[[EMConfig, np.ndarray, "np.ndarray | None"], tuple[EMProblem, np.ndarray]]
+
+
+def em_with_phases(run, occupied: np.ndarray, params: MapParams, problem_for: ProblemFor,
+                   select: np.ndarray | None = None, progress: Progress | None = None) -> EMOutcome:
+    """The EM of the em and adaptive modes: EM over the problems ``problem_for`` sets up, with
+    the forward model calibrated on the readings ``select`` marks when calibration is on
+    (``calibration.em_with_model``); ``occupied`` (flat) is updated in place, and timed."""
+    last = {}
+
+    def on_sweep(sweep, flips, objective):
+        if progress:
+            progress("em sweep", sweep, params.em.max_sweeps)
+
+    def em_step(config: EMConfig, occ: np.ndarray, subset: np.ndarray | None):
+        t0 = time.perf_counter()
+        problem, candidates = problem_for(config, occ, subset)
+        t1 = time.perf_counter()
+        result = run_em(problem, occ, candidates, config, on_sweep, final=subset is None)
+        last.update(index=t1 - t0, sweeps=time.perf_counter() - t1, problem=problem)
+        return result.objective[0], result.objective[-1], result.sweeps, result
+
+    t0 = time.perf_counter()
+    config, result, calibration = em_with_model(run, occupied, params, em_step, select)
+    total = time.perf_counter() - t0
+    seconds = {"index": last["index"], "calibration": total - last["index"] - last["sweeps"], "sweeps": last["sweeps"]}
+    return EMOutcome(config, result, last["problem"], calibration, seconds)
+
+
+def em_stats(outcome: EMOutcome | None) -> dict:
+    """The map's statistics of EM's final run (zeros without one), and calibration's record."""
+    if outcome is None:
+        return {"sweeps": 0, "flips_per_sweep": [], "objective_per_sweep": [], "scored_per_sweep": [],
+                "pairs_per_sweep": [], "candidate_cells": 0, "em_readings": 0, "index_entries": 0, "scratch_bytes": 0}
+    r = outcome.result
+    stats = {"sweeps": r.sweeps, "flips_per_sweep": r.flips, "objective_per_sweep": r.objective,
+             "scored_per_sweep": r.scored, "pairs_per_sweep": r.pairs, "candidate_cells": int(r.candidates.size),
+             "em_readings": int(outcome.problem.readings.z.size), "index_entries": r.peak_pairs,
+             "scratch_bytes": r.scratch_bytes}
+    if outcome.calibration is not None:
+        stats["calibration"] = outcome.calibration
+    return stats
+
+
+def em_view(log_odds: np.ndarray, observed: np.ndarray, outcome: EMOutcome | None, grid, poses: np.ndarray, sensor,
+            params: MapParams) -> tuple[np.ndarray, np.ndarray]:
+    """(probability, observed) (H, W) of an em or adaptive map: the standard map's, EM's residuals
+    on its candidates (``residual_into``), what a planner sees (``planner_view``), 0.5 where
+    unobserved."""
+    probability = probability_from_log_odds(log_odds, observed).reshape(-1)
+    if outcome is not None:
+        free = probability_from_log_odds(np.float64(params.inverse_model.clamp_min))
+        observed = planner_view(probability, observed, residual_into(probability, outcome.result, outcome.config),
+                                footprint(grid, poses, sensor), free)
+    probability = probability.reshape(grid.shape)
+    probability[~observed] = 0.5
+    return probability, observed
+
+
 def map_em(log, params: MapParams, progress: Progress | None = None) -> OccupancyMap:
     """The em mode: Thrun's EM map of a log source (``pipeline``); every cell some cone holds is
     a candidate, started from the thresholded standard map (or empty, ``em.start``)."""
-    config = params.em
     grid = log_grid(log, params.resolution)
     whole = log.read()  # EM needs every reading in memory: read the scans once
     log_odds, observed, t_standard = standard_pass(whole, grid, params)
@@ -336,60 +408,27 @@ def map_em(log, params: MapParams, progress: Progress | None = None) -> Occupanc
     run = lay_out_readings(whole.pose, whole.ranges, log.sensor, grid)
     keep = ~np.isnan(run.z)
     t_readings = time.perf_counter() - t0
-    occupied = (log_odds > 0).reshape(-1) if config.start == "standard" else np.zeros(grid.height * grid.width, bool)
-    occupied = np.ascontiguousarray(occupied)
-    seconds = {"index": 0.0, "em": 0.0}
+    start = (log_odds > 0).reshape(-1) if params.em.start == "standard" else np.zeros(grid.height * grid.width, bool)
+    occupied = np.ascontiguousarray(start)
 
-    def on_sweep(sweep, flips, objective):
-        if progress:
-            progress("em sweep", sweep, config.max_sweeps)
+    def problem_for(config: EMConfig, occ: np.ndarray, subset: np.ndarray | None):
+        rd = em_readings(run.rows, run.cols, run.bins, run.z, templates, grid, log.sensor.max_range, config.forward,
+                         select=keep if subset is None else keep & subset)
+        problem = em_problem(rd, templates, grid.shape, occ, config)
+        return problem, np.flatnonzero(problem.seen)
 
-    def em_step(em_config: EMConfig, occ: np.ndarray, subset: np.ndarray | None):
-        t0 = time.perf_counter()
-        rd = em_readings(run.rows, run.cols, run.bins, run.z, templates, grid, log.sensor.max_range,
-                         em_config.forward, select=keep if subset is None else keep & subset)
-        problem = em_problem(rd, templates, grid.shape, occ, em_config)
-        candidates = np.flatnonzero(problem.seen)
-        t1 = time.perf_counter()
-        result = run_em(problem, occ, candidates, em_config, on_sweep, final=subset is None)
-        seconds["index"] += t1 - t0
-        seconds["em"] += time.perf_counter() - t1
-        return result.objective[0], result.objective[-1], result.sweeps, result
-
+    outcome = em_with_phases(run, occupied, params, problem_for, progress=progress)
     t0 = time.perf_counter()
-    config, result, calibration = em_with_model(run, occupied, params, em_step)
-    t_calibration = time.perf_counter() - t0 - seconds["index"] - seconds["em"]
-    t0 = time.perf_counter()
-    probability = probability_from_log_odds(log_odds, observed).reshape(-1)
-    free = probability_from_log_odds(np.float64(params.inverse_model.clamp_min))
-    observed = planner_view(probability, observed, residual_into(probability, result, config),
-                            footprint(grid, whole.pose, log.sensor), free)
-    probability = probability.reshape(grid.shape)
-    probability[~observed] = 0.5
-    t_em = seconds["em"] + time.perf_counter() - t0
-    t_index = seconds["index"]
-    stats = {
-        "sweeps": result.sweeps,
-        "flips_per_sweep": result.flips,
-        "objective_per_sweep": result.objective,
-        "scored_per_sweep": result.scored,
-        "pairs_per_sweep": result.pairs,
-        "candidate_cells": int(result.candidates.size),
-        "index_entries": result.peak_pairs,
-        "scratch_bytes": result.scratch_bytes,
-        "phase_seconds": {"standard": t_standard, "readings": t_readings, "calibration": t_calibration,
-                          "index": t_index, "em": t_em},
-    }
-    if calibration is not None:
-        stats["calibration"] = calibration
+    probability, observed = em_view(log_odds, observed, outcome, grid, whole.pose, log.sensor, params)
+    phases = {"standard": t_standard, "readings": t_readings, **outcome.seconds, "view": time.perf_counter() - t0}
     return OccupancyMap(
         grid=grid,
         probability=probability,
         observed=observed,
         mode="em",
-        params=params_json(dataclasses.replace(params, em=config), "em", grid),
-        runtime_s=t_standard + t_readings + t_calibration + t_index + t_em,
+        params=params_json(dataclasses.replace(params, em=outcome.config), "em", grid),
+        runtime_s=sum(phases.values()),
         source_log=log.path,
         occupied=occupied.reshape(grid.shape) & observed,
-        stats=stats,
+        stats={**em_stats(outcome), "phase_seconds": phases},
     )
