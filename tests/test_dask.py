@@ -1,6 +1,5 @@
-"""Many logs on a Dask cluster (issue 16): ``compare`` and ``simulate`` on a two-worker
-``LocalCluster`` give what ``--jobs 1`` and one-by-one runs give, bit for bit; a failed task is
-reported while the others finish; ``--resume`` skips complete outputs and redoes broken ones;
+"""Many logs on Dask (issue 16): ``compare`` and ``simulate`` on a two-worker ``LocalCluster`` give what
+``--jobs 1`` and one-by-one runs give, bit for bit; a failed task does not stop the others; ``--resume``;
 without Dask, ``--scheduler`` names the extra to install."""
 
 import json
@@ -11,8 +10,6 @@ import h5py
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from test_compare import WORLD as DOOR  # tiny worlds of ~20 scans
-from test_holdout import ROOM
 
 from aogm_cli.cli import main
 
@@ -32,7 +29,6 @@ trajectory:
   scan_period: 0.4
 sonar: {count: 12, max_range: 3.0}
 """
-WORLDS = {"door": DOOR, "room": ROOM, "nook": NOOK}
 
 
 def run(*args, env=None):
@@ -47,10 +43,11 @@ def cluster():
 
 
 @pytest.fixture(scope="module")
-def worlds(tmp_path_factory):
+def worlds(tmp_path_factory, tiny_door_world, tiny_room_world):
+    """World files of three tiny worlds (door, room, nook), of 15-40 scans each."""
     folder = tmp_path_factory.mktemp("worlds")
     paths = []
-    for name, text in WORLDS.items():
+    for name, text in {"door": tiny_door_world, "room": tiny_room_world, "nook": NOOK}.items():
         (folder / f"{name}.yaml").write_text(text)
         paths.append(folder / f"{name}.yaml")
     return paths
