@@ -1,12 +1,17 @@
 """Fixtures the test modules share: corridor_door simulated once per session, the tiny worlds of the
-compare tests, a CSV reader."""
+compare tests, a CSV reader, and ``require``: a test whose ``../shared`` data or dev-extra module is
+missing skips, or fails under CI (``CI=true``), where all of it is always there."""
 
 from __future__ import annotations
 
 import csv
 import hashlib
+import importlib
+import os
 import sys
 from pathlib import Path
+from types import ModuleType
+from typing import NoReturn
 
 import pytest
 from click.testing import CliRunner
@@ -14,6 +19,46 @@ from click.testing import CliRunner
 from aogm_cli.cli import main
 
 ROOT = Path(__file__).resolve().parents[1]
+SHARED = ROOT.parent / "shared"  # the third-party data dir beside the clone (README, .ci/run)
+TRUE = ("1", "true", "yes", "on")
+
+
+class Require:
+    """What a test needs from outside the repository. Missing, the test skips with the reason, or,
+    when the environment variable CI is true (CI has all of it), fails with the same reason."""
+
+    def __init__(self, shared_root: Path = SHARED):
+        self.shared_root = shared_root
+
+    @staticmethod
+    def in_ci() -> bool:
+        return os.environ.get("CI", "").strip().lower() in TRUE
+
+    def missing(self, reason: str) -> NoReturn:
+        if self.in_ci():
+            pytest.fail(f"{reason} (CI={os.environ['CI']}: CI always has it, so this fails instead of skipping)",
+                        pytrace=False)
+        pytest.skip(reason)
+
+    def shared(self, relative: str | Path) -> Path:
+        """The path of ``relative`` under ``../shared``, if it exists."""
+        path = self.shared_root / relative
+        if not path.exists():
+            self.missing(f"shared data not available: {path}")
+        return path
+
+    def module(self, name: str) -> ModuleType:
+        """The module ``name`` imported (one of the dev extra's: pip install -e '.[dev]')."""
+        try:
+            return importlib.import_module(name)
+        except ImportError as e:
+            error = e  # reported outside the handler, without the ImportError's traceback
+        self.missing(f"module {name!r} cannot be imported ({error}): pip install -e '.[dev]'")
+
+
+@pytest.fixture(scope="session")
+def require() -> Require:
+    return Require()
 
 
 def _state(path: Path) -> tuple[str, list[str]]:

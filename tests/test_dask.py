@@ -13,8 +13,6 @@ from click.testing import CliRunner
 
 from aogm_cli.cli import main
 
-distributed = pytest.importorskip("distributed")
-
 NOOK = """
 name: tiny_nook
 bounds: [-0.5, -0.5, 5.0, 3.0]
@@ -36,8 +34,9 @@ def run(*args, env=None):
 
 
 @pytest.fixture(scope="module")
-def cluster():
+def cluster(require):
     """A two-worker LocalCluster (one thread each, separate processes); its scheduler's address."""
+    distributed = require.module("distributed")
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as c:
         yield c.scheduler_address
 
