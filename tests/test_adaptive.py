@@ -2,7 +2,6 @@
 
 import dataclasses
 import math
-from pathlib import Path
 
 import h5py
 import numpy as np
@@ -22,16 +21,6 @@ from aogm_cli.mapping.modes import map_file
 from aogm_cli.mapping.params import resolve_params
 from aogm_cli.mapping.sensor_models.cone import build_cone_templates
 
-WORLDS = Path(__file__).resolve().parents[1] / "worlds"
-
-
-@pytest.fixture(scope="module")
-def door_log(tmp_path_factory):
-    out = tmp_path_factory.mktemp("logs") / "door.h5"
-    result = CliRunner().invoke(main, ["simulate", str(WORLDS / "corridor_door.yaml"), "-o", str(out), "--seed", "1", "-q"])
-    assert result.exit_code == 0, result.output
-    return out
-
 
 def detector_with_threshold(tmp_path, threshold):
     path = tmp_path / f"det_{threshold}.h5"
@@ -39,11 +28,11 @@ def detector_with_threshold(tmp_path, threshold):
     return path
 
 
-def test_no_flagged_reading_gives_the_standard_map(door_log, tmp_path):
+def test_no_flagged_reading_gives_the_standard_map(corridor_door_log, tmp_path):
     params = resolve_params(overrides={"adaptive": {"contested": 0.0, "weak": 0.0}})  # no contested or weak cells either
     never = detector_with_threshold(tmp_path, 1.0)  # p(y = 1) stays below 1 on these readings
-    adaptive = map_file(door_log, "adaptive", params, str(never))
-    standard = map_file(door_log, "standard", params)
+    adaptive = map_file(corridor_door_log, "adaptive", params, str(never))
+    standard = map_file(corridor_door_log, "standard", params)
     assert adaptive.stats["clusters"] == 0 and adaptive.stats["flagged_readings"] == 0
     assert not adaptive.clusters.any()
     assert np.array_equal(adaptive.probability, standard.probability)
@@ -51,12 +40,12 @@ def test_no_flagged_reading_gives_the_standard_map(door_log, tmp_path):
     assert np.array_equal(adaptive.occupied, (standard.log_odds > 0) & standard.observed)
 
 
-def test_em_changes_nothing_outside_the_clusters(door_log):
+def test_em_changes_nothing_outside_the_clusters(corridor_door_log):
     params = resolve_params()
-    adaptive = map_file(door_log, "adaptive", params)
-    standard = map_file(door_log, "standard", params)
+    adaptive = map_file(corridor_door_log, "adaptive", params)
+    standard = map_file(corridor_door_log, "standard", params)
     # outside the clusters and the robot's footprint (cleared, as EM's map is)
-    with LogReader(door_log) as r:
+    with LogReader(corridor_door_log) as r:
         body = footprint(standard.grid, r.poses(), r.sensor)
     outside = (adaptive.clusters == 0) & ~body
     assert adaptive.stats["clusters"] > 0
@@ -71,36 +60,36 @@ def test_em_changes_nothing_outside_the_clusters(door_log):
     assert np.all(adaptive.observed[body]) and np.all(adaptive.probability[body] < 0.5)
 
 
-def test_contested_cells_alone_make_clusters(door_log, tmp_path):
+def test_contested_cells_alone_make_clusters(corridor_door_log, tmp_path):
     """With no flagged reading, the cells whose occupied evidence alone reaches
     ``adaptive.contested`` but which the standard map holds free are still clustered."""
     never = detector_with_threshold(tmp_path, 1.0)
     params = resolve_params(overrides={"adaptive": {"weak": 0.0, "grow": 0}})
-    adaptive = map_file(door_log, "adaptive", params, str(never))
-    standard = map_file(door_log, "standard", params)
+    adaptive = map_file(corridor_door_log, "adaptive", params, str(never))
+    standard = map_file(corridor_door_log, "standard", params)
     assert adaptive.stats["flagged_readings"] == 0 and adaptive.stats["clusters"] > 0
     inside = adaptive.clusters > 0
     assert np.all(standard.log_odds[inside] <= 0)
 
 
-def test_weak_cells_alone_make_clusters(door_log, tmp_path):
+def test_weak_cells_alone_make_clusters(corridor_door_log, tmp_path):
     """With no flagged reading and no contested cell, the cells whose standard log-odds lie
     within ``adaptive.weak`` of the prior are clustered, and only they."""
     never = detector_with_threshold(tmp_path, 1.0)
     params = resolve_params(overrides={"adaptive": {"contested": 0.0, "grow": 0}})
-    adaptive = map_file(door_log, "adaptive", params, str(never))
-    standard = map_file(door_log, "standard", params)
+    adaptive = map_file(corridor_door_log, "adaptive", params, str(never))
+    standard = map_file(corridor_door_log, "standard", params)
     weak = standard.observed & (np.abs(standard.log_odds) < params.adaptive.weak)
     assert np.array_equal(adaptive.clusters > 0, weak)
     # grown by one cell (8-connected), within the observed cells
     params = resolve_params(overrides={"adaptive": {"contested": 0.0, "grow": 1}})
-    adaptive = map_file(door_log, "adaptive", params, str(never))
+    adaptive = map_file(corridor_door_log, "adaptive", params, str(never))
     assert np.array_equal(adaptive.clusters > 0, standard.observed & cluster.grown(weak, 1))
 
 
-def test_adaptive_cli_writes_clusters_and_stats(door_log, tmp_path):
+def test_adaptive_cli_writes_clusters_and_stats(corridor_door_log, tmp_path):
     out = tmp_path / "ad.h5"
-    result = CliRunner().invoke(main, ["map", str(door_log), "--mode", "adaptive", "-o", str(out), "-q",
+    result = CliRunner().invoke(main, ["map", str(corridor_door_log), "--mode", "adaptive", "-o", str(out), "-q",
                                        "--png", str(tmp_path / "ad.png")])
     assert result.exit_code == 0, result.output
     with h5py.File(out) as f:
@@ -130,12 +119,12 @@ def _em_map(log, tmp_path):
     return out
 
 
-def test_bad_detector_file_exits_2(door_log, tmp_path):
+def test_bad_detector_file_exits_2(corridor_door_log, tmp_path):
     bad = tmp_path / "bad.h5"
     with h5py.File(bad, "w") as f:
         f.attrs["format"] = "aogm-detector"
     out = tmp_path / "ad.h5"
-    result = CliRunner().invoke(main, ["map", str(door_log), "--mode", "adaptive", "--detector", str(bad), "-o", str(out), "-q"])
+    result = CliRunner().invoke(main, ["map", str(corridor_door_log), "--mode", "adaptive", "--detector", str(bad), "-o", str(out), "-q"])
     assert result.exit_code == 2 and str(bad) in result.output
     assert not out.exists()
 

@@ -137,16 +137,9 @@ def test_the_fit_at_the_true_map_recovers_the_simulators_noise_and_random_rate(t
     assert fit.forward.p_rand == pytest.approx(rate, abs=0.03)
 
 
-@pytest.fixture(scope="module")
-def door_log(tmp_path_factory):
-    out = tmp_path_factory.mktemp("logs") / "door.h5"
-    assert run("simulate", WORLDS / "corridor_door.yaml", "-o", out, "--seed", 1, "-q").exit_code == 0
-    return out
-
-
-def test_calibrated_map_records_the_learned_model_and_its_rounds(door_log, tmp_path):
+def test_calibrated_map_records_the_learned_model_and_its_rounds(corridor_door_log, tmp_path):
     out = tmp_path / "em.h5"
-    result = run("map", door_log, "--mode", "em", "-o", out, "-q")
+    result = run("map", corridor_door_log, "--mode", "em", "-o", out, "-q")
     assert result.exit_code == 0, result.output
     m = read_map_file(out)
     record = m.stats["calibration"]
@@ -160,19 +153,19 @@ def test_calibrated_map_records_the_learned_model_and_its_rounds(door_log, tmp_p
     assert all(b >= a - 1e-3 for a, b in zip(fits, fits[1:], strict=False))
 
     off = tmp_path / "off.h5"
-    assert run("map", door_log, "--mode", "em", "-o", off, "--no-calibrate", "-q").exit_code == 0
+    assert run("map", corridor_door_log, "--mode", "em", "-o", off, "--no-calibrate", "-q").exit_code == 0
     m = read_map_file(off)
     assert "calibration" not in m.stats and m.params["em"]["sigma"] == 0.03
 
 
-def test_calibrate_prints_the_model_and_writes_params_that_map_takes(door_log, tmp_path):
+def test_calibrate_prints_the_model_and_writes_params_that_map_takes(corridor_door_log, tmp_path):
     model = tmp_path / "model.yaml"
-    result = run("calibrate", door_log, "-o", model, "-q")
+    result = run("calibrate", corridor_door_log, "-o", model, "-q")
     assert result.exit_code == 0, result.output
     assert "sigma" in result.output and "learned from" in result.output
     assert not list(tmp_path.glob("*.h5"))  # no map written
     out = tmp_path / "m.h5"
-    assert run("map", door_log, "--mode", "em", "--params", model, "-o", out, "-q").exit_code == 0
+    assert run("map", corridor_door_log, "--mode", "em", "--params", model, "-o", out, "-q").exit_code == 0
     with h5py.File(out) as f:
         params = json.loads(f.attrs["params"])
         assert "calibration" not in f["stats"].attrs
@@ -187,10 +180,10 @@ def test_calibrate_prints_the_model_and_writes_params_that_map_takes(door_log, t
     ("calibration: {sigma_min: 0.2, sigma_max: 0.1}\n", "calibration.sigma_min"),
     ("calibration: {speed: 1}\n", "calibration.speed"),
 ])
-def test_bad_calibration_params_exit_2_naming_the_key(door_log, tmp_path, text, key):
+def test_bad_calibration_params_exit_2_naming_the_key(corridor_door_log, tmp_path, text, key):
     params = tmp_path / "p.yaml"
     params.write_text(text)
-    result = run("map", door_log, "--mode", "em", "--params", params, "-o", tmp_path / "m.h5", "-q")
+    result = run("map", corridor_door_log, "--mode", "em", "--params", params, "-o", tmp_path / "m.h5", "-q")
     assert result.exit_code == 2 and key in result.output and "Traceback" not in result.output
     assert not (tmp_path / "m.h5").exists()
 

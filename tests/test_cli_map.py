@@ -1,7 +1,6 @@
 """``aogm map``, ``render`` and ``export`` end to end on a simulated corridor."""
 
 import json
-from pathlib import Path
 
 import h5py
 import numpy as np
@@ -14,29 +13,20 @@ from aogm_cli.io.logfile import read_log
 from aogm_cli.io.map_server import read_map_yaml
 from aogm_cli.io.mapfile import read_map_file
 
-WORLDS = Path(__file__).resolve().parents[1] / "worlds"
-
 
 def run(*args):
     return CliRunner().invoke(main, [str(a) for a in args])
 
 
-@pytest.fixture(scope="module")
-def door_log(tmp_path_factory):
-    out = tmp_path_factory.mktemp("logs") / "door.h5"
-    assert run("simulate", WORLDS / "corridor_door.yaml", "-o", out, "--seed", 1, "-q").exit_code == 0
-    return out
-
-
 @pytest.mark.parametrize("mode", ["standard", "em"])
-def test_map_file_follows_the_contract(door_log, tmp_path, mode):
+def test_map_file_follows_the_contract(corridor_door_log, tmp_path, mode):
     out = tmp_path / f"{mode}.h5"
-    result = run("map", door_log, "--mode", mode, "-o", out, "--png", tmp_path / "m.png", "-q")
+    result = run("map", corridor_door_log, "--mode", mode, "-o", out, "--png", tmp_path / "m.png", "-q")
     assert result.exit_code == 0, result.output
     assert (tmp_path / "m.png").stat().st_size > 1000
     with h5py.File(out) as f:
         assert f.attrs["format"] == "aogm-map" and f.attrs["format_version"] == 1
-        assert f.attrs["mode"] == mode and f.attrs["source_log"] == str(door_log)
+        assert f.attrs["mode"] == mode and f.attrs["source_log"] == str(corridor_door_log)
         assert f.attrs["runtime_s"] > 0
         params = json.loads(f.attrs["params"])
         assert params["inverse_model"]["clamp_max"] == 3.5 and "p_hit" in params["em"]
@@ -47,26 +37,26 @@ def test_map_file_follows_the_contract(door_log, tmp_path, mode):
         assert ("log_odds" in f["map"]) == (mode == "standard")
         assert ("occupied" in f["map"]) == (mode == "em")
         assert "stats" in f
-    truth = read_log(door_log).truth
+    truth = read_log(corridor_door_log).truth
     m = read_map_file(out)
     assert m.grid.shape == truth.grid.shape
     metrics = evaluate(m, truth)
     assert metrics["accuracy"] > 0.75 and 0 < metrics["occupied_f1"] <= 1
 
 
-def test_em_objective_never_decreases(door_log, tmp_path):
+def test_em_objective_never_decreases(corridor_door_log, tmp_path):
     out = tmp_path / "em.h5"
-    assert run("map", door_log, "--mode", "em", "-o", out, "-q").exit_code == 0
+    assert run("map", corridor_door_log, "--mode", "em", "-o", out, "-q").exit_code == 0
     objective = read_map_file(out).stats["objective_per_sweep"]
     assert len(objective) >= 2
     assert all(b >= a - 1e-6 for a, b in zip(objective, objective[1:], strict=False))
 
 
-def test_parameters_from_options_and_file_are_recorded(door_log, tmp_path):
+def test_parameters_from_options_and_file_are_recorded(corridor_door_log, tmp_path):
     params = tmp_path / "p.yaml"
     params.write_text("inverse_model: {l_occ: 1.2, model: constant}\nem: {p_hit: 0.5}\n")
     out = tmp_path / "m.h5"
-    result = run("map", door_log, "--mode", "standard", "-o", out, "--params", params, "--l-occ", 1.0, "-q")
+    result = run("map", corridor_door_log, "--mode", "standard", "-o", out, "--params", params, "--l-occ", 1.0, "-q")
     assert result.exit_code == 0, result.output
     recorded = read_map_file(out).params
     assert recorded["inverse_model"]["l_occ"] == 1.0  # the option wins over the file
@@ -76,11 +66,11 @@ def test_parameters_from_options_and_file_are_recorded(door_log, tmp_path):
 @pytest.mark.parametrize(
     "text, key", [("inverse_model: {l_ocq: 1}\n", "inverse_model.l_ocq"), ("em: {p_hit: 2}\n", "em.p_hit"), ("[1, 2\n", "p.yaml")]
 )
-def test_bad_params_exit_2_without_output(door_log, tmp_path, text, key):
+def test_bad_params_exit_2_without_output(corridor_door_log, tmp_path, text, key):
     params = tmp_path / "p.yaml"
     params.write_text(text)
     out = tmp_path / "m.h5"
-    result = run("map", door_log, "--mode", "standard", "-o", out, "--params", params, "-q")
+    result = run("map", corridor_door_log, "--mode", "standard", "-o", out, "--params", params, "-q")
     assert result.exit_code == 2 and key in result.output and "Traceback" not in result.output
     assert not out.exists()
 
@@ -97,9 +87,9 @@ def test_not_a_log_exits_2(tmp_path):
     assert not (tmp_path / "m.h5").exists()
 
 
-def test_render_and_ros_export_round_trip(door_log, tmp_path):
+def test_render_and_ros_export_round_trip(corridor_door_log, tmp_path):
     out = tmp_path / "m.h5"
-    assert run("map", door_log, "--mode", "standard", "-o", out, "-q").exit_code == 0
+    assert run("map", corridor_door_log, "--mode", "standard", "-o", out, "-q").exit_code == 0
     assert run("render", out, "-o", tmp_path / "r.png").exit_code == 0
     assert (tmp_path / "r.png").read_bytes()[:4] == b"\x89PNG"
     assert run("export", out, "--format", "ros", "-o", tmp_path / "ros").exit_code == 0

@@ -56,9 +56,8 @@ def test_log_follows_the_contract(tmp_path):
         assert np.all(np.isinf(ranges[cause == 1]))
 
 
-def test_truth_puts_the_door_where_the_yaml_says(tmp_path):
-    _, out = simulate(tmp_path, WORLDS / "corridor_door.yaml", "door.h5")
-    log = read_log(out)
+def test_truth_puts_the_door_where_the_yaml_says(corridor_door_log):
+    log = read_log(corridor_door_log)
     grid, occ = log.truth.grid, log.truth.occupancy
     row, _ = grid.world_to_cell(0.0, 2.0)
     _, cols = grid.world_to_cell(np.array([9.4, 9.6, 10.0, 10.4, 10.6]), 0.0)

@@ -20,28 +20,6 @@ from aogm_cli.mapping import modes
 from aogm_cli.simulation.sonar import simulate
 from aogm_cli.world.loader import parse_world
 
-WORLD = """
-name: tiny_door
-bounds: [-0.5, -0.5, 6.5, 4.0]
-truth_resolution: 0.1
-walls:
-  - points: [[0, 0], [6, 0]]
-  - points: [[0, 2], [6, 2]]
-    openings: [{at: 3.0, width: 1.0}]
-  - points: [[0, 0], [0, 2]]
-  - points: [[6, 0], [6, 2]]
-  - points: [[2, 2], [2, 3.5], [4, 3.5], [4, 2]]
-trajectory:
-  waypoints: [[0.5, 1.0], [5.5, 1.0]]
-  speed: 0.5
-  scan_period: 0.5
-sonar: {count: 16, max_range: 4.0}
-checks:
-  - name: door_passable
-    passable: {from: [3.0, 1.0], to: [3.0, 3.0], robot_radius: 0.2}
-  - name: through_wall
-    passable: {from: [1.0, 1.0], to: [1.0, -0.3], robot_radius: 0.1}
-"""
 METRICS = ("accuracy", "occupied_precision", "occupied_recall", "occupied_f1", "brier")
 PLANNER = ("leak", "block", "surface_recall")  # against the truth, for the default --robot-radius 0.2
 
@@ -51,10 +29,10 @@ def run(*args):
 
 
 @pytest.fixture(scope="module")
-def logs(tmp_path_factory):
+def logs(tmp_path_factory, tiny_door_world):
     """Two ~20-scan logs of one small corridor world (seeds 1 and 2)."""
     folder = tmp_path_factory.mktemp("logs")
-    world = parse_world(yaml.safe_load(WORLD), file="tiny_door.yaml", text=WORLD)
+    world = parse_world(yaml.safe_load(tiny_door_world), file="tiny_door.yaml", text=tiny_door_world)
     paths = []
     for seed in (1, 2):
         log = simulate(world, seed=seed)

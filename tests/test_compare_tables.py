@@ -1,7 +1,6 @@
 """``aogm compare --csv`` and ``--from-json``: the CSV table against the JSON, and the JSON of
 earlier runs read back, merged, printed and gated without mapping again."""
 
-import csv
 import dataclasses
 import hashlib
 import json
@@ -54,12 +53,6 @@ def run(*args):
     return CliRunner().invoke(main, [str(a) for a in args])
 
 
-def read_csv(path):
-    with open(path, newline="") as fh:
-        rows = list(csv.reader(fh))
-    return rows[0], [dict(zip(rows[0], row, strict=True)) for row in rows[1:]]
-
-
 def number(cell):
     return None if cell == "" else float(cell)
 
@@ -107,7 +100,7 @@ def no_mapping(monkeypatch):
     monkeypatch.setattr(compare, "map_one", refuse)
 
 
-def test_the_csv_has_a_row_per_log_and_mode_equal_to_the_json(runs):
+def test_the_csv_has_a_row_per_log_and_mode_equal_to_the_json(runs, read_csv):
     out, _ = runs
     doc = json.loads((out / "a.json").read_text())
     header, rows = read_csv(out / "a.csv")
@@ -137,7 +130,7 @@ def test_the_csv_has_a_row_per_log_and_mode_equal_to_the_json(runs):
             assert all(row[f"learned_{k}"] == "" for k in LEARNED) and row["learned_from_readings"] == ""
 
 
-def test_from_json_merges_prints_and_gates_without_mapping(logs, runs, tmp_path, monkeypatch):
+def test_from_json_merges_prints_and_gates_without_mapping(logs, runs, tmp_path, monkeypatch, read_csv):
     out, _ = runs
     no_mapping(monkeypatch)
     a, b = (json.loads((out / name).read_text()) for name in ("a.json", "b.json"))
@@ -176,7 +169,7 @@ def test_a_failed_gate_reads_as_in_the_run_that_mapped(runs, tmp_path, monkeypat
     assert hint.exit_code == 2 and "a.json: a JSON file" in hint.output and "--from-json" in hint.output
 
 
-def test_without_truth_and_with_holdout_the_csv_and_json_come_back_the_same(logs, tmp_path, monkeypatch):
+def test_without_truth_and_with_holdout_the_csv_and_json_come_back_the_same(logs, tmp_path, monkeypatch, read_csv):
     bare = tmp_path / "bare.h5"
     write_log(bare, dataclasses.replace(read_log(logs[0]), truth=None))
     params = tmp_path / "p.yaml"

@@ -34,23 +34,6 @@ from aogm_cli.mapping.standard import standard_map
 from aogm_cli.simulation.sonar import simulate
 from aogm_cli.world.loader import parse_world
 
-ROOM = """
-name: tiny_room
-bounds: [-0.5, -0.5, 4.5, 3.0]
-truth_resolution: 0.1
-walls:
-  - points: [[0, 0], [4, 0], [4, 2.5], [0, 2.5], [0, 0]]
-  - points: [[2, 0], [2, 1.0]]
-trajectory:
-  waypoints: [[0.5, 1.8], [3.5, 1.8]]
-  speed: 0.5
-  scan_period: 0.25
-sonar: {count: 12, max_range: 3.0}
-checks:
-  - name: across
-    passable: {from: [0.5, 1.8], to: [3.5, 1.8], robot_radius: 0.15}
-"""
-
 
 def run(*args):
     return CliRunner().invoke(main, [str(a) for a in args])
@@ -229,8 +212,8 @@ def test_loglik_of_one_reading_and_one_obstacle_is_the_formula():
 
 
 @pytest.fixture(scope="module")
-def room_log(tmp_path_factory):
-    world = parse_world(yaml.safe_load(ROOM), file="tiny_room.yaml", text=ROOM)
+def room_log(tmp_path_factory, tiny_room_world):
+    world = parse_world(yaml.safe_load(tiny_room_world), file="tiny_room.yaml", text=tiny_room_world)
     log = simulate(world, seed=1)
     assert 20 <= log.n_scans <= 40
     path = tmp_path_factory.mktemp("holdout") / "room.h5"

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import math
 import re
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -25,8 +24,7 @@ from aogm_cli.io.importers.carmen import (
 )
 from aogm_cli.io.logfile import read_log
 
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
-INTEL = DATA / "carmen" / "intel-corrected.log.gz"
+INTEL = "data/carmen/intel-corrected.log.gz"  # in ../shared
 HALF_PI = math.pi / 2
 
 # FLASER num_readings r1..rn x y theta odom_x odom_y odom_theta ipc_timestamp host logger_timestamp
@@ -302,10 +300,9 @@ def test_cli_writes_the_log_and_reports_errors_with_exit_2(tmp_path):
     assert res.exit_code == 2 and "--pose-from" in res.output
 
 
-def test_intel_log_imports_910_scans_of_180_beams(tmp_path):
-    if not INTEL.exists():
-        pytest.skip(f"shared data not available: {INTEL}")
-    result = import_carmen(INTEL)
+def test_intel_log_imports_910_scans_of_180_beams(tmp_path, require):
+    intel = require.shared(INTEL)
+    result = import_carmen(intel)
     log = result.log
     assert (result.message, log.n_scans, log.sensor.count) == ("FLASER", 910, 180)
     assert log.ranges.shape == (910, 180) and log.ranges.dtype == np.float32
@@ -317,7 +314,7 @@ def test_intel_log_imports_910_scans_of_180_beams(tmp_path):
     assert np.isinf(log.ranges).any() and not np.isnan(log.ranges).any()
     assert float(np.max(log.ranges[np.isfinite(log.ranges)])) < 80.0
     # the same scans with poses interpolated from the raw odometry
-    odom = import_carmen(INTEL, CarmenOptions(pose_from="odom")).log
+    odom = import_carmen(intel, CarmenOptions(pose_from="odom")).log
     assert odom.n_scans == 910 and not np.allclose(odom.pose, log.pose)
 
 

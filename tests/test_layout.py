@@ -7,8 +7,6 @@ import sys
 import tomllib
 from pathlib import Path
 
-import pytest
-
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGE = ROOT / "aogm_cli"
 
@@ -52,9 +50,9 @@ def test_every_module_says_what_it_owns():
         assert text.startswith('"""'), f"{path.relative_to(ROOT)} has no module docstring"
 
 
-def test_the_import_contracts_are_kept():
+def test_the_import_contracts_are_kept(require):
     linter = Path(sys.executable).parent / "lint-imports"
     if not linter.exists():
-        pytest.skip("import-linter is not installed (pip install -e '.[dev]')")
+        require.missing(f"import-linter is not installed: no {linter} (pip install -e '.[dev]')")
     result = subprocess.run([str(linter), "--no-cache"], cwd=ROOT, capture_output=True, text=True)
     assert result.returncode == 0, result.stdout[-3000:]

@@ -27,11 +27,8 @@ def run(*args):
 
 
 @pytest.fixture(scope="module")
-def door(tmp_path_factory):
-    path = tmp_path_factory.mktemp("check") / "door.h5"
-    result = run("simulate", ROOT / "worlds" / "corridor_door.yaml", "--seed", "1", "-o", path, "-q")
-    assert result.exit_code == 0, result.output
-    return read_log(path)
+def door(corridor_door_log):
+    return read_log(corridor_door_log)
 
 
 def stuck(log):

@@ -8,9 +8,9 @@ import json
 import numpy as np
 import pytest
 import yaml
-from test_compare import WORLD as DOOR  # a ~20-scan corridor with a door into a room
-from test_compare_tables import read_csv, run
+from click.testing import CliRunner
 
+from aogm_cli.cli import main
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.evaluation.planner import against_standard, map_reach, planner_metrics
 from aogm_cli.io.logfile import read_log, write_log
@@ -96,18 +96,23 @@ def test_against_the_standard_map():
 
 # --- aogm compare ---------------------------------------------------------------------------------
 
-WORLD = DOOR + """  - name: behind_the_wall
+BEHIND_THE_WALL = """  - name: behind_the_wall
     blocked: {from: [1.0, 1.0], to: [1.0, 3.0], robot_radius: 0.2}
-"""
+"""  # a third check, appended to the tiny door world's checks
 TRUTH_KEYS = ("leak", "block", "surface_recall")
 STANDARD_KEYS = ("walls_kept", "leak_vs_standard")
 
 
+def run(*args):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
 @pytest.fixture(scope="module")
-def logs(tmp_path_factory):
+def logs(tmp_path_factory, tiny_door_world):
     """A short log of a corridor with a door into a room (truth), and the same log without its truth."""
     folder = tmp_path_factory.mktemp("planner")
-    world = parse_world(yaml.safe_load(WORLD), file="tiny_door.yaml", text=WORLD)
+    text = tiny_door_world + BEHIND_THE_WALL
+    world = parse_world(yaml.safe_load(text), file="tiny_door.yaml", text=text)
     log = simulate(world, seed=1)
     write_log(folder / "room.h5", log)
     write_log(folder / "bare.h5", dataclasses.replace(log, truth=None))
@@ -123,7 +128,7 @@ def compared(logs, tmp_path_factory):
     return out, json.loads((out / "r.json").read_text()), result.output
 
 
-def test_compare_reports_leak_block_and_surface_recall(logs, compared):
+def test_compare_reports_leak_block_and_surface_recall(logs, compared, read_csv):
     out, doc, output = compared
     assert "gates: 1 of 1 passed" in output
     assert all(name in output for name in ("Leak", "Block", "Surface"))
@@ -167,7 +172,7 @@ def test_a_gate_on_a_planner_metric_fails_with_its_numbers(compared):
     assert f"FAILED tiny_door: em.leak > 2  ({leak:.6g} > 2)" in result.output
 
 
-def test_from_json_reads_older_files_without_the_planner_metrics(compared, tmp_path, monkeypatch):
+def test_from_json_reads_older_files_without_the_planner_metrics(compared, tmp_path, monkeypatch, read_csv):
     out, doc, _ = compared
     old = json.loads(json.dumps(doc))
     for r in old["results"]:

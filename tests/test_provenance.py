@@ -41,12 +41,11 @@ def recorded(path) -> dict:
 
 
 @pytest.fixture(scope="module")
-def files(tmp_path_factory):
-    """A simulated corridor log (in process) and its standard map (``python -m aogm_cli``)."""
+def files(tmp_path_factory, corridor_door_log):
+    """The corridor log simulated in process (``aogm simulate WORLD -o LOG --seed 1 -q``, conftest.py)
+    and its standard map (``python -m aogm_cli``)."""
     folder = tmp_path_factory.mktemp("prov")
-    log, m = folder / "door.h5", folder / "door_map.h5"
-    result = run("simulate", WORLDS / "corridor_door.yaml", "-o", log, "--seed", 1, "-q")
-    assert result.exit_code == 0, result.output
+    log, m = corridor_door_log, folder / "door_map.h5"
     done = subprocess.run([sys.executable, "-m", "aogm_cli", "map", str(log), "--mode", "standard", "-o", str(m), "-q"],
                           capture_output=True, text=True, timeout=120, check=False)
     assert done.returncode == 0, done.stderr

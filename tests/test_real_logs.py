@@ -2,7 +2,6 @@
 standard map agrees with its own readings (the issue's bar: 70% of in-range endpoints on cells
 believed occupied)."""
 
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,18 +12,16 @@ from aogm_cli.evaluation.consistency import log_consistency
 from aogm_cli.io.logfile import LogReader
 from aogm_cli.io.mapfile import read_map_file
 
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
-INTEL = DATA / "carmen" / "intel-corrected.log.gz"
+INTEL = "data/carmen/intel-corrected.log.gz"  # in ../shared
 
 
 @pytest.fixture(scope="module")
-def intel(tmp_path_factory):
-    if not INTEL.is_file():
-        pytest.skip(f"shared data not available: {INTEL}")
+def intel(tmp_path_factory, require):
+    intel_log = require.shared(INTEL)
     folder = tmp_path_factory.mktemp("intel")
     log, m = folder / "intel.h5", folder / "intel_map.h5"
     runner = CliRunner()
-    result = runner.invoke(main, ["import", "carmen", str(INTEL), "-o", str(log), "--max-range", "30", "-q"])
+    result = runner.invoke(main, ["import", "carmen", str(intel_log), "-o", str(log), "--max-range", "30", "-q"])
     assert result.exit_code == 0, result.output
     result = runner.invoke(main, ["map", str(log), "--mode", "standard", "-o", str(m), "-q"])
     assert result.exit_code == 0, result.output

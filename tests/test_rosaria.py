@@ -16,9 +16,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 import yaml
+from bag_writer import T0, Bag
 from click.testing import CliRunner
 from numpy.testing import assert_allclose, assert_array_equal
-from test_import_rosbag import T0, Bag
 
 from aogm_cli.cli import main
 from aogm_cli.io.importers.mounts import load_mounts, presets

@@ -1,4 +1,5 @@
-"""Tests of aogm_cli.rosmap: map_server conformance, the turtlebot3 map, write/read round trips."""
+"""ROS map_server maps (``io.map_server``, ``io.map_saver``): map_server conformance, the turtlebot3
+map, write/read round trips."""
 
 from __future__ import annotations
 
@@ -16,15 +17,8 @@ from aogm_cli.core.grid import GridSpec
 from aogm_cli.io.map_saver import write_map
 from aogm_cli.io.map_server import RosMap, pixels_to_occupancy, read_map_yaml
 
-DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data"
-TESTMAPS = DATA / "ros_map_server_testmaps"
-TURTLEBOT = DATA / "floorplans" / "turtlebot3_world" / "map.yaml"
-
-
-def need(path: Path) -> Path:
-    if not path.exists():
-        pytest.skip(f"shared data not available: {path}")
-    return path
+TESTMAPS = Path("data/ros_map_server_testmaps")  # in ../shared: require.shared(TESTMAPS / name)
+TURTLEBOT = Path("data/floorplans/turtlebot3_world/map.yaml")
 
 
 def write_yaml(folder: Path, image: str | None, name: str = "m.yaml", **overrides) -> Path:
@@ -48,9 +42,9 @@ def write_yaml(folder: Path, image: str | None, name: str = "m.yaml", **override
 
 
 @pytest.mark.parametrize("name", ["testmap.yaml", "testmap2.yaml"])
-def test_map_server_testmaps_match_expected(name):
-    expected = json.loads(need(TESTMAPS / "expected.json").read_text())[name]
-    m = read_map_yaml(TESTMAPS / name)
+def test_map_server_testmaps_match_expected(require, name):
+    expected = json.loads(require.shared(TESTMAPS / "expected.json").read_text())[name]
+    m = read_map_yaml(require.shared(TESTMAPS / name))
     assert m.width == expected["width"] and m.height == expected["height"]
     assert m.resolution == pytest.approx(expected["resolution"])
     assert m.origin == pytest.approx(tuple(expected["origin"]))
@@ -59,23 +53,23 @@ def test_map_server_testmaps_match_expected(name):
     assert_array_equal(m.data, np.array(expected["data_rows_bottom_first"], dtype=np.int8))
 
 
-def test_bmp_testmap_loads_like_the_png_and_absolute_image_path_works(tmp_path):
-    expected = json.loads(need(TESTMAPS / "expected.json").read_text())["testmap.yaml"]
-    path = write_yaml(tmp_path, str(TESTMAPS / "testmap.bmp"), origin="[2.0, 3.0, 1.0]")
+def test_bmp_testmap_loads_like_the_png_and_absolute_image_path_works(require, tmp_path):
+    expected = json.loads(require.shared(TESTMAPS / "expected.json").read_text())["testmap.yaml"]
+    bmp = require.shared(TESTMAPS / "testmap.bmp")
+    path = write_yaml(tmp_path, str(bmp), origin="[2.0, 3.0, 1.0]")
     m = read_map_yaml(path)
-    assert m.image == str(TESTMAPS / "testmap.bmp")
+    assert m.image == str(bmp)
     assert_array_equal(m.data, np.array(expected["data_rows_bottom_first"], dtype=np.int8))
 
 
-def spectrum(tmp_path: Path, **overrides) -> RosMap:
-    need(TESTMAPS / "spectrum.png")
-    return read_map_yaml(write_yaml(tmp_path, str(TESTMAPS / "spectrum.png"), **overrides))
+def spectrum(require, tmp_path: Path, **overrides) -> RosMap:
+    return read_map_yaml(write_yaml(tmp_path, str(require.shared(TESTMAPS / "spectrum.png")), **overrides))
 
 
-def test_spectrum_trinary_thresholds_are_strict(tmp_path):
+def test_spectrum_trinary_thresholds_are_strict(require, tmp_path):
     # spectrum.png: 16x16 grey, the bottom image row is 0..15, the top one 240..255; so with
     # row 0 = bottom image row, the pixel under data[r, c] is 16 r + c.
-    m = spectrum(tmp_path)
+    m = spectrum(require, tmp_path)
     pixel = np.arange(256).reshape(16, 16)
     # occ = (255 - v)/255: v <= 89 gives occ > 0.65; v >= 206 gives occ < 0.196;
     # v = 205 gives occ = 50/255 = 0.19608, not < 0.196, so unknown.
@@ -85,17 +79,17 @@ def test_spectrum_trinary_thresholds_are_strict(tmp_path):
     assert_array_equal(m.occupied(), pixel <= 89)
 
 
-def test_spectrum_scale_and_raw_modes(tmp_path):
-    m = spectrum(tmp_path, mode="scale")
+def test_spectrum_scale_and_raw_modes(require, tmp_path):
+    m = spectrum(require, tmp_path, mode="scale")
     pixel = np.arange(256).reshape(16, 16)
     value = dict(zip(pixel.ravel().tolist(), m.data.ravel().tolist(), strict=True))
     assert value[89] == 100 and value[206] == 0
     assert value[150] == 47  # occ 105/255, ratio 0.47525, int(1 + 98 * 0.47525) = 47
     assert value[100] == 89  # occ 155/255, ratio 0.90714, int(89.9) = 89
     assert value[205] == 1  # ratio 0.0002 -> 1
-    raw = spectrum(tmp_path, mode="raw")
+    raw = spectrum(require, tmp_path, mode="raw")
     assert_array_equal(raw.data, pixel.astype(np.uint8).view(np.int8))  # 255 reads as -1, 200 as -56
-    negated = spectrum(tmp_path, mode="raw", negate="1")
+    negated = spectrum(require, tmp_path, mode="raw", negate="1")
     assert_array_equal(negated.data, (255 - pixel).astype(np.uint8).view(np.int8))
 
 
@@ -170,13 +164,14 @@ def test_sixteen_bit_pgm_is_refused(tmp_path):
 # ------------------------------------------------------------------ turtlebot3 map_saver output
 
 
-def test_turtlebot3_map_loads():
-    m = read_map_yaml(need(TURTLEBOT))
+def test_turtlebot3_map_loads(require):
+    turtlebot = require.shared(TURTLEBOT)
+    m = read_map_yaml(turtlebot)
     assert (m.height, m.width) == (384, 384)
     assert m.resolution == pytest.approx(0.05)
     assert m.origin == pytest.approx((-10.0, -10.0, 0.0))
     assert m.grid_spec() == GridSpec(-10.0, -10.0, 0.05, 384, 384)
-    pgm = np.asarray(Image.open(TURTLEBOT.parent / "map.pgm"))
+    pgm = np.asarray(Image.open(turtlebot.parent / "map.pgm"))
     assert set(np.unique(pgm).tolist()) == {0, 205, 254}
     assert (m.data == 100).sum() == (pgm == 0).sum() > 0
     assert (m.data == 0).sum() == (pgm == 254).sum() > 0
@@ -184,8 +179,8 @@ def test_turtlebot3_map_loads():
     assert_array_equal(m.data[::-1] == 100, pgm == 0)
 
 
-def test_rosmap_is_frozen_and_read_only():
-    m = read_map_yaml(need(TESTMAPS / "testmap.yaml"))
+def test_rosmap_is_frozen_and_read_only(require):
+    m = read_map_yaml(require.shared(TESTMAPS / "testmap.yaml"))
     with pytest.raises(dataclasses.FrozenInstanceError):
         m.resolution = 1.0
     with pytest.raises(ValueError):

@@ -1,6 +1,5 @@
-"""Many logs on a Dask cluster (issue 16): ``compare`` and ``simulate`` on a two-worker
-``LocalCluster`` give what ``--jobs 1`` and one-by-one runs give, bit for bit; a failed task is
-reported while the others finish; ``--resume`` skips complete outputs and redoes broken ones;
+"""Many logs on Dask (issue 16): ``compare`` and ``simulate`` on a two-worker ``LocalCluster`` give what
+``--jobs 1`` and one-by-one runs give, bit for bit; a failed task does not stop the others; ``--resume``;
 without Dask, ``--scheduler`` names the extra to install."""
 
 import json
@@ -11,12 +10,8 @@ import h5py
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from test_compare import WORLD as DOOR  # tiny worlds of ~20 scans
-from test_holdout import ROOM
 
 from aogm_cli.cli import main
-
-distributed = pytest.importorskip("distributed")
 
 NOOK = """
 name: tiny_nook
@@ -32,7 +27,6 @@ trajectory:
   scan_period: 0.4
 sonar: {count: 12, max_range: 3.0}
 """
-WORLDS = {"door": DOOR, "room": ROOM, "nook": NOOK}
 
 
 def run(*args, env=None):
@@ -40,17 +34,19 @@ def run(*args, env=None):
 
 
 @pytest.fixture(scope="module")
-def cluster():
+def cluster(require):
     """A two-worker LocalCluster (one thread each, separate processes); its scheduler's address."""
+    distributed = require.module("distributed")
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as c:
         yield c.scheduler_address
 
 
 @pytest.fixture(scope="module")
-def worlds(tmp_path_factory):
+def worlds(tmp_path_factory, tiny_door_world, tiny_room_world):
+    """World files of three tiny worlds (door, room, nook), of 15-40 scans each."""
     folder = tmp_path_factory.mktemp("worlds")
     paths = []
-    for name, text in WORLDS.items():
+    for name, text in {"door": tiny_door_world, "room": tiny_room_world, "nook": NOOK}.items():
         (folder / f"{name}.yaml").write_text(text)
         paths.append(folder / f"{name}.yaml")
     return paths
