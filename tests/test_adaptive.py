@@ -105,7 +105,7 @@ def test_adaptive_cli_writes_clusters_and_stats(corridor_door_log, tmp_path):
     phases = m.stats["phase_seconds"]
     assert set(phases) == {"standard", "readings", "detector", "clusters", "index", "calibration", "sweeps", "view"}
     assert m.runtime_s == pytest.approx(sum(phases.values()), rel=1e-12)
-    em = read_map_file(_em_map(door_log, tmp_path))
+    em = read_map_file(_em_map(corridor_door_log, tmp_path))
     assert set(em.stats["phase_seconds"]) == set(phases) - {"detector", "clusters"}
     shared = {"sweeps", "flips_per_sweep", "objective_per_sweep", "scored_per_sweep", "pairs_per_sweep",
               "candidate_cells", "em_readings", "index_entries", "scratch_bytes", "calibration"}

@@ -188,14 +188,14 @@ def test_bad_calibration_params_exit_2_naming_the_key(corridor_door_log, tmp_pat
     assert not (tmp_path / "m.h5").exists()
 
 
-def test_calibration_maps_the_whole_log_once_and_part_of_it_before(door_log):
+def test_calibration_maps_the_whole_log_once_and_part_of_it_before(corridor_door_log):
     """The fits are made at maps of every 4th, then every 2nd scan; only the final EM run maps
     every scan (issue 22: calibration at the cost of at most one extra EM over part of the log)."""
     from aogm_cli.io.logfile import LogReader
     from aogm_cli.mapping.params import EMConfig
     from aogm_cli.mapping.pipeline import lay_out_readings, log_grid
 
-    with LogReader(door_log) as reader:
+    with LogReader(corridor_door_log) as reader:
         log, grid = reader.read(), log_grid(reader, 0.05)
     run_ = lay_out_readings(log.pose, log.ranges, log.sensor, grid)
     calls = []
