@@ -16,7 +16,18 @@ import numpy as np
 from aogm_cli.core.log import Log
 from aogm_cli.core.occupancy_map import OccupancyMap
 from aogm_cli.mapping.cluster import cone_bands, grown, label_clusters, near_occupied, readings_near_clusters
-from aogm_cli.mapping.em import EMProblem, em_problem, em_readings, em_stats, em_view, em_with_phases, find_root
+from aogm_cli.mapping.em import (
+    EMProblem,
+    EMSetup,
+    coarse_run,
+    em_problem,
+    em_readings,
+    em_stats,
+    em_view,
+    em_with_phases,
+    find_root,
+    whole_log_problems,
+)
 from aogm_cli.mapping.params import EMConfig, MapParams
 from aogm_cli.mapping.pipeline import (
     Progress,
@@ -93,6 +104,8 @@ def map_adaptive(log, params: MapParams, detector, detector_name: str = "package
     whole = log.read()  # EM needs every reading in memory: read the scans once
     log_odds, observed, t_standard = standard_pass(whole, grid, params)
     forward_templates(grid, sensor)  # one-time set-up, cached, outside the clock
+    if params.calibration.enabled and params.calibration.coarse > 1:
+        forward_templates(grid.coarsened(params.calibration.coarse), sensor)
     t0 = time.perf_counter()
     run = lay_out_readings(whole.pose, whole.ranges, sensor, grid)
     t_readings = time.perf_counter() - t0
@@ -122,7 +135,15 @@ def map_adaptive(log, params: MapParams, detector, detector_name: str = "package
         near = np.zeros(run.z.size, dtype=bool)
         near[readings_near_clusters(clusters, run.rows, run.cols, run.z, run.grid, sensor.max_range,
                                     params.em.forward)] = True
-        outcome = em_with_phases(run, occupied, params, problem_for, select=near, progress=progress)
+        t0 = time.perf_counter()
+        laid = coarse_run(whole, grid, sensor, params)
+        coarse = None
+        if laid is not None:  # calibration's maps: EM over every coarse cell, fitted on the same readings
+            coarse = EMSetup(laid[0], laid[1], whole_log_problems(laid[0], laid[0].templates, laid[0].grid,
+                                                                  sensor.max_range), near)
+        t_coarse = time.perf_counter() - t0
+        outcome = em_with_phases(EMSetup(run, occupied, problem_for, near), params, coarse, progress)
+        outcome.seconds["calibration"] += t_coarse
         groups = coupled_groups(outcome.problem, n_clusters)
     t0 = time.perf_counter()
     probability, observed = em_view(log_odds, observed, outcome, grid, whole.pose, sensor, params)

@@ -20,7 +20,7 @@ import numpy as np
 
 from aogm_cli.core.occupancy_map import OccupancyMap
 from aogm_cli.mapping import em_kernels as K
-from aogm_cli.mapping.calibration import em_with_model
+from aogm_cli.mapping.calibration import Stage, em_with_model
 from aogm_cli.mapping.params import EMConfig, MapParams
 from aogm_cli.mapping.pipeline import (
     Progress,
@@ -340,27 +340,41 @@ class EMOutcome:
 ProblemFor = Callable[[EMConfig, np.ndarray, "np.ndarray | None"], tuple[EMProblem, np.ndarray]]
 
 
-def em_with_phases(run, occupied: np.ndarray, params: MapParams, problem_for: ProblemFor,
-                   select: np.ndarray | None = None, progress: Progress | None = None) -> EMOutcome:
-    """The EM of the em and adaptive modes: EM over the problems ``problem_for`` sets up, with
-    the forward model calibrated on the readings ``select`` marks when calibration is on
-    (``calibration.em_with_model``); ``occupied`` (flat) is updated in place, and timed."""
+@dataclass
+class EMSetup:
+    """EM on one grid: the readings laid out on it, the flat start map (updated in place), the
+    problems EM solves there, and the readings calibration fits on (None: all)."""
+
+    run: object
+    occupied: np.ndarray
+    problem_for: ProblemFor
+    select: np.ndarray | None = None
+
+
+def em_with_phases(fine: EMSetup, params: MapParams, coarse: EMSetup | None = None,
+                   progress: Progress | None = None) -> EMOutcome:
+    """The EM of the em and adaptive modes: EM over the problems ``fine.problem_for`` sets up,
+    its forward model calibrated first when calibration is on (``calibration.em_with_model``; at
+    ``coarse``'s maps when given); ``fine.occupied`` is updated in place, and timed."""
     last = {}
 
     def on_sweep(sweep, flips, objective):
         if progress:
             progress("em sweep", sweep, params.em.max_sweeps)
 
-    def em_step(config: EMConfig, occ: np.ndarray, subset: np.ndarray | None):
-        t0 = time.perf_counter()
-        problem, candidates = problem_for(config, occ, subset)
-        t1 = time.perf_counter()
-        result = run_em(problem, occ, candidates, config, on_sweep, final=subset is None)
-        last.update(index=t1 - t0, sweeps=time.perf_counter() - t1, problem=problem)
-        return result.objective[0], result.objective[-1], result.sweeps, result
+    def stage(setup: EMSetup) -> Stage:
+        def em_step(config: EMConfig, occ: np.ndarray, subset: np.ndarray | None):
+            t0 = time.perf_counter()
+            problem, candidates = setup.problem_for(config, occ, subset)
+            t1 = time.perf_counter()
+            result = run_em(problem, occ, candidates, config, on_sweep, final=subset is None)
+            last.update(index=t1 - t0, sweeps=time.perf_counter() - t1, problem=problem)
+            return result.objective[0], result.objective[-1], result.sweeps, result
+
+        return Stage(setup.run, setup.occupied, em_step, setup.select)
 
     t0 = time.perf_counter()
-    config, result, calibration = em_with_model(run, occupied, params, em_step, select)
+    config, result, calibration = em_with_model(stage(fine), params, stage(coarse) if coarse else None)
     total = time.perf_counter() - t0
     seconds = {"index": last["index"], "calibration": total - last["index"] - last["sweeps"], "sweeps": last["sweeps"]}
     return EMOutcome(config, result, last["problem"], calibration, seconds)
@@ -396,6 +410,32 @@ def em_view(log_odds: np.ndarray, observed: np.ndarray, outcome: EMOutcome | Non
     return probability, observed
 
 
+def whole_log_problems(run, templates, grid, z_max: float) -> ProblemFor:
+    """The em mode's problems: every valid reading of ``run`` (of a subset, if given), every cell
+    some cone holds a candidate."""
+    keep = ~np.isnan(run.z)
+
+    def problem_for(config: EMConfig, occ: np.ndarray, subset: np.ndarray | None):
+        rd = em_readings(run.rows, run.cols, run.bins, run.z, templates, grid, z_max, config.forward,
+                         select=keep if subset is None else keep & subset)
+        problem = em_problem(rd, templates, grid.shape, occ, config)
+        return problem, np.flatnonzero(problem.seen)
+
+    return problem_for
+
+
+def coarse_run(whole, grid, sensor, params: MapParams):
+    """(the readings laid out on the grid of ``calibration.coarse`` times larger cells, the flat
+    thresholded standard map there) for calibration's maps, or None when it is 1 or off."""
+    factor = params.calibration.coarse
+    if not params.calibration.enabled or factor <= 1:
+        return None
+    coarse = grid.coarsened(factor)
+    log_odds, _, _ = standard_pass(whole, coarse, params)
+    start = (log_odds > 0).reshape(-1) if params.em.start == "standard" else np.zeros(coarse.height * coarse.width, bool)
+    return lay_out_readings(whole.pose, whole.ranges, sensor, coarse), np.ascontiguousarray(start)
+
+
 def map_em(log, params: MapParams, progress: Progress | None = None) -> OccupancyMap:
     """The em mode: Thrun's EM map of a log source (``pipeline``); every cell some cone holds is
     a candidate, started from the thresholded standard map (or empty, ``em.start``)."""
@@ -404,20 +444,23 @@ def map_em(log, params: MapParams, progress: Progress | None = None) -> Occupanc
     log_odds, observed, t_standard = standard_pass(whole, grid, params)
     templates = forward_templates(grid, log.sensor)  # one-time set-up, cached, outside the clock
     K.row_groups(templates)
+    if params.calibration.enabled and params.calibration.coarse > 1:
+        K.row_groups(forward_templates(grid.coarsened(params.calibration.coarse), log.sensor))
     t0 = time.perf_counter()
     run = lay_out_readings(whole.pose, whole.ranges, log.sensor, grid)
-    keep = ~np.isnan(run.z)
     t_readings = time.perf_counter() - t0
     start = (log_odds > 0).reshape(-1) if params.em.start == "standard" else np.zeros(grid.height * grid.width, bool)
     occupied = np.ascontiguousarray(start)
-
-    def problem_for(config: EMConfig, occ: np.ndarray, subset: np.ndarray | None):
-        rd = em_readings(run.rows, run.cols, run.bins, run.z, templates, grid, log.sensor.max_range, config.forward,
-                         select=keep if subset is None else keep & subset)
-        problem = em_problem(rd, templates, grid.shape, occ, config)
-        return problem, np.flatnonzero(problem.seen)
-
-    outcome = em_with_phases(run, occupied, params, problem_for, progress=progress)
+    fine = EMSetup(run, occupied, whole_log_problems(run, templates, grid, log.sensor.max_range))
+    t0 = time.perf_counter()
+    laid = coarse_run(whole, grid, log.sensor, params)
+    coarse = None
+    if laid is not None:
+        coarse = EMSetup(laid[0], laid[1], whole_log_problems(laid[0], laid[0].templates, laid[0].grid,
+                                                              log.sensor.max_range))
+    t_coarse = time.perf_counter() - t0
+    outcome = em_with_phases(fine, params, coarse, progress)
+    outcome.seconds["calibration"] += t_coarse
     t0 = time.perf_counter()
     probability, observed = em_view(log_odds, observed, outcome, grid, whole.pose, log.sensor, params)
     phases = {"standard": t_standard, "readings": t_readings, **outcome.seconds, "view": time.perf_counter() - t0}
