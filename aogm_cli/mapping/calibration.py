@@ -156,7 +156,7 @@ def calibrated_em(fine: Stage, em: EMConfig, config: CalibrationConfig,
     start = stage.occupied.copy()
     record = {"initial": model_values(em.forward), "readings_used": int(readings.z.shape[0]),
               "fitted_at": f"{stage.run.grid.resolution:g} m cells" + (", every scan" if coarse else
-                                                                      f", every {config.subsample}th scan"),
+                                                                      f", 1 scan in {config.subsample}"),
               "rounds": []}
     used = dataclasses.replace(em, forward=dataclasses.replace(em.forward, sigma=max(em.forward.sigma, config.start_sigma)))
     step = dataclasses.replace(used, max_sweeps=min(em.max_sweeps, config.start_sweeps))
@@ -201,11 +201,14 @@ def calibration_table(record: dict) -> str:
              f" {'sweeps':>6}"]
     for r in record["rounds"]:
         loglik = f"{r['loglik_per_reading']:10.4f}" if "loglik_per_reading" in r else f"{'-':>10}"
-        objective = f"{r['em_objective']:14.2f}" if "em_objective" in r else f"{'(settled)':>14}"
+        objective = f"{r['em_objective']:14.2f}" if "em_objective" in r else f"{'(final map)':>14}"
         sweeps = f"{r['em_sweeps']:6d}" if "em_sweeps" in r else f"{'-':>6}"
         lines.append(f"{r['round']:>5} {r['sigma']:8.4f} {r['p_rand']:8.4f} {r['p_hit']:8.4f} {r['p_max']:8.4f}"
                      f" {loglik} {objective} {sweeps}")
     final = record["final"]
+    if "final_em" in record:
+        lines.append(f"final map, every scan with the last fit: EM objective {record['final_em']['em_objective']:.2f}, "
+                     f"{record['final_em']['em_sweeps']} sweeps (the rounds' maps: {record['fitted_at']})")
     lines.append(f"learned from {record['readings_used']} readings: "
                  + ", ".join(f"{k} {final[k]:.4g}" for k in LEARNED))
     return "\n".join(lines)
