@@ -219,3 +219,29 @@ def test_planner_view_reports_unseen_cells_unobserved_and_clears_the_footprint()
     out = planner_view(probability, observed, np.array([2, 4, 6]), body, 0.12)
     assert out.astype(int).tolist() == [[1, 1, 0, 1], [1, 1, 0, 1], [1, 1, 1, 1]]
     np.testing.assert_allclose(probability, [0.12, 0.12, 0.6, 0.5, 0.12, 0.5, 0.4, 0.8, 0.3, 0.3, 0.3, 0.3])
+
+
+@pytest.mark.parametrize("col, where", [(15, "inside the window"), (8, "far before it")])
+def test_a_flips_gain_is_the_change_of_the_readings_log_likelihood_by_hand(col, where):
+    """One reading (z = 1.0 m) along a row with an obstacle held at 0.8 m; the candidate cell is
+    at 1.0 m (inside the Gaussian window: a second detection term) or at 0.3 m (before the
+    window: every term behind it scaled by q). EM's score of the flip, read back from its
+    residual and objective, is log p(z | m with the cell) - log p(z | m) plus the prior."""
+    fixed, cell = 10 * GRID.width + 13, 10 * GRID.width + col
+    occupied = np.zeros(N_CELLS, dtype=bool)
+    occupied[fixed] = True
+    problem, occupied, _ = problem_for([1.0], occupied, beam_deg=1.0)
+    p_hit, q, w, sigma = 0.4, 0.6, 0.95, 0.05
+
+    def n(r):
+        return math.exp(-0.5 * ((1.0 - r) / sigma) ** 2) / (math.sqrt(2 * math.pi) * sigma)
+
+    const, g0 = 0.05 / 4.0, n(4.0)
+    before = p_hit * n(0.8) + q * g0
+    after = p_hit * n(0.8) + q * p_hit * n(1.0) + q * q * g0 if col == 15 else q * before
+    gain = math.log(const + w * after) - math.log(const + w * before)
+    result = run_em(problem, occupied, np.array([cell]), CONFIG)
+    assert result.residual[0] == pytest.approx(1.0 / (1.0 + math.exp(-(gain + CONFIG.l_prior))), rel=1e-9)
+    assert occupied[cell] == (gain + CONFIG.l_prior > 0)
+    if occupied[cell]:
+        assert result.objective[-1] - result.objective[0] == pytest.approx(gain + CONFIG.l_prior, rel=1e-9)
