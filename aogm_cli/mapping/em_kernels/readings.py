@@ -1,0 +1,91 @@
+"""Where each reading's cone lies: its template entries, bounding box and Gaussian window
+rows (compiled; the set-up of ``mapping.em.em_readings``)."""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from aogm_cli.mapping.sensor_models.forward_model import cone_entries
+
+
+@numba.njit(cache=True, inline="always")
+def _entry_cell(tpl, k, j, row0, col0, height, width):
+    """Flat cell of entry j of heading bin k's cone from (row0, col0), or -1 outside the grid."""
+    s = tpl.offsets[tpl.base_bin[k]]
+    dc = np.int64(tpl.dcol[s + j])
+    dr = np.int64(tpl.drow[s + j])
+    r = row0 + tpl.transform[k, 2] * dc + tpl.transform[k, 3] * dr
+    c = col0 + tpl.transform[k, 0] * dc + tpl.transform[k, 1] * dr
+    if r < 0 or r >= height or c < 0 or c >= width:
+        return -1
+    return r * width + c
+
+
+@numba.njit(cache=True)
+def _reading_extent(tpl, groups, readings, gauss, grid_shape, out, span):
+    """Per reading span[0] <= t < span[1] of ``readings`` = (rows, cols, bins, z, limits,
+    lower): the entries of its cone (m: up to ``limits``, and beyond z only while the
+    Gaussian, ``gauss`` = (sigma, window), is not 0, as ``forward_model.cone_entries``), the
+    first entry at range >= ``lower`` (jlo), the grid rows and columns its cone spans (row_lo >
+    row_hi: none) and the squared offsets (cells) of entries m - 1 and jlo - 1
+    (``EMReadings.reach2``)."""
+    rows, cols, bins, z, limits, lower = readings
+    sigma, window = gauss
+    height, width = grid_shape
+    out_m, out_jlo, out_box, out_reach2, out_inside = out
+    for t in range(span[0], span[1]):
+        k = bins[t]
+        b = tpl.base_bin[k]
+        s = tpl.offsets[b]
+        r = tpl.ranges[s : tpl.offsets[b + 1]]
+        m = cone_entries(r, z[t], limits[t], sigma, window)
+        out_m[t] = m
+        out_jlo[t] = np.searchsorted(r, lower[t], side="left") if lower[t] >= 0.0 else 0
+        out_box[0, t] = height  # none
+        out_box[1, t] = -1
+        out_box[2, t] = width
+        out_box[3, t] = -1
+        out_reach2[0, t] = -1
+        out_reach2[1, t] = -1
+        out_inside[t] = 0
+        if m == 0:
+            continue
+        # ranges are resolution * sqrt(dr^2 + dc^2) and distinct squares give distinct ranges
+        out_reach2[0, t] = np.int64(tpl.drow[s + m - 1]) ** 2 + np.int64(tpl.dcol[s + m - 1]) ** 2
+        jlo = out_jlo[t]
+        if jlo > 0:
+            out_reach2[1, t] = np.int64(tpl.drow[s + jlo - 1]) ** 2 + np.int64(tpl.dcol[s + jlo - 1]) ** 2
+        dr_lo, dr_hi = groups.box[0, s + m - 1], groups.box[1, s + m - 1]
+        dc_lo, dc_hi = groups.box[2, s + m - 1], groups.box[3, s + m - 1]
+        ta, tb, tc, td = tpl.transform[k, 0], tpl.transform[k, 1], tpl.transform[k, 2], tpl.transform[k, 3]
+        if tc == 0:  # drow = td dr, dcol = ta dc
+            r_lo, r_hi = (dr_lo, dr_hi) if td > 0 else (-dr_hi, -dr_lo)
+            c_lo, c_hi = (dc_lo, dc_hi) if ta > 0 else (-dc_hi, -dc_lo)
+        else:  # drow = tc dc, dcol = tb dr
+            r_lo, r_hi = (dc_lo, dc_hi) if tc > 0 else (-dc_hi, -dc_lo)
+            c_lo, c_hi = (dr_lo, dr_hi) if tb > 0 else (-dr_hi, -dr_lo)
+        r_lo, r_hi, c_lo, c_hi = rows[t] + r_lo, rows[t] + r_hi, cols[t] + c_lo, cols[t] + c_hi
+        out_inside[t] = 1 if r_lo >= 0 and r_hi < height and c_lo >= 0 and c_hi < width else 0
+        r_lo, r_hi = max(r_lo, 0), min(r_hi, height - 1)
+        c_lo, c_hi = max(c_lo, 0), min(c_hi, width - 1)
+        if r_lo > r_hi or c_lo > c_hi:
+            continue
+        out_box[0, t] = r_lo
+        out_box[1, t] = r_hi
+        out_box[2, t] = c_lo
+        out_box[3, t] = c_hi
+
+
+@numba.njit(cache=True)
+def _window_rows(tpl, rd, height, out, span):
+    """The last grid row of the window cells (entries jlo .. m - 1; -1: none) of each reading
+    span[0] <= t < span[1]."""
+    for t in range(span[0], span[1]):
+        k = rd.bin[t]
+        s0 = tpl.offsets[tpl.base_bin[k]]
+        tc, td = tpl.transform[k, 2], tpl.transform[k, 3]
+        hi = np.int64(-1)
+        for j in range(rd.jlo[t], rd.m[t]):
+            hi = max(hi, rd.row0[t] + tc * np.int64(tpl.dcol[s0 + j]) + td * np.int64(tpl.drow[s0 + j]))
+        out[t] = min(hi, height - 1)

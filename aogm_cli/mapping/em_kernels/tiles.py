@@ -1,0 +1,456 @@
+"""The sweep: candidates visited tile by tile (one grid row, SEGMENT columns), the active
+readings listed per segment, their (candidate, reading) pairs generated from the templates,
+each flip kept when it raises the objective (``_sweep_tiles``)."""
+
+
+# How a tile works. The readings whose cones cross grid row r are *active* at r (a bit set,
+# updated as r grows); each lists itself under the column segments its cone's row-r cells can
+# reach. For one segment, the (candidate, reading) pairs are generated from the templates
+# (reading order within each candidate, as the sweep needs them), the candidates are visited
+# in order and each flip updates its readings' state. The obstacles of a reading inside its
+# Gaussian window (which a flip's score needs in range order, with prefix sums) are rebuilt
+# from the map into an arena when a tile first needs them and dropped once the sweep passes
+# the window's last row (or the arena reaches its cap); what a reading keeps otherwise is S_t,
+# the window's sum, its obstacle counts and the ratios of adding or removing a far obstacle.
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numba
+import numpy as np
+
+from aogm_cli.mapping.em_kernels.layout import (
+    CTL_BUDGET,
+    CTL_CLOCK,
+    CTL_ENTER,
+    CTL_FLIPS,
+    CTL_LEAVE,
+    CTL_LISTED,
+    CTL_MODE,
+    CTL_NEED_LIST,
+    CTL_NEED_PAIRS,
+    CTL_PAIRS,
+    CTL_ROW,
+    CTL_SCORED,
+    CTL_SEG,
+    CTL_WINDOW_LEAVE,
+    DONE,
+    NEED_BUFFERS,
+    PAUSED,
+    SEGMENT,
+    SWEEP,
+    _trailing_zeros,
+)
+from aogm_cli.mapping.em_kernels.likelihood import _far_changed, _flip_gain, _set_sum, _update_reading
+from aogm_cli.mapping.em_kernels.windows import _build_window, _make_room, _room, _row_group
+from aogm_cli.mapping.sensor_models.forward_model import gaussian_at
+
+
+@numba.njit(cache=True, inline="always")
+def _isqrt(n):
+    """The largest o >= 0 with o * o <= n (-1 for n < 0), exactly."""
+    if n < 0:
+        return np.int64(-1)
+    o = np.int64(math.sqrt(float(n)))
+    while o * o > n:
+        o -= 1
+    while (o + 1) * (o + 1) <= n:
+        o += 1
+    return o
+
+
+class RowSpan(NamedTuple):
+    """One reading's cone in one grid row, as runs of the other offset o (``_row_span``): the
+    cell at o has column col0 + sign * o and template entry j[kind, first + o - o_first]."""
+
+    kind: int
+    first: int
+    o_first: int
+    sign: int
+    o_lo: int  # the cone's cells: o_lo <= o <= o_hi
+    o_hi: int
+    f_lo: int  # those before the window: f_lo <= o <= f_hi (f_hi < f_lo: none)
+    f_hi: int
+
+
+@numba.njit(cache=True, inline="always")
+def _row_span(tpl, groups, rd, t, r):
+    """``RowSpan`` of reading t's cone in grid row r (o_hi < o_lo: none there)."""
+    kind, b, gv, sign = _row_group(tpl, groups, rd.bin[t], r - rd.row0[t])
+    ext = tpl.extent
+    if gv < -ext or gv > ext or rd.m[t] == 0:
+        return RowSpan(0, 0, 0, 1, 1, 0, 1, 0)
+    first = groups.ptr[kind, b, gv + ext]
+    if first == groups.ptr[kind, b, gv + ext + 1]:
+        return RowSpan(0, 0, 0, 1, 1, 0, 1, 0)
+    o_first = np.int64(groups.lo[kind, b, gv + ext])
+    o_last = np.int64(groups.hi[kind, b, gv + ext])
+    # a template entry's range is resolution * sqrt(dr^2 + dc^2): entries < m (or < jlo) are
+    # the cells of the row with o^2 <= reach2 - gv^2, exactly, in integers
+    v = _isqrt(rd.reach2[0, t] - gv * gv)
+    if v < 0:
+        return RowSpan(0, 0, 0, 1, 1, 0, 1, 0)
+    f = min(_isqrt(rd.reach2[1, t] - gv * gv), v)
+    return RowSpan(kind, first, o_first, sign, max(o_first, -v), min(o_last, v), max(o_first, -f), min(o_last, f))
+
+
+@numba.njit(cache=True, inline="always")
+def _o_range(span, col0, c0, c1, lo, hi):
+    """The o of [lo, hi] whose columns lie in [c0, c1)."""
+    if span.sign > 0:
+        return max(lo, c0 - col0), min(hi, c1 - 1 - col0)
+    return max(lo, col0 - c1 + 1), min(hi, col0 - c0)
+
+
+@numba.njit(cache=True, inline="always")
+def _window_pairs(i, t, span, r, c0, c1, c_start, fill, tpl, groups, rd, model, cand, work):
+    """Count (``fill`` False) or write reading t's window pairs in tile columns [c0, c1) of
+    row r (the cone's cells beyond its far run: up to two runs of o); returns how many."""
+    width = cand.of_cell.shape[0] // cand.tile_clock.shape[0]
+    col0 = rd.col0[t]
+    at = r * width + col0
+    gj = groups.j[span.kind]
+    s0 = tpl.offsets[tpl.base_bin[rd.bin[t]]]
+    n = 0
+    for side in range(2):
+        if span.f_lo > span.f_hi:  # no far run: one run, the whole cone row
+            if side == 1:
+                break
+            lo, hi = span.o_lo, span.o_hi
+        elif side == 0:
+            lo, hi = span.o_lo, span.f_lo - 1
+        else:
+            lo, hi = span.f_hi + 1, span.o_hi
+        lo, hi = _o_range(span, col0, c0, c1, lo, hi)
+        for o in range(lo, hi + 1):
+            ci = cand.of_cell[at + span.sign * o]
+            if ci < 0:
+                continue
+            n += 1
+            local = ci - c_start
+            if not fill:
+                work.count[local + 1] += 1
+                continue
+            j = gj[span.first + o - span.o_first]
+            pos = work.count[local]
+            work.count[local] = pos + 1
+            work.pair_pos[pos] = i
+            work.pair_j[pos] = j
+            work.pair_g[pos] = gaussian_at(rd.z[t], tpl.ranges[s0 + j], model.sigma, model.window)
+    return n
+
+
+@numba.njit(cache=True, inline="always")
+def _advance(rd, work, r):
+    """The active bit set at row r: readings whose cone rows reach r (repeatable)."""
+    ctl = work.ctl
+    active = work.active
+    n_read = rd.z.shape[0]
+    e = ctl[CTL_ENTER]
+    while e < n_read and rd.box[0, rd.enter[e]] <= r:
+        t = rd.enter[e]
+        active[t >> 6] |= np.uint64(1) << np.uint64(t & 63)
+        e += 1
+    ctl[CTL_ENTER] = e
+    k = ctl[CTL_LEAVE]
+    while k < n_read and rd.box[1, rd.leave[k]] < r:
+        t = rd.leave[k]
+        active[t >> 6] &= ~(np.uint64(1) << np.uint64(t & 63))
+        work.slot[t] = -1  # its arena slot (if any) is dead
+        k += 1
+    ctl[CTL_LEAVE] = k
+    k = ctl[CTL_WINDOW_LEAVE]
+    while k < n_read and rd.window_hi[rd.window_leave[k]] < r:
+        work.slot[rd.window_leave[k]] = -1  # the sweep is past its window: no tile needs the slot again
+        k += 1
+    ctl[CTL_WINDOW_LEAVE] = k
+
+
+@numba.njit(cache=True, inline="always")
+def _span_at(work, k):
+    """The ``RowSpan`` stored at ``work.spans[:, k]`` (its reading is spans[8, k])."""
+    sp = work.spans
+    return RowSpan(sp[0, k], sp[1, k], sp[2, k], sp[3, k], sp[4, k], sp[5, k], sp[6, k], sp[7, k])
+
+
+@numba.njit(cache=True, inline="always")
+def _span_mask(lo, hi, s):
+    """Bits of columns lo..hi within segment s (bit k: column s * SEGMENT + k)."""
+    a = max(lo - s * SEGMENT, 0)
+    b = min(hi - s * SEGMENT, SEGMENT - 1)
+    if a > b:
+        return np.int64(0)
+    return ((np.int64(1) << np.int64(b - a + 1)) - 1) << np.int64(a)
+
+
+@numba.njit(cache=True, inline="always")
+def _list_segments(tpl, groups, rd, cand, work, r, n_seg):
+    """The row's active readings with their ``RowSpan`` in ``spans`` (one each), and each
+    segment's (ascending) in seg_ptr / seg_list, as positions in ``spans``: a reading is
+    listed where its cone holds a candidate of the row (``seg_mask``). False (with the size
+    needed in ctl) when a buffer is too small."""
+    active = work.active
+    seg_ptr = work.seg_ptr
+    fill = work.seg_fill
+    sp = work.spans
+    mask = work.seg_mask
+    width = cand.of_cell.shape[0] // cand.tile_clock.shape[0]
+    for s in range(n_seg + 1):
+        seg_ptr[s] = 0
+    for s in range(n_seg):
+        mask[s] = 0
+    for c in range(cand.row_first[r], cand.row_first[r + 1]):
+        col = cand.cell[c] - r * width
+        mask[col // SEGMENT] |= np.int64(1) << np.int64(col % SEGMENT)
+    n = 0
+    visited = 0
+    for wi in range(active.shape[0]):
+        word = active[wi]
+        while word != np.uint64(0):
+            t = (wi << 6) + np.int64(_trailing_zeros(word))
+            word &= word - np.uint64(1)  # the lowest set bit off
+            visited += 1
+            span = _row_span(tpl, groups, rd, t, r)
+            if span.o_hi >= span.o_lo:
+                col0 = rd.col0[t]
+                if span.sign > 0:
+                    lo, hi = col0 + span.o_lo, col0 + span.o_hi
+                else:
+                    lo, hi = col0 - span.o_hi, col0 - span.o_lo
+                lo, hi = max(lo, rd.box[2, t]), min(hi, rd.box[3, t])
+                if lo <= hi:
+                    if n >= sp.shape[1]:
+                        work.ctl[CTL_NEED_LIST] = max(work.ctl[CTL_NEED_LIST], 2 * sp.shape[1])
+                        return False
+                    sp[0, n], sp[1, n], sp[2, n], sp[3, n] = span.kind, span.first, span.o_first, span.sign
+                    sp[4, n], sp[5, n], sp[6, n], sp[7, n] = span.o_lo, span.o_hi, span.f_lo, span.f_hi
+                    sp[8, n] = t
+                    sp[9, n], sp[10, n] = lo, hi
+                    listed = False
+                    for s in range(lo // SEGMENT, hi // SEGMENT + 1):
+                        if _span_mask(lo, hi, s) & mask[s]:
+                            seg_ptr[s + 1] += 1
+                            listed = True
+                    if listed:
+                        n += 1
+    work.ctl[CTL_BUDGET] -= active.shape[0] + 2 * visited  # a listed reading costs about two window pairs
+    for s in range(n_seg):
+        seg_ptr[s + 1] += seg_ptr[s]
+        fill[s] = seg_ptr[s]
+    if seg_ptr[n_seg] > work.seg_list.shape[0]:
+        work.ctl[CTL_NEED_LIST] = max(work.ctl[CTL_NEED_LIST], seg_ptr[n_seg])
+        return False
+    for k in range(n):
+        lo, hi = sp[9, k], sp[10, k]
+        for s in range(lo // SEGMENT, hi // SEGMENT + 1):
+            if _span_mask(lo, hi, s) & mask[s]:
+                work.seg_list[fill[s]] = k
+                fill[s] += 1
+    return True
+
+
+@numba.njit(cache=True, inline="always")
+def _row_unchanged(rd, cand, state, work, r, n_seg):
+    """True (and every candidate of row r stamped as scored now) when no active reading
+    changed since the row's tiles were last visited: a check of one stamp per reading
+    instead of listing them (late sweeps change few readings)."""
+    since = cand.tile_clock[r, 0]
+    for s in range(1, n_seg):
+        since = min(since, cand.tile_clock[r, s])
+    if since < 0:
+        return False
+    active = work.active
+    for wi in range(active.shape[0]):
+        word = active[wi]
+        while word != np.uint64(0):
+            t = (wi << 6) + np.int64(_trailing_zeros(word))
+            word &= word - np.uint64(1)
+            if state.stamp[t] > since:
+                return False
+    now = work.ctl[CTL_CLOCK]
+    for c in range(cand.row_first[r], cand.row_first[r + 1]):
+        cand.stamp[c] = now
+    for s in range(n_seg):
+        cand.tile_clock[r, s] = now
+    return True
+
+
+# _nrt=False: the sweep allocates nothing (its scratch comes in ``work``), and without numba's
+# reference-counting runtime the arrays it hands to the inlined helpers cost nothing per call
+@numba.njit(cache=True, _nrt=False)
+def _sweep_tiles(tpl, flat, groups, rd, model, cand, state, work):
+    """One pass over the candidates in flat-id order, tile by tile (see the module docstring):
+    ctl[CTL_MODE] SWEEP keeps each flip that raises the objective, SCORE scores every
+    candidate into ``last_gain`` and flips none.
+
+    A candidate none of whose readings changed since it was last scored keeps its (non-
+    improving) gain and is skipped, and so is a whole tile none of whose readings changed
+    since the tile's last visit: the result equals a full sweep's. The clock counts accepted
+    flips. Starts at (ctl[CTL_ROW], ctl[CTL_SEG]); returns NEED_BUFFERS, with the sizes
+    needed in ctl, before a tile's first change when the scratch is too small (grow it and
+    call again: the pass resumes there), PAUSED before a row or a tile once the work done in
+    this call (subtracted from ctl[CTL_BUDGET], in window pairs: a listed reading counts 2, a
+    scored candidate 8, a window built its entries, a flip the tile's readings and the cell's
+    pairs) exhausts the budget the caller set (set it again and call again: the pass resumes
+    there, with the row's listing kept, ctl[CTL_LISTED]), else DONE. Every call does at least
+    one tile or row before it pauses; where it pauses changes nothing computed.
+    """
+    ctl = work.ctl
+    height, n_seg = cand.tile_clock.shape
+    width = cand.of_cell.shape[0] // height
+    mode = ctl[CTL_MODE]
+    occupied = cand.occupied
+    seg_list = work.seg_list
+    cnt = work.count
+    fresh = True  # nothing done yet in this call: no pause
+    for r in range(ctl[CTL_ROW], height):
+        ca = cand.row_first[r]
+        cb = cand.row_first[r + 1]
+        if ca == cb:
+            continue
+        if ctl[CTL_SEG] == 0 and ctl[CTL_BUDGET] <= 0 and not fresh:
+            ctl[CTL_ROW] = r
+            return PAUSED
+        ctl[CTL_ROW] = r
+        _advance(rd, work, r)
+        if mode == SWEEP and ctl[CTL_SEG] == 0:
+            ctl[CTL_BUDGET] -= work.active.shape[0]
+            if _row_unchanged(rd, cand, state, work, r, n_seg):
+                fresh = False
+                continue  # no reading whose cone crosses the row changed since its last visit
+        if ctl[CTL_LISTED] != r:  # else listed before a pause, and still so
+            if not _list_segments(tpl, groups, rd, cand, work, r, n_seg):
+                return NEED_BUFFERS
+            ctl[CTL_LISTED] = r
+        c_pos = ca
+        row_base = r * width
+        for sg in range(ctl[CTL_SEG], n_seg):
+            c0 = sg * SEGMENT
+            c1 = min(c0 + SEGMENT, width)
+            while c_pos < cb and cand.cell[c_pos] < row_base + c0:
+                c_pos += 1
+            c_start = c_pos
+            while c_pos < cb and cand.cell[c_pos] < row_base + c1:
+                c_pos += 1
+            c_stop = c_pos
+            if c_start == c_stop:
+                continue
+            if ctl[CTL_BUDGET] <= 0 and not fresh:
+                ctl[CTL_SEG] = sg
+                return PAUSED
+            fresh = False
+            list_lo = work.seg_ptr[sg]
+            list_hi = work.seg_ptr[sg + 1]
+            ctl[CTL_BUDGET] -= list_hi - list_lo
+            clock0 = ctl[CTL_CLOCK]
+            if mode == SWEEP:
+                since = cand.tile_clock[r, sg]
+                dirty = since < 0
+                if not dirty:
+                    for i in range(list_lo, list_hi):
+                        if state.stamp[work.spans[8, seg_list[i]]] > since:
+                            dirty = True
+                            break
+                if not dirty:  # nothing the tile's candidates see changed: each keeps its gain
+                    for c in range(c_start, c_stop):
+                        cand.stamp[c] = clock0
+                    cand.tile_clock[r, sg] = clock0
+                    continue
+            # the tile: each listed reading's far run (into the sums of log far ratios) and
+            # window pairs (counted per candidate, then written in reading order)
+            nc = c_stop - c_start
+            n_list = list_hi - list_lo
+            if n_list > work.far_lo.shape[0]:
+                ctl[CTL_NEED_LIST] = max(ctl[CTL_NEED_LIST], n_list)
+                ctl[CTL_SEG] = sg
+                return NEED_BUFFERS
+            for i in range(nc + 1):
+                cnt[i] = 0
+            for k in range(SEGMENT + 1):
+                work.far_sum[0, k] = 0.0
+                work.far_sum[1, k] = 0.0
+            room = 0
+            n_pairs = 0
+            for i in range(list_lo, list_hi):
+                span = _span_at(work, seg_list[i])
+                t = work.spans[8, seg_list[i]]
+                li = i - list_lo
+                work.tile_t[li] = t
+                work.far_lo[li] = 1
+                work.far_hi[li] = 0
+                if span.o_hi < span.o_lo:
+                    continue
+                f_lo, f_hi = _o_range(span, rd.col0[t], c0, c1, span.f_lo, span.f_hi)
+                if f_lo <= f_hi:
+                    col0 = rd.col0[t]
+                    a, b = (col0 + f_lo, col0 + f_hi) if span.sign > 0 else (col0 - f_hi, col0 - f_lo)
+                    work.far_lo[li] = a - c0
+                    work.far_hi[li] = b - c0
+                    work.far_sum[0, a - c0] += state.far_log[t, 0]
+                    work.far_sum[0, b - c0 + 1] -= state.far_log[t, 0]
+                    work.far_sum[1, a - c0] += state.far_log[t, 1]
+                    work.far_sum[1, b - c0 + 1] -= state.far_log[t, 1]
+                k = _window_pairs(li, t, span, r, c0, c1, c_start, False, tpl, groups, rd, model, cand, work)
+                n_pairs += k
+                if k > 0 and work.slot[t] < 0:
+                    room += _room(rd, t)
+            for i in range(1, nc + 1):
+                cnt[i] += cnt[i - 1]
+            if n_pairs > work.pair_pos.shape[0] or not _make_room(rd, work, room):
+                ctl[CTL_NEED_PAIRS] = n_pairs
+                ctl[CTL_SEG] = sg
+                return NEED_BUFFERS
+            ctl[CTL_PAIRS] += n_pairs
+            ctl[CTL_BUDGET] -= n_pairs + 8 * nc
+            for i in range(list_lo, list_hi):
+                span = _span_at(work, seg_list[i])
+                t = work.spans[8, seg_list[i]]
+                if span.o_hi >= span.o_lo:
+                    _window_pairs(i - list_lo, t, span, r, c0, c1, c_start, True, tpl, groups, rd, model, cand, work)
+            for c in range(c_start, c_stop):
+                li = c - c_start
+                lo_pair = 0 if li == 0 else cnt[li - 1]
+                hi_pair = cnt[li]
+                x = cand.cell[c] - row_base - c0  # the tile column
+                for p in range(lo_pair, hi_pair):  # the window obstacles the score needs
+                    t = work.tile_t[work.pair_pos[p]]
+                    if work.pair_g[p] != 0.0 and work.slot[t] < 0:
+                        _build_window(t, tpl, flat, rd, model, cand, work)
+                        ctl[CTL_BUDGET] -= _room(rd, t)
+                ctl[CTL_SCORED] += 1
+                d = _flip_gain(c, x, lo_pair, hi_pair, rd, model, cand, state, work)
+                cand.last_gain[c] = d
+                if mode != SWEEP:
+                    continue
+                cell = cand.cell[c]
+                d += -model.l_prior if occupied[cell] else model.l_prior
+                if d > 1e-9:
+                    occupied[cell] = not occupied[cell]
+                    cand.last_gain[c] = -cand.last_gain[c]  # flipping back undoes exactly this gain
+                    ctl[CTL_FLIPS] += 1
+                    ctl[CTL_CLOCK] += 1
+                    ctl[CTL_BUDGET] -= n_list + hi_pair - lo_pair
+                    adding = occupied[cell]
+                    now = ctl[CTL_CLOCK]
+                    for i in range(n_list):  # the readings that hold the cell before their windows
+                        if work.far_lo[i] <= x <= work.far_hi[i]:
+                            t = work.tile_t[i]
+                            old_add, old_rem = state.far_log[t, 0], state.far_log[t, 1]
+                            state.nfar[t] += 1 if adding else -1
+                            _set_sum(t, rd, model, state)
+                            _far_changed(i, t, x, old_add, old_rem, state, work)
+                            state.stamp[t] = now
+                    for p in range(lo_pair, hi_pair):  # ... and inside them
+                        i = work.pair_pos[p]
+                        t = work.tile_t[i]
+                        old_add, old_rem = state.far_log[t, 0], state.far_log[t, 1]
+                        _update_reading(t, work.pair_j[p], work.pair_g[p], adding, model, rd, state, work)
+                        _far_changed(i, t, x, old_add, old_rem, state, work)
+                        state.stamp[t] = now
+                cand.stamp[c] = ctl[CTL_CLOCK]
+            if mode == SWEEP:
+                cand.tile_clock[r, sg] = clock0
+        ctl[CTL_SEG] = 0
+    return DONE
