@@ -26,8 +26,7 @@ def one_run(inputs):
     run, config, log_odds = inputs.readings, inputs.params.em, inputs.log_odds
     keep = ~np.isnan(run.z)
     t0 = time.perf_counter()
-    rd = E.em_readings(run.rows[keep], run.cols[keep], run.bins[keep], run.z[keep], run.templates, run.grid,
-                       run.sensor.max_range, config.forward)
+    rd = E.em_readings(tuple(a[keep] for a in run.cones), run.templates, run.grid, run.sensor.max_range, config.forward)
     t_readings = time.perf_counter() - t0
     occupied = np.ascontiguousarray((log_odds > 0).reshape(-1))
     t0 = time.perf_counter()

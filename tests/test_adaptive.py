@@ -151,8 +151,8 @@ def test_coupled_groups_joins_the_clusters_one_cone_holds():
     # reading 0 joins 1 and 2; without it they are two groups, as are 3 and 4
     rows, cols, z = np.array([10, 2]), np.array([5, 5]), np.array([1.5, 1.0])
     for readings, groups in (([0, 1], 3), ([1], 4)):
-        rd = em_readings(rows[readings], cols[readings], tpl.heading_bin(np.zeros(len(readings))), z[readings], tpl,
-                         grid, 4.0, config.forward)
+        cones = (rows[readings], cols[readings], tpl.heading_bin(np.zeros(len(readings))), z[readings])
+        rd = em_readings(cones, tpl, grid, 4.0, config.forward)
         occupied = np.zeros(grid.height * grid.width, dtype=bool)
         problem = em_problem(rd, tpl, grid.shape, occupied, config, labels=labels.reshape(-1))
         assert problem.seen[labels.reshape(-1) == 3].all() and not problem.seen[labels.reshape(-1) == 4].any()

@@ -151,15 +151,16 @@ def _one_sonar(grid, z):
 def test_cone_bands_sweep_near_the_range_and_count_a_mask():
     grid = GridSpec(0.0, 0.0, 0.05, 60, 41)
     _, _, templates, rows, cols, bins, zm = _one_sonar(grid, 1.0)
-    band, counts = cone_bands(grid, templates, rows, cols, bins, zm, 0.2, 0.05, np.ones(grid.shape, bool))
+    band, counts = cone_bands(grid, templates, (rows, cols, bins, zm), 0.2, 0.05, np.ones(grid.shape, bool))
     r, c = np.nonzero(band)
     d = np.hypot(r - 20, c - 10) * 0.05
     assert band.sum() == counts[0] > 0
     assert d.min() >= zm[0] - 0.2 - 1e-9 and d.max() <= zm[0] + 0.05 + 1e-9  # only the band near the range
     assert np.all(np.abs(np.arctan2(r - 20, c - 10)) <= math.radians(15) + 1e-9)  # inside the cone
-    half = cone_bands(grid, templates, rows, cols, bins, zm, 0.2, 0.05, np.arange(41 * 60).reshape(grid.shape) % 2 == 0)[1]
+    half = cone_bands(grid, templates, (rows, cols, bins, zm), 0.2, 0.05,
+                      np.arange(41 * 60).reshape(grid.shape) % 2 == 0)[1]
     assert half[0] == np.count_nonzero(band.reshape(-1)[::2])
-    none, zero = cone_bands(grid, templates, rows, cols, bins, np.array([INF]), 0.2, 0.05)
+    none, zero = cone_bands(grid, templates, (rows, cols, bins, np.array([INF])), 0.2, 0.05)
     assert not none.any() and zero[0] == 0  # a max-range reading has no band
 
 

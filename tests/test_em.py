@@ -32,7 +32,7 @@ def problem_for(ranges, occupied=None, config=CONFIG, **kw):
     (empty by default; the same array is to be passed to run_em) and the forward model's index."""
     tpl, rows, cols, bins, z = readings_for(ranges, **kw)
     occupied = np.zeros(N_CELLS, dtype=bool) if occupied is None else occupied
-    rd = em_readings(rows, cols, bins, z, tpl, GRID, 4.0, config.forward)
+    rd = em_readings((rows, cols, bins, z), tpl, GRID, 4.0, config.forward)
     problem = em_problem(rd, tpl, GRID.shape, occupied, config)
     return problem, occupied, build_forward_index(rows, cols, bins, z, GRID, tpl, 4.0, config.forward)
 

@@ -81,7 +81,7 @@ class Case:
                                    self.config.forward)
 
     def problem(self, occupied):
-        rd = em_readings(self.rows, self.cols, self.bins, self.z, self.templates, self.grid, Z_MAX, self.config.forward)
+        rd = em_readings((self.rows, self.cols, self.bins, self.z), self.templates, self.grid, Z_MAX, self.config.forward)
         return em_problem(rd, self.templates, self.grid.shape, occupied, self.config)
 
 
@@ -253,7 +253,7 @@ def test_a_cluster_problem_climbs_as_the_reference_over_the_cluster_cells(seed):
     n_clusters = int(labels.max())
     case.candidates = np.flatnonzero(labels > 0)
     occupied = case.start.copy()
-    rd = em_readings(case.rows, case.cols, case.bins, case.z, case.templates, case.grid, Z_MAX, case.config.forward)
+    rd = em_readings((case.rows, case.cols, case.bins, case.z), case.templates, case.grid, Z_MAX, case.config.forward)
     problem = em_problem(rd, case.templates, case.grid.shape, occupied, case.config, labels=labels)
     groups = [find_root(problem.parent, k) for k in range(1, n_clusters + 1)]
     reference = coupled_reference(case.index(), labels, n_clusters)

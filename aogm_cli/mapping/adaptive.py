@@ -17,22 +17,22 @@ from aogm_cli.core.log import Log
 from aogm_cli.core.occupancy_map import OccupancyMap
 from aogm_cli.mapping.cluster import cone_bands, grown, label_clusters, near_occupied, readings_near_clusters
 from aogm_cli.mapping.em import (
+    EMOutcome,
     EMProblem,
     EMSetup,
-    coarse_run,
+    coarse_setup,
     em_problem,
     em_readings,
     em_stats,
     em_view,
     em_with_phases,
     find_root,
-    whole_log_problems,
+    prepared_templates,
 )
 from aogm_cli.mapping.params import EMConfig, MapParams
 from aogm_cli.mapping.pipeline import (
     Progress,
     Readings,
-    forward_templates,
     is_narrow_beam,
     lay_out_readings,
     log_grid,
@@ -49,7 +49,7 @@ def cluster_problem(run: Readings, clusters: np.ndarray, occupied: np.ndarray, c
     near = readings_near_clusters(clusters, run.rows, run.cols, run.z, run.grid, run.sensor.max_range, config.forward)
     if subset is not None:
         near = near[subset[near]]
-    rd = em_readings(run.rows, run.cols, run.bins, run.z, run.templates, run.grid, run.sensor.max_range,
+    rd = em_readings(run.cones, run.templates, run.grid, run.sensor.max_range,
                      config.forward, select=near)
     return em_problem(rd, run.templates, run.grid.shape, occupied, config, labels=clusters.reshape(-1))
 
@@ -83,7 +83,7 @@ def find_clusters(run: Readings, flags: np.ndarray, log_odds: np.ndarray, observ
     grown by ``adaptive.grow`` cells (8-connected), so that a wall's back layers, which the
     standard map holds free where too-long readings crossed them, are EM's to decide too (for
     cones only: on the intel laser log growing cost adaptive's held-out AUC 0.9863 -> 0.9737)."""
-    region, _ = cone_bands(run.grid, run.templates, run.rows[flags], run.cols[flags], run.bins[flags], run.z[flags],
+    region, _ = cone_bands(run.grid, run.templates, tuple(a[flags] for a in run.cones),
                            params.adaptive.band_below, params.inverse_model.alpha)
     region &= observed & (log_odds > params.inverse_model.clamp_min)
     region &= near_occupied(log_odds, params.adaptive.near_occupied)
@@ -95,6 +95,30 @@ def find_clusters(run: Readings, flags: np.ndarray, log_odds: np.ndarray, observ
     return label_clusters(observed & grown(region, grow))
 
 
+def em_in_clusters(whole, run: Readings, clusters: np.ndarray, n_clusters: int, occupied: np.ndarray,
+                   params: MapParams, progress: Progress | None = None) -> tuple[EMOutcome, int]:
+    """EM over every cluster cell at once, every other cell held at ``occupied`` (flat, updated
+    in place): (its outcome, how many groups of coupled clusters it solved). Clusters that share
+    no reading are independent (as the paper has them): one run gives each its own result."""
+    cells = np.flatnonzero(clusters.reshape(-1) > 0)
+
+    def problem_for(config: EMConfig, occ: np.ndarray, subset: np.ndarray | None):
+        if config.start == "empty":
+            occ[cells] = False
+        return cluster_problem(run, clusters, occ, config, subset), cells
+
+    # the model is fitted on the readings EM explains: those whose cones reach a cluster
+    # (outside the clusters the thresholded standard map stands, and readings crossing its
+    # thick walls looked random: p_rand 0.29 on the intel log when fitted on every reading)
+    near = np.zeros(run.z.size, dtype=bool)
+    near[readings_near_clusters(clusters, run.rows, run.cols, run.z, run.grid, run.sensor.max_range,
+                                params.em.forward)] = True
+    coarse, t_coarse = coarse_setup(whole, run.grid, run.sensor, params, near)
+    outcome = em_with_phases(EMSetup(run, occupied, problem_for, near), params, coarse, progress)
+    outcome.seconds["calibration"] += t_coarse
+    return outcome, coupled_groups(outcome.problem, n_clusters)
+
+
 def map_adaptive(log, params: MapParams, detector, detector_name: str = "packaged",
                  progress: Progress | None = None) -> OccupancyMap:
     """The adaptive mode on a log source (``pipeline``) with ``detector`` (anything with
@@ -103,9 +127,7 @@ def map_adaptive(log, params: MapParams, detector, detector_name: str = "package
     sensor = log.sensor
     whole = log.read()  # EM needs every reading in memory: read the scans once
     log_odds, observed, t_standard = standard_pass(whole, grid, params)
-    forward_templates(grid, sensor)  # one-time set-up, cached, outside the clock
-    if params.calibration.enabled and params.calibration.coarse > 1:
-        forward_templates(grid.coarsened(params.calibration.coarse), sensor)
+    prepared_templates(grid, sensor, params)  # outside the clock
     t0 = time.perf_counter()
     run = lay_out_readings(whole.pose, whole.ranges, sensor, grid)
     t_readings = time.perf_counter() - t0
@@ -120,31 +142,7 @@ def map_adaptive(log, params: MapParams, detector, detector_name: str = "package
     t_cluster = time.perf_counter() - t0
 
     occupied = np.ascontiguousarray((log_odds > 0).reshape(-1))  # the thresholded standard map
-    outcome, groups = None, 0
-    if n_clusters:
-        cells = np.flatnonzero(clusters.reshape(-1) > 0)
-
-        def problem_for(config: EMConfig, occ: np.ndarray, subset: np.ndarray | None):
-            if config.start == "empty":
-                occ[cells] = False
-            return cluster_problem(run, clusters, occ, config, subset), cells
-
-        # the model is fitted on the readings EM explains: those whose cones reach a cluster
-        # (outside the clusters the thresholded standard map stands, and readings crossing its
-        # thick walls looked random: p_rand 0.29 on the intel log when fitted on every reading)
-        near = np.zeros(run.z.size, dtype=bool)
-        near[readings_near_clusters(clusters, run.rows, run.cols, run.z, run.grid, sensor.max_range,
-                                    params.em.forward)] = True
-        t0 = time.perf_counter()
-        laid = coarse_run(whole, grid, sensor, params)
-        coarse = None
-        if laid is not None:  # calibration's maps: EM over every coarse cell, fitted on the same readings
-            coarse = EMSetup(laid[0], laid[1], whole_log_problems(laid[0], laid[0].templates, laid[0].grid,
-                                                                  sensor.max_range), near)
-        t_coarse = time.perf_counter() - t0
-        outcome = em_with_phases(EMSetup(run, occupied, problem_for, near), params, coarse, progress)
-        outcome.seconds["calibration"] += t_coarse
-        groups = coupled_groups(outcome.problem, n_clusters)
+    outcome, groups = em_in_clusters(whole, run, clusters, n_clusters, occupied, params, progress) if n_clusters else (None, 0)
     t0 = time.perf_counter()
     probability, observed = em_view(log_odds, observed, outcome, grid, whole.pose, sensor, params)
     seconds = outcome.seconds if outcome else {"index": 0.0, "calibration": 0.0, "sweeps": 0.0}

@@ -68,14 +68,15 @@ def _band(tpl, grid, readings, counts, span):
         counts[t] = count
 
 
-def cone_bands(grid: GridSpec, templates, rows, cols, bins, z_model, below: float, above: float,
+def cone_bands(grid: GridSpec, templates, cones, below: float, above: float,
                cell_mask: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Each reading's band, the cells of its cone with template range in [z - below, z + above].
 
-    ``rows, cols, bins, z_model`` as ``mapper.readings_of`` gives them (z in template ranges); a
+    ``cones``: (rows, cols, bins, z) as ``pipeline.readings_of`` gives them (z in template ranges); a
     non-finite z has no band. Returns ((H, W) bool union of the bands, (N,) int64 cells of
     ``cell_mask`` (H, W) on each reading's band; zeros without a mask).
     """
+    rows, cols, bins, z_model = cones
     z = np.asarray(z_model, dtype=np.float64).reshape(-1)
     finite = np.isfinite(z)
     lower = np.where(finite, z - below, np.inf)

@@ -105,13 +105,14 @@ def planner_view(probability: np.ndarray, observed: np.ndarray, unseen: np.ndarr
     return out
 
 
-def em_readings(rows, cols, bins, z, templates, grid, z_max: float, config: ForwardModelConfig,
+def em_readings(cones, templates, grid, z_max: float, config: ForwardModelConfig,
                 select: np.ndarray | None = None) -> K.EMReadings:
-    """The readings (sensor cells, heading bins, template ranges; flat arrays of one length, as
-    ``pipeline.Readings`` has them) as EM's kernels take them, or those ``select`` picks (a
+    """The readings ``cones`` (sensor cells, heading bins, template ranges: flat arrays of one
+    length, as ``pipeline.Readings.cones`` has them) as EM's kernels take them, or those ``select`` picks (a
     bool mask or positions; taken one column at a time, without a copy of every array). NaN
     readings must be left out; +inf is a max-range reading (cone up to z_max); other cones end
     ``config.window`` sigmas beyond z."""
+    rows, cols, bins, z = cones
     pick = (lambda a: np.asarray(a).reshape(-1)) if select is None else (lambda a: np.asarray(a).reshape(-1)[select])
     z = pick(z).astype(np.float64, copy=False)
     if np.isnan(z).any():
@@ -416,7 +417,7 @@ def whole_log_problems(run, templates, grid, z_max: float) -> ProblemFor:
     keep = ~np.isnan(run.z)
 
     def problem_for(config: EMConfig, occ: np.ndarray, subset: np.ndarray | None):
-        rd = em_readings(run.rows, run.cols, run.bins, run.z, templates, grid, z_max, config.forward,
+        rd = em_readings(run.cones, templates, grid, z_max, config.forward,
                          select=keep if subset is None else keep & subset)
         problem = em_problem(rd, templates, grid.shape, occ, config)
         return problem, np.flatnonzero(problem.seen)
@@ -424,16 +425,30 @@ def whole_log_problems(run, templates, grid, z_max: float) -> ProblemFor:
     return problem_for
 
 
-def coarse_run(whole, grid, sensor, params: MapParams):
-    """(the readings laid out on the grid of ``calibration.coarse`` times larger cells, the flat
-    thresholded standard map there) for calibration's maps, or None when it is 1 or off."""
+def prepared_templates(grid, sensor, params: MapParams):
+    """The forward templates of ``grid`` (and of calibration's coarse grid, when used), built or
+    loaded before any clock starts: a one-time set-up, cached."""
+    templates = forward_templates(grid, sensor)
+    K.row_groups(templates)
+    if params.calibration.enabled and params.calibration.coarse > 1:
+        K.row_groups(forward_templates(grid.coarsened(params.calibration.coarse), sensor))
+    return templates
+
+
+def coarse_setup(whole, grid, sensor, params: MapParams, select: np.ndarray | None = None) -> tuple[EMSetup | None, float]:
+    """(calibration's EM over every cell of the grid of ``calibration.coarse`` times larger
+    cells, started from its thresholded standard map and fitted on the readings ``select``
+    marks, or None when it is 1 or calibration is off; the seconds its set-up took)."""
     factor = params.calibration.coarse
     if not params.calibration.enabled or factor <= 1:
-        return None
+        return None, 0.0
+    t0 = time.perf_counter()
     coarse = grid.coarsened(factor)
     log_odds, _, _ = standard_pass(whole, coarse, params)
     start = (log_odds > 0).reshape(-1) if params.em.start == "standard" else np.zeros(coarse.height * coarse.width, bool)
-    return lay_out_readings(whole.pose, whole.ranges, sensor, coarse), np.ascontiguousarray(start)
+    run = lay_out_readings(whole.pose, whole.ranges, sensor, coarse)
+    problems = whole_log_problems(run, run.templates, coarse, sensor.max_range)
+    return EMSetup(run, np.ascontiguousarray(start), problems, select), time.perf_counter() - t0
 
 
 def map_em(log, params: MapParams, progress: Progress | None = None) -> OccupancyMap:
@@ -442,23 +457,14 @@ def map_em(log, params: MapParams, progress: Progress | None = None) -> Occupanc
     grid = log_grid(log, params.resolution)
     whole = log.read()  # EM needs every reading in memory: read the scans once
     log_odds, observed, t_standard = standard_pass(whole, grid, params)
-    templates = forward_templates(grid, log.sensor)  # one-time set-up, cached, outside the clock
-    K.row_groups(templates)
-    if params.calibration.enabled and params.calibration.coarse > 1:
-        K.row_groups(forward_templates(grid.coarsened(params.calibration.coarse), log.sensor))
+    templates = prepared_templates(grid, log.sensor, params)  # outside the clock
     t0 = time.perf_counter()
     run = lay_out_readings(whole.pose, whole.ranges, log.sensor, grid)
     t_readings = time.perf_counter() - t0
     start = (log_odds > 0).reshape(-1) if params.em.start == "standard" else np.zeros(grid.height * grid.width, bool)
     occupied = np.ascontiguousarray(start)
     fine = EMSetup(run, occupied, whole_log_problems(run, templates, grid, log.sensor.max_range))
-    t0 = time.perf_counter()
-    laid = coarse_run(whole, grid, log.sensor, params)
-    coarse = None
-    if laid is not None:
-        coarse = EMSetup(laid[0], laid[1], whole_log_problems(laid[0], laid[0].templates, laid[0].grid,
-                                                              log.sensor.max_range))
-    t_coarse = time.perf_counter() - t0
+    coarse, t_coarse = coarse_setup(whole, grid, log.sensor, params)
     outcome = em_with_phases(fine, params, coarse, progress)
     outcome.seconds["calibration"] += t_coarse
     t0 = time.perf_counter()

@@ -127,6 +127,12 @@ class Readings:
     bins: np.ndarray
     z: np.ndarray
 
+    @property
+    def cones(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(rows, cols, bins, z): where each reading's cone sits, as ``em_readings`` and
+        ``cluster.cone_bands`` take them."""
+        return self.rows, self.cols, self.bins, self.z
+
 
 def lay_out_readings(pose: np.ndarray, ranges: np.ndarray, sensor: SensorSpec, grid: GridSpec,
                      chunk: int = 4096) -> Readings:

@@ -170,9 +170,9 @@ def standard_map_wrong_arcs(log: Log, min_wrong: int) -> np.ndarray:
     log_odds, observed = standard_map([(0, log.time, log.pose, ranges)], sensor, grid, params.inverse_model,
                                       templates=templates)
     wrong = standard_wrong(probability_from_log_odds(log_odds, observed), observed, truth.occupancy)
-    rows, cols, bins, z = readings_of(log.pose, ranges, sensor, grid, templates)
+    cones = readings_of(log.pose, ranges, sensor, grid, templates)
     half = 0.5 * params.inverse_model.alpha
-    _, counts = cone_bands(grid, templates, rows, cols, bins, z, half, half, wrong)
+    _, counts = cone_bands(grid, templates, cones, half, half, wrong)
     return (counts >= min_wrong).reshape(ranges.shape)
 
 
