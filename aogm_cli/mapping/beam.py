@@ -161,6 +161,18 @@ class BeamMapper:
         return log_odds, observed
 
 
+@numba.njit(cache=True, inline="always")
+def _slab(p, u, size, t_lo, t_hi):
+    """[t_lo, t_hi] clipped to where p + t u lies in [0, size) along one axis (t_hi -1: nowhere)."""
+    if u > 0.0:
+        return max(t_lo, -p / u), min(t_hi, (size - p) / u)
+    if u < 0.0:
+        return max(t_lo, (size - p) / u), min(t_hi, -p / u)
+    if not (0.0 <= p < size):
+        return t_lo, -1.0
+    return t_lo, t_hi
+
+
 @numba.njit(cache=True)
 def _ray_start(px, py, ux, uy, begin, end, height, width, res):
     """Set-up of the traversal of [begin, end] along one ray, in metres from the grid's origin.
@@ -176,22 +188,8 @@ def _ray_start(px, py, ux, uy, begin, end, height, width, res):
     x_max = width * res
     y_max = height * res
     # clip the stretch to the grid's box (slab method)
-    if ux > 0.0:
-        t_lo = max(t_lo, -px / ux)
-        t_hi = min(t_hi, (x_max - px) / ux)
-    elif ux < 0.0:
-        t_lo = max(t_lo, (x_max - px) / ux)
-        t_hi = min(t_hi, -px / ux)
-    elif not (0.0 <= px < x_max):
-        t_hi = -1.0
-    if uy > 0.0:
-        t_lo = max(t_lo, -py / uy)
-        t_hi = min(t_hi, (y_max - py) / uy)
-    elif uy < 0.0:
-        t_lo = max(t_lo, (y_max - py) / uy)
-        t_hi = min(t_hi, -py / uy)
-    elif not (0.0 <= py < y_max):
-        t_hi = -1.0
+    t_lo, t_hi = _slab(px, ux, x_max, t_lo, t_hi)
+    t_lo, t_hi = _slab(py, uy, y_max, t_lo, t_hi)
     if not t_lo < t_hi:
         return 0, 0, 1.0, 0.0, inf, inf, inf, inf, 0, 0
     col = min(max(int(math.floor((px + ux * t_lo) / res)), 0), width - 1)

@@ -2,72 +2,7 @@
 where each reading's cone lies, each reading's likelihood state, the arena of window
 obstacles, and the sweep over tiles of regenerated cones (one module each)."""
 
-from aogm_cli.mapping.em_kernels.layout import (  # noqa: F401
-    ARENA_ENTRIES,
-    CTL_BUDGET,
-    CTL_BUMP,
-    CTL_CLOCK,
-    CTL_ENTER,
-    CTL_FLIPS,
-    CTL_LEAVE,
-    CTL_LISTED,
-    CTL_MODE,
-    CTL_NEED_LIST,
-    CTL_NEED_PAIRS,
-    CTL_NEED_ROOM,
-    CTL_PAIRS,
-    CTL_ROW,
-    CTL_SCORED,
-    CTL_SEG,
-    CTL_SIZE,
-    CTL_WINDOW_LEAVE,
-    DONE,
-    F_CONST,
-    F_G0,
-    F_LOG,
-    F_RATIO,
-    F_S,
-    F_WSUM,
-    F_Z,
-    FLOATS,
-    I_BIN,
-    I_BOX,
-    I_COL0,
-    I_INSIDE,
-    I_JLO,
-    I_M,
-    I_NFAR,
-    I_NOBS,
-    I_REACH2,
-    I_ROW0,
-    I_SLOT,
-    I_STAMP,
-    I_WINDOW_HI,
-    INTS,
-    NEED_BUFFERS,
-    PAUSE_WORK,
-    PAUSED,
-    SCORE,
-    SEGMENT,
-    SWEEP,
-    Candidates,
-    EMModel,
-    EMReadings,
-    EMState,
-    RowGroups,
-    TileWork,
-    row_groups,
-)
-from aogm_cli.mapping.em_kernels.likelihood import (  # noqa: F401
-    _find,
-    _init_state,
-    _objective,
-    _residual_from_gains,
-)
-from aogm_cli.mapping.em_kernels.readings import (  # noqa: F401
-    _reading_extent,
-    _window_rows,
-)
-from aogm_cli.mapping.em_kernels.tiles import (  # noqa: F401
-    _sweep_tiles,
-)
+from aogm_cli.mapping.em_kernels.layout import *  # noqa: F403
+from aogm_cli.mapping.em_kernels.likelihood import _find, _init_state, _objective, _residual_from_gains  # noqa: F401
+from aogm_cli.mapping.em_kernels.readings import _reading_extent, _window_rows  # noqa: F401
+from aogm_cli.mapping.em_kernels.tiles import _sweep_tiles  # noqa: F401

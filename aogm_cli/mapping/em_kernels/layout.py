@@ -12,6 +12,16 @@ from llvmlite import ir
 from numba import types
 from numba.extending import intrinsic
 
+__all__ = [  # what the package re-exports: the layout every caller of the kernels needs
+    "ARENA_ENTRIES", "CTL_BUDGET", "CTL_BUMP", "CTL_CLOCK", "CTL_ENTER", "CTL_FLIPS", "CTL_LEAVE",
+    "CTL_LISTED", "CTL_MODE", "CTL_NEED_LIST", "CTL_NEED_PAIRS", "CTL_NEED_ROOM", "CTL_PAIRS", "CTL_ROW",
+    "CTL_SCORED", "CTL_SEG", "CTL_SIZE", "CTL_WINDOW_LEAVE", "Candidates", "DONE", "EMModel", "EMReadings",
+    "EMState", "FLOATS", "F_CONST", "F_G0", "F_LOG", "F_RATIO", "F_S", "F_WSUM", "F_Z", "INTS", "I_BIN",
+    "I_BOX", "I_COL0", "I_INSIDE", "I_JLO", "I_M", "I_NFAR", "I_NOBS", "I_REACH2", "I_ROW0", "I_SLOT",
+    "I_STAMP", "I_WINDOW_HI", "NEED_BUFFERS", "PAUSED", "PAUSE_WORK", "RowGroups", "SCORE", "SEGMENT",
+    "SWEEP", "TileWork", "row_groups",
+]
+
 SWEEP = 0  # TileWork.ctl[CTL_MODE]: flip candidates that raise the objective
 SCORE = 1  # score every candidate once (the residual pass), flip none
 SEGMENT = 32  # columns per tile
