@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     from aogm_cli.core.log import Log
     from aogm_cli.core.occupancy_map import OccupancyMap
-    from aogm_cli.evaluation.log_check import LogCheck
+    from aogm_cli.report.log_check import LogCheck
 
 __all__ = ["bundled_world", "check", "evaluate", "load_log", "load_map", "map_log", "map_params", "save_log", "save_map",
            "simulate"]
@@ -135,7 +135,7 @@ def simulate(world_path: str | Path, seed: int = 0) -> Log:
     True
     """
     from aogm_cli.simulation.sonar import simulate as run_simulation
-    from aogm_cli.world.budget import load_checked_world
+    from aogm_cli.world.simulation_cost import load_checked_world
 
     return run_simulation(load_checked_world(world_path), seed=seed)
 
@@ -224,7 +224,7 @@ def evaluate(m: OccupancyMap, log: Log | str | Path, robot_radius: float | None 
 
 def check(log_or_path: Log | str | Path, **limits: Any) -> LogCheck:
     """What a log holds before it is mapped, as ``aogm check`` reports it
-    (``evaluation.log_check.check_log``): per-sensor shares, time and pose findings, the grid a
+    (``report.log_check.check_log``): per-sensor shares, time and pose findings, the grid a
     map would need, and ``warnings`` (a list of dicts; empty for a clean log). ``limits``:
     ``CheckLimits``' fields (``max_speed``, ``max_turn``, ``gap_factor``, ``resolution``,
     ``max_memory``). ``.as_dict()`` is ``--json``'s output, ``.lines()`` the table's.
@@ -237,7 +237,7 @@ def check(log_or_path: Log | str | Path, **limits: Any) -> LogCheck:
     >>> result.as_dict()["scans"] > 0
     True
     """
-    from aogm_cli.evaluation.log_check import CheckLimits, check_log
+    from aogm_cli.report.log_check import CheckLimits, check_log
 
     checked = CheckLimits(**limits)
     if isinstance(log_or_path, str | Path):

@@ -18,11 +18,11 @@ import numpy as np
 
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import SensorSpec
-from aogm_cli.mapping.pipeline import cone_templates as standard_templates
-from aogm_cli.mapping.pipeline import echo_ranges
-from aogm_cli.mapping.sensor_models.cone import cone_cells, reading_geometry
-from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig
 from aogm_cli.mapping.standard import standard_map
+from aogm_cli.sensor_models.cone import cone_cells, reading_geometry
+from aogm_cli.sensor_models.inverse_model import InverseModelConfig
+from aogm_cli.sensor_models.readings import cone_templates as standard_templates
+from aogm_cli.sensor_models.readings import echo_ranges
 
 CHUNK = 4096  # scans per chunk, as LogReader.chunks() yields them
 

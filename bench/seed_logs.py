@@ -13,8 +13,9 @@ import numpy as np
 from aogm_cli.io.logfile import LogReader, write_log
 from aogm_cli.mapping.modes import resolved_params, warm_up
 from aogm_cli.mapping.params import MapParams
-from aogm_cli.mapping.pipeline import Readings, forward_templates, lay_out_readings, log_grid
+from aogm_cli.mapping.pipeline import log_grid
 from aogm_cli.mapping.standard import standard_pass
+from aogm_cli.sensor_models.readings import LaidOutReadings, forward_templates, lay_out_readings
 from aogm_cli.simulation.sonar import simulate
 from aogm_cli.world.loader import load_world
 
@@ -36,7 +37,7 @@ class EMInputs:
     """What EM and adaptive mapping hold before their own work starts (as ``mapping.em.map_em``)."""
 
     params: MapParams  # as ``modes.map_file`` resolves them for the log
-    readings: Readings
+    readings: LaidOutReadings
     log_odds: np.ndarray
     observed: np.ndarray
     t_standard: float  # the standard pass's own clock

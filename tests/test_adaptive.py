@@ -19,7 +19,7 @@ from aogm_cli.mapping.cluster import label_clusters
 from aogm_cli.mapping.em import em_problem, em_readings, find_root, footprint
 from aogm_cli.mapping.modes import map_file
 from aogm_cli.mapping.params import resolve_params
-from aogm_cli.mapping.sensor_models.cone import build_cone_templates
+from aogm_cli.sensor_models.cone import build_cone_templates
 
 
 def detector_with_threshold(tmp_path, threshold):

@@ -10,12 +10,12 @@ from numpy.testing import assert_allclose, assert_array_equal
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import Log, SensorSpec
 from aogm_cli.io.logfile import write_log
-from aogm_cli.mapping.beam import BeamMapper, ray_cells
+from aogm_cli.mapping.beam import BeamMapper
 from aogm_cli.mapping.modes import map_file
 from aogm_cli.mapping.params import MapParams
-from aogm_cli.mapping.pipeline import is_narrow_beam
-from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig
 from aogm_cli.mapping.standard import StandardMapper, _mapper_for, standard_map
+from aogm_cli.sensor_models.inverse_model import InverseModelConfig
+from aogm_cli.sensor_models.ray import is_narrow_beam, ray_cells
 
 S5 = math.sqrt(5.0)
 LASER = SensorSpec(mount=np.zeros((1, 3)), kind="laser", beam_width=math.radians(0.5), min_range=0.0, max_range=5.0)
@@ -183,8 +183,8 @@ def test_which_sensors_are_traced_as_rays():
     thin = SensorSpec(np.zeros((1, 3)), "sonar", math.radians(0.5), 0.0, 5.0)  # 4.4 cm wide at 5 m
     assert is_narrow_beam(thin, 0.05) and not is_narrow_beam(thin, 0.04)
     grid = GridSpec(0.0, 0.0, 0.05, 10, 10)
-    assert isinstance(_mapper_for(LASER, grid, CONFIG, None), BeamMapper)
-    assert isinstance(_mapper_for(sonar, grid, CONFIG, None), StandardMapper)
+    assert isinstance(_mapper_for(LASER, grid, CONFIG, None, is_narrow_beam(LASER, grid.resolution)), BeamMapper)
+    assert isinstance(_mapper_for(sonar, grid, CONFIG, None, is_narrow_beam(sonar, grid.resolution)), StandardMapper)
 
 
 def test_map_standard_of_a_laser_log_puts_each_endpoint_on_an_occupied_cell(tmp_path):

@@ -16,8 +16,8 @@ from aogm_cli.core.grid import GridSpec
 from aogm_cli.io.mapfile import read_map_file
 from aogm_cli.mapping import calibration as C
 from aogm_cli.mapping.params import CalibrationConfig
-from aogm_cli.mapping.sensor_models import forward_model as F
-from aogm_cli.mapping.sensor_models.cone import build_cone_templates, flat_offsets
+from aogm_cli.sensor_models import forward_model as F
+from aogm_cli.sensor_models.cone import build_cone_templates, flat_offsets
 
 WORLDS = Path(__file__).resolve().parents[1] / "worlds"
 GRID = GridSpec(0.0, 0.0, 0.05, 60, 80)
@@ -126,7 +126,7 @@ def test_the_fit_at_the_true_map_recovers_the_simulators_noise_and_random_rate(t
     world.write_text(text)
     assert run("simulate", world, "-o", tmp_path / "w.h5", "--seed", 2, "-q").exit_code == 0
     from aogm_cli.io.logfile import read_log
-    from aogm_cli.mapping.pipeline import lay_out_readings
+    from aogm_cli.sensor_models.readings import lay_out_readings
 
     log = read_log(tmp_path / "w.h5")
     grid = log.truth.grid
@@ -193,7 +193,8 @@ def test_calibration_maps_the_whole_log_once_and_part_of_it_before(corridor_door
     every scan (issue 22: calibration at the cost of at most one extra EM over part of the log)."""
     from aogm_cli.io.logfile import LogReader
     from aogm_cli.mapping.params import EMConfig
-    from aogm_cli.mapping.pipeline import lay_out_readings, log_grid
+    from aogm_cli.mapping.pipeline import log_grid
+    from aogm_cli.sensor_models.readings import lay_out_readings
 
     with LogReader(corridor_door_log) as reader:
         log, grid = reader.read(), log_grid(reader, 0.05)

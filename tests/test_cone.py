@@ -8,7 +8,7 @@ import pytest
 from aogm_cli.core.errors import InputError
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import SensorSpec
-from aogm_cli.mapping.sensor_models.cone import (
+from aogm_cli.sensor_models.cone import (
     build_cone_templates,
     cone_cells,
     heading_bins_for,
@@ -194,8 +194,8 @@ def test_a_narrow_beams_cone_holds_every_cell_its_ray_crosses():
     import math
 
     from aogm_cli.core.grid import GridSpec
-    from aogm_cli.mapping.beam import ray_cells
-    from aogm_cli.mapping.sensor_models.cone import build_cone_templates
+    from aogm_cli.sensor_models.cone import build_cone_templates
+    from aogm_cli.sensor_models.ray import ray_cells
 
     grid = GridSpec(-10.0, -10.0, 0.05, 400, 400)
     narrow = build_cone_templates(0.05, math.radians(0.5), 8.0, margin=0.05)

@@ -27,8 +27,8 @@ from aogm_cli.evaluation.consistency import (
     with_neighbours,
 )
 from aogm_cli.io.logfile import LogReader, write_log
-from aogm_cli.mapping.pipeline import cone_templates as standard_templates
 from aogm_cli.mapping.standard import standard_map
+from aogm_cli.sensor_models.readings import cone_templates as standard_templates
 
 LASER = SensorSpec(np.array([[0.1, 0.0, 0.0]]), "laser", math.radians(0.5), 0.0, 4.0, 0.01)
 GRID = GridSpec(0.0, 0.0, 0.1, 6, 8)
@@ -96,7 +96,7 @@ def sonar_status(occupied, free, z=0.45):
 
 
 def test_sonar_arc_is_the_standard_mappers_occupied_arc():
-    from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig
+    from aogm_cli.sensor_models.inverse_model import InverseModelConfig
 
     log_odds, _ = standard_map([(0, None, np.array([[0.25, 0.55, 0.0]]), np.array([[0.45]], np.float32))],
                                SONAR, SONAR_GRID, InverseModelConfig(alpha=0.1, model="constant"))

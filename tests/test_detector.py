@@ -20,9 +20,10 @@ from aogm_cli.detector.features import FeatureSpec, features, neighbour_ranges
 from aogm_cli.detector.network import Detector, Layer
 from aogm_cli.io.detectorfile import TRAINING_LOGS, default_detector_path, load_detector, save_detector
 from aogm_cli.io.logfile import read_log, write_log
-from aogm_cli.mapping.cluster import cone_bands, near_occupied
-from aogm_cli.mapping.pipeline import cone_templates as standard_templates
-from aogm_cli.mapping.pipeline import readings_of
+from aogm_cli.mapping.cluster import near_occupied
+from aogm_cli.mapping.standard import truth_grid_map
+from aogm_cli.sensor_models.readings import cone_bands, readings_of
+from aogm_cli.sensor_models.readings import cone_templates as standard_templates
 from aogm_cli.simulation.sonar import simulate
 from aogm_cli.training.fit import (
     Dataset,
@@ -184,8 +185,8 @@ def test_labels_flag_arcs_where_the_standard_map_is_wrong():
     # cells the standard map believes occupied; the reading itself is right and no edge is near
     off = labels(log, LabelDefinition(arc_wrong_min=0))
     assert_array_equal(off, [[False], [False]])
-    assert_array_equal(labels(log, LabelDefinition(arc_wrong_min=1)), [[True], [False]])
-    assert_array_equal(labels(log, LabelDefinition(arc_wrong_min=10_000)), [[False], [False]])
+    assert_array_equal(labels(log, LabelDefinition(arc_wrong_min=1), standard_map_of=truth_grid_map), [[True], [False]])
+    assert_array_equal(labels(log, LabelDefinition(arc_wrong_min=10_000), standard_map_of=truth_grid_map), [[False], [False]])
     with pytest.raises(InputError):
         LabelDefinition(arc_wrong_min=-1)
 

@@ -9,8 +9,8 @@ import pytest
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.mapping.em import em_problem, em_readings, run_em
 from aogm_cli.mapping.params import EMConfig
-from aogm_cli.mapping.sensor_models.cone import build_cone_templates
-from aogm_cli.mapping.sensor_models.forward_model import ForwardModelConfig, build_forward_index, log_likelihoods
+from aogm_cli.sensor_models.cone import build_cone_templates
+from aogm_cli.sensor_models.forward_model import ForwardModelConfig, build_forward_index, log_likelihoods
 
 GRID = GridSpec(0.0, 0.0, 0.1, 21, 41)
 FORWARD = ForwardModelConfig(sigma=0.05, p_rand=0.05, p_hit=0.4, p_max=0.0)

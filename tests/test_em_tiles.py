@@ -19,8 +19,8 @@ from aogm_cli.mapping import em as E
 from aogm_cli.mapping import pipeline
 from aogm_cli.mapping.em import em_problem, em_readings, find_root, run_em
 from aogm_cli.mapping.params import EMConfig
-from aogm_cli.mapping.sensor_models.cone import build_cone_templates
-from aogm_cli.mapping.sensor_models.forward_model import ForwardModelConfig, build_forward_index, log_likelihoods
+from aogm_cli.sensor_models.cone import build_cone_templates
+from aogm_cli.sensor_models.forward_model import ForwardModelConfig, build_forward_index, log_likelihoods
 
 GRID = GridSpec(0.0, 0.0, 0.1, 30, 70)
 Z_MAX = 2.5

@@ -29,8 +29,8 @@ from aogm_cli.evaluation.holdout import (
     split_log,
 )
 from aogm_cli.io.logfile import read_log, write_log
-from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig
 from aogm_cli.mapping.standard import standard_map
+from aogm_cli.sensor_models.inverse_model import InverseModelConfig
 from aogm_cli.simulation.sonar import simulate
 from aogm_cli.world.loader import parse_world
 

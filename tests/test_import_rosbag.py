@@ -22,7 +22,7 @@ from aogm_cli.io.importers.rosbag import RosbagOptions, _open, read_bag
 from aogm_cli.io.importers.rosbag_messages import SONAR_ARRAY, group_readings
 from aogm_cli.io.importers.rosbag_tf import PoseSeries, TfTree, compose, invert, planar_mounts
 from aogm_cli.io.logfile import read_log
-from aogm_cli.mapping.modes import map_log
+from aogm_cli.mapping.modes import map_in_mode
 from aogm_cli.mapping.params import MapParams
 
 ODOM = np.array([0.3, -0.2, 0.1])  # map -> odom
@@ -48,7 +48,7 @@ def original(corridor_door_log) -> Log:
 
 
 def standard_map(log):
-    return map_log(log, "standard", MapParams())
+    return map_in_mode(log, "standard", MapParams())
 
 
 def bag_value(r: float, k: int, max_range: float) -> float:

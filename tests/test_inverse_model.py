@@ -8,7 +8,7 @@ import pytest
 
 from aogm_cli.core.errors import InputError
 from aogm_cli.core.log import SensorSpec
-from aogm_cli.mapping.sensor_models.inverse_model import (
+from aogm_cli.sensor_models.inverse_model import (
     InverseModelConfig,
     InverseUpdate,
     angular_profile,

@@ -15,7 +15,7 @@ from aogm_cli.cli import main
 from aogm_cli.core.budget import Limits, parse_size
 from aogm_cli.core.log import Log, SensorSpec
 from aogm_cli.io.logfile import write_log
-from aogm_cli.mapping.budget import map_estimate
+from aogm_cli.mapping.map_cost import map_estimate
 
 WORLDS = Path(__file__).resolve().parent.parent / "worlds"
 DOOR = WORLDS / "corridor_door.yaml"
@@ -38,7 +38,7 @@ def no_work(monkeypatch):
 
     monkeypatch.setattr(sonar, "echo_block", boom)
     monkeypatch.setattr(modes, "warm_up", boom)
-    monkeypatch.setattr(modes, "map_log", boom)
+    monkeypatch.setattr(modes, "map_in_mode", boom)
 
 
 def world(tmp_path, old, new) -> Path:
@@ -131,8 +131,8 @@ def test_compare_refuses_before_mapping(tmp_path, no_work):
 
 
 def test_bundled_worlds_and_intel_sized_maps_are_well_within_the_defaults(tmp_path):
-    from aogm_cli.world.budget import simulation_estimate
     from aogm_cli.world.loader import load_world
+    from aogm_cli.world.simulation_cost import simulation_estimate
 
     limits = Limits()
     for path in WORLDS.glob("*.yaml"):
@@ -143,13 +143,13 @@ def test_bundled_worlds_and_intel_sized_maps_are_well_within_the_defaults(tmp_pa
 def test_warnings_are_silenced_unless_debug(tmp_path, monkeypatch):
     import aogm_cli.mapping.modes as modes
 
-    real = modes.map_log
+    real = modes.map_in_mode
 
     def noisy(*a, **k):
         warnings.warn("invalid value encountered in divide", RuntimeWarning, stacklevel=1)
         return real(*a, **k)
 
-    monkeypatch.setattr(modes, "map_log", noisy)
+    monkeypatch.setattr(modes, "map_in_mode", noisy)
     log = a_log(tmp_path)
     r = CliRunner().invoke(main, ["map", str(log), "--mode", "standard", "-o", str(tmp_path / "m.h5")])
     assert r.exit_code == 0 and "Warning" not in r.stderr, r.stderr

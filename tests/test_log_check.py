@@ -14,8 +14,8 @@ from click.testing import CliRunner
 
 from aogm_cli.cli import main
 from aogm_cli.core.log import sensor_names
-from aogm_cli.evaluation.log_check import CheckLimits, check_log
 from aogm_cli.io.logfile import read_log, write_log
+from aogm_cli.report.log_check import CheckLimits, check_log
 from aogm_cli.world.loader import load_world
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -25,7 +25,7 @@ from aogm_cli.io.importers.mounts import load_mounts, presets
 from aogm_cli.io.importers.rosbag import RosbagOptions, read_bag
 from aogm_cli.io.importers.rosbag_messages import CONE_TOLERANCE, not_echoes
 from aogm_cli.io.logfile import read_log
-from aogm_cli.mapping.modes import map_log
+from aogm_cli.mapping.modes import map_in_mode
 from aogm_cli.mapping.params import MapParams
 from aogm_cli.simulation.sonar import simulate
 from aogm_cli.world.loader import parse_world
@@ -76,7 +76,7 @@ def run(*args):
 
 def occupied_near_poses(log, distance: float = 0.3) -> int:
     """Cells of the standard map above 0.5 within ``distance`` of some pose."""
-    m = map_log(log, "standard", MapParams())
+    m = map_in_mode(log, "standard", MapParams())
     near = m.grid.cells_near(log.pose[:, 0], log.pose[:, 1], distance)
     return int((near & m.observed & (m.probability > 0.5)).sum())
 

@@ -7,10 +7,10 @@ import pytest
 
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import SensorSpec
-from aogm_cli.mapping.pipeline import cone_templates as standard_templates
-from aogm_cli.mapping.sensor_models.cone import build_cone_templates
-from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig, inverse_model
 from aogm_cli.mapping.standard import StandardMapper, flat_offsets, probability_from_log_odds, standard_map
+from aogm_cli.sensor_models.cone import build_cone_templates
+from aogm_cli.sensor_models.inverse_model import InverseModelConfig, inverse_model
+from aogm_cli.sensor_models.readings import cone_templates as standard_templates
 
 BEAM = math.radians(30.0)
 ONE_SONAR = SensorSpec(mount=np.zeros((1, 3)), beam_width=BEAM, min_range=0.05, max_range=5.0)

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from aogm_cli.evaluation.log_check import CheckLimits, _poses, _time
+from aogm_cli.report.log_check import CheckLimits, _poses, _time
 from aogm_cli.world.loader import load_world
 from aogm_cli.world.trajectory import trajectory_poses
 

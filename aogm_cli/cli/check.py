@@ -1,4 +1,4 @@
-"""``aogm check``: what a log holds before it is mapped (``evaluation.log_check``): a table, or JSON;
+"""``aogm check``: what a log holds before it is mapped (``report.log_check``): a table, or JSON;
 exit 0 with warnings, 3 with ``--strict`` when there is any."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import json
 import click
 
 from aogm_cli.cli.options import MIN_RESOLUTION, FiniteFloat, SizeParam
-from aogm_cli.evaluation.log_check import CheckLimits
+from aogm_cli.report.log_check import CheckLimits
 
 STRICT_STATUS = 3  # --strict and some warning
 
@@ -61,8 +61,8 @@ def check(log_file: str, as_json: bool, strict: bool, all_sensors: bool, max_spe
       aogm check p3dx.h5
       aogm check p3dx.h5 --json --strict --max-speed 1.5
     """
-    from aogm_cli.evaluation.log_check import check_log
     from aogm_cli.io.logfile import LogReader
+    from aogm_cli.report.log_check import check_log
 
     limits = CheckLimits(max_speed=max_speed, max_turn=max_turn, gap_factor=gap_factor, resolution=resolution,
                          max_memory=max_memory)

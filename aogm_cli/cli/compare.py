@@ -280,7 +280,7 @@ def compare(inputs, modes_text, detector, params_file, json_out, csv_out, figure
     record = provenance(read)  # the inputs as read, the time the run starts
 
     from aogm_cli.core.budget import using
-    from aogm_cli.mapping.budget import check_logs
+    from aogm_cli.mapping.map_cost import check_logs
 
     limits = limits_of(max_memory, max_work)
     refuse_huge_grids(list(dict.fromkeys(e.path for e in entries for mode in modes if mode not in e.maps)), params,

@@ -64,7 +64,7 @@ def _degrees(radians: float) -> float:
 
 def _report(output: str, log, what: str, origin: str, extra: list[str], quiet: bool) -> None:
     """What was imported (unless quiet), then ``aogm check``'s summary of the log (quiet: its warnings only)."""
-    from aogm_cli.evaluation.log_check import check_log
+    from aogm_cli.report.log_check import check_log
 
     s = log.sensor
     if not quiet:

@@ -21,8 +21,8 @@ from aogm_cli.cli.options import (
 )
 from aogm_cli.io.outputs import resolve_outputs
 from aogm_cli.mapping.params import EMConfig
-from aogm_cli.mapping.sensor_models.forward_model import ForwardModelConfig
-from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig
+from aogm_cli.sensor_models.forward_model import ForwardModelConfig
+from aogm_cli.sensor_models.inverse_model import InverseModelConfig
 
 # (option, section, key, type, help); defaults are read from the config dataclasses
 PARAMETER_OPTIONS = (

@@ -81,9 +81,9 @@ def refuse_huge_grids(log_files, params, params_file: str | None, resolution_giv
     budget's estimate, which would otherwise overflow on an absurd grid."""
     from aogm_cli.core.budget import format_bytes
     from aogm_cli.core.errors import InputError
-    from aogm_cli.evaluation.log_check import grid_need
     from aogm_cli.io.logfile import LogReader
-    from aogm_cli.mapping.budget import BYTES_PER_CELL
+    from aogm_cli.mapping.map_cost import BYTES_PER_CELL
+    from aogm_cli.report.log_check import grid_need
 
     res = params.resolution
     for path in log_files:

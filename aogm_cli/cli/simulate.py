@@ -116,7 +116,7 @@ def parse_seeds(text: str) -> list[int]:
 def _load_checked(world_file: str, limits):
     """The world of ``world_file`` and the files it is read from, its estimate checked against
     ``limits`` (before any work)."""
-    from aogm_cli.world.budget import load_checked_world
+    from aogm_cli.world.simulation_cost import load_checked_world
 
     world = load_checked_world(world_file, limits)
     return world, world_inputs(world_file, world)

@@ -85,6 +85,7 @@ def train(log_files, output, seed, validation_logs, hidden, activation, beta, ri
     from aogm_cli.io.detectorfile import save_detector
     from aogm_cli.io.logfile import read_log
     from aogm_cli.io.provenance import provenance
+    from aogm_cli.mapping.standard import truth_grid_map
     from aogm_cli.training.fit import split_by_world, train_detector
     from aogm_cli.training.labels import LabelDefinition
 
@@ -100,7 +101,7 @@ def train(log_files, output, seed, validation_logs, hidden, activation, beta, ri
                 raise InputError("no scans (/scans/time is empty); a detector learns from readings", file=p,
                                  key="/scans")
         detector = train_detector(train_logs, validation_logs_read, spec, LabelDefinition(arc_wrong_min=arc_wrong_min), config,
-                                  advance)
+                                  advance, standard_map_of=truth_grid_map)
     save_detector(output, detector, record)
     click.echo(format_metrics(detector.metrics))
     if not quiet:

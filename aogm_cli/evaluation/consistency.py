@@ -38,9 +38,10 @@ from aogm_cli.core.frames import sensor_poses
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import SensorSpec
 from aogm_cli.io.logfile import LogReader
-from aogm_cli.mapping.pipeline import cone_templates, echo_ranges, is_narrow_beam
-from aogm_cli.mapping.sensor_models.cone import ConeReadings, ConeTemplates, range_search, reading_geometry
-from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig, occupied_arc
+from aogm_cli.sensor_models.cone import ConeReadings, ConeTemplates, range_search, reading_geometry
+from aogm_cli.sensor_models.inverse_model import InverseModelConfig, occupied_arc
+from aogm_cli.sensor_models.ray import is_narrow_beam
+from aogm_cli.sensor_models.readings import cone_templates, echo_ranges
 
 # per-reading status
 NOT_COUNTED = -1  # not in range (no echo, NaN, negative) or no finite pose

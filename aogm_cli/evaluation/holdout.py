@@ -56,9 +56,7 @@ from aogm_cli.core.frames import sensor_poses
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import Log, SensorSpec
 from aogm_cli.evaluation.consistency import reading_endpoints
-from aogm_cli.mapping.beam import ray_cells
-from aogm_cli.mapping.pipeline import cone_templates, echo_ranges, is_narrow_beam, lay_out_readings
-from aogm_cli.mapping.sensor_models.cone import (
+from aogm_cli.sensor_models.cone import (
     SPARE_MASK,
     ConeReadings,
     cone_flat_cells,
@@ -66,8 +64,10 @@ from aogm_cli.mapping.sensor_models.cone import (
     range_search,
     reading_geometry,
 )
-from aogm_cli.mapping.sensor_models.forward_model import ForwardModelConfig, build_forward_index, log_likelihoods
-from aogm_cli.mapping.sensor_models.inverse_model import occupied_arc
+from aogm_cli.sensor_models.forward_model import ForwardModelConfig, build_forward_index, log_likelihoods
+from aogm_cli.sensor_models.inverse_model import occupied_arc
+from aogm_cli.sensor_models.ray import is_narrow_beam, ray_cells
+from aogm_cli.sensor_models.readings import cone_templates, echo_ranges, lay_out_readings
 
 OPTION = "--holdout"
 MAX_FRACTION = 0.5  # at most every second scan held out: the map keeps at least half

@@ -15,7 +15,7 @@ import numpy as np
 
 from aogm_cli.core.log import Log
 from aogm_cli.core.occupancy_map import OccupancyMap
-from aogm_cli.mapping.cluster import cone_bands, grown, label_clusters, near_occupied, readings_near_clusters
+from aogm_cli.mapping.cluster import grown, label_clusters, near_occupied, readings_near_clusters
 from aogm_cli.mapping.em import (
     EMOutcome,
     EMProblem,
@@ -30,15 +30,11 @@ from aogm_cli.mapping.em import (
     prepared_templates,
 )
 from aogm_cli.mapping.params import EMConfig, MapParams
-from aogm_cli.mapping.pipeline import (
-    Progress,
-    Readings,
-    is_narrow_beam,
-    lay_out_readings,
-    log_grid,
-    params_json,
-)
+from aogm_cli.mapping.pipeline import Progress, log_grid, params_json
 from aogm_cli.mapping.standard import standard_pass
+from aogm_cli.sensor_models.ray import is_narrow_beam
+from aogm_cli.sensor_models.readings import LaidOutReadings as Readings
+from aogm_cli.sensor_models.readings import cone_bands, lay_out_readings
 
 
 def cluster_problem(run: Readings, clusters: np.ndarray, occupied: np.ndarray, config: EMConfig,

@@ -33,48 +33,16 @@ Cost: O(cells on the ray) per reading, no set-up; the intel log maps in about 0.
 
 from __future__ import annotations
 
-import math
 from typing import NamedTuple
 
 import numba
 import numpy as np
 
 from aogm_cli.core.frames import sensor_poses
-from aogm_cli.core.grid import GridSpec, dda_steps
+from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import SensorSpec
-from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig, inverse_update, occupied_arc
-
-# a ray that stays in a cell for at most this many cells' length only touches it (a corner,
-# up to rounding) and leaves it alone
-TOUCH = 1e-9
-
-
-class Ray(NamedTuple):
-    """One ray for ``_ray_cells_kernel``: from (px, py) (m, from the grid's origin) along the
-    unit vector (ux, uy), up to ``length`` m."""
-
-    px: float
-    py: float
-    ux: float
-    uy: float
-    length: float
-
-
-class RayCells(NamedTuple):
-    """Outputs of ``_ray_cells_kernel``, each with room for every cell of a ray."""
-
-    rows: np.ndarray  # int64
-    cols: np.ndarray  # int64
-    t_enter: np.ndarray  # float64 (m)
-    t_exit: np.ndarray  # float64 (m)
-
-
-class RayGrid(NamedTuple):
-    """A grid's shape as the traversal takes it."""
-
-    height: int
-    width: int
-    resolution: float
+from aogm_cli.sensor_models.inverse_model import InverseModelConfig, inverse_update, occupied_arc
+from aogm_cli.sensor_models.ray import TOUCH, next_cell, ray_start
 
 
 class BeamGrid(NamedTuple):
@@ -94,26 +62,6 @@ class Rays(NamedTuple):
     ux: np.ndarray  # unit beam direction
     uy: np.ndarray
     z: np.ndarray  # float32 range as logged (NaN or negative: nothing; >= max_range: max-range)
-
-
-def ray_cells(grid: GridSpec, x: float, y: float, yaw: float, length: float):
-    """Cells of ``grid`` that the ray from (x, y) along ``yaw`` crosses up to ``length`` metres.
-
-    Returns (rows, cols, t_enter, t_exit) in order along the ray: int64 cell indices and the
-    float64 stretch [t_enter, t_exit) of the ray inside each cell (t from (x, y), clipped to
-    [0, length]); cells the ray only touches (a corner, or a stretch under ``TOUCH`` cells)
-    are left out. The start may lie
-    outside the grid; cells outside it are left out.
-    """
-    n_max = int(grid.height + grid.width + 2)
-    rows = np.empty(n_max, dtype=np.int64)
-    cols = np.empty(n_max, dtype=np.int64)
-    t0 = np.empty(n_max, dtype=np.float64)
-    t1 = np.empty(n_max, dtype=np.float64)
-    ray = Ray(float(x) - grid.origin_x, float(y) - grid.origin_y, math.cos(yaw), math.sin(yaw), float(length))
-    n = _ray_cells_kernel(ray, RayGrid(grid.height, grid.width, float(grid.resolution)), RayCells(rows, cols, t0, t1))
-    return rows[:n], cols[:n], t0[:n], t1[:n]
-
 
 class BeamMapper:
     """Incremental standard mapping of a narrow-beam sensor: ``update`` with chunks, then ``result``.
@@ -160,91 +108,6 @@ class BeamMapper:
         log_odds[~observed] = np.float32(self.config.l0)
         return log_odds, observed
 
-
-@numba.njit(cache=True, inline="always")
-def _slab(p, u, size, t_lo, t_hi):
-    """[t_lo, t_hi] clipped to where p + t u lies in [0, size) along one axis (t_hi -1: nowhere)."""
-    if u > 0.0:
-        return max(t_lo, -p / u), min(t_hi, (size - p) / u)
-    if u < 0.0:
-        return max(t_lo, (size - p) / u), min(t_hi, -p / u)
-    if not (0.0 <= p < size):
-        return t_lo, -1.0
-    return t_lo, t_hi
-
-
-@numba.njit(cache=True)
-def _ray_start(px, py, ux, uy, begin, end, height, width, res):
-    """Set-up of the traversal of [begin, end] along one ray, in metres from the grid's origin.
-
-    Returns (row, col, t_start, t_stop, t_max_row, t_max_col, t_delta_row, t_delta_col,
-    step_row, step_col); t_start >= t_stop when that stretch misses the grid.
-    """
-    inf = np.inf
-    if not (np.isfinite(px) and np.isfinite(py) and np.isfinite(ux) and np.isfinite(uy)):
-        return 0, 0, 1.0, 0.0, inf, inf, inf, inf, 0, 0
-    t_lo = max(begin, 0.0)
-    t_hi = end
-    x_max = width * res
-    y_max = height * res
-    # clip the stretch to the grid's box (slab method)
-    t_lo, t_hi = _slab(px, ux, x_max, t_lo, t_hi)
-    t_lo, t_hi = _slab(py, uy, y_max, t_lo, t_hi)
-    if not t_lo < t_hi:
-        return 0, 0, 1.0, 0.0, inf, inf, inf, inf, 0, 0
-    col = min(max(int(math.floor((px + ux * t_lo) / res)), 0), width - 1)
-    row = min(max(int(math.floor((py + uy * t_lo) / res)), 0), height - 1)
-    # t of the next column / row edge, from the sensor's own position (no drift)
-    step_col, step_row, t_max_col, t_max_row, t_delta_col, t_delta_row = dda_steps(col, row, px, py, ux, uy, 0.0,
-                                                                                   0.0, res)
-    return row, col, t_lo, t_hi, t_max_row, t_max_col, t_delta_row, t_delta_col, step_row, step_col
-
-
-@numba.njit(cache=True)
-def _next_cell(row, col, t_max_row, t_max_col, d_row, d_col, s_row, s_col, height, width):
-    """One Amanatides-Woo step: (row, col, t_max_row, t_max_col, still inside the grid).
-    On a tie (a corner) the row steps first; the column's zero-length cell that follows is
-    skipped by the callers."""
-    if t_max_col < t_max_row:
-        col += s_col
-        return row, col, t_max_row, t_max_col + d_col, 0 <= col < width
-    row += s_row
-    return row, col, t_max_row + d_row, t_max_col, 0 <= row < height
-
-
-@numba.njit(cache=True)
-def _ray_cells_kernel(ray, grid, out):
-    """Write the cells of one ``Ray`` on a ``RayGrid`` (see ``ray_cells``) to ``out``
-    (``RayCells``); return how many."""
-    height = grid.height
-    width = grid.width
-    res = grid.resolution
-    rows = out.rows
-    cols = out.cols
-    t_enter = out.t_enter
-    t_exit = out.t_exit
-    row, col, t0, t_stop, t_max_row, t_max_col, d_row, d_col, s_row, s_col = _ray_start(
-        ray.px, ray.py, ray.ux, ray.uy, 0.0, ray.length, height, width, res
-    )
-    tiny = TOUCH * res
-    n = 0
-    inside = True
-    while inside and t0 < t_stop and n < rows.size:
-        t1 = min(t_max_row, t_max_col)
-        t1c = min(t1, t_stop)
-        if t1c - t0 > tiny:
-            rows[n] = row
-            cols[n] = col
-            t_enter[n] = t0
-            t_exit[n] = t1c
-            n += 1
-        row, col, t_max_row, t_max_col, inside = _next_cell(
-            row, col, t_max_row, t_max_col, d_row, d_col, s_row, s_col, height, width
-        )
-        t0 = max(t0, t1)
-    return n
-
-
 # _nrt=False (a private numba option, as em_kernels._sweep): the kernel allocates nothing, and
 # without reference counting its tuples' arrays cost nothing per reading
 @numba.njit(cache=True, _nrt=False)
@@ -284,7 +147,7 @@ def _beam_kernel(grid, rays, update, n_beams, first_scan):
             if not (zt >= 0.0 and zt < max_range):
                 continue
             arc_start, arc_end = occupied_arc(zt, half_alpha, max_range)
-            row, col, t0, t_stop, t_max_row, t_max_col, d_row, d_col, s_row, s_col = _ray_start(
+            row, col, t0, t_stop, t_max_row, t_max_col, d_row, d_col, s_row, s_col = ray_start(
                 px[t], py[t], ux[t], uy[t], arc_start, arc_end, height, width, res
             )
             inside = True
@@ -292,7 +155,7 @@ def _beam_kernel(grid, rays, update, n_beams, first_scan):
                 t1 = min(t_max_row, t_max_col)
                 if min(t1, t_stop) - t0 > tiny:
                     hit_scan[row * width + col] = scan
-                row, col, t_max_row, t_max_col, inside = _next_cell(
+                row, col, t_max_row, t_max_col, inside = next_cell(
                     row, col, t_max_row, t_max_col, d_row, d_col, s_row, s_col, height, width
                 )
                 t0 = max(t0, t1)
@@ -306,7 +169,7 @@ def _beam_kernel(grid, rays, update, n_beams, first_scan):
                 z_free = np.inf
             else:
                 z_free, end = occupied_arc(zt, half_alpha, max_range)
-            row, col, t0, t_stop, t_max_row, t_max_col, d_row, d_col, s_row, s_col = _ray_start(
+            row, col, t0, t_stop, t_max_row, t_max_col, d_row, d_col, s_row, s_col = ray_start(
                 px[t], py[t], ux[t], uy[t], 0.0, end, height, width, res
             )
             inside = True
@@ -322,7 +185,7 @@ def _beam_kernel(grid, rays, update, n_beams, first_scan):
                     elif t1c > min_range and hit_scan[i] != scan:
                         x = max(x + c_free, lo)
                     state[i] = x
-                row, col, t_max_row, t_max_col, inside = _next_cell(
+                row, col, t_max_row, t_max_col, inside = next_cell(
                     row, col, t_max_row, t_max_col, d_row, d_col, s_row, s_col, height, width
                 )
                 t0 = max(t0, t1)

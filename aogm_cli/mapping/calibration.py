@@ -13,9 +13,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from aogm_cli.mapping.params import CalibrationConfig, EMConfig, MapParams
-from aogm_cli.mapping.pipeline import Readings
-from aogm_cli.mapping.sensor_models import forward_model as F
-from aogm_cli.mapping.sensor_models.cone import flat_offsets
+from aogm_cli.sensor_models import forward_model as F
+from aogm_cli.sensor_models.cone import flat_offsets
+from aogm_cli.sensor_models.readings import LaidOutReadings as Readings
 
 LEARNED = ("sigma", "p_rand", "p_hit", "p_max")  # the forward model's parameters calibration sets
 

@@ -22,17 +22,11 @@ from aogm_cli.core.occupancy_map import OccupancyMap
 from aogm_cli.mapping import em_kernels as K
 from aogm_cli.mapping.calibration import Stage, em_with_model
 from aogm_cli.mapping.params import EMConfig, MapParams
-from aogm_cli.mapping.pipeline import (
-    Progress,
-    forward_templates,
-    lay_out_readings,
-    log_grid,
-    params_json,
-    reading_spans,
-)
-from aogm_cli.mapping.sensor_models.cone import flat_offsets
-from aogm_cli.mapping.sensor_models.forward_model import ForwardModelConfig, reading_constants
+from aogm_cli.mapping.pipeline import Progress, log_grid, params_json
 from aogm_cli.mapping.standard import probability_from_log_odds, standard_pass
+from aogm_cli.sensor_models.cone import flat_offsets
+from aogm_cli.sensor_models.forward_model import ForwardModelConfig, reading_constants
+from aogm_cli.sensor_models.readings import forward_templates, lay_out_readings, reading_spans
 
 
 @dataclass

@@ -18,12 +18,12 @@ from aogm_cli.core.occupancy_map import MODES, OccupancyMap
 from aogm_cli.detector.network import ConstantDetector
 from aogm_cli.io.detectorfile import BASELINE_DETECTORS, file_sha256, load_detector
 from aogm_cli.io.logfile import LogReader
-from aogm_cli.mapping.budget import map_estimate
+from aogm_cli.mapping.map_cost import map_estimate
 from aogm_cli.mapping.params import MapParams
 from aogm_cli.mapping.pipeline import Progress, log_grid
 from aogm_cli.mapping.standard import map_standard
 
-__all__ = ["BASELINE_DETECTORS", "map_file", "map_log", "map_source", "resolve_detector", "warm_up"]
+__all__ = ["BASELINE_DETECTORS", "map_file", "map_in_mode", "map_source", "resolve_detector", "warm_up"]
 
 
 def resolve_detector(spec: str | None):
@@ -35,7 +35,7 @@ def resolve_detector(spec: str | None):
     return detector, "packaged" if spec is None else str(spec)
 
 
-def map_log(log, mode: str, params: MapParams, detector=None, detector_name: str = "packaged",
+def map_in_mode(log, mode: str, params: MapParams, detector=None, detector_name: str = "packaged",
             progress: Progress | None = None) -> OccupancyMap:
     """Map a log source (an open ``LogReader`` or a ``Log``) in ``mode``; adaptive needs ``detector``.
     EM's and adaptive's modules are imported here, when used (a standard map's start-up is most of its time)."""
@@ -86,7 +86,7 @@ def map_source(log, mode: str, params: MapParams, detector: str | None = None, p
     warm_up(log.sensor, params, mode)
     t_compile = time.perf_counter() - t0
     t0 = time.perf_counter()
-    m = map_log(log, mode, params, flagger, name, progress)
+    m = map_in_mode(log, mode, params, flagger, name, progress)
     t_total = time.perf_counter() - t0
     m.stats["untimed_seconds"] = {"compile": t_compile, "read_and_set_up": max(0.0, t_total - m.runtime_s)}
     return m
@@ -109,7 +109,7 @@ def warm_up(sensor: SensorSpec, params: MapParams, mode: str) -> None:
     Cached kernels are loaded without numba's full start-up (``core.jit_cache``)."""
     jit_cache.load_lean()
     log = tiny_log(sensor)
-    map_log(log, mode, params, ConstantDetector(True), "all")
+    map_in_mode(log, mode, params, ConstantDetector(True), "all")
     if mode != "standard":
         one_sweep = dataclasses.replace(params, em=dataclasses.replace(params.em, max_sweeps=1))
-        map_log(log, mode, one_sweep, ConstantDetector(True), "all")
+        map_in_mode(log, mode, one_sweep, ConstantDetector(True), "all")

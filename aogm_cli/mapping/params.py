@@ -13,8 +13,8 @@ from typing import Any
 
 from aogm_cli.core.errors import InputError
 from aogm_cli.io.yamlfile import read_yaml
-from aogm_cli.mapping.sensor_models.forward_model import ForwardModelConfig
-from aogm_cli.mapping.sensor_models.inverse_model import InverseModelConfig
+from aogm_cli.sensor_models.forward_model import ForwardModelConfig
+from aogm_cli.sensor_models.inverse_model import InverseModelConfig
 
 
 def check_field_types(config) -> None:

@@ -56,21 +56,12 @@ import numba
 import numpy as np
 
 from aogm_cli.core.grid import GridSpec
-from aogm_cli.core.log import SensorSpec
+from aogm_cli.core.log import Log, SensorSpec
 from aogm_cli.core.occupancy_map import OccupancyMap
 from aogm_cli.mapping.beam import BeamMapper
 from aogm_cli.mapping.params import MapParams
-from aogm_cli.mapping.pipeline import (
-    Progress,
-    Timed,
-    cone_templates,
-    echo_ranges,
-    is_narrow_beam,
-    log_grid,
-    params_json,
-    reading_spans,
-)
-from aogm_cli.mapping.sensor_models.cone import (
+from aogm_cli.mapping.pipeline import Progress, Timed, log_grid, params_json
+from aogm_cli.sensor_models.cone import (
     SPARE_MASK,
     ConeReadings,
     ConeTemplates,
@@ -79,12 +70,14 @@ from aogm_cli.mapping.sensor_models.cone import (
     range_search,
     reading_geometry,
 )
-from aogm_cli.mapping.sensor_models.inverse_model import (
+from aogm_cli.sensor_models.inverse_model import (
     InverseModelConfig,
     angular_profile,
     inverse_update,
     occupied_arc,
 )
+from aogm_cli.sensor_models.ray import is_narrow_beam
+from aogm_cli.sensor_models.readings import cone_templates, echo_ranges, reading_spans
 
 
 def probability_from_log_odds(log_odds, observed=None) -> np.ndarray:
@@ -194,10 +187,11 @@ class StandardMapper:
         return log_odds, observed
 
 
-def _mapper_for(sensor: SensorSpec, grid: GridSpec, config: InverseModelConfig, templates: ConeTemplates | None):
-    """Rays (``beam.BeamMapper``) when ``beam.is_narrow_beam``, else cone templates
-    (``StandardMapper``; ``templates`` is ignored for rays)."""
-    if is_narrow_beam(sensor, grid.resolution):
+def _mapper_for(sensor: SensorSpec, grid: GridSpec, config: InverseModelConfig, templates: ConeTemplates | None,
+                narrow: bool):
+    """Rays (``beam.BeamMapper``) for a ``narrow`` beam (``ray.is_narrow_beam``), else cone
+    templates (``StandardMapper``; ``templates`` is ignored for rays)."""
+    if narrow:
         return BeamMapper(sensor, grid, config)
     return StandardMapper(sensor, grid, config, templates=templates)
 
@@ -209,19 +203,22 @@ def standard_map(
     config: InverseModelConfig,
     *,
     templates: ConeTemplates | None = None,
+    narrow: bool | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Standard log-odds map of logged scans: (log_odds float32 (H, W), observed bool (H, W)).
 
     ``chunks`` yields (start, time, pose (T, 3), ranges (T, S)) with ranges as logged, like
     ``LogReader.chunks()``; the range convention is applied here: cones take
-    ``pipeline.echo_ranges``, narrow beams (rays) the logged range, whose hit is the cell
+    ``readings.echo_ranges``, narrow beams (rays) the logged range, whose hit is the cell
     holding the endpoint (OctoMap's convention; on the intel log 0.892 of endpoints land on
     occupied cells this way, 0.819 with the half-cell shift). Memory is the grid, the
     templates and one chunk. Unobserved cells hold the prior l0. ``templates`` defaults to
-    ``pipeline.cone_templates(grid, sensor)``; rays need none.
+    ``readings.cone_templates(grid, sensor)``; rays need none. ``narrow`` is
+    ``ray.is_narrow_beam(sensor, grid.resolution)``, decided here unless the caller has.
     """
-    narrow = is_narrow_beam(sensor, grid.resolution)
-    mapper = _mapper_for(sensor, grid, config, templates)
+    if narrow is None:
+        narrow = is_narrow_beam(sensor, grid.resolution)
+    mapper = _mapper_for(sensor, grid, config, templates, narrow)
     for _start, _time, pose, ranges in chunks:
         z = np.asarray(ranges, dtype=np.float32) if narrow else echo_ranges(ranges, grid).astype(np.float32)
         mapper.update(pose, z)
@@ -235,14 +232,25 @@ def standard_pass(log, grid: GridSpec, params: MapParams, chunk: int = 4096, chu
     One-time set-up is done before the clock starts, like compilation: the cone templates
     and their per-grid-width tables are built (or found in their caches) by mapping no scans.
     """
-    narrow = is_narrow_beam(log.sensor, grid.resolution)
-    templates = None if narrow else cone_templates(grid, log.sensor)
-    standard_map([], log.sensor, grid, params.inverse_model, templates=templates)
+    narrow = is_narrow_beam(log.sensor, grid.resolution)  # decided once, for the templates and both calls
+    templates = None if narrow else cone_templates(grid, log.sensor, narrow=narrow)
+    standard_map([], log.sensor, grid, params.inverse_model, templates=templates, narrow=narrow)
     timed = Timed(log.chunks(chunk) if chunks is None else chunks)
     t0 = time.perf_counter()
-    log_odds, observed = standard_map(timed, log.sensor, grid, params.inverse_model, templates=templates)
+    log_odds, observed = standard_map(timed, log.sensor, grid, params.inverse_model, templates=templates,
+                                      narrow=narrow)
     seconds = time.perf_counter() - t0 - timed.io_seconds
     return log_odds, observed, seconds
+
+
+def truth_grid_map(log: Log) -> tuple[np.ndarray, np.ndarray]:
+    """(probability float32, observed bool) (H, W): the standard map of an in-memory simulated
+    ``log`` on its truth grid at the default inverse model, in one chunk: the map the detector's
+    training labels compare with the truth (``training.labels``, rule (c))."""
+    grid = log.truth.grid
+    ranges = np.asarray(log.ranges, dtype=np.float32)
+    log_odds, observed = standard_map([(0, log.time, log.pose, ranges)], log.sensor, grid, InverseModelConfig())
+    return probability_from_log_odds(log_odds, observed), observed
 
 
 def map_standard(log, params: MapParams, progress: Progress | None = None) -> OccupancyMap:

@@ -30,9 +30,9 @@ from aogm_cli.core.log import (
 from aogm_cli.simulation import firing
 from aogm_cli.simulation.odometry import dead_reckoning
 from aogm_cli.simulation.raycast import geometry, trace_sub_ray
-from aogm_cli.world.budget import simulation_estimate
 from aogm_cli.world.config import SideLobes, SimulationErrors, Sonar, World
 from aogm_cli.world.scene import build_scene
+from aogm_cli.world.simulation_cost import simulation_estimate
 from aogm_cli.world.trajectory import poses_before, trajectory_poses
 from aogm_cli.world.truth import truth_occupancy
 

@@ -18,7 +18,7 @@ from aogm_cli.detector.features import FeatureSpec, features
 from aogm_cli.detector.network import Detector, Layer
 from aogm_cli.io.detectorfile import TRAINING_LOGS
 from aogm_cli.training.config import TrainingConfig
-from aogm_cli.training.labels import LabelDefinition, labels
+from aogm_cli.training.labels import LabelDefinition, StandardMapOf, labels
 from aogm_cli.training.provenance import training_logs
 
 THRESHOLDS = np.round(np.arange(0.05, 0.951, 0.01), 2)  # candidate flag thresholds
@@ -33,18 +33,21 @@ class Dataset:
     logs: tuple[str, ...]
 
 
-def log_dataset(log: Log, spec: FeatureSpec, definition: LabelDefinition, name: str = "") -> tuple[np.ndarray, np.ndarray]:
-    """(T*S, F) features and (T*S,) bool labels of one simulated log, rows in reading order."""
-    y = labels(log, definition, file=name or None).ravel()
+def log_dataset(log: Log, spec: FeatureSpec, definition: LabelDefinition, name: str = "",
+                standard_map_of: StandardMapOf | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(T*S, F) features and (T*S,) bool labels of one simulated log, rows in reading order
+    (``labels.labels``: rule (c) needs ``standard_map_of``)."""
+    y = labels(log, definition, file=name or None, standard_map_of=standard_map_of).ravel()
     return features(log.ranges, log.sensor.max_range, spec), y
 
 
 def build_dataset(named_logs: Sequence[tuple[str, Log]], spec: FeatureSpec, definition: LabelDefinition,
-                  progress: Callable[[int], None] | None = None) -> Dataset:
+                  progress: Callable[[int], None] | None = None,
+                  standard_map_of: StandardMapOf | None = None) -> Dataset:
     """The logs' samples stacked in the order given."""
     xs, ys = [], []
     for name, log in named_logs:
-        x, y = log_dataset(log, spec, definition, name)
+        x, y = log_dataset(log, spec, definition, name, standard_map_of)
         xs.append(x)
         ys.append(y)
         if progress:
@@ -131,8 +134,10 @@ def train_detector(
     definition: LabelDefinition | None = None,
     config: TrainingConfig | None = None,
     progress: Callable[[int], None] | None = None,
+    standard_map_of: StandardMapOf | None = None,
 ) -> Detector:
-    """Fit the detector on ``train_logs`` (name, log) and score it there and on ``validation_logs``.
+    """Fit the detector on ``train_logs`` (name, log) and score it there and on ``validation_logs``;
+    label rule (c) compares each log's standard map, ``standard_map_of(log)``, with its truth.
 
     The flag threshold maximises F_beta on the training data; ``metrics`` holds precision,
     recall, F1 and sample counts on training and validation (None without validation logs);
@@ -142,8 +147,8 @@ def train_detector(
     spec = spec or FeatureSpec()
     definition = definition or LabelDefinition()
     config = config or TrainingConfig()
-    train = build_dataset(train_logs, spec, definition, progress)
-    validation = build_dataset(validation_logs, spec, definition, progress)
+    train = build_dataset(train_logs, spec, definition, progress, standard_map_of)
+    validation = build_dataset(validation_logs, spec, definition, progress, standard_map_of)
     model = fit_mlp(train, config)
     if progress:
         progress(1)

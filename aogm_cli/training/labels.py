@@ -28,6 +28,7 @@ log disagrees with the truth on the reading's occupied arc. Pure functions on ar
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 
 import numpy as np
@@ -36,9 +37,14 @@ from aogm_cli.core.errors import InputError
 from aogm_cli.core.frames import sensor_poses
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import CAUSE_ECHO, CAUSE_NO_ECHO, Log
-from aogm_cli.mapping.cluster import cone_bands
+from aogm_cli.sensor_models.inverse_model import InverseModelConfig
+from aogm_cli.sensor_models.readings import cone_bands, cone_templates, readings_of
 
 SCANS_PER_BLOCK = 16  # scans per block of sub-ray sampling (bounds the memory of sub_ray_depths)
+# Rule (c)'s map: (probability float32, observed bool) (H, W), the standard map of a simulated log
+# on its truth grid at the default inverse model. Training runs no mapper: the caller passes one
+# in (``mapping.standard.truth_grid_map``).
+StandardMapOf = Callable[[Log], tuple[np.ndarray, np.ndarray]]
 
 
 @dataclass(frozen=True)
@@ -155,29 +161,25 @@ def standard_wrong(probability: np.ndarray, observed: np.ndarray, truth_occupanc
     return np.asarray(observed, dtype=bool) & (((p > 0.5) & ~occ) | ((p < 0.5) & occ))
 
 
-def standard_map_wrong_arcs(log: Log, min_wrong: int) -> np.ndarray:
-    """(T, S) bool, rule (c): the log's standard map (default parameters, truth grid) is wrong on
-    at least ``min_wrong`` cells of the reading's occupied arc."""
-    from aogm_cli.mapping.params import resolve_params
-    from aogm_cli.mapping.pipeline import cone_templates, readings_of
-    from aogm_cli.mapping.standard import probability_from_log_odds, standard_map
-
-    params = resolve_params()
+def standard_map_wrong_arcs(log: Log, min_wrong: int, standard_map_of: StandardMapOf) -> np.ndarray:
+    """(T, S) bool, rule (c): the log's standard map (``standard_map_of(log)``: default parameters,
+    truth grid) is wrong on at least ``min_wrong`` cells of the reading's occupied arc."""
     truth = log.truth
     grid, sensor = truth.grid, log.sensor
     templates = cone_templates(grid, sensor)
     ranges = np.asarray(log.ranges, dtype=np.float32)
-    log_odds, observed = standard_map([(0, log.time, log.pose, ranges)], sensor, grid, params.inverse_model,
-                                      templates=templates)
-    wrong = standard_wrong(probability_from_log_odds(log_odds, observed), observed, truth.occupancy)
+    probability, observed = standard_map_of(log)
+    wrong = standard_wrong(probability, observed, truth.occupancy)
     cones = readings_of(log.pose, ranges, sensor, grid, templates)
-    half = 0.5 * params.inverse_model.alpha
+    half = 0.5 * InverseModelConfig().alpha
     _, counts = cone_bands(grid, templates, cones, half, half, wrong)
     return (counts >= min_wrong).reshape(ranges.shape)
 
 
-def labels(log: Log, definition: LabelDefinition | None = None, file: str | None = None) -> np.ndarray:
-    """(T, S) bool labels y of a simulated log (rules (a), (b) or (c) of the module docstring)."""
+def labels(log: Log, definition: LabelDefinition | None = None, file: str | None = None,
+           standard_map_of: StandardMapOf | None = None) -> np.ndarray:
+    """(T, S) bool labels y of a simulated log (rules (a), (b) or (c) of the module docstring);
+    rule (c) (``arc_wrong_min`` > 0) needs ``standard_map_of``."""
     definition = definition or LabelDefinition()
     if log.truth is None:
         raise InputError("no /truth group: training needs a simulated log with its truth", file=file, key="/truth")
@@ -188,5 +190,8 @@ def labels(log: Log, definition: LabelDefinition | None = None, file: str | None
     edge = depth_edge(depths, definition.edge_factor, definition.edge_margin, definition.edge_reach)
     y = wrong | edge
     if definition.arc_wrong_min:
-        y |= standard_map_wrong_arcs(log, definition.arc_wrong_min)
+        if standard_map_of is None:
+            raise ValueError("label rule (c) (arc_wrong_min > 0) compares the log's standard map with its truth: "
+                             "pass standard_map_of (mapping.standard.truth_grid_map)")
+        y |= standard_map_wrong_arcs(log, definition.arc_wrong_min, standard_map_of)
     return y

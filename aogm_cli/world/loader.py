@@ -39,7 +39,7 @@ ROUGH = Surface("rough", math.pi / 2)
 # polygon at 1e300 m made the truth raster's kernel write out of bounds: a segfault).
 MAX_MAGNITUDE = 1e6
 MIN_TRUTH_RESOLUTION = 1e-4
-MAX_SONARS = 100_000  # sonar.count; larger work sizes are refused by world.budget
+MAX_SONARS = 100_000  # sonar.count; larger work sizes are refused by world.simulation_cost
 MAX_FIRING_INTERVAL = 10.0  # s between a ring's firing slots (errors.firing.interval)
 MAX_SCANS = 10_000_000  # scans a waypoint trajectory makes (make bench-scale's largest office: 200,000)
 MAX_SUB_RAYS = 1000  # sonar.sub_rays per cone (the default 11)

@@ -11,7 +11,7 @@ import numpy as np
 
 from aogm_cli.mapping.em_kernels.readings import _entry_cell
 from aogm_cli.mapping.em_kernels.windows import _rank
-from aogm_cli.mapping.sensor_models.forward_model import gaussian_at
+from aogm_cli.sensor_models.forward_model import gaussian_at
 
 
 @numba.njit(cache=True, inline="always")

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from aogm_cli.mapping.sensor_models.forward_model import cone_entries
+from aogm_cli.sensor_models.forward_model import cone_entries
 
 
 @numba.njit(cache=True, inline="always")

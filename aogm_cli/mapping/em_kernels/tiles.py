@@ -45,7 +45,7 @@ from aogm_cli.mapping.em_kernels.layout import (
 )
 from aogm_cli.mapping.em_kernels.likelihood import _far_changed, _flip_gain, _set_sum, _update_reading
 from aogm_cli.mapping.em_kernels.windows import _build_window, _make_room, _room, _row_group
-from aogm_cli.mapping.sensor_models.forward_model import gaussian_at
+from aogm_cli.sensor_models.forward_model import gaussian_at
 
 
 @numba.njit(cache=True, inline="always")

@@ -8,7 +8,7 @@ import numpy as np
 
 from aogm_cli.mapping.em_kernels.layout import ARENA_ENTRIES, CTL_BUMP, CTL_NEED_ROOM
 from aogm_cli.mapping.em_kernels.readings import _entry_cell
-from aogm_cli.mapping.sensor_models.forward_model import gaussian_at
+from aogm_cli.sensor_models.forward_model import gaussian_at
 
 
 @numba.njit(cache=True, inline="always")

@@ -229,7 +229,7 @@ def grid_need(source, resolution: float, pose: np.ndarray | None = None) -> dict
     bounds plus the sensor's reach at ``resolution``, as ``mapping.pipeline.log_grid``, in floats
     so that no absurd log overflows) and about how much memory a standard map of it needs (at
     least ``BYTES_PER_CELL`` a cell); {} without a finite pose."""
-    from aogm_cli.mapping.budget import BYTES_PER_CELL, map_estimate
+    from aogm_cli.mapping.map_cost import BYTES_PER_CELL, map_estimate
 
     pose = np.asarray(source.poses(), dtype=np.float64).reshape(-1, 3) if pose is None else pose
     truth = source.truth_grid()

@@ -11,7 +11,8 @@ import numpy as np
 
 from aogm_cli.core.budget import Estimate
 from aogm_cli.mapping.params import MapParams
-from aogm_cli.mapping.pipeline import is_narrow_beam, log_grid
+from aogm_cli.mapping.pipeline import log_grid
+from aogm_cli.sensor_models.ray import is_narrow_beam
 
 BYTES_PER_CELL = 40  # log-odds, probability, observed, EM state, the map file in memory
 BYTES_PER_PADDED_CELL = 4  # the standard mapper's padded float32 state

@@ -28,7 +28,7 @@ import numba
 import numpy as np
 
 from aogm_cli.core.errors import InputError
-from aogm_cli.mapping.sensor_models.cone import cone_flat_cells, flat_offsets
+from aogm_cli.sensor_models.cone import cone_flat_cells, flat_offsets
 
 
 @dataclass(frozen=True)

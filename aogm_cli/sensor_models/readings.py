@@ -1,0 +1,177 @@
+"""Readings on a grid, as every model takes them: the range convention (``echo_ranges``), the cone
+templates every mode uses, each reading's sensor cell, heading bin and template range
+(``readings_of``, ``lay_out_readings``), and the bands of readings' cones (``cone_bands``)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numba
+import numpy as np
+
+from aogm_cli.core.grid import GridSpec
+from aogm_cli.core.log import SensorSpec
+from aogm_cli.sensor_models.cone import ConeTemplates, build_cone_templates, cone_cells, flat_offsets, reading_geometry
+from aogm_cli.sensor_models.ray import is_narrow_beam
+
+# readings per call of the kernels that walk every reading's cone once (``reading_spans``)
+READINGS_PER_CALL = 1 << 14
+
+
+def echo_ranges(ranges: np.ndarray, grid: GridSpec) -> np.ndarray:
+    """Ranges as the cone mappers use them: half a cell longer (the one place this shift is made).
+
+    A truth (and map) cell is occupied when its centre lies inside an obstacle, so the first
+    occupied cell along a beam has its centre between 0 and 1 cell beyond the surface that
+    echoed: half a cell on average. Without this, standard and EM maps put walls half a cell
+    too near the robot. Narrow beams (rays) take ranges as logged (see ``mapping.standard``)."""
+    return np.asarray(ranges, dtype=np.float64) + 0.5 * grid.resolution
+
+
+def cone_templates(grid: GridSpec, sensor: SensorSpec, narrow: bool | None = None) -> ConeTemplates:
+    """The cone templates every mode uses on ``grid``: reach max_range plus one cell (for the
+    axis-offset correction of ``cone.reading_geometry``); cached, one-time set-up. A narrow
+    beam's cones (EM's forward model of a laser) also hold every cell their ray crosses, as the
+    ray tracing of standard mapping and of the held-out scores does (``build_cone_templates``).
+    ``narrow`` is ``ray.is_narrow_beam(sensor, grid.resolution)``, decided here unless the caller has."""
+    if narrow is None:
+        narrow = is_narrow_beam(sensor, grid.resolution)
+    return build_cone_templates(grid.resolution, sensor.beam_width, sensor.max_range, margin=grid.resolution,
+                                ray=narrow)
+
+
+def forward_templates(grid: GridSpec, sensor: SensorSpec) -> ConeTemplates:
+    """The forward model's templates: the standard mapper's (one cache for both), with their
+    flat offsets for this grid's width built (and cached) now, as one-time set-up."""
+    templates = cone_templates(grid, sensor)
+    flat_offsets(templates, grid.width)
+    return templates
+
+
+def readings_of(pose: np.ndarray, ranges: np.ndarray, sensor: SensorSpec, grid: GridSpec, templates):
+    """All readings as flat arrays: sensor cell rows, cols, heading bins, and ranges shifted
+    into template ranges: ``echo_ranges`` plus the sensor's offset from its cell's centre
+    along the beam (``cone.reading_geometry``)."""
+    rows, cols, bins, valid, offset = reading_geometry(pose, sensor, grid, templates)
+    z = np.where(valid, echo_ranges(ranges, grid), np.nan) + offset
+    return rows.reshape(-1), cols.reshape(-1), bins.reshape(-1), z.reshape(-1)
+
+
+def reading_spans(n: int) -> list[tuple[int, int]]:
+    """(start, stop) of readings 0 .. n - 1 in spans of ``READINGS_PER_CALL``: the kernels that
+    walk every reading's cone once take a span per call and so return to Python between spans,
+    where a signal's handler runs (``core.interrupts``): a signal ends a run within a second
+    whatever the log's size."""
+    return [(a, min(a + READINGS_PER_CALL, n)) for a in range(0, n, READINGS_PER_CALL)]
+
+
+@dataclass
+class LaidOutReadings:
+    """Every reading of a log laid out for the forward model (what EM and adaptive map from)."""
+
+    grid: GridSpec
+    sensor: SensorSpec
+    templates: ConeTemplates
+    ranges: np.ndarray  # (T, S) as logged
+    rows: np.ndarray
+    cols: np.ndarray
+    bins: np.ndarray
+    z: np.ndarray
+
+    @property
+    def cones(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(rows, cols, bins, z): where each reading's cone sits, as ``em_readings`` and
+        ``cone_bands`` take them."""
+        return self.rows, self.cols, self.bins, self.z
+
+
+def lay_out_readings(pose: np.ndarray, ranges: np.ndarray, sensor: SensorSpec, grid: GridSpec,
+                     chunk: int = 4096) -> LaidOutReadings:
+    """The readings of (pose (T, 3), ranges (T, S)) as ``LaidOutReadings`` on ``grid``, laid out
+    ``chunk`` scans at a time (the placement's temporaries stay small at any log size)."""
+    templates = forward_templates(grid, sensor)
+    n = ranges.size
+    rows, cols, bins = (np.empty(n, dtype=np.int64) for _ in range(3))
+    z = np.empty(n)
+    width = ranges.shape[1] if ranges.ndim == 2 else 1
+    for start in range(0, pose.shape[0], chunk):
+        stop = min(start + chunk, pose.shape[0])
+        part = slice(start * width, stop * width)
+        rows[part], cols[part], bins[part], z[part] = readings_of(pose[start:stop], ranges[start:stop], sensor, grid,
+                                                                  templates)
+    return LaidOutReadings(grid, sensor, templates, ranges, rows, cols, bins, z)
+
+
+class BandReadings(NamedTuple):
+    """``_band``'s readings: flat arrays of one length."""
+
+    rows: np.ndarray  # the sensor's cell (int64; may lie outside the grid)
+    cols: np.ndarray
+    bins: np.ndarray  # heading bin (int64)
+    lower: np.ndarray  # float64 template ranges of the band (upper NaN or < 0: no band)
+    upper: np.ndarray
+
+
+class BandGrid(NamedTuple):
+    """``_band``'s grid: its shape, the mask it counts cells of, and the union it marks."""
+
+    height: int
+    width: int
+    cell_mask: np.ndarray  # flat bool (H * W)
+    swept: np.ndarray  # flat bool (H * W): set on every cell of some band
+
+
+@numba.njit(cache=True)
+def _band(tpl, grid, readings, counts, span):
+    """Mark the band of each reading span[0] <= t < span[1] in ``grid.swept`` and count its
+    cells of ``grid.cell_mask`` into ``counts``; ``tpl`` is ``ConeTemplates.kernel_arrays``."""
+    height = grid.height
+    width = grid.width
+    cell_mask = grid.cell_mask
+    swept = grid.swept
+    rows = readings.rows
+    cols = readings.cols
+    bins = readings.bins
+    lower = readings.lower
+    upper = readings.upper
+    offsets = tpl.offsets
+    scratch_cell = np.empty(offsets[-1], dtype=np.int64)
+    scratch_range = np.empty(offsets[-1], dtype=np.float64)
+    for t in range(span[0], span[1]):
+        if not upper[t] >= 0.0:  # no band (max-range or invalid reading)
+            continue
+        n = cone_cells(tpl, height, width, rows[t], cols[t], bins[t], upper[t], scratch_cell, scratch_range,
+                       lower[t])
+        count = 0
+        for i in range(n):
+            cell = scratch_cell[i]
+            swept[cell] = True
+            if cell_mask[cell]:
+                count += 1
+        counts[t] = count
+
+
+def cone_bands(grid: GridSpec, templates, cones, below: float, above: float,
+               cell_mask: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Each reading's band, the cells of its cone with template range in [z - below, z + above].
+
+    ``cones``: (rows, cols, bins, z) as ``readings_of`` gives them (z in template ranges); a
+    non-finite z has no band. Returns ((H, W) bool union of the bands, (N,) int64 cells of
+    ``cell_mask`` (H, W) on each reading's band; zeros without a mask).
+    """
+    rows, cols, bins, z_model = cones
+    z = np.asarray(z_model, dtype=np.float64).reshape(-1)
+    finite = np.isfinite(z)
+    lower = np.where(finite, z - below, np.inf)
+    upper = np.where(finite, z + above, -1.0)
+    if cell_mask is None:
+        mask = np.zeros(grid.height * grid.width, dtype=np.bool_)
+    else:
+        mask = np.ascontiguousarray(np.asarray(cell_mask, dtype=np.bool_).reshape(-1))
+    counts = np.zeros(z.shape[0], dtype=np.int64)
+    swept = np.zeros(grid.height * grid.width, dtype=np.bool_)
+    readings = BandReadings(*(np.ascontiguousarray(a, np.int64).reshape(-1) for a in (rows, cols, bins)), lower, upper)
+    for span in reading_spans(z.shape[0]):
+        _band(templates.kernel_arrays, BandGrid(grid.height, grid.width, mask, swept), readings, counts, span)
+    return swept.reshape(grid.shape), counts
