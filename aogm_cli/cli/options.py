@@ -25,6 +25,7 @@ from contextlib import contextmanager
 
 import click
 
+from aogm_cli.core.executors import SCHEDULER_ENV
 from aogm_cli.core.occupancy_map import MODES
 from aogm_cli.mapping.params import MapParams
 
@@ -111,7 +112,7 @@ def jobs_option(help_text: str):
 
 
 scheduler_option = click.option(
-    "--scheduler", metavar="ADDRESS", envvar="AOGM_SCHEDULER", show_envvar=True,
+    "--scheduler", metavar="ADDRESS", envvar=SCHEDULER_ENV, show_envvar=True,
     help="Run every task on the Dask cluster whose scheduler is at ADDRESS (tcp://host:8786) instead of"
          " --jobs local processes; needs pip install aogm[dask] (see Running on a cluster in README.md).",
 )
@@ -270,7 +271,7 @@ def progress_bar(total: int | None, desc: str, quiet: bool, unit: str = "it"):
 def check_executor(jobs: int, scheduler: str | None, batch: bool = True) -> None:
     """One executor per run: ``--jobs N`` (N > 1) and a ``--scheduler`` given on the command line
     are refused together (exit 2), and so is ``--scheduler`` where there is no batch of tasks to
-    send (``batch`` false); a scheduler that comes from AOGM_SCHEDULER alone is then ignored."""
+    send (``batch`` false); a scheduler that comes from ``SCHEDULER_ENV`` alone is then ignored."""
     from click.core import ParameterSource
 
     from aogm_cli.core.errors import InputError

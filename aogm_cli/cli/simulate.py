@@ -27,9 +27,7 @@ def world_inputs(world_file: str, world) -> list[str]:
     """The files a world is read from: its YAML, and a floor plan's map_server YAML and image."""
     files = [world_file]
     if world.floorplan is not None:
-        from aogm_cli.io.map_server import read_map_yaml
-
-        files += [world.floorplan.map, read_map_yaml(world.floorplan.map).image]
+        files += [world.floorplan.map, world.floorplan.plan.image]
     return files
 
 

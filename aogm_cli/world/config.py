@@ -9,8 +9,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from aogm_cli.core.log import SensorSpec
+
+if TYPE_CHECKING:
+    from aogm_cli.io.map_server import RosMap  # not at start-up: it loads numpy and Pillow
 
 Point = tuple[float, float]
 
@@ -72,10 +76,12 @@ class Circle:
 
 @dataclass(frozen=True)
 class Floorplan:
-    """A bitmap floor plan read as ROS map_server reads ``map`` (a map_server YAML file)."""
+    """A bitmap floor plan read as ROS map_server reads ``map`` (a map_server YAML file), decoded
+    once by the loader: the scene, the truth and the list of a simulation's inputs take ``plan``."""
 
     map: str  # absolute path of the map_server YAML
     surface: str
+    plan: RosMap = field(compare=False, repr=False)  # the map and its image as map_server reads them
 
 
 @dataclass(frozen=True)

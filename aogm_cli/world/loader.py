@@ -324,10 +324,10 @@ def _floorplan(n: Node, surfaces: Surfaces, base_dir: Path) -> Floorplan:
     from aogm_cli.io.map_server import read_map_yaml
 
     try:
-        read_map_yaml(map_path)
+        plan = read_map_yaml(map_path)
     except InputError as exc:
         raise n.child("map").error(f"cannot load the map_server YAML: {exc}") from None
-    return Floorplan(str(map_path), surfaces.of(n))
+    return Floorplan(str(map_path), surfaces.of(n), plan)
 
 
 def _robot(n: Node) -> Robot:

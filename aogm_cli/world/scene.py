@@ -115,9 +115,7 @@ def _floorplan_bitmap(world: World) -> tuple[np.ndarray, GridSpec | None, float]
     empty bitmap without a grid when the world has no floor plan."""
     if world.floorplan is None:
         return np.zeros((1, 1), dtype=np.uint8), None, math.pi / 2
-    from aogm_cli.io.map_server import read_map_yaml
-
-    rosmap = read_map_yaml(world.floorplan.map)
+    rosmap = world.floorplan.plan
     bitmap = np.ascontiguousarray(np.asarray(rosmap.data) == 100, dtype=np.uint8)
     return bitmap, rosmap.grid_spec(), world.surfaces[world.floorplan.surface].specular_threshold
 

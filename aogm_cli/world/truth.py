@@ -143,9 +143,7 @@ def truth_occupancy(world: World) -> tuple[GridSpec, np.ndarray]:
     if len(solids.centre_lines):
         _mark_lines(occ, ox, oy, res, solids.centre_lines)
     if world.floorplan is not None:
-        from aogm_cli.io.map_server import read_map_yaml
-
-        rosmap = read_map_yaml(world.floorplan.map)
+        rosmap = world.floorplan.plan
         _mark_bitmap(occ, grid, np.asarray(rosmap.data) == 100, rosmap.grid_spec())
     return grid, occ
 
