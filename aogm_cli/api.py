@@ -1,20 +1,6 @@
-"""aogm from Python: load and save logs and maps, simulate, map in any mode, evaluate, check.
-
-Every function returns numpy arrays or aogm's domain types (``core.log.Log``,
-``core.occupancy_map.OccupancyMap`` with its ``GridSpec``) and calls the same library functions
-as the command line (``aogm simulate``, ``map``, ``compare``, ``check``): the same log and map
-files, the same parameters, the same metrics. Bad input raises ``core.errors.InputError`` (the
-CLI's exit 2), naming the file and the key. Re-exported at the package's top level
-(``aogm_cli.load_log`` ...), loaded on first use so that ``import aogm_cli`` stays cheap.
-
-Examples:
-
->>> import aogm_cli
->>> log = aogm_cli.simulate(aogm_cli.bundled_world("corridor_door"), seed=1)
->>> m = aogm_cli.map_log(log, "standard")
->>> m.probability.shape == m.grid.shape == log.truth.grid.shape
-True
-"""
+"""aogm from Python, re-exported at the package's top level and loaded on first use: load and save logs
+and maps, simulate, map in any mode, evaluate, check, through the same library functions as the
+commands. Results are numpy arrays or aogm's domain types; bad input raises ``InputError``."""
 
 from __future__ import annotations
 

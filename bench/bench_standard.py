@@ -102,7 +102,7 @@ def ceiling(pose, ranges, sensor, grid, config, templates, block=500):
     for start in range(0, pose.shape[0], block):
         stop = min(pose.shape[0], start + block)
         rows, cols, bins, valid, offset = reading_geometry(pose[start:stop], sensor, grid, templates)
-        # the ranges as standard_map takes them (pipeline.echo_ranges, as float32)
+        # the ranges as standard_map takes them (readings.echo_ranges, as float32)
         z = np.where(valid, echo_ranges(ranges[start:stop], grid).astype(np.float32), np.nan).astype(np.float32).reshape(-1)
         limits = _reading_limits(z, offset.reshape(-1), 0.5 * config.alpha, sensor.max_range)
         idx = _gather_cells(

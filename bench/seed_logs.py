@@ -45,7 +45,7 @@ class EMInputs:
 
 def em_inputs(log_path: Path, params: MapParams) -> EMInputs:
     """Compile every kernel of the em mode, run its (timed) standard pass over the whole log held
-    in memory and lay out every reading (``pipeline.lay_out_readings``), as ``map_em`` does."""
+    in memory and lay out every reading (``readings.lay_out_readings``), as ``map_em`` does."""
     with LogReader(log_path) as reader:
         params = resolved_params(reader, params)
         sensor = reader.sensor

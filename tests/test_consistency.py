@@ -80,7 +80,7 @@ def test_nothing_counted_gives_null_shares():
 
 # the sonar case of test_standard: a 30 deg cone from the centre of cell (5, 2) of an 11 x 11
 # grid at 0.1 m, pointing +x; a logged 0.45 m (0.5 m after the half-cell shift of
-# pipeline.echo_ranges, which standard_map and the re-cast both apply) with alpha 0.1 marks
+# readings.echo_ranges, which standard_map and the re-cast both apply) with alpha 0.1 marks
 # cells (5, 7), (4, 7), (6, 7) occupied.
 SONAR = SensorSpec(np.zeros((1, 3)), "sonar", math.radians(30.0), 0.05, 5.0)
 SONAR_GRID = GridSpec(0.0, 0.0, 0.1, 11, 11)

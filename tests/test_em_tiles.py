@@ -16,9 +16,9 @@ import pytest
 
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.mapping import em as E
-from aogm_cli.mapping import pipeline
 from aogm_cli.mapping.em import em_problem, em_readings, find_root, run_em
 from aogm_cli.mapping.params import EMConfig
+from aogm_cli.sensor_models import readings as laid_out
 from aogm_cli.sensor_models.cone import build_cone_templates
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig, build_forward_index, log_likelihoods
 
@@ -319,7 +319,7 @@ def test_sweeps_paused_before_every_tile_give_the_same_run(seed, tiny, monkeypat
     expected, expected_map, _ = run_case(case)
     statuses, sweep = [], E.K._sweep_tiles
     monkeypatch.setattr(E.K, "PAUSE_WORK", 1)
-    monkeypatch.setattr(pipeline, "READINGS_PER_CALL", 3)
+    monkeypatch.setattr(laid_out, "READINGS_PER_CALL", 3)
     monkeypatch.setattr(E.K, "_sweep_tiles", lambda *args: statuses.append(sweep(*args)) or statuses[-1])
     if tiny:
         monkeypatch.setattr(E, "_work", tiny_work)

@@ -187,7 +187,7 @@ def gaussian(z, d, sigma):
 
 def test_loglik_of_one_reading_and_one_obstacle_is_the_formula():
     """Sensor at a cell's centre facing +x, one occupied cell 10 cells (0.5 m) ahead. The
-    reading 0.48 m is compared at 0.505 m (half a cell further, ``pipeline.echo_ranges``)."""
+    reading 0.48 m is compared at 0.505 m (half a cell further, ``readings.echo_ranges``)."""
     grid = GridSpec(0.0, 0.0, 0.05, 40, 40)
     z_max = 1.5
     sensor = SensorSpec(mount=np.zeros((4, 3)), max_range=z_max)

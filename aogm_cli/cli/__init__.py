@@ -1,8 +1,6 @@
-"""The ``aogm`` command group: one small module per subcommand, all thin over the library.
-
-Errors: InputError -> one line on stderr and exit 2; OutputError and anything else -> exit 1
-(traceback only with ``--debug``); SIGINT, SIGTERM, SIGHUP -> 128 + N (``core.interrupts``).
-"""
+"""The ``aogm`` command group (one small module per subcommand) and its one error boundary: InputError
+-> a line on stderr and exit 2; OutputError and anything else -> exit 1 (a traceback with ``--debug``);
+SIGINT, SIGTERM, SIGHUP -> 128 + N (``core.interrupts``)."""
 
 from __future__ import annotations
 

@@ -1,21 +1,20 @@
-"""The registry of options that more than one command takes, each defined once here (defaults
-read from the config dataclasses), and the progress bar. Every command checks its outputs
-with ``io.outputs.resolve_outputs`` before any work.
+"""The options that more than one command takes, each defined once (defaults read from the config
+dataclasses; which commands take which: the table below), and the progress bar. Every command checks
+its outputs with ``io.outputs.resolve_outputs`` before any work."""
 
-Option                 commands
--o/--output            simulate, map, train, render, export (a PREFIX), import carmen, import text, import rosbag
--q/--quiet             simulate, map, train, render, export, compare, import carmen, import text, import rosbag
---seed                 simulate, train (below 2**32), compare (--holdout)
---png                  simulate, map
---mode / --modes       map / compare (choices from core.occupancy_map.MODES; also --require-checks)
---params, --detector   map, compare
---resolution           map, calibrate (check: its own, 0.05 by default); refuse_huge_grids: map, calibrate, compare
---calibrate/--no-calibrate map, compare (``calibration.enabled``)
---max-memory/--max-work simulate, map, compare (``budget_options``; ``core.budget``)
---jobs/-j, --scheduler simulate, compare (``core.executors``: a local process pool, a Dask cluster)
---resume               simulate, compare (--maps-dir): skip outputs already complete and valid
-LOG arguments as a folder or a glob (``expand_log_paths``): train
-"""
+# Option                  commands
+# -o/--output             simulate, map, train, render, export (a PREFIX), import carmen, import text, import rosbag
+# -q/--quiet              simulate, map, train, render, export, compare, import carmen, import text, import rosbag
+# --seed                  simulate, train (below 2**32), compare (--holdout)
+# --png                   simulate, map
+# --mode / --modes        map / compare (choices from core.occupancy_map.MODES; also --require-checks)
+# --params, --detector    map, compare
+# --resolution            map, calibrate (check: its own, 0.05 by default); refuse_huge_grids: map, calibrate, compare
+# --calibrate/--no-calibrate  map, compare (``calibration.enabled``)
+# --max-memory/--max-work simulate, map, compare (``budget_options``; ``core.budget``)
+# --jobs/-j, --scheduler  simulate, compare (``core.executors``: a local process pool, a Dask cluster)
+# --resume                simulate, compare (--maps-dir): skip outputs already complete and valid
+# LOG arguments as a folder or a glob (``expand_log_paths``): train
 
 from __future__ import annotations
 

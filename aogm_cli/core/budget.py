@@ -1,8 +1,6 @@
-"""Limits on the memory and work of one run, checked against estimates before the work starts.
-
-``Limits`` (defaults sized for a 2-core, 24 GB machine), ``parse_size``, and ``check`` which
-refuses an estimate over a limit with an ``InputError`` that says what the run would need.
-"""
+"""The budget of one run: ``Limits`` on its memory and work (defaults sized for a 2-core, 24 GB machine),
+and ``check``, which refuses an ``Estimate`` over them before any work with an ``InputError`` saying
+what the run would need; ``parse_size`` reads sizes such as 16G."""
 
 from __future__ import annotations
 

@@ -1,8 +1,6 @@
-"""Where a run's tasks execute: in this process, in a local process pool (``--jobs N``) or on a
-Dask cluster (``--scheduler ADDRESS``, ``distributed.Client(address).get_executor()``), all as
-``concurrent.futures`` executors. Each task's outcome comes back on its own: one failed task (bad
-input, a lost worker) is recorded as a ``Failure`` and the others still finish.
-"""
+"""Where a run's tasks execute, as ``concurrent.futures`` executors: this process, a local process pool
+(``--jobs N``) or a Dask cluster (``--scheduler ADDRESS``). Each task's outcome comes back on its own:
+a failed task (bad input, a lost worker) is a ``Failure`` and the others still finish."""
 
 from __future__ import annotations
 

@@ -1,8 +1,5 @@
-"""Robot frame -> world frame: where each sensor is, and where it points, at each scan.
-
-A pose is (x, y, yaw) with yaw counter-clockwise from +x (REP-103); a mount is a sensor's
-(x, y, yaw) in the robot frame.
-"""
+"""Robot frame -> world frame: where each sensor is, and where it points, at each scan. A pose is
+(x, y, yaw), yaw counter-clockwise from +x (REP-103); a mount is a sensor's (x, y, yaw) on the robot."""
 
 from __future__ import annotations
 

@@ -1,8 +1,6 @@
-"""The one place that converts between world (x, y) metres and grid (row, col) cells.
-
-Index [row, col] = [iy, ix]; row 0 is the lowest y (ROS OccupancyGrid order). Cell [iy, ix]
-covers x in [origin_x + ix*res, origin_x + (ix+1)*res), and likewise y.
-"""
+"""The one place that converts between world (x, y) metres and grid (row, col) cells: index [row, col]
+= [iy, ix], row 0 the lowest y (ROS OccupancyGrid order); cell [iy, ix] covers x in
+[origin_x + ix*res, origin_x + (ix+1)*res), and likewise y."""
 
 from __future__ import annotations
 

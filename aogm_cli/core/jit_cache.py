@@ -1,18 +1,16 @@
-"""aogm's compiled kernels loaded from numba's on-disk cache without numba's full start-up.
-
-Before it loads any cached kernel, numba initialises its whole CPU target
-(``BaseContext.refresh``: every typing and lowering registry, numba.np.*, numba.cpython.*),
-which only compiling needs: 0.6-0.8 s on the development machine, more than the rest of
-``aogm map`` of a small log. ``load_lean()`` makes numba load aogm's own kernels (functions
-of ``aogm_cli`` modules) with only what their machine code links to, numba's runtime (the
-NRT); compiling still initialises the target in full (numba's compiler does so itself),
-other packages' kernels load as numba loads them, and a kernel that fails to load this way
-is loaded numba's way.
-"""
+"""aogm's compiled kernels loaded from numba's on-disk cache without numba's full start-up
+(``load_lean``): with only what their machine code links to, numba's runtime."""
 
 from __future__ import annotations
 
 _installed: list[bool] = []
+
+# Before it loads any cached kernel, numba initialises its whole CPU target (``BaseContext.refresh``:
+# every typing and lowering registry, numba.np.*, numba.cpython.*), which only compiling needs and
+# which takes longer than the rest of ``aogm map`` of a small log. ``load_lean`` loads aogm's own
+# kernels (functions of ``aogm_cli`` modules) with numba's runtime (the NRT) alone; compiling still
+# initialises the target in full (numba's compiler does so itself), other packages' kernels load as
+# numba loads them, and a kernel that fails to load this way is loaded numba's way.
 
 
 def load_lean() -> None:

@@ -1,7 +1,5 @@
-"""A log in memory: the range sensors, the scans and, for simulated logs, the truth.
-
-Domain types only (no file I/O); ``aogm_cli.io.logfile`` reads and writes them as HDF5.
-"""
+"""A log in memory: the range sensors, the scans and, for simulated logs, the truth. Domain types
+only (no file I/O); ``aogm_cli.io.logfile`` reads and writes them as HDF5."""
 
 from __future__ import annotations
 

@@ -1,7 +1,5 @@
-"""A finished occupancy map in memory: probabilities, observed mask and each mode's layers.
-
-Domain type only (no file I/O); ``aogm_cli.io.mapfile`` reads and writes it as HDF5.
-"""
+"""A finished occupancy map in memory: probabilities, observed mask and each mode's layers. Domain
+type only (no file I/O); ``aogm_cli.io.mapfile`` reads and writes it as HDF5."""
 
 from __future__ import annotations
 

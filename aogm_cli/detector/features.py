@@ -1,15 +1,6 @@
 """The detector's input: the paper's P = [p_1 .. p_R], R neighbouring sonar measurements per reading.
-
-``FeatureSpec`` says which measurements and how they are normalised; it is stored as JSON in
-the detector file (root attribute ``features``), and ``features`` rebuilds the inputs from it.
-
-For reading (scan t, sonar j) the R measurements are the ranges of sonars j-k .. j+k of the
-same ring reading (indices wrap around the ring; sonars are assumed ordered around the ring,
-as ``aogm simulate`` writes them) and of sonar j at scans t-m .. t-1, t+1 .. t+m (clipped at
-the ends of the log). Each range is divided by max_range and clipped to [0, 1]; +inf (no echo)
-and NaN (invalid) become 1.0. Optional extras: each neighbour minus the centre reading
-(``differences``), and a 0/1 flag per measurement for a missing echo (``missing_flags``).
-"""
+``FeatureSpec`` says which and how they are normalised (stored as JSON in the detector file, root
+attribute ``features``); ``features`` rebuilds the inputs from it."""
 
 from __future__ import annotations
 
@@ -24,6 +15,12 @@ MAX_NEIGHBOURS = 1000  # beyond any ring or scan window; bounds the feature coun
 NORMALISATION = "range / max_range clipped to [0, 1]; +inf (no echo) and NaN (invalid) -> 1.0"
 
 
+# For reading (scan t, sonar j) the R measurements are the ranges of sonars j-k .. j+k of the same
+# ring reading (indices wrap around the ring; sonars are assumed ordered around the ring, as ``aogm
+# simulate`` writes them) and of sonar j at scans t-m .. t-1, t+1 .. t+m (clipped at the ends of the
+# log). Each range is divided by max_range and clipped to [0, 1]; +inf (no echo) and NaN (invalid)
+# become 1.0. Optional extras: each neighbour minus the centre reading (``differences``), and a 0/1
+# flag per measurement for a missing echo (``missing_flags``).
 @dataclass(frozen=True)
 class FeatureSpec:
     """Which neighbouring measurements make up a sample, and which extra features follow them."""

@@ -1,8 +1,5 @@
-"""The cluster detector in memory and its inference in numpy (no file I/O, no scikit-learn).
-
-``Detector.flag`` turns a (T, S) range array into the paper's y (which readings make clusters);
-``aogm_cli.io.detectorfile`` reads and writes detector files.
-"""
+"""The cluster detector in memory and its inference in numpy (no file I/O, no scikit-learn):
+``Detector.flag`` turns a (T, S) range array into the paper's y (which readings make clusters)."""
 
 from __future__ import annotations
 

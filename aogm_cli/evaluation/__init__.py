@@ -1,4 +1,2 @@
-"""Map quality: ``metrics`` against simulated truth (accuracy, F1, Brier, checks), ``consistency``
-of a map with its own log, and ``holdout``: scores of a map on scans held out of its making,
-for logs with or without truth.
-"""
+"""Map quality, running no mapper: ``metrics`` against simulated truth, ``consistency`` of a map with its
+own log, ``holdout`` scores on scans held out of its making, and what a ``planner`` sees in it."""

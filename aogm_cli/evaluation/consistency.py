@@ -1,30 +1,6 @@
 """Consistency of a finished map with its own log, for logs without truth (as OctoMap's
-``eval_octree_accuracy``): every in-range reading is re-cast against the map.
-
-Pure functions on arrays (``reading_endpoints``, ``endpoint_status``, ``arc_status``,
-``summarize``) and one loop over a log's chunks (``log_consistency``, ``map_consistency``).
-
-What is measured
-----------------
-A cell is believed occupied when observed and p > 0.5, believed free when observed and
-p < 0.5. A reading is in range when finite, >= 0 and below the sensor's max_range (max-range
-readings end nowhere). Each in-range reading is re-cast from its sensor's pose:
-
-* narrow beams (``mapping.beam.is_narrow_beam``): its endpoint, the point at the logged range
-  along the beam's axis. It agrees when the endpoint's cell is believed occupied, contradicts
-  when that cell is believed free; otherwise (unobserved, p = 0.5, outside the grid) neither.
-* cones (sonar): its occupied arc, the cells the standard mapper marks occupied for it (cone
-  templates, range band alpha around the reading as the mapper shifts it). It agrees when some
-  arc cell is believed occupied, contradicts when every arc cell in the grid is believed free.
-
-``endpoint_occupied`` is the share of in-range readings that agree. ``endpoint_occupied_8``
-is the same with each believed-occupied cell grown by its 8 neighbours: the share that lands
-within one cell of an occupied one, which forgives pose errors of up to a cell. Both are
-reported; the first is the headline (OctoMap's count, and the stricter). ``endpoint_free`` is
-the share that contradicts. ``free_contradicted`` is the share of believed-free cells on which
-some reading ends (its endpoint cell, or a believed-free cell of the arc of a reading with no
-believed-occupied arc cell): free space that the log itself says holds an obstacle.
-"""
+``eval_octree_accuracy``): every in-range reading is re-cast against the map (``log_consistency``,
+``map_consistency``, over pure functions on arrays: ``reading_endpoints``, ``arc_status``, ``summarize``)."""
 
 from __future__ import annotations
 
@@ -42,6 +18,23 @@ from aogm_cli.sensor_models.cone import ConeReadings, ConeTemplates, range_searc
 from aogm_cli.sensor_models.inverse_model import InverseModelConfig, occupied_arc
 from aogm_cli.sensor_models.ray import is_narrow_beam
 from aogm_cli.sensor_models.readings import cone_templates, echo_ranges
+
+# What is measured. A cell is believed occupied when observed and p > 0.5, believed free when observed
+# and p < 0.5. A reading is in range when finite, >= 0 and below the sensor's max_range (max-range
+# readings end nowhere). Each in-range reading is re-cast from its sensor's pose:
+# * narrow beams (``ray.is_narrow_beam``): its endpoint, the point at the logged range along the
+#   beam's axis. It agrees when the endpoint's cell is believed occupied, contradicts when that cell
+#   is believed free; otherwise (unobserved, p = 0.5, outside the grid) neither.
+# * cones (sonar): its occupied arc, the cells the standard mapper marks occupied for it (cone
+#   templates, range band alpha around the reading as the mapper shifts it). It agrees when some arc
+#   cell is believed occupied, contradicts when every arc cell in the grid is believed free.
+# ``endpoint_occupied`` is the share of in-range readings that agree. ``endpoint_occupied_8`` is the
+# same with each believed-occupied cell grown by its 8 neighbours: the share that lands within one
+# cell of an occupied one, which forgives pose errors of up to a cell. Both are reported; the first
+# is the headline (OctoMap's count, and the stricter). ``endpoint_free`` is the share that
+# contradicts. ``free_contradicted`` is the share of believed-free cells on which some reading ends
+# (its endpoint cell, or a believed-free cell of the arc of a reading with no believed-occupied arc
+# cell): free space that the log itself says holds an obstacle.
 
 # per-reading status
 NOT_COUNTED = -1  # not in range (no echo, NaN, negative) or no finite pose
@@ -128,7 +121,7 @@ def arc_status(
     """Status (int8 (T, S)) of each reading's occupied arc: AGREES when some arc cell is
     believed occupied, CONTRADICTS when every arc cell in the grid is believed free, else
     UNKNOWN; NOT_COUNTED for readings out of range. The arc is the standard mapper's: template
-    cells within alpha/2 of the reading shifted by ``pipeline.echo_ranges`` and the sensor's axis
+    cells within alpha/2 of the reading shifted by ``readings.echo_ranges`` and the sensor's axis
     offset. When ``contradicted`` (bool (H, W)) is given, the believed-free arc cells of
     readings with no believed-occupied arc cell are set in it.
     """
@@ -222,7 +215,7 @@ def _arc_kernel(maps, readings, tpl, half_alpha, max_range, status):
 
 def summarize(status, status_8, contradicted: np.ndarray, free: np.ndarray, method: str) -> dict:
     """The consistency fields from per-reading statuses (exact and with 8 neighbours) and the
-    contradicted cells: see the module docstring. Shares are None when nothing was counted."""
+    contradicted cells: see the comment at the top. Shares are None when nothing was counted."""
     status = np.asarray(status).reshape(-1)
     n = int(np.sum(status != NOT_COUNTED))
     n_free = int(np.sum(free))

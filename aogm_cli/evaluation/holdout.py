@@ -1,46 +1,6 @@
-"""Scoring a map without ground truth by the field's held-out protocol (ALGORITHMS.md section 7):
-which scans are held out (``HoldoutSplit``, ``split_log``), and how well a map made from the
-others predicts their readings (``holdout_scores``: ROC AUC and a reference log-likelihood).
-
-What is measured
-----------------
-Every ``period``-th scan is held out, period = round(1 / fraction), starting at an offset drawn
-from the seed: whole scans on a fixed pattern, so that neighbouring readings of one scan do not
-leak into the map that scores them. The map is made from the other scans; then:
-
-* ``holdout_auc``: the ROC AUC of the map's occupancy probability where the held-out readings
-  end (positives, one per reading) against the cells they pass through (negatives, each
-  (reading, cell) pair counted once), ties by average ranks (Mann-Whitney). Sonar cones: a
-  reading's positive is the largest probability over the cells of its occupied arc (one cell of
-  the arc echoed, the rest of the arc may well be free: scoring every arc cell as a positive
-  ranks a map that keeps the free cells of a 30-degree arc free below one that smears the arc;
-  measured on corridor_door: adaptive 0.48 per cell, below the standard map's 0.73), the
-  negatives the cells of its free region, both drawn as the standard mapper's inverse model
-  draws them (``mapping.standard``: arc z -/+ alpha/2, free from
-  min_range up to the arc; the region, whatever Elfes' weights give its cells); a no-echo
-  (max-range) reading gives negatives only, its cone from min_range up to max_range. Narrow
-  beams (lasers, ``beam.is_narrow_beam``): the positive is the largest probability over the
-  cells the ray crosses within alpha/2 of z (the hit band), the negatives the cells it crosses
-  before the hit band and past min_range (as ``beam.BeamMapper`` marks them free). The arc's
-  thickness is fixed, ``REFERENCE_ALPHA`` = z -/+ the reference model's sigma (0.1 m), or one
-  cell if larger, whatever the maps were made with: a held-out reading's surface lies within
-  its noise of z, and a one-cell arc (0.05 m) missed the wall of a sharp (EM) map behind noisy
-  readings (corridor_door: a quarter of EM's arcs held no cell above 0.12). Unobserved cells score 0.5; cells outside the grid are left out. NaN when no reading
-  gives a positive or none a negative.
-* ``holdout_loglik``: the mean of log p(z | m) over the held-out readings (NaN ones left out;
-  no echo, or a range at or beyond max_range, is a max-range reading) under Thrun's forward
-  model (``sensor_models.forward_model``, the formula EM maximises) with the fixed parameters
-  ``REFERENCE_MODEL``, for the binary map p > 0.5. The same model for every mode and every
-  run, independent of the modes' own parameters and of any calibration, so that modes compare
-  fairly. It is a density (per metre): higher is better, and it can be positive.
-
-The reference model, chosen to be tolerant rather than fitted to any one sensor: sigma 0.1 m
-(two cells of the default grid: a real sonar's noise plus pose error, not our simulator's
-0.02 m), p_rand 0.1 and p_max 0.1 (one reading in ten random, one in ten a specular dropout,
-so that a few surprising readings do not dominate the mean), p_hit 0.5 (an obstacle as likely
-missed as seen, between EM's trade-off values). EM's own defaults (sigma 0.03, p_hit 0.7) are
-fitted to our simulator; scoring with them would favour the EM maps that maximise them.
-"""
+"""Scoring a map without ground truth by the field's held-out protocol (ALGORITHMS.md section 7): which
+scans are held out (``HoldoutSplit``, ``split_log``), and how well a map made from the others predicts
+their readings (``holdout_scores``: a ROC AUC and the log-likelihood under a fixed reference model)."""
 
 from __future__ import annotations
 
@@ -71,6 +31,13 @@ from aogm_cli.sensor_models.readings import cone_templates, echo_ranges, lay_out
 
 OPTION = "--holdout"
 MAX_FRACTION = 0.5  # at most every second scan held out: the map keeps at least half
+# The reference model, chosen to be tolerant rather than fitted to any one sensor: sigma 0.1 m (two
+# cells of the default grid: a real sonar's noise plus pose error, not our simulator's 0.02 m), p_rand
+# 0.1 and p_max 0.1 (one reading in ten random, one in ten a specular dropout, so that a few surprising
+# readings do not dominate the mean), p_hit 0.5 (an obstacle as likely missed as seen, between EM's
+# trade-off values). EM's own defaults are fitted to our simulator; scoring with them would favour the
+# EM maps that maximise them. The same model for every mode and every run, independent of the modes'
+# own parameters and of any calibration, so that modes compare fairly.
 REFERENCE_MODEL = ForwardModelConfig(sigma=0.1, p_rand=0.1, p_hit=0.5, p_max=0.1, window=4.0).validate()
 REFERENCE_ALPHA = 2 * REFERENCE_MODEL.sigma  # m: the arc band z -/+ sigma of the reference model
 READING_CHUNK = 8192  # held-out readings per forward-model index: bounds the index's memory
@@ -176,7 +143,7 @@ def _cone_labels(readings, tpl, flat, limits, height, width, counts, scratch, pr
     non-empty flat ``probability`` (H * W), also each reading's largest probability over its
     arc's cells inside the grid into ``arc_max`` (NaN: no echo, or no arc cell in the grid).
 
-    ``readings`` are ``cone.ConeReadings`` with ranges shifted by ``pipeline.echo_ranges``,
+    ``readings`` are ``cone.ConeReadings`` with ranges shifted by ``readings.echo_ranges``,
     ``tpl`` ``ConeTemplates.kernel_arrays``, ``flat`` its ``cone.FlatOffsets`` for ``width``.
     ``counts`` (2, H * W + SPARE_MASK + 1) int32: cells outside the grid land in the spare
     cells after it; ``scratch`` holds one template bin's entries. The regions are the standard
@@ -320,6 +287,29 @@ def reference_log_likelihoods(pose: np.ndarray, ranges: np.ndarray, sensor: Sens
     return out
 
 
+# What is measured. Every ``period``-th scan is held out, period = round(1 / fraction), starting at an
+# offset drawn from the seed: whole scans on a fixed pattern, so that neighbouring readings of one scan
+# do not leak into the map that scores them. The map is made from the other scans; then:
+# * ``holdout_auc``: the ROC AUC of the map's occupancy probability where the held-out readings end
+#   (positives, one per reading) against the cells they pass through (negatives, each (reading, cell)
+#   pair counted once), ties by average ranks (Mann-Whitney). Sonar cones: a reading's positive is the
+#   largest probability over the cells of its occupied arc (one cell of the arc echoed, the rest may
+#   well be free: scoring every arc cell as a positive ranks a map that keeps the free cells of a
+#   30-degree arc free below one that smears the arc), the negatives the cells of its free region,
+#   both drawn as the standard mapper's inverse model draws them (``mapping.standard``: arc z -/+
+#   alpha/2, free from min_range up to the arc); a no-echo (max-range) reading gives negatives only,
+#   its cone from min_range up to max_range. Narrow beams (lasers, ``ray.is_narrow_beam``): the
+#   positive is the largest probability over the cells the ray crosses within alpha/2 of z (the hit
+#   band), the negatives the cells it crosses before the hit band and past min_range (as
+#   ``beam.BeamMapper`` marks them free). The arc's thickness is fixed, ``REFERENCE_ALPHA`` = z -/+
+#   the reference model's sigma (0.1 m), or one cell if larger, whatever the maps were made with: a
+#   held-out reading's surface lies within its noise of z, and a one-cell arc missed the wall of a
+#   sharp (EM) map behind noisy readings. Unobserved cells score 0.5; cells outside the grid are left
+#   out. NaN when no reading gives a positive or none a negative.
+# * ``holdout_loglik``: the mean of log p(z | m) over the held-out readings (NaN ones left out; no
+#   echo, or a range at or beyond max_range, is a max-range reading) under Thrun's forward model
+#   (``sensor_models.forward_model``, the formula EM maximises) with the fixed ``REFERENCE_MODEL``,
+#   for the binary map p > 0.5. It is a density (per metre): higher is better, and it can be positive.
 def holdout_scores(log, m, split: HoldoutSplit) -> dict:
     """The held-out scores of map ``m`` (an ``OccupancyMap`` made from the kept scans of ``split``)
     against the held-out scans of the log source ``log``: ``holdout_auc``, ``holdout_loglik``

@@ -1,8 +1,5 @@
-"""Map quality against simulated truth: accuracy, occupied precision/recall/F1, Brier, checks.
-
-Independent of how a map was made: it takes probabilities, the observed mask and the truth,
-exactly as CONTRACT.md ("Metrics") defines them.
-"""
+"""Map quality against simulated truth: accuracy, occupied precision/recall/F1, Brier, checks, whatever
+made the map: it takes probabilities, the observed mask and the truth, as CONTRACT.md ("Metrics") defines them."""
 
 from __future__ import annotations
 

@@ -1,35 +1,6 @@
-"""Standard mapping of narrow-beam sensors (lasers): one ray per reading instead of a cone template.
-
-Owns the Amanatides-Woo grid traversal (``ray_cells``) and ``BeamMapper``, the log-odds update
-along rays with the state and clamping of ``standard``; the dispatch rule (``is_narrow_beam``)
-lives in ``pipeline``, whose cone templates need it too.
-
-The model along a ray (Amanatides & Woo 1987, traversed from the sensor's true position)
------------------------------------------------------------------------------------------
-A cell is the stretch [t_enter, t_exit) of the ray inside it (t in metres from the sensor).
-For a reading z (the hit: the range as logged, see ``mapper.standard_pass``):
-
-* occupied: cells that overlap the hit band [z - alpha/2, min(z + alpha/2, max_range)], so
-  the cell holding the endpoint always (OctoMap's and GMapping's convention), and the cell
-  before it when the endpoint lies within alpha/2 of their common edge;
-* free:     the cells before the band (t_exit <= z - alpha/2) that reach past min_range;
-* observed only: the blind zone (t_exit <= min_range), no evidence.
-
-A max-range reading (z >= max_range, or +inf) clears the cells that overlap
-[min_range, max_range] and marks nothing occupied; NaN or negative readings carry nothing.
-Increments are the constant model's (``l_free - l0``, ``l_occ - l0``) whichever model the
-``InverseModelConfig`` names: a ray has no angular profile, and Elfes' range profile, which
-models a sonar's fading cone, is not applied to a laser.
-
-Within one scan (one row of the log's ranges), a cell in some reading's hit band gets no free
-evidence from the other readings of that scan (OctoMap's insertPointCloud: occupied wins).
-Otherwise every reading updates its cells once each, clamped, in the log's order, exactly as
-``standard.StandardMapper`` does. A ray through a lattice corner steps diagonally: a cell the
-ray crosses for less than ``TOUCH`` cells (zero, up to rounding) is skipped. On the intel log (910 scans x 180 beams, 30 m max range, 0.05 m
-cells) hit precedence raises the share of endpoints on occupied cells from 0.879 to 0.892.
-
-Cost: O(cells on the ray) per reading, no set-up; the intel log maps in about 0.1 s.
-"""
+"""Standard mapping of narrow-beam sensors (lasers): ``BeamMapper``, the log-odds update along rays
+(traversed by ``sensor_models.ray``) with the state and clamping of ``standard``; which sensors count as
+narrow is ``ray.is_narrow_beam``."""
 
 from __future__ import annotations
 
@@ -63,6 +34,25 @@ class Rays(NamedTuple):
     uy: np.ndarray
     z: np.ndarray  # float32 range as logged (NaN or negative: nothing; >= max_range: max-range)
 
+
+# The model along a ray (Amanatides & Woo 1987, traversed from the sensor's true position). A cell is
+# the stretch [t_enter, t_exit) of the ray inside it (t in metres from the sensor). For a reading z
+# (the hit: the range as logged, see ``standard.standard_map``):
+# * occupied: cells that overlap the hit band [z - alpha/2, min(z + alpha/2, max_range)], so the cell
+#   holding the endpoint always (OctoMap's and GMapping's convention), and the cell before it when the
+#   endpoint lies within alpha/2 of their common edge;
+# * free: the cells before the band (t_exit <= z - alpha/2) that reach past min_range;
+# * observed only: the blind zone (t_exit <= min_range), no evidence.
+# A max-range reading (z >= max_range, or +inf) clears the cells that overlap [min_range, max_range]
+# and marks nothing occupied; NaN or negative readings carry nothing. Increments are the constant
+# model's (``l_free - l0``, ``l_occ - l0``) whichever model the ``InverseModelConfig`` names: a ray has
+# no angular profile, and Elfes' range profile, which models a sonar's fading cone, is not applied to a
+# laser. Within one scan (one row of the log's ranges), a cell in some reading's hit band gets no free
+# evidence from the other readings of that scan (OctoMap's insertPointCloud: occupied wins; it puts
+# more of a laser log's endpoints on occupied cells). Otherwise every reading updates its cells once
+# each, clamped, in the log's order, exactly as ``standard.StandardMapper`` does. A ray through a
+# lattice corner steps diagonally: a cell the ray crosses for less than ``TOUCH`` cells (zero, up to
+# rounding) is skipped. Cost: O(cells on the ray) per reading, no set-up.
 class BeamMapper:
     """Incremental standard mapping of a narrow-beam sensor: ``update`` with chunks, then ``result``.
 
@@ -107,6 +97,7 @@ class BeamMapper:
         observed = log_odds != self.UNOBSERVED
         log_odds[~observed] = np.float32(self.config.l0)
         return log_odds, observed
+
 
 # _nrt=False (a private numba option, as em_kernels._sweep): the kernel allocates nothing, and
 # without reference counting its tuples' arrays cost nothing per reading

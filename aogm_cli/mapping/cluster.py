@@ -1,17 +1,16 @@
-"""Clusters: where the readings the detector flags disagree with the standard map, grouped.
-
-A flagged reading's cluster cells are the band of its cone near its range (z - 0.2 m to
-z + alpha; none for a max-range reading), kept where the standard map is observed, not at
-its free clamp, and holds the cell occupied (or, with ``near_occupied`` = n, within n cells
-of one it holds occupied); 8-connected components of the union are the clusters, numbered
-1..K (0 outside every cluster).
-"""
+"""Clusters: where the readings the detector flags disagree with the standard map, grouped into
+8-connected components numbered 1..K (0 outside every cluster); and the readings whose cones reach them."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from aogm_cli.core.grid import GridSpec
+
+# A flagged reading's cluster cells are the band of its cone near its range (z - 0.2 m to z + alpha,
+# ``readings.cone_bands``; none for a max-range reading), kept where the standard map is observed,
+# not at its free clamp, and holds the cell occupied (or, with ``near_occupied`` = n, within n cells
+# of one it holds occupied); the components of their union are the clusters (``label_clusters``).
 
 
 def grown(mask: np.ndarray, cells: int) -> np.ndarray:

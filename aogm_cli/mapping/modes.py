@@ -1,7 +1,6 @@
-"""The three modes behind one call: ``map_file(path, mode, params, detector)`` opens a log,
-resolves the parameters it derives (the grid's resolution), compiles every kernel the mode
-runs by mapping a tiny synthetic log with the same sensor, and maps the log.
-"""
+"""The three modes behind one call: ``map_file(path, mode, params, detector)`` opens a log, resolves
+the parameters it derives (the grid's resolution), compiles every kernel the mode runs by mapping a
+tiny synthetic log with the same sensor, and maps the log (``map_in_mode``)."""
 
 from __future__ import annotations
 

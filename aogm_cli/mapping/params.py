@@ -1,8 +1,6 @@
-"""Every mapping parameter: one frozen dataclass per concern (EM, clusters; the sensor models'
-own beside them), gathered in ``MapParams``, read from a ``--params`` YAML and CLI options.
-
-Validation happens here, once; the resolved parameters are written into every map file.
-"""
+"""Every mapping parameter: one frozen dataclass per concern (EM, clusters, calibration; the sensor models'
+own beside them), gathered in ``MapParams``, read from a ``--params`` YAML and CLI options and validated
+here, once; the resolved parameters are written into every map file."""
 
 from __future__ import annotations
 

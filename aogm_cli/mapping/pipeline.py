@@ -1,9 +1,6 @@
-"""What every mode shares between a log and its map: the grid of a log, the range convention
-(``echo_ranges``), the readings laid out as flat arrays, and timing that leaves out reading I/O.
-
-A *log source* is an open ``io.logfile.LogReader`` or an in-memory ``core.log.Log``: both
-have ``sensor``, ``n_scans``, ``truth_grid()``, ``poses()``, ``chunks()``, ``scan_ranges()`` and ``read()``.
-"""
+"""What every mode shares between a log and its map: the grid of a log, the parameters a map records,
+and timing that leaves out reading I/O. A *log source* is an open ``io.logfile.LogReader`` or an
+in-memory ``core.log.Log``: both have ``sensor``, ``n_scans``, ``truth_grid()``, ``poses()``, ``chunks()``."""
 
 from __future__ import annotations
 

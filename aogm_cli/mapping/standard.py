@@ -1,49 +1,6 @@
 """Standard occupancy-grid mapping (Elfes 1989, Moravec 1988): each cell on its own, in log-odds.
-
-``standard_map`` streams a log's scans chunk by chunk through one compiled kernel that, for
-every reading and every cell of its cone, adds ``inverse_model - l0`` and clamps.
-
-Choices (documented)
---------------------
-* Clamping after every update (OctoMap's clamping update): a cell's log-odds never leaves
-  [clamp_min, clamp_max], so a long run of identical evidence cannot make a cell too
-  confident to change back. The result depends on the order of readings; that order is the
-  log's (scans in time, sensors in mount order), so maps are reproducible.
-* A reading visits each cell of its cone once (the templates hold each cell once).
-* Geometry: cones come from ``cone`` templates (sensor snapped to its cell's centre, heading
-  to its bin). The snap's component along the beam axis is corrected per reading: a cell at
-  template range d is taken to lie at d - axis_offset from the real sensor (see
-  ``cone.reading_geometry``), so the occupied arc does not jitter by up to res/sqrt 2 with
-  the sensor's position inside its cell. Templates therefore reach one cell beyond max_range.
-* ``observed`` marks every cell that some reading's cone covered up to min(z + alpha/2,
-  max_range), or up to max_range for a max-range reading, including the blind zone next
-  to the sensor, where the reading gives no evidence.
-* Arithmetic on the grid is float32 in a fixed order, so a map made chunk by chunk equals,
-  bit for bit, the map made in one pass.
-* Narrow beams (lasers, or a cone under a cell wide at max range: ``beam.is_narrow_beam``)
-  are traced as rays by ``beam.BeamMapper`` instead (``standard_map`` chooses); cone
-  templates of an 80 m laser would be enormous and a ray is the laser's own model.
-
-Speed (``bench/bench_standard.py``: about 0.7 G cone-cell updates/s, 60% of a plain
-compiled scatter-add over the same cells, on one core of the development machine):
-
-* no transcendental function per cell: per template entry the kernel reads a precomputed
-  angular weight a (E_a, or 1 for the constant model), the range d and a flat index offset;
-  the free increment is a (c_free - B u^2) with u = d - Rmin and B = c_free / span^2 per
-  reading (Elfes' E_r), the occupied one c_occ a;
-* a reading's region boundaries are short table-assisted binary searches in its template's
-  sorted ranges (``cone.range_search``);
-* increments and flat indices are computed in vectorised passes (loops over slices from 0,
-  so that numba drops its negative-index checks; flat offsets precomputed per grid width,
-  so no integer multiplies), leaving a scalar read-modify-write loop as lean as the
-  scatter-add's;
-* the kernel runs without numba's reference counting (``_nrt=False``): its inputs come as
-  named tuples, and counting references to their arrays per reading cost a third of the
-  kernel's time on the bundled worlds' logs;
-* "observed" lives in the log-odds grid itself (-inf until first seen), and the grid is
-  padded by the cone's reach, so that there is no second scattered write and no bounds
-  check for sensors inside the grid.
-"""
+``standard_map`` streams a log's scans chunk by chunk through one compiled kernel that, for every
+reading and every cell of its cone, adds ``inverse_model - l0`` and clamps; narrow beams go to ``beam``."""
 
 from __future__ import annotations
 
@@ -120,6 +77,25 @@ def _entry_tables(templates: ConeTemplates, model: str, beam_width: float) -> En
     return EntryTables(weights, ranges32)
 
 
+# Choices:
+# * Clamping after every update (OctoMap's clamping update): a cell's log-odds never leaves
+#   [clamp_min, clamp_max], so a long run of identical evidence cannot make a cell too confident to
+#   change back. The result depends on the order of readings; that order is the log's (scans in time,
+#   sensors in mount order), so maps are reproducible.
+# * A reading visits each cell of its cone once (the templates hold each cell once).
+# * Geometry: cones come from ``cone`` templates (sensor snapped to its cell's centre, heading to its
+#   bin). The snap's component along the beam axis is corrected per reading: a cell at template range
+#   d is taken to lie at d - axis_offset from the real sensor (see ``cone.reading_geometry``), so the
+#   occupied arc does not jitter by up to res/sqrt 2 with the sensor's position inside its cell.
+#   Templates therefore reach one cell beyond max_range.
+# * ``observed`` marks every cell that some reading's cone covered up to min(z + alpha/2, max_range),
+#   or up to max_range for a max-range reading, including the blind zone next to the sensor, where the
+#   reading gives no evidence.
+# * Arithmetic on the grid is float32 in a fixed order, so a map made chunk by chunk equals, bit for
+#   bit, the map made in one pass.
+# * Narrow beams (lasers, or a cone under a cell wide at max range: ``ray.is_narrow_beam``) are traced
+#   as rays by ``beam.BeamMapper`` instead (``standard_map`` chooses); cone templates of an 80 m laser
+#   would be enormous and a ray is the laser's own model.
 class StandardMapper:
     """Incremental standard mapping on one grid: ``update`` with chunks of scans, then ``result``.
 
@@ -270,6 +246,21 @@ def map_standard(log, params: MapParams, progress: Progress | None = None) -> Oc
     )
 
 
+# Speed (``bench/bench_standard.py`` compares the kernel with a plain compiled scatter-add over the
+# same cells):
+# * no transcendental function per cell: per template entry the kernel reads a precomputed angular
+#   weight a (E_a, or 1 for the constant model), the range d and a flat index offset; the free
+#   increment is a (c_free - B u^2) with u = d - Rmin and B = c_free / span^2 per reading (Elfes'
+#   E_r), the occupied one c_occ a;
+# * a reading's region boundaries are short table-assisted binary searches in its template's sorted
+#   ranges (``cone.range_search``);
+# * increments and flat indices are computed in vectorised passes (loops over slices from 0, so that
+#   numba drops its negative-index checks; flat offsets precomputed per grid width, so no integer
+#   multiplies), leaving a scalar read-modify-write loop as lean as the scatter-add's;
+# * the kernel runs without numba's reference counting (``_nrt=False``): its inputs come as named
+#   tuples, whose arrays' reference counts would otherwise be updated per reading;
+# * "observed" lives in the log-odds grid itself (-inf until first seen), and the grid is padded by the
+#   cone's reach, so that there is no second scattered write and no bounds check for sensors inside.
 # _nrt=False (a private numba option, as em_kernels._sweep): the kernel allocates nothing, and
 # without reference counting its tuples' arrays cost nothing per reading
 @numba.njit(cache=True, _nrt=False)

@@ -1,3 +1,2 @@
-"""Reports over finished maps: ``compare`` (map, evaluate, JSON), ``gates`` (--require
-expressions), ``figure`` (the paper-style comparison PNG).
-"""
+"""Reports over logs and finished maps: ``compare`` (map, evaluate, JSON), ``gates`` (--require
+expressions), ``figure`` and ``picture`` (PNGs), ``log_check`` (what a log holds before mapping)."""

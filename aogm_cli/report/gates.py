@@ -1,8 +1,6 @@
-"""Quality gates of ``aogm compare``: ``--require`` expressions over ``mode.metric`` names.
-
-A tiny parser (no eval): numbers, names, + - * /, parentheses and exactly one comparison;
-each gate is evaluated per log, and a failure reads with the numbers substituted.
-"""
+"""Quality gates of ``aogm compare``: ``--require`` expressions over ``mode.metric`` names, read by a
+tiny parser (no eval: numbers, names, + - * /, parentheses and exactly one comparison); each gate is
+evaluated per log, and a failure reads with the numbers substituted."""
 
 from __future__ import annotations
 

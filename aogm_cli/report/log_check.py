@@ -1,13 +1,6 @@
-"""What a log holds before it is mapped (``aogm check``, and the summary at the end of every import).
-
-Per sensor: the share of no-echo and invalid readings, a sensor that never gave a valid echo
-(disabled?) or whose readings never change (stuck), readings closer than its minimum range or
-inside the robot (not farther from the sensor than the sensor is from the robot's centre). Over
-the scans: poses that move or turn faster than a robot does between two scans, gaps in time
-(several median periods), time running backwards, poses that are not finite. And the grid a map of
-the log would need (cells and memory at a resolution). Each finding over its threshold is a
-warning; the thresholds are ``CheckLimits``.
-"""
+"""What a log holds before it is mapped (``aogm check``, and the summary at the end of every import):
+per-sensor shares and findings, time and pose findings over the scans, and the grid and memory a map
+of it would need; each finding over its threshold (``CheckLimits``) is a warning."""
 
 from __future__ import annotations
 
@@ -20,6 +13,11 @@ from aogm_cli.core.budget import DEFAULT_MAX_MEMORY, format_bytes
 from aogm_cli.core.log import sensor_names
 from aogm_cli.mapping.params import MapParams
 
+# Per sensor: the share of no-echo and invalid readings, a sensor that never gave a valid echo
+# (disabled?) or whose readings never change (stuck), readings closer than its minimum range or inside
+# the robot (not farther from the sensor than the sensor is from the robot's centre). Over the scans:
+# poses that move or turn faster than a robot does between two scans, gaps in time (several median
+# periods), time running backwards, poses that are not finite.
 INSIDE_TOLERANCE = 1e-3  # m: a reading this little beyond its sensor's distance from the centre is still inside
 STUCK_MIN_READINGS = 10  # valid readings before a sensor that never changes is called stuck
 MOVED = (0.1, 0.1)  # m, rad: a robot that moved less over the whole log may well read the same

@@ -1,10 +1,6 @@
-"""Pictures (PNG, matplotlib Agg): a log's truth and trajectory, and a map's probabilities.
-
-Free is white, occupied black, grey levels between; unobserved cells are drawn in a pale
-blue so that unknown never looks like p = 0.5; clusters are outlined in orange; axes in metres.
-A world's checks are drawn green (passable) or red (blocked); where a planner drives in a map
-is tinted green, and red where it leaks past what the robot can reach in truth.
-"""
+"""Pictures (PNG, matplotlib Agg): a log's truth and trajectory, and a map's probabilities (free white,
+occupied black, unobserved pale blue so that unknown never looks like p = 0.5, clusters outlined in
+orange; checks green or red; where a planner drives tinted green, red where it leaks)."""
 
 from __future__ import annotations
 

@@ -1,34 +1,6 @@
-"""Precomputed cone templates: which grid cells a sonar cone covers, in increasing range.
-
-Shared by every mapper: the standard mapper walks a template to apply the inverse model, the
-EM mapper walks it to find the obstacles of Thrun's forward model in range order.
-
-Quantisation (documented choices)
----------------------------------
-* The sensor is snapped to the centre of the cell that contains it. A template lists cells
-  as (drow, dcol) offsets from that cell, with the range and bearing of each offset cell's
-  centre seen from the sensor cell's centre. The position error is at most res/sqrt(2).
-* Headings are quantised into ``n_bins`` bins; bin k is centred on yaw k * 2 pi / n_bins. A
-  cell is in bin k's cone when |bearing offset from the bin's axis| <= beam_width / 2 and its
-  range <= reach (= max_range + margin). The sensor's own cell (range 0) is always included.
-* ``heading_bins_for`` picks n_bins so that the worst heading error (pi / n_bins) moves a
-  point at the reach sideways by at most a quarter of a cell: n_bins >= 4 pi reach / res,
-  rounded up to a multiple of 8 (at least 64). For a 5 m sonar on a 0.05 m grid that is
-  1264 bins (0.14 degrees).
-* Only the bins of the first octant (headings 0..45 degrees, bins 0..n_bins/8) are stored.
-  Every other bin is one of the eight symmetries of the square lattice (quarter turns and
-  mirrors) applied to a stored bin: ``transform[k] = (a, b, c, d)`` maps a stored offset
-  (dc, dr) to dcol = a dc + b dr, drow = c dc + d dr. Ranges are unchanged and bearings keep
-  or flip sign (mirrors), so range order is preserved. This keeps the templates 8x smaller
-  (about 430,000 entries, 10 MB, for a 5 m, 30 degree sonar at 0.05 m instead of 3.4 million).
-* ``reading_geometry`` also gives each reading's axis offset, the sensor's offset from its
-  cell's centre along the beam: a mapper can compare a reading z with template ranges at
-  z + offset, which removes the along-axis part of the snapping error.
-
-For other mappers: ``sensor_cells`` places readings; ``ConeTemplates.reading_cells`` (Python)
-and ``cone_cells`` (compiled) list a reading's grid cells in increasing range up to a given
-range, clipped to the grid; ``range_search`` finds where a range falls in a template.
-"""
+"""Precomputed cone templates: which grid cells a sonar cone covers, in increasing range. The standard
+mapper walks a template to apply the inverse model, EM finds its forward model's obstacles in range
+order; ``reading_geometry`` places readings, ``cone_cells`` lists a reading's cells, ``range_search``."""
 
 from __future__ import annotations
 
@@ -49,6 +21,25 @@ from aogm_cli.core.errors import InputError
 from aogm_cli.core.frames import sensor_poses
 from aogm_cli.core.grid import GridSpec
 
+# Quantisation (documented choices):
+# * The sensor is snapped to the centre of the cell that contains it. A template lists cells as
+#   (drow, dcol) offsets from that cell, with the range and bearing of each offset cell's centre seen
+#   from the sensor cell's centre. The position error is at most res/sqrt(2).
+# * Headings are quantised into ``n_bins`` bins; bin k is centred on yaw k * 2 pi / n_bins. A cell is
+#   in bin k's cone when |bearing offset from the bin's axis| <= beam_width / 2 and its range <= reach
+#   (= max_range + margin). The sensor's own cell (range 0) is always included.
+# * ``heading_bins_for`` picks n_bins so that the worst heading error (pi / n_bins) moves a point at
+#   the reach sideways by at most a quarter of a cell: n_bins >= 4 pi reach / res, rounded up to a
+#   multiple of 8 (at least 64). For a 5 m sonar on a 0.05 m grid that is 1264 bins (0.14 degrees).
+# * Only the bins of the first octant (headings 0..45 degrees, bins 0..n_bins/8) are stored. Every
+#   other bin is one of the eight symmetries of the square lattice (quarter turns and mirrors) applied
+#   to a stored bin: ``transform[k] = (a, b, c, d)`` maps a stored offset (dc, dr) to dcol = a dc + b dr,
+#   drow = c dc + d dr. Ranges are unchanged and bearings keep or flip sign (mirrors), so range order is
+#   preserved. This keeps the templates 8x smaller (about 430,000 entries, 10 MB, for a 5 m, 30 degree
+#   sonar at 0.05 m instead of 3.4 million).
+# * ``reading_geometry`` also gives each reading's axis offset, the sensor's offset from its cell's
+#   centre along the beam: a mapper can compare a reading z with template ranges at z + offset, which
+#   removes the along-axis part of the snapping error.
 TWO_PI = 2.0 * math.pi
 _TOL = 1e-9  # slack of the inclusion tests, so that cells exactly on the cone's edge are kept
 
@@ -114,7 +105,7 @@ class ConeTemplates:
     then offset). ``dcol``, ``drow`` are the offsets in the stored bin's frame, ``ranges`` (m)
     and ``bearings`` (rad, signed, from the stored bin's axis) describe each entry.
     ``base_bin[k]`` is the stored bin that heading bin k uses and ``transform[k]`` the lattice
-    symmetry applied to it (see the module docstring). ``extent`` bounds |drow| and |dcol|.
+    symmetry applied to it (see the comment at the top). ``extent`` bounds |drow| and |dcol|.
     ``range_index[b, q]`` counts stored bin b's entries with range < q * resolution, so that
     ``range_search`` finds a range's place with a table look-up and a short search.
     """

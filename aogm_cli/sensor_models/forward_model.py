@@ -1,22 +1,6 @@
-"""Thrun's (2003) forward sensor model: the likelihood of a sonar reading given a binary map.
-
-A reading has one cause: random (uniform 1/z_max), a max-range dropout (optional point mass),
-no obstacle detected (max-range reading), or the k-th obstacle of its cone in range order,
-detected with probability p_hit each. EM's kernels (``mapping.em_kernels``) share this
-module's Gaussian (``gaussian_at``) and cone end (``cone_entries``); ``build_forward_index``
-and ``log_likelihoods`` evaluate the model directly, the reference EM's tests compare with.
-
-For reading t with obstacles d_1 <= ... <= d_K in its cone, q = 1 - p_hit and
-g(d) = N(z; d, sigma^2), G0 = N(z; z_max, sigma^2):
-
-    p(z | m) = C + w * S,   C = p_rand / z_max + p_max * G0,   w = 1 - p_rand - p_max,
-    S = sum_k q^(k-1) p_hit g(d_k) + q^K G0.
-
-The Gaussian is truncated at ``window`` sigmas (g = 0 beyond; the mass left out is below
-exp(-window^2 / 2) of the peak), and so is a cone beyond z; a max-range reading keeps its
-whole cone up to z_max. Cells before a reading's window then change it only through the
-detection factor q, which EM scores in O(1) per reading.
-"""
+"""Thrun's (2003) forward sensor model: the likelihood of a sonar reading given a binary map
+(``build_forward_index`` and ``log_likelihoods``, the reference EM's tests compare with), and the pieces
+EM's kernels (``mapping.em_kernels``) share: its Gaussian (``gaussian_at``) and cone end (``cone_entries``)."""
 
 from __future__ import annotations
 
@@ -31,9 +15,21 @@ from aogm_cli.core.errors import InputError
 from aogm_cli.sensor_models.cone import cone_flat_cells, flat_offsets
 
 
+# A reading has one cause: random (uniform 1/z_max), a max-range dropout (optional point mass), no
+# obstacle detected (max-range reading), or the k-th obstacle of its cone in range order, detected with
+# probability p_hit each. For reading t with obstacles d_1 <= ... <= d_K in its cone, q = 1 - p_hit and
+# g(d) = N(z; d, sigma^2), G0 = N(z; z_max, sigma^2):
+#
+#     p(z | m) = C + w * S,   C = p_rand / z_max + p_max * G0,   w = 1 - p_rand - p_max,
+#     S = sum_k q^(k-1) p_hit g(d_k) + q^K G0.
+#
+# The Gaussian is truncated at ``window`` sigmas (g = 0 beyond; the mass left out is below
+# exp(-window^2 / 2) of the peak), and so is a cone beyond z; a max-range reading keeps its whole cone
+# up to z_max. Cells before a reading's window then change it only through the detection factor q,
+# which EM scores in O(1) per reading.
 @dataclass(frozen=True)
 class ForwardModelConfig:
-    """Parameters of the forward model; see the module docstring for their meaning."""
+    """Parameters of the forward model; see the comment above for their meaning."""
 
     # Defaults measured on the nine bundled worlds (seed 1; python bench/params_sweep.py em):
     # sigma 0.03 / 0.05 and p_hit 0.3 / 0.5 / 0.7 and p_max 0 / 0.1 / 0.2 were compared; the
@@ -340,8 +336,8 @@ def expectation_sums(tpl, flat, shape, readings, occupied, model, out):
     ``model`` is (p_rand, p_max, p_hit, sigma, window, z_max). For reading t with obstacles
     d_1 <= ... <= d_K in its cone (cells up to z + window sigma; up to z_max for a max-range
     reading), the causes' posteriors are e_rand = (p_rand / z_max) / p, e_dropout = p_max G0 / p,
-    e_k = w q^(k-1) p_hit g(d_k) / p and e_0 = w q^K G0 / p, with p = p(z_t | m) (module
-    docstring). Adds into ``out`` (E_SIZE,): readings, sum of log p, sum e_rand, sum e_dropout,
+    e_k = w q^(k-1) p_hit g(d_k) / p and e_0 = w q^K G0 / p, with p = p(z_t | m) (the comment
+    above ``ForwardModelConfig``). Adds into ``out`` (E_SIZE,): readings, sum of log p, sum e_rand, sum e_dropout,
     sum_k e_k (detections), sum_k k e_k + K e_0 (obstacles examined), sum_k e_k (z - d_k)^2,
     sum e_0 (no obstacle detected).
     """

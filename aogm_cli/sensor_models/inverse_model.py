@@ -1,40 +1,6 @@
-"""The sonar inverse model of standard mapping: its configuration and its value per cell.
-
-``InverseModelConfig`` holds every parameter (validated in one place, recorded in map files);
-``inverse_model`` is the model as a plain vectorised function, the reference that the compiled
-kernel of ``mapping.standard`` is tested against; ``inverse_update`` gives the constants the
-compiled kernels read, as the named tuple ``InverseUpdate``.
-
-The model (Elfes 1989; Moravec 1988; Probabilistic Robotics table 9.2)
------------------------------------------------------------------------
-For a reading z and a cell at range d and bearing theta from the beam axis (|theta| <= beta/2,
-beta the beam width), the inverse model's log-odds is
-
-* occupied arc, z - alpha/2 <= d <= min(z + alpha/2, max_range): l0 + w_occ * (l_occ - l0)
-* free region, min_range <= d < z - alpha/2:                     l0 + w_free * (l_free - l0)
-* anything else (beyond the arc, outside the cone, nearer than min_range): l0 (no evidence)
-
-with weights in [0, 1]:
-
-* model "elfes":    w_free = E_r(d) E_a(theta),  w_occ = E_a(theta), where
-  E_a(theta) = 1 - (2 theta / beta)^2 and E_r(d) = 1 - ((d - Rmin) / (z - alpha/2 - Rmin))^2,
-  Rmin the sensor's min_range. Free evidence is strongest next to the sensor and fades to
-  nothing at the arc; both kinds fade to nothing at the cone's edge.
-* model "constant": w_free = w_occ = 1 (l_free inside, l_occ on the arc).
-
-A max-range reading (z = +inf, or any z >= max_range: the sensor saw no echo within its
-range) is evidence of free space only: the free region runs to max_range inclusive, with
-z - alpha/2 replaced by max_range in E_r. A NaN or negative reading carries no information.
-The sensor's blind zone (d < min_range) gets no evidence in either model.
-
-alpha, the obstacle thickness (Elfes' range band 2 epsilon), defaults to 0.05 m: the
-Polaroid ranging module is accurate to about 1% of the reading, +/-2.5 cm at a typical 2.5 m,
-and 0.05 m is one cell of the default grid. Measured on the bundled worlds (seed 1, the
-command python bench/params_sweep.py standard), 0.1 m arcs thicken every wall by a cell towards the robot and
-cost 3-5 points of accuracy; arcs thinner than a cell's diagonal can leave single-cell holes
-along diagonal walls, which the many overlapping sonar cones fill. On coarser grids choose
-alpha of about the resolution.
-"""
+"""The sonar inverse model of standard mapping (Elfes 1989; Moravec 1988): ``InverseModelConfig`` (every
+parameter, validated once, recorded in map files), ``inverse_model`` (the model as a vectorised function,
+the reference the compiled kernels are tested against) and ``inverse_update`` (the kernels' constants)."""
 
 from __future__ import annotations
 
@@ -64,6 +30,12 @@ class InverseModelConfig:
     l0: float = 0.0
     clamp_min: float = -2.0
     clamp_max: float = 3.5
+    # alpha, the obstacle thickness (Elfes' range band 2 epsilon): the Polaroid ranging module is
+    # accurate to about 1% of the reading, +/-2.5 cm at a typical 2.5 m, and 0.05 m is one cell of the
+    # default grid. Thicker arcs (0.1 m) thicken every wall by a cell towards the robot and cost
+    # accuracy (python bench/params_sweep.py standard); arcs thinner than a cell's diagonal can leave
+    # single-cell holes along diagonal walls, which the many overlapping sonar cones fill. On coarser
+    # grids choose alpha of about the resolution.
     alpha: float = 0.05
 
     def validate(self) -> InverseModelConfig:
@@ -121,6 +93,22 @@ def range_profile(d, z_free, min_range: float):
     return np.where((d >= min_range) & (d < z_free) & (span > 0), e, 0.0)
 
 
+# The model (Elfes 1989; Moravec 1988; Probabilistic Robotics table 9.2). For a reading z and a cell
+# at range d and bearing theta from the beam axis (|theta| <= beta/2, beta the beam width), the inverse
+# model's log-odds is
+# * occupied arc, z - alpha/2 <= d <= min(z + alpha/2, max_range): l0 + w_occ * (l_occ - l0)
+# * free region, min_range <= d < z - alpha/2:                     l0 + w_free * (l_free - l0)
+# * anything else (beyond the arc, outside the cone, nearer than min_range): l0 (no evidence)
+# with weights in [0, 1]:
+# * model "elfes": w_free = E_r(d) E_a(theta), w_occ = E_a(theta), where E_a(theta) = 1 - (2 theta /
+#   beta)^2 and E_r(d) = 1 - ((d - Rmin) / (z - alpha/2 - Rmin))^2, Rmin the sensor's min_range. Free
+#   evidence is strongest next to the sensor and fades to nothing at the arc; both kinds fade to
+#   nothing at the cone's edge.
+# * model "constant": w_free = w_occ = 1 (l_free inside, l_occ on the arc).
+# A max-range reading (z = +inf, or any z >= max_range: the sensor saw no echo within its range) is
+# evidence of free space only: the free region runs to max_range inclusive, with z - alpha/2 replaced
+# by max_range in E_r. A NaN or negative reading carries no information. The sensor's blind zone
+# (d < min_range) gets no evidence in either model.
 def inverse_model(d, theta, z, config: InverseModelConfig, *, beam_width: float, min_range: float, max_range: float):
     """Log-odds l(x | z) of a cell at range ``d`` (m) and bearing ``theta`` (rad, from the beam
     axis) given reading ``z`` (m; +inf = max-range reading, NaN = invalid). Broadcasts.

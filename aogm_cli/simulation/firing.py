@@ -1,11 +1,5 @@
-"""The ring's firing schedule (world key ``errors.firing``): which firing of each sonar a scan
-holds, how long before the scan it was taken, and which earlier scan already holds it.
-
-Sonars fire in a fixed cycle, slot after slot ``interval`` seconds apart, from time 0 on (and
-before: the robot stands at its first pose until the log starts); a scan at time t holds each
-sonar's latest firing at or before t, as a robot's driver reports the newest reading of every
-sonar with the robot's current pose.
-"""
+"""The ring's firing schedule (world key ``errors.firing``): which firing of each sonar a scan holds,
+how long before the scan it was taken, and which earlier scan already holds it."""
 
 from __future__ import annotations
 
@@ -23,6 +17,10 @@ def slots(firing: Firing, n_sensors: int) -> np.ndarray:
     return np.asarray(firing.slots or range(n_sensors), dtype=np.int64)
 
 
+# Sonars fire in a fixed cycle, slot after slot ``interval`` seconds apart, from time 0 on (and
+# before: the robot stands at its first pose until the log starts); a scan at time t holds each
+# sonar's latest firing at or before t, as a robot's driver reports the newest reading of every
+# sonar with the robot's current pose.
 def schedule(firing: Firing, time: np.ndarray, n_sensors: int) -> tuple[np.ndarray, np.ndarray]:
     """Ages (T, S) and sources (T, S) of the readings of scans at ``time`` (T,).
 

@@ -1,11 +1,5 @@
-"""Odometry drift: the pose estimate a robot's dead reckoning logs while it drives the true path.
-
-The true relative motion between consecutive scans is split into (rot1, trans, rot2) and each
-part drawn with Gaussian error, as in the odometry motion model of Probabilistic Robotics
-(Thrun, Burgard & Fox 2005, table 5.6), with UMBmark's systematic errors (Borenstein & Feng
-1996: unequal wheel diameters, a wrong wheelbase) as a bias on each turn, then integrated from
-the true first pose.
-"""
+"""Odometry drift: the pose estimate a robot's dead reckoning logs while it drives the true path
+(``dead_reckoning``)."""
 
 from __future__ import annotations
 
@@ -39,6 +33,10 @@ def relative_motion(pose: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarra
     return rot1, trans, rot2
 
 
+# The true relative motion between consecutive scans is split into (rot1, trans, rot2) and each part
+# drawn with Gaussian error, as in the odometry motion model of Probabilistic Robotics (Thrun, Burgard
+# & Fox 2005, table 5.6), with UMBmark's systematic errors (Borenstein & Feng 1996: unequal wheel
+# diameters, a wrong wheelbase) as a bias on each turn, then integrated from the true first pose.
 def dead_reckoning(pose: np.ndarray, odometry: Odometry, rng: np.random.Generator) -> np.ndarray:
     """The drifting pose estimate (T, 3) of a robot driving the true ``pose`` (T, 3).
 

@@ -1,12 +1,6 @@
-"""Ray casting against a compiled ``Scene``: the first surface a ray hits, and how it hits it.
-
-Compiled kernels only: exact ray-segment and ray-circle intersection over the scene's bucket
-grid (a grid traversal that stops at the first bucket holding a hit), and an Amanatides-Woo
-traversal of the floor-plan bitmap. Both give the distance, the surface normal and threshold.
-The kernels are inlined into their one entry point, ``sonar.echo_block`` (through
-``trace_sub_ray``); none is called from Python, so none is compiled on its own (the tests, too,
-go through ``echo_block``).
-"""
+"""Ray casting against a compiled ``Scene``: the first surface a ray hits, and how it hits it (distance,
+surface normal, threshold): ray-segment and ray-circle intersection over the scene's bucket grid, and an
+Amanatides-Woo traversal of the floor-plan bitmap; compiled kernels only."""
 
 from __future__ import annotations
 
@@ -41,6 +35,8 @@ Geometry = namedtuple(
     ],
 )
 
+# The kernels are inlined into their one entry point, ``sonar.echo_block`` (through ``trace_sub_ray``);
+# none is called from Python, so none is compiled on its own (the tests, too, go through ``echo_block``).
 # Performance: the kernels are inlined into their callers at numba IR level and compiled
 # without the reference-counting runtime (_nrt=False; they never allocate). Passing the
 # Geometry tuple through ordinary calls, and refcounting its arrays, cost more than the

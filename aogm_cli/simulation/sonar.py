@@ -1,11 +1,6 @@
-"""The sonar simulator: a world in, a log with its truth out (``simulate``).
-
-Each reading casts a fan of sub-rays across the cone (and its side lobes, when they are on)
-from the robot's pose when its sonar fires; the nearest echo strong enough to be detected
-(after specular bounces) is the reading, then crosstalk, random readings, Gaussian noise and
-the range limits apply. The cause and the noise-free range of the nearest surface of
-every reading are kept as truth; the logged poses are the odometry's (``simulation.odometry``).
-"""
+"""The sonar simulator: a world in, a log with its truth out (``simulate``): a fan of sub-rays per
+reading, the nearest echo strong enough to be detected after specular bounces, then a real robot's
+errors; the truth keeps every reading's cause and noise-free range, the log the odometry's poses."""
 
 from __future__ import annotations
 
@@ -180,6 +175,11 @@ def side_lobe_offsets(lobes: SideLobes) -> np.ndarray:
     return np.concatenate([one, -one])
 
 
+# Each reading casts a fan of sub-rays across the cone (and its side lobes, when they are on) from
+# the robot's pose when its sonar fires; the nearest echo strong enough to be detected (after specular
+# bounces) is the reading, then crosstalk, random readings, Gaussian noise and the range limits apply.
+# The cause and the noise-free range of the nearest surface of every reading are kept as truth; the
+# logged poses are the odometry's (``simulation.odometry``).
 def simulate(world: World, seed: int, progress: Callable[[int], None] | None = None) -> Log:
     """Simulate the world's sonar along its trajectory: the log, with its truth.
 

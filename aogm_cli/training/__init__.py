@@ -1,4 +1,3 @@
 """Training the cluster detector: labels from simulation truth (``labels``), the MLP fit with
-scikit-learn (``fit``) and its configuration (``config``). May import mapping; mapping never
-imports training.
-"""
+scikit-learn (``fit``) and its configuration (``config``). Runs no mapper (the standard map its
+labels need is passed in); mapping never imports training."""

@@ -1,8 +1,5 @@
-"""How the cluster detector is trained: the network's size, its fitting and the flag threshold's rule.
-
-Kept apart from ``train`` (which loads the logs and scikit-learn) so that the command line
-reads its defaults without importing either.
-"""
+"""How the cluster detector is trained: the network's size, its fitting and the flag threshold's rule;
+apart from ``fit`` (which loads scikit-learn) so that the command line reads its defaults cheaply."""
 
 from __future__ import annotations
 

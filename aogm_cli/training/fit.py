@@ -1,8 +1,6 @@
 """Training the cluster detector: simulated logs -> features and labels -> a small MLP -> a Detector.
-
-The only module that imports scikit-learn (``MLPClassifier``); inference lives in ``network``.
-Validation is by world: whole logs are held out, never random readings.
-"""
+The only module that imports scikit-learn (``MLPClassifier``; inference lives in ``detector.network``);
+validation is by world: whole logs are held out, never random readings."""
 
 from __future__ import annotations
 

@@ -1,30 +1,6 @@
-"""Training labels from simulation truth: y = 1 where the region a reading sweeps is erroneous or cluttered.
-
-A reading (scan t, sonar j) gets y = 1 when (a) the reading is wrong, (b) its cone
-straddles a depth edge of the truth map near the robot, or (c) the standard map of the same
-log disagrees with the truth on the reading's occupied arc. Pure functions on arrays.
-
-(a) erroneous: its truth cause is random (2) or specular/multipath (3); or it has no echo (1)
-    although a surface lies in the cone (finite ideal range); or its range differs from the
-    ideal range by more than ``range_tolerance`` (a finite range where the ideal is +inf counts).
-    A no-echo reading with nothing in range is correct and is not flagged.
-(b) depth edge: ``sub_rays`` rays evenly across the cone are walked through the truth
-    occupancy grid (samples every half cell out to max_range); two adjacent rays whose first
-    hits differ by more than ``edge_factor`` x the nearer + ``edge_margin``, with the nearer hit
-    within ``edge_reach``, mean the cone covers an obstacle's side and the free space beside it:
-    a door frame, a gap between objects, an opening narrower than the cone's arc. There the
-    standard inverse model smears the near hit across the whole arc and closes openings.
-    Smooth walls seen obliquely change depth gradually from ray to ray and are not edges.
-(c) standard map wrong: the log's own standard log-odds map (``mapper.standard_pass`` with the
-    default parameters, ``resolve_params()``) is compared with the truth grid; a cell is wrong
-    when p > 0.5 on a truth-free cell or p < 0.5 on a truth-occupied one (observed cells only).
-    The reading's occupied arc is the cells of its cone (the standard mapper's templates) whose
-    range lies within alpha/2 of the reading, in template ranges as the standard mapper uses
-    them (``mapper.readings_of``). y = 1 when at least ``arc_wrong_min`` arc cells are wrong:
-    these are the readings whose arcs draw walls too thick towards the robot (oblique cones),
-    close openings or miss surfaces -- where EM should decide instead. ``arc_wrong_min = 0``
-    turns the rule off. Max-range and invalid readings have no arc.
-"""
+"""Training labels from simulation truth: y = 1 where the region a reading sweeps is erroneous or
+cluttered, by three rules (the comment below): (a) a wrong reading, (b) a cone across a depth edge of
+the truth, (c) an occupied arc where the log's standard map is wrong. Pure functions on arrays."""
 
 from __future__ import annotations
 
@@ -47,9 +23,29 @@ SCANS_PER_BLOCK = 16  # scans per block of sub-ray sampling (bounds the memory o
 StandardMapOf = Callable[[Log], tuple[np.ndarray, np.ndarray]]
 
 
+# A reading (scan t, sonar j) gets y = 1 when
+# (a) erroneous: its truth cause is random (2) or specular/multipath (3); or it has no echo (1)
+#     although a surface lies in the cone (finite ideal range); or its range differs from the ideal
+#     range by more than ``range_tolerance`` (a finite range where the ideal is +inf counts). A no-echo
+#     reading with nothing in range is correct and is not flagged.
+# (b) depth edge: ``sub_rays`` rays evenly across the cone are walked through the truth occupancy grid
+#     (samples every half cell out to max_range); two adjacent rays whose first hits differ by more
+#     than ``edge_factor`` x the nearer + ``edge_margin``, with the nearer hit within ``edge_reach``,
+#     mean the cone covers an obstacle's side and the free space beside it: a door frame, a gap between
+#     objects, an opening narrower than the cone's arc. There the standard inverse model smears the
+#     near hit across the whole arc and closes openings. Smooth walls seen obliquely change depth
+#     gradually from ray to ray and are not edges.
+# (c) standard map wrong: the log's own standard map (default parameters, truth grid: ``StandardMapOf``,
+#     passed in) is compared with the truth grid; a cell is wrong when p > 0.5 on a truth-free cell or
+#     p < 0.5 on a truth-occupied one (observed cells only). The reading's occupied arc is the cells of
+#     its cone (the standard mapper's templates) whose range lies within alpha/2 of the reading, in
+#     template ranges as the standard mapper uses them (``readings.readings_of``). y = 1 when at least
+#     ``arc_wrong_min`` arc cells are wrong: the readings whose arcs draw walls too thick towards the
+#     robot (oblique cones), close openings or miss surfaces -- where EM should decide instead.
+#     ``arc_wrong_min = 0`` turns the rule off. Max-range and invalid readings have no arc.
 @dataclass(frozen=True)
 class LabelDefinition:
-    """The parameters of the label rule above; written as JSON to the detector file (``labels``)."""
+    """The parameters of the label rules above; written as JSON to the detector file (``labels``)."""
 
     range_tolerance: float = 0.3  # m: |range - ideal_range| above this is an erroneous reading
     sub_rays: int = 31  # rays across the cone for the depth-edge test (1 degree apart for 30 degrees)
@@ -95,7 +91,7 @@ class LabelDefinition:
 
 
 def erroneous(ranges: np.ndarray, cause: np.ndarray, ideal_range: np.ndarray, tolerance: float) -> np.ndarray:
-    """(T, S) bool: readings that are wrong (rule (a) of the module docstring)."""
+    """(T, S) bool: readings that are wrong (rule (a) of the comment above ``LabelDefinition``)."""
     r = np.asarray(ranges, dtype=np.float64)
     ideal = np.asarray(ideal_range, dtype=np.float64)
     cause = np.asarray(cause)
@@ -178,7 +174,7 @@ def standard_map_wrong_arcs(log: Log, min_wrong: int, standard_map_of: StandardM
 
 def labels(log: Log, definition: LabelDefinition | None = None, file: str | None = None,
            standard_map_of: StandardMapOf | None = None) -> np.ndarray:
-    """(T, S) bool labels y of a simulated log (rules (a), (b) or (c) of the module docstring);
+    """(T, S) bool labels y of a simulated log (rules (a), (b) or (c) above ``LabelDefinition``);
     rule (c) (``arc_wrong_min`` > 0) needs ``standard_map_of``."""
     definition = definition or LabelDefinition()
     if log.truth is None:

@@ -1,7 +1,6 @@
-"""Which logs a detector was trained on: per training and validation log its file, its world,
-whether that world is a realistic variant (an ``errors:`` section), its seed and its scan count
-(the detector file's ``training_logs`` attribute).
-"""
+"""Which logs a detector was trained on (its file's ``training_logs`` attribute): per training and
+validation log its file, world, whether that world is a realistic variant (an ``errors:`` section),
+its seed and its scan count."""
 
 from __future__ import annotations
 

@@ -1,5 +1,3 @@
-"""The world a simulated robot drives through: typed configuration (``config``), the YAML loader
-that validates it (``loader``), its solids (``solids``), the ray-castable scene (``scene``), the
-truth raster (``truth``) and the path (``trajectory``); ``office`` generates a large office floor
-as a world file.
-"""
+"""The world a simulated robot drives through: typed configuration (``config``) validated by its YAML
+``loader``, its ``solids``, the ray-castable ``scene``, the ``truth`` raster and the ``trajectory``;
+``office`` generates a large office floor; ``simulation_cost`` what simulating a world would cost."""

@@ -1,9 +1,6 @@
-"""The world as typed, frozen configuration: geometry, surfaces, robot, trajectory, sonar, the
-errors of a real robot, checks.
-
-These dataclasses are what ``world.loader`` produces from YAML after validation; nothing
-else in the package reads world YAML. Angles are stored in radians, lengths in metres.
-"""
+"""The world as typed, frozen configuration (geometry, surfaces, robot, trajectory, sonar, a real
+robot's errors, checks), as ``world.loader`` produces it from YAML after validation: nothing else reads
+world YAML. Angles are in radians, lengths in metres."""
 
 from __future__ import annotations
 

@@ -1,8 +1,6 @@
-"""Reads a world YAML file into a validated ``World``: the one place world input is checked.
-
-Every error names the file and the key path (``walls[2].thickness``), what was found and
-what was expected. The format is documented in ``worlds/README.md``.
-"""
+"""Reads a world YAML file into a validated ``World``: the one place world input is checked. Every
+error names the file and the key path (``walls[2].thickness``), what was found and what was expected;
+the format is documented in ``worlds/README.md``."""
 
 from __future__ import annotations
 

@@ -1,19 +1,6 @@
-"""A generated office floor for benchmarks at building scale (``office_spec``, ``office_yaml``).
-
-A 60 m x 40 m floor (1220 x 820 truth cells at 0.05 m with its margin): a 2 m corridor ring
-with 40 rooms around it, 28 in the outer bands (four corner rooms entered from a neighbour
-through a connecting door) and 12 deep rooms in the core. Every room facing the corridor has a
-door 0.8-1.6 m wide; about a third of the fronts are glass; furniture (desks, tables, metal
-cabinets, chairs, bins) is placed clear of the door and of the robot's way in. The robot does
-laps of the ring, alternately counter-clockwise and clockwise and a little off the centre line,
-with detours through the doors into the rooms (every room on the first lap, about half of them
-on later laps), until it has made exactly ``scans`` scans.
-
-Everything comes from ``seed``: the floor from one stream, the laps from another, so the same
-seed gives the same floor at any number of scans, and a shorter run's path is the start of a
-longer one's. The result is the raw mapping of a world file (``worlds/README.md``);
-``office_yaml`` writes it as YAML and ``world.loader.parse_world`` reads it back.
-"""
+"""A generated office floor for benchmarks at building scale (``office_spec``, ``office_yaml``): a
+corridor ring with 40 rooms, doors, glass fronts and furniture, driven in laps with detours into the
+rooms; everything from ``seed``, so a shorter run's path is the start of a longer one's."""
 
 from __future__ import annotations
 
@@ -23,6 +10,16 @@ from dataclasses import dataclass
 
 import yaml
 
+# A 60 m x 40 m floor (1220 x 820 truth cells at 0.05 m with its margin): a 2 m corridor ring with
+# 40 rooms around it, 28 in the outer bands (four corner rooms entered from a neighbour through a
+# connecting door) and 12 deep rooms in the core. Every room facing the corridor has a door 0.8-1.6 m
+# wide; about a third of the fronts are glass; furniture (desks, tables, metal cabinets, chairs, bins)
+# is placed clear of the door and of the robot's way in. The robot does laps of the ring, alternately
+# counter-clockwise and clockwise and a little off the centre line, with detours through the doors
+# into the rooms (every room on the first lap, about half of them on later laps), until it has made
+# exactly ``scans`` scans. The floor comes from one random stream, the laps from another, so the same
+# seed gives the same floor at any number of scans. The result is the raw mapping of a world file
+# (``worlds/README.md``); ``office_yaml`` writes it as YAML and ``world.loader.parse_world`` reads it.
 WIDTH, HEIGHT = 60.0, 40.0
 BAND = 6.0  # depth of the outer rooms
 CORRIDOR = 2.0

@@ -1,8 +1,6 @@
-"""The ray-castable scene: the world's solids compiled into flat arrays for ``simulation.raycast``.
-
-Owns ``Scene`` (edge segments, circles, a floor-plan bitmap and a uniform bucket grid in CSR
-form) and ``build_scene``, with the kernels that sort segments and circles into buckets.
-"""
+"""The ray-castable scene: the world's solids compiled into flat arrays for ``simulation.raycast``:
+``Scene`` (edge segments, circles, a floor-plan bitmap and a uniform bucket grid in CSR form) and
+``build_scene``, with the kernels that sort segments and circles into buckets."""
 
 from __future__ import annotations
 

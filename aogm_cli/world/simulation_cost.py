@@ -1,6 +1,5 @@
-"""What simulating a world would cost, from its configuration alone (no pose is sampled), so
-that ``core.budget.check`` can refuse an absurd world before the simulator allocates anything.
-"""
+"""What simulating a world would cost, from its configuration alone (no pose is sampled), so that
+``core.budget.check`` can refuse an absurd world before the simulator allocates anything."""
 
 from __future__ import annotations
 

@@ -1,8 +1,6 @@
-"""The world's solids in world coordinates: walls cut at their openings into rectangles, boxes,
-polygons and circles, and the centre lines of the ones thinner than a truth cell's diagonal.
-
-Both the ray-castable scene (``world.scene``) and the truth raster (``world.truth``) start here.
-"""
+"""The world's solids in world coordinates: walls cut at their openings into rectangles, boxes, polygons
+and circles, and the centre lines of those thinner than a truth cell's diagonal. Both the ray-castable
+scene (``world.scene``) and the truth raster (``world.truth``) start here."""
 
 from __future__ import annotations
 

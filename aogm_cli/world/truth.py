@@ -1,8 +1,6 @@
-"""The truth raster: which cells of the truth grid the world's solids occupy.
-
-``truth_occupancy`` fills polygons and circles by their cell centres, marks the centre lines of
-thin solids cell by cell and adds the floor plan's occupied pixels.
-"""
+"""The truth raster: which cells of the truth grid the world's solids occupy (``truth_occupancy``:
+polygons and circles by their cell centres, the centre lines of thin solids cell by cell, and the
+floor plan's occupied pixels)."""
 
 from __future__ import annotations
 
