@@ -1,7 +1,6 @@
-"""``aogm import carmen``, ``aogm import text`` and ``aogm import rosbag``: real range logs -> an aogm log (HDF5).
-
-Thin: the options become ``CarmenOptions`` / ``TextOptions`` / ``RosbagOptions``; parsing lives in
-``aogm_cli.io.importers``.
+"""``aogm import carmen``, ``text`` and ``rosbag``: real range logs -> an aogm log (HDF5). Thin: the
+options (the sensor's from ``cli.options.sensor_options``) become ``CarmenOptions`` /
+``TextOptions`` / ``RosbagOptions``; parsing lives in ``aogm_cli.io.importers``.
 """
 
 from __future__ import annotations

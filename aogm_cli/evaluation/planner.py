@@ -1,7 +1,6 @@
-"""What a planner sees in a map: where a disk robot starting at the trajectory can drive.
-
-``leak``, ``block`` and ``surface_recall`` against a simulated truth; ``walls_kept`` and
-``leak_vs_standard`` against the standard map of the same log and grid (CONTRACT.md, Metrics).
+"""What a planner sees in a map, where a disk robot starting at the trajectory can drive: ``leak``,
+``block`` and ``surface_recall`` against a simulated truth; ``walls_kept`` and ``leak_vs_standard``
+against the standard map of the same log and grid (CONTRACT.md, Metrics).
 """
 
 from __future__ import annotations

@@ -1,7 +1,6 @@
 """The comparison figure of ``aogm compare``, laid out like the paper's: one row per log, panels
-truth | standard | em | adaptive (clusters outlined), each map titled with its accuracy, leak and
-runtime and tinted where a planner reaches in it (``evaluation.planner``), with what it reaches
-beyond the truth's reach in red.
+truth | standard | em | adaptive (clusters outlined), each map titled with accuracy, leak and runtime,
+tinted where a planner reaches in it (``evaluation.planner``), red beyond the truth's reach.
 """
 
 from __future__ import annotations
