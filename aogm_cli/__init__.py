@@ -5,8 +5,8 @@ flow of data: world -> simulation -> log -> mapping -> map -> evaluation -> repo
 __version__ = "0.1.0"
 
 # aogm from Python (``aogm_cli.api``): load_log, save_log, load_map, save_map, simulate, map_log,
-# evaluate, check. Loaded on first use, so that ``import aogm_cli`` (the CLI's start-up) stays cheap.
-_API = ("bundled_world", "check", "evaluate", "load_log", "load_map", "map_log", "map_params", "save_log",
+# evaluate, check, info. Loaded on first use, so that ``import aogm_cli`` (the CLI's start-up) stays cheap.
+_API = ("bundled_world", "check", "evaluate", "info", "load_log", "load_map", "map_log", "map_params", "save_log",
         "save_map", "simulate")
 __all__ = ["__version__", *_API]
 

@@ -1,5 +1,5 @@
 """aogm from Python, re-exported at the package's top level and loaded on first use: load and save logs
-and maps, simulate, map in any mode, evaluate, check, through the same library functions as the
+and maps, simulate, map in any mode, evaluate, check, info, through the same library functions as the
 commands. Results are numpy arrays or aogm's domain types; bad input raises ``InputError``."""
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ if TYPE_CHECKING:
     from aogm_cli.core.occupancy_map import OccupancyMap
     from aogm_cli.report.log_check import LogCheck
 
-__all__ = ["bundled_world", "check", "evaluate", "load_log", "load_map", "map_log", "map_params", "save_log", "save_map",
-           "simulate"]
+__all__ = ["bundled_world", "check", "evaluate", "info", "load_log", "load_map", "map_log", "map_params", "save_log",
+           "save_map", "simulate"]
 
 
 def bundled_world(name: str) -> Path:
@@ -105,6 +105,26 @@ def save_map(m: OccupancyMap, path: str | Path) -> None:
     from aogm_cli.io.mapfile import write_map_file
 
     write_map_file(path, m)
+
+
+def info(path: str | Path) -> dict:
+    """What the log, map or detector file at ``path`` holds and what made it, as ``aogm info
+    --json`` prints it (``io.summary.describe``; numpy values as read): ``kind`` ("log", "map" or
+    "detector"), the kind's fields (shape, grid, parameters, stats, ...) and ``provenance``
+    (None when none is recorded). A missing, damaged or non-aogm file: InputError.
+
+    Examples:
+
+    >>> import tempfile
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     save_log(simulate(bundled_world("corridor_door"), seed=1), f"{d}/door.h5")
+    ...     summary = info(f"{d}/door.h5")
+    >>> summary["kind"], summary["seed"], summary["checks"][0]
+    ('log', 1, 'door_passable')
+    """
+    from aogm_cli.io.summary import describe
+
+    return describe(str(path))
 
 
 def simulate(world_path: str | Path, seed: int = 0) -> Log:

@@ -251,13 +251,14 @@ def test_results_are_small_records_unless_a_figure_or_maps_dir_needs_the_maps(lo
     """Each task maps and evaluates where it runs; its map comes back only when asked for."""
     from aogm_cli.mapping.params import resolve_params
     from aogm_cli.report import compare as lib
+    from aogm_cli.report.scoring import CompareJob
 
     entries = lib.collect_inputs([str(logs[0])])
-    params = resolve_params(None, {"calibration": {"enabled": False}})
-    small, failed = lib.run_comparison(entries, ("standard", "em"), params, keep_maps=False)
-    full, _ = lib.run_comparison(entries, ("standard", "em"), params, keep_maps=True)
+    job = CompareJob(resolve_params(None, {"calibration": {"enabled": False}}))
+    small, failed = lib.run_comparison(entries, ("standard", "em"), job, keep_maps=False)
+    full, _ = lib.run_comparison(entries, ("standard", "em"), job, keep_maps=True)
     assert not failed and [r.map for r in small] == [None, None]
     assert all(r.map is not None for r in full)
     assert [r.metrics for r in small] == [r.metrics for r in full]
-    in_dir, _ = lib.run_comparison(entries, ("standard",), params, maps_dir=str(tmp_path), keep_maps=False)
+    in_dir, _ = lib.run_comparison(entries, ("standard",), job, maps_dir=str(tmp_path), keep_maps=False)
     assert in_dir[0].map is not None and in_dir[0].map_file == str(tmp_path / f"{logs[0].stem}_standard.h5")

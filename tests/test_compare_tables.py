@@ -12,9 +12,9 @@ import yaml
 from click.testing import CliRunner
 
 from aogm_cli.cli import main
+from aogm_cli.evaluation import scoring
 from aogm_cli.io.logfile import read_log, write_log
 from aogm_cli.mapping import modes
-from aogm_cli.report import compare
 from aogm_cli.simulation.sonar import simulate
 from aogm_cli.world.loader import parse_world
 
@@ -97,7 +97,7 @@ def no_mapping(monkeypatch):
         raise AssertionError("a map was computed")
 
     monkeypatch.setattr(modes, "map_file", refuse)
-    monkeypatch.setattr(compare, "map_one", refuse)
+    monkeypatch.setattr(scoring, "map_one", refuse)
 
 
 def test_the_csv_has_a_row_per_log_and_mode_equal_to_the_json(runs, read_csv):

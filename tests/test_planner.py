@@ -12,10 +12,10 @@ from click.testing import CliRunner
 
 from aogm_cli.cli import main
 from aogm_cli.core.grid import GridSpec
+from aogm_cli.evaluation import scoring
 from aogm_cli.evaluation.planner import against_standard, map_reach, planner_metrics
 from aogm_cli.io.logfile import read_log, write_log
 from aogm_cli.io.mapfile import read_map_file
-from aogm_cli.report import compare
 from aogm_cli.simulation.sonar import simulate
 from aogm_cli.world.loader import parse_world
 
@@ -183,7 +183,7 @@ def test_from_json_reads_older_files_without_the_planner_metrics(compared, tmp_p
     def refuse(*args, **kwargs):
         raise AssertionError("mapped")
 
-    monkeypatch.setattr(compare, "map_one", refuse)
+    monkeypatch.setattr(scoring, "map_one", refuse)
     result = run("compare", "--from-json", tmp_path / "old.json", "--json", tmp_path / "again.json", "--csv",
                  tmp_path / "again.csv", "--require", "em.accuracy >= 0", "-q")
     assert result.exit_code == 0, result.output
@@ -224,7 +224,7 @@ def test_without_truth_every_map_is_compared_with_the_standard_map(logs, tmp_pat
     def refuse(*args, **kwargs):
         raise AssertionError("mapped")
 
-    monkeypatch.setattr(compare, "map_one", refuse)  # both maps given: the standard one is at hand
+    monkeypatch.setattr(scoring, "map_one", refuse)  # both maps given: the standard one is at hand
     given = run("compare", tmp_path / "maps" / "bare_standard.h5", tmp_path / "maps" / "bare_em.h5", "--json",
                 tmp_path / "g.json", "-q")
     assert given.exit_code == 0, given.output

@@ -30,100 +30,6 @@ from aogm_cli.cli.options import (
 from aogm_cli.io.outputs import resolve_outputs
 
 
-def _check_outputs(inputs, entries, modes, params_file, detector, json_out, csv_out, figure_out,
-                   maps_dir) -> list[str]:
-    """Every output (--json, --csv, --figure, the --maps-dir maps to write) against every input:
-    the arguments, the logs that map files name, --params and --detector. Returns those inputs
-    (each once, for the provenance)."""
-    from aogm_cli.report.compare import maps_dir_targets
-
-    targets = maps_dir_targets(entries, modes, maps_dir) if maps_dir else {}
-    sources = [e.path for e in entries]
-    every = [str(p) for p in (*inputs, *sources, params_file, detector_file(detector, modes)) if p is not None]
-    resolve_outputs(
-        every,
-        [("--json", json_out), ("--csv", csv_out), ("--figure", figure_out),
-         *(("--maps-dir", t) for t in targets.values())],
-        [("--maps-dir", maps_dir)],
-    )
-    return list(dict.fromkeys(every))
-
-
-def _print_table(results, labels, quiet: bool) -> None:
-    from rich.console import Console
-    from rich.table import Table
-
-    from aogm_cli.report.compare import relative_runtimes
-
-    consistency = any(r.consistency is not None for r in results)  # some log has no truth
-    holdout = any(r.holdout is not None for r in results)
-    planner = [k for k in PLANNER_COLUMNS if any(k in (r.planner or {}) for r in results)]  # older JSON: none
-    console = Console()
-    if not console.is_terminal:  # wide enough for every column, the held-out ones too
-        console = Console(width=max(console.width, (260 if holdout else 200) + 12 * len(planner)), no_color=True,
-                          highlight=False)
-    relative = relative_runtimes(results)
-    table = Table(title=None if quiet else "aogm compare")
-    columns = [("World", "left"), ("Mode", "left"), ("Accuracy", "right"), ("Occ. F1", "right"), ("Brier", "right"),
-               ("Checks", "right")]
-    if consistency:
-        columns += [("Ends on occ.", "right"), ("±1 cell", "right"), ("Free contra.", "right")]
-    columns += [(PLANNER_COLUMNS[k], "right") for k in planner]
-    if holdout:
-        columns += [("Held-out AUC", "right"), ("Held-out loglik", "right"), ("Held-out readings", "right"),
-                    ("Held-out scans", "right")]
-    columns += [("Runtime (s)", "right"), ("vs standard", "right"), ("Map", "left")]
-    for name, justify in columns:
-        table.add_column(name, justify=justify, no_wrap=name != "Map", overflow="fold")
-    previous = None
-    for r in results:
-        label = labels[r.log]
-        if previous is not None and label != previous:
-            table.add_section()
-        previous = label
-        if r.metrics is None:
-            acc = f1 = brier = checks = "n/a"
-        else:
-            acc = f"{r.metrics['accuracy']:.4f}"
-            f1 = f"{r.metrics['occupied_f1']:.4f}"
-            brier = f"{r.metrics['brier']:.4f}"
-            passed = sum(c["passed"] for c in r.metrics["checks"])
-            checks = f"{passed}/{len(r.metrics['checks'])}"
-        rel = relative[(r.log, r.mode)]
-        row = [label, r.mode, acc, f1, brier, checks]
-        if consistency:
-            c = r.consistency or {}
-            row += [_share(c.get("endpoint_occupied")), _share(c.get("endpoint_occupied_8")),
-                    _share(c.get("free_contradicted"))]
-        row += [_share((r.planner or {}).get(k)) for k in planner]
-        if holdout:
-            h = r.holdout or {}
-            row += [_share(h.get("holdout_auc")), _share(h.get("holdout_loglik")), str(h.get("holdout_readings", "n/a")),
-                    str(h.get("holdout_scans", "n/a"))]
-        row += [f"{r.runtime_s:.3f}", "–" if rel is None else f"x{rel:.2f}", _source(r)]
-        table.add_row(*row)
-    console.print(table)
-
-
-# what a planner sees (``evaluation.planner``) -> its column: with truth, then without
-PLANNER_COLUMNS = {"leak": "Leak", "block": "Block", "surface_recall": "Surface", "walls_kept": "Walls kept",
-                   "leak_vs_standard": "Leak vs std"}
-
-
-def _share(v) -> str:
-    return "n/a" if v is None or v != v else f"{v:.4f}"  # v != v: NaN
-
-
-def _source(r) -> str:
-    """Where a row's map came from: a file given, or mapped here (and written to --maps-dir); for
-    a result read back with --from-json, that file."""
-    if r.results_file is not None:
-        return f"json {Path(r.results_file).name}"
-    if r.reused:
-        return f"file {Path(r.map_file).name}"
-    return "mapped" if r.map_file is None else f"mapped -> {Path(r.map_file).name}"
-
-
 @click.command("compare")
 @click.argument("inputs", nargs=-1, required=True, metavar="LOG.h5|MAP.h5 ... | RESULTS.json ...",
                 type=click.Path(dir_okay=False))
@@ -263,51 +169,40 @@ def compare(inputs, modes_text, detector, params_file, json_out, csv_out, figure
         return
 
     from aogm_cli.evaluation.holdout import HoldoutSplit
+    from aogm_cli.io.provenance import provenance
     from aogm_cli.mapping.params import resolve_params
     from aogm_cli.report import compare as lib
+    from aogm_cli.report.scoring import CompareJob
+    from aogm_cli.report.table import log_labels, print_table
 
     split = None if holdout is None else HoldoutSplit(holdout, seed).validate()
     radius = _robot_radius(robot_radius)
     check_executor(jobs, scheduler)
     params = resolve_params(params_file, {"calibration": {"enabled": calibrate}})
+    job = CompareJob(params, detector, split, limits_of(max_memory, max_work), radius)
     entries = lib.collect_inputs(list(inputs))
     modes = lib.parse_modes(modes_text) if modes_text else lib.default_modes(entries)
     _check_gates(gates, require_checks, modes, split is not None)
-    resumed = _resume(entries, modes, maps_dir, params, detector, split, resume, quiet)
-    read = _check_outputs(inputs, entries, modes, params_file, detector, json_out, csv_out, figure_out, maps_dir)
-    from aogm_cli.io.provenance import provenance
-
+    resumed = _resume(entries, modes, maps_dir, job, resume, quiet)
+    outputs = [("--json", json_out), ("--csv", csv_out), ("--figure", figure_out)]
+    read = _check_outputs(inputs, entries, modes, (params_file, detector_file(detector, modes)), outputs, maps_dir)
     record = provenance(read)  # the inputs as read, the time the run starts
-
-    from aogm_cli.core.budget import using
-    from aogm_cli.mapping.map_cost import check_logs
-
-    limits = limits_of(max_memory, max_work)
-    refuse_huge_grids(list(dict.fromkeys(e.path for e in entries for mode in modes if mode not in e.maps)), params,
-                      params_file, False, max_memory)
-    check_logs([(e.path, mode) for e in entries for mode in modes if mode not in e.maps], params, limits)
+    _check_budget(entries, modes, job, params_file)
     n_tasks = sum(mode not in e.maps for e in entries for mode in modes)
-    with using(limits), progress_bar(n_tasks, "compare", quiet, unit="map") as advance:
-        results, failures = lib.run_comparison(
-            entries, modes, params, detector=detector, jobs=jobs, maps_dir=maps_dir,
-            on_map=lambda i, mode, r: advance(1), holdout=split, scheduler=scheduler, keep_maps=bool(figure_out),
-            robot_radius=radius,
-        )
-
-    for r in results:
-        differs = [] if r.map_file in resumed or not r.reused else lib.params_differences(r.map.params, params,
-                                                                                         r.metrics is not None)
-        if differs:
-            click.echo(f"aogm: note: {r.map_file} was made with other {', '.join(differs)} parameters than "
-                       "this comparison's; it is reported as it is", err=True)
-    labels = lib.log_labels(entries)
-    _print_table(results, labels, quiet)
-    figure = None
+    with progress_bar(n_tasks, "compare", quiet, unit="map") as advance:
+        results, failures = lib.run_comparison(entries, modes, job, jobs, scheduler, maps_dir, keep_maps=bool(figure_out),
+                                               on_map=lambda i, mode, r: advance(1))
+    for path, differs in lib.given_maps_differences(results, params, resumed):
+        click.echo(f"aogm: note: {path} was made with other {', '.join(differs)} parameters than "
+                   "this comparison's; it is reported as it is", err=True)
+    labels = log_labels(entries)
+    print_table(results, labels, quiet)
+    files = lib.output_files(results, record, json_out, csv_out)
     if figure_out:
         from aogm_cli.report.figure import comparison_figure_png
 
-        figure = comparison_figure_png(entries, results, labels, radius)
-    _commit_outputs(results, record, json_out, csv_out, figure_out, figure, maps_dir, quiet)
+        files.append((Path(figure_out), comparison_figure_png(entries, results, labels, radius)))
+    _commit_outputs(files, maps_dir, [json_out, csv_out, figure_out], quiet)
     gate_failed = _report_gates(gates, require_checks, results, labels, exit_now=not failures)
     report_failures(failures, lambda key: f"{key[0]} ({key[1]})", gate_failed)
 
@@ -327,7 +222,7 @@ def _robot_radius(value: float | None) -> float:
     return value
 
 
-def _resume(entries, modes, maps_dir, params, detector, split, resume: bool, quiet: bool) -> set[str]:
+def _resume(entries, modes, maps_dir, job, resume: bool, quiet: bool) -> set[str]:
     """--resume: the --maps-dir maps taken as they are (``report.compare.resume_maps``)."""
     if not resume:
         return set()
@@ -337,10 +232,32 @@ def _resume(entries, modes, maps_dir, params, detector, split, resume: bool, qui
         raise InputError("needs --maps-dir (the maps of an earlier run to take up again)", key="--resume")
     from aogm_cli.report.compare import resume_maps
 
-    taken = resume_maps(entries, modes, maps_dir, params, detector, split)
+    taken = resume_maps(entries, modes, maps_dir, job)
     if not quiet:
         click.echo(f"resume: {len(taken)} map(s) in {maps_dir} already complete, not mapped again", err=True)
     return set(taken)
+
+
+def _check_outputs(inputs, entries, modes, files, outputs, maps_dir) -> list[str]:
+    """Every output (``outputs``: (option, path) of --json, --csv, --figure; the --maps-dir maps to
+    write) against every input: the arguments, the logs that map files name, and ``files``
+    (--params, the detector file). Returns those inputs (each once, for the provenance)."""
+    from aogm_cli.report.compare import maps_dir_targets
+
+    targets = maps_dir_targets(entries, modes, maps_dir) if maps_dir else {}
+    every = [str(p) for p in (*inputs, *(e.path for e in entries), *files) if p is not None]
+    resolve_outputs(every, [*outputs, *(("--maps-dir", t) for t in targets.values())], [("--maps-dir", maps_dir)])
+    return list(dict.fromkeys(every))
+
+
+def _check_budget(entries, modes, job, params_file: str | None) -> None:
+    """Refuse (exit 2) before any work a map to make whose grid or estimate exceeds ``job.limits``."""
+    from aogm_cli.mapping.map_cost import check_logs
+
+    to_map = [(e.path, mode) for e in entries for mode in modes if mode not in e.maps]
+    refuse_huge_grids(list(dict.fromkeys(path for path, _ in to_map)), job.params, params_file, False,
+                      job.limits.max_memory)
+    check_logs(to_map, job.params, job.limits)
 
 
 # options that only mapping uses: refused with --from-json (parameter name -> option)
@@ -379,45 +296,40 @@ def _check_gates(gates, require_checks, modes, holdout: bool) -> None:
 def _compare_results_files(paths, gates, require_checks, json_out, csv_out, quiet) -> None:
     """--from-json: merge the results of the --json files ``paths``, print, write and gate them."""
     from aogm_cli.io.provenance import provenance
-    from aogm_cli.report import compare as lib
+    from aogm_cli.io.results import merge_results_files
+    from aogm_cli.report.compare import output_files
+    from aogm_cli.report.table import print_table, result_labels
 
     record = provenance(paths)  # the files as read, the time the run starts
-    merged = lib.merge_results_files(paths)
+    merged = merge_results_files(paths)
     _check_gates(gates, require_checks, merged.modes, merged.holdout is not None)
     resolve_outputs(paths, [("--json", json_out), ("--csv", csv_out)])
-    labels = lib.result_labels(merged.results)
-    _print_table(merged.results, labels, quiet)
-    _commit_outputs(merged.results, record, json_out, csv_out, None, None, None, quiet, merged.holdout)
+    labels = result_labels(merged.results)
+    print_table(merged.results, labels, quiet)
+    _commit_outputs(output_files(merged.results, record, json_out, csv_out, merged.holdout), None, [json_out, csv_out],
+                    quiet)
     _report_gates(gates, require_checks, merged.results, labels)
 
 
-def _commit_outputs(results, record, json_out, csv_out, figure_out, figure, maps_dir, quiet, holdout=None) -> None:
-    """--maps-dir maps, --json, --csv and --figure (its PNG bytes ``figure``) in one commit: all
-    written, or none (and a folder --maps-dir made here removed again). The maps and the JSON
-    record the provenance ``record`` (``io.provenance``; the CSV stays a plain table).
-    ``holdout``: the top-level holdout object of merged results (``report.compare.results_json``)."""
+def _commit_outputs(files: list[tuple[Path, bytes]], maps_dir: str | None, written: list[str | None],
+                    quiet: bool) -> None:
+    """The output ``files`` (``report.compare.output_files``, the figure) in one commit: all
+    written, or none (and a folder --maps-dir made here removed again); then "wrote" each of
+    ``written`` given (unless quiet)."""
     from aogm_cli.io.atomic import write_files_atomically
-    from aogm_cli.report import compare as lib
 
-    outputs = lib.maps_dir_outputs(results, record)
-    if json_out:
-        outputs.append((Path(json_out), lib.json_bytes(results, holdout, record)))
-    if csv_out:
-        outputs.append((Path(csv_out), lib.csv_bytes(results)))
-    if figure_out:
-        outputs.append((Path(figure_out), figure))
     made = [f for f in (Path(maps_dir), *Path(maps_dir).parents) if not f.exists()] if maps_dir else []
-    if outputs and made:
+    if files and made:
         Path(maps_dir).mkdir(parents=True)
     try:
-        write_files_atomically(outputs)
+        write_files_atomically(files)
     except BaseException:
         for folder in made:
             if folder.exists() and not any(folder.iterdir()):
                 folder.rmdir()
         raise
     if not quiet:
-        for path in (json_out, csv_out, figure_out):
+        for path in written:
             if path:
                 click.echo(f"wrote {path}", err=True)
 
@@ -425,17 +337,9 @@ def _commit_outputs(results, record, json_out, csv_out, figure_out, figure, maps
 def _report_gates(gates, require_checks, results, labels, exit_now: bool = True) -> bool:
     """Evaluate --require and --require-checks per log, print each failure and the count; exit 1
     when one fails (``exit_now``), else leave the exit to the failed tasks' report."""
-    from aogm_cli.report.compare import gate_values
-    from aogm_cli.report.gates import evaluate_gates, evaluate_required_checks
+    from aogm_cli.report.gates import evaluate_comparison_gates
 
-    per_log = [(labels[log], values) for log, values in gate_values(results)]
-    n_gates, failures = evaluate_gates(gates, per_log)
-    checks_by_log: dict[str, dict] = {}
-    for r in results:
-        checks_by_log.setdefault(labels[r.log], {})[r.mode] = None if r.metrics is None else r.metrics["checks"]
-    n_checks, check_failures = evaluate_required_checks(list(require_checks), list(checks_by_log.items()))
-    failures += check_failures
-    total = n_gates + n_checks
+    total, failures = evaluate_comparison_gates(gates, require_checks, results, labels)
     for failure in failures:
         click.echo(str(failure))
     if total:

@@ -1,7 +1,6 @@
-"""``aogm import carmen``, ``aogm import text`` and ``aogm import rosbag``: real range logs -> an aogm log (HDF5).
-
-Thin: the options become ``CarmenOptions`` / ``TextOptions`` / ``RosbagOptions``; parsing lives in
-``aogm_cli.io.importers``.
+"""``aogm import carmen``, ``text`` and ``rosbag``: real range logs -> an aogm log (HDF5). Thin: the
+options (the sensor's from ``cli.options.sensor_options``) become ``CarmenOptions`` /
+``TextOptions`` / ``RosbagOptions``; parsing lives in ``aogm_cli.io.importers``.
 """
 
 from __future__ import annotations
@@ -12,7 +11,17 @@ from pathlib import Path
 
 import click
 
-from aogm_cli.cli.options import FiniteFloat, output_option, progress_bar, quiet_option
+from aogm_cli.cli.options import (
+    ANGLE_DEG,
+    FINITE,
+    NON_NEGATIVE,
+    POSITIVE,
+    degrees_shown,
+    output_option,
+    progress_bar,
+    quiet_option,
+    sensor_options,
+)
 from aogm_cli.core.errors import InputError
 from aogm_cli.io.importers.carmen import (
     LASER_MAX_RANGE,
@@ -28,11 +37,6 @@ from aogm_cli.io.importers.carmen import (
 from aogm_cli.io.importers.rosbag import RosbagOptions
 from aogm_cli.io.importers.text import ANGLE_UNITS, DELIMITERS, LENGTH_UNITS, TIME_UNITS, TextOptions
 from aogm_cli.io.outputs import resolve_outputs
-
-_finite = FiniteFloat()
-_positive = FiniteFloat(min=0, min_open=True)
-_non_negative = FiniteFloat(min=0)
-_angle_deg = FiniteFloat(min=0, max=180, min_open=True, max_open=True)  # a beam width (deg)
 
 
 @click.group("import")
@@ -55,11 +59,6 @@ def _option_names(names: tuple[str, ...]):
         if exc.key in names:
             raise InputError(exc.message, file=exc.file, key="--" + exc.key.replace("_", "-")) from None
         raise
-
-
-def _degrees(radians: float) -> float:
-    """A default angle of the options (radians) as the command line shows and takes it."""
-    return round(math.degrees(radians), 9)
 
 
 def _report(output: str, log, what: str, origin: str, extra: list[str], quiet: bool) -> None:
@@ -96,37 +95,27 @@ def _report(output: str, log, what: str, origin: str, extra: list[str], quiet: b
 )
 @click.option(
     "--start-angle",
-    type=_finite,
-    default=_degrees(CarmenOptions.start_angle),
+    type=FINITE,
+    default=degrees_shown(CarmenOptions.start_angle),
     show_default=True,
     help="First beam's bearing (deg) of FLASER/RLASER, whose lines do not store it.",
 )
 @click.option(
     "--angular-res",
-    type=_positive,
+    type=POSITIVE,
     help="Beam spacing (deg) of FLASER/RLASER. Default: 1 deg for 180/181 beams, 0.5 for 360/361, 0.25 for 400/401 (as CARMEN guesses).",
 )
-@click.option(
-    "--max-range",
-    type=_positive,
-    help=f"Max range (m); readings at or beyond it become +inf (no echo). Default: the line's own (RAWLASER, ROBOTLASER), else {LASER_MAX_RANGE:g} m for lasers, {SONAR_MAX_RANGE:g} m for SONAR.",
-)
-@click.option(
-    "--min-range", type=_non_negative, help=f"Min range (m) of the sensor. Default {LASER_MIN_RANGE:g} for lasers, {SONAR_MIN_RANGE:g} for SONAR."
-)
-@click.option(
-    "--beam-width",
-    type=_angle_deg,
-    help="Beam (cone) width (deg). Default 0.5 for lasers, the cone_angle of SONAR lines.",
-)
-@click.option(
-    "--noise-sigma",
-    type=_non_negative,
-    help=f"Range noise (m) recorded in the log. Default {LASER_NOISE_SIGMA:g} for lasers, {SONAR_NOISE_SIGMA:g} for SONAR.",
+@sensor_options(
+    max_range="Max range (m); readings at or beyond it become +inf (no echo). Default: the line's own (RAWLASER, "
+    f"ROBOTLASER), else {LASER_MAX_RANGE:g} m for lasers, {SONAR_MAX_RANGE:g} m for SONAR.",
+    min_range=f"Min range (m) of the sensor. Default {LASER_MIN_RANGE:g} for lasers, {SONAR_MIN_RANGE:g} for SONAR.",
+    beam_width="Beam (cone) width (deg). Default 0.5 for lasers, the cone_angle of SONAR lines.",
+    noise_sigma=f"Range noise (m) recorded in the log. Default {LASER_NOISE_SIGMA:g} for lasers, {SONAR_NOISE_SIGMA:g} "
+    "for SONAR.",
 )
 @click.option(
     "--mount",
-    type=(_finite, _finite, _finite),
+    type=(FINITE, FINITE, FINITE),
     metavar="X Y YAW",
     help="Laser mount in the robot frame (m, m, deg) for FLASER, RLASER, RAWLASER. Default 0 0 0.",
 )
@@ -190,6 +179,12 @@ def carmen(
     _report(output, result.log, f"{result.message} scans", Path(log_file).name, extra, quiet)
 
 
+def _unit_option(flag: str, units, help_text: str):
+    """A unit option of ``import text``: one of ``units``, by default ``TextOptions``' value."""
+    default = getattr(TextOptions, flag.removeprefix("--").replace("-", "_"))
+    return click.option(flag, type=click.Choice(list(units)), default=default, show_default=True, help=help_text)
+
+
 @import_log.command("text")
 @click.option(
     "--ranges",
@@ -215,29 +210,13 @@ def carmen(
     "--pose-time-column",
     help="Time column of the pose table; with --range-time-column, poses are interpolated by time instead of paired row by row.",
 )
-@click.option(
-    "--range-unit", type=click.Choice(list(LENGTH_UNITS)), default=TextOptions.range_unit, show_default=True, help="Unit of the readings."
-)
-@click.option(
-    "--position-unit",
-    type=click.Choice(list(LENGTH_UNITS)),
-    default=TextOptions.position_unit,
-    show_default=True,
-    help="Unit of pose x, y (and of --mounts).",
-)
-@click.option(
-    "--angle-unit",
-    type=click.Choice(list(ANGLE_UNITS)),
-    default=TextOptions.angle_unit,
-    show_default=True,
-    help="Unit of pose yaw (ddeg = tenths of a degree).",
-)
-@click.option(
-    "--time-unit", type=click.Choice(list(TIME_UNITS)), default=TextOptions.time_unit, show_default=True, help="Unit of the time columns."
-)
+@_unit_option("--range-unit", LENGTH_UNITS, "Unit of the readings.")
+@_unit_option("--position-unit", LENGTH_UNITS, "Unit of pose x, y (and of --mounts).")
+@_unit_option("--angle-unit", ANGLE_UNITS, "Unit of pose yaw (ddeg = tenths of a degree).")
+@_unit_option("--time-unit", TIME_UNITS, "Unit of the time columns.")
 @click.option(
     "--no-echo",
-    type=_finite,
+    type=FINITE,
     multiple=True,
     help="A reading value (in --range-unit) that means no echo; repeatable. Stored as +inf.",
 )
@@ -246,16 +225,10 @@ def carmen(
     help="Sensor bearings: 'ring' (evenly spaced from 0), 'ring:N[:START[:STEP]]' or a list such as 90,50,30,10,-10,-30,-50,-90. "
     f"[default: {TextOptions.bearings}]",
 )
-@click.option(
-    "--bearing-unit",
-    type=click.Choice(list(ANGLE_UNITS)),
-    default=TextOptions.bearing_unit,
-    show_default=True,
-    help="Unit of --bearings and of the yaw in --mounts.",
-)
+@_unit_option("--bearing-unit", ANGLE_UNITS, "Unit of --bearings and of the yaw in --mounts.")
 @click.option(
     "--sensor-radius",
-    type=_non_negative,
+    type=NON_NEGATIVE,
     default=TextOptions.sensor_radius,
     show_default=True,
     help="Distance (m) of each sensor from the robot centre along its bearing.",
@@ -268,23 +241,17 @@ def carmen(
     help="Table of sensor mounts x y yaw (one row per range column) instead of --bearings, or a robot preset "
     "(p3dx, p3at, peoplebot, nomad200: in m and deg whatever the units).",
 )
-@click.option("--kind", type=click.Choice(["sonar", "laser"]), default=TextOptions.kind, show_default=True)
-@click.option("--beam-width", type=_angle_deg, default=_degrees(TextOptions.beam_width), show_default=True,
-              help="Beam (cone) width in degrees.")
-@click.option("--min-range", type=_non_negative, default=TextOptions.min_range, show_default=True, help="Min range (m).")
-@click.option(
-    "--max-range",
-    type=_positive,
-    default=TextOptions.max_range,
-    show_default=True,
-    help="Max range (m); readings at or beyond it become +inf.",
-)
-@click.option(
-    "--noise-sigma", type=_non_negative, default=TextOptions.noise_sigma, show_default=True, help="Range noise (m) recorded in the log."
+@sensor_options(
+    TextOptions,
+    kind=None,
+    beam_width="Beam (cone) width in degrees.",
+    min_range="Min range (m).",
+    max_range="Max range (m); readings at or beyond it become +inf.",
+    noise_sigma="Range noise (m) recorded in the log.",
 )
 @click.option(
     "--period",
-    type=_positive,
+    type=POSITIVE,
     default=TextOptions.period,
     show_default=True,
     help="Seconds between scans when there is no time column.",
@@ -343,32 +310,32 @@ def text(
               help="Robot poses: tf:map.base_link (the chain of /tf and /tf_static frames, e.g. through odom, "
               "interpolated in time) or a nav_msgs/Odometry, geometry_msgs/PoseStamped or "
               "PoseWithCovarianceStamped topic.")
-@click.option("--kind", type=click.Choice(["sonar", "laser"]),
-              help="Sensor kind. Default: laser for a LaserScan (--kind sonar: a sonar ring published as a scan), sonar otherwise.")
+@sensor_options(kind="Sensor kind. Default: laser for a LaserScan (--kind sonar: a sonar ring published as a scan), "
+                "sonar otherwise.")
 @click.option("--base-frame", help="The robot's frame for the mounts. Default: the CHILD of --pose tf:..., an "
               "Odometry's child_frame_id, else base_link.")
 @click.option("--mounts", "mounts_file", type=click.Path(dir_okay=False), metavar="FILE|PRESET",
               help="Table of sensor mounts x y yaw (m, m, deg), one row per sensor (a LaserScan: one row for "
               "the scanner, or one per beam), instead of /tf_static; or a robot preset: p3dx, p3at, peoplebot "
               "(ARIA's tables), nomad200 (a 16-sonar ring). Needed for PointCloud and SonarArray.")
-@click.option("--start", type=_non_negative, help="Import readings from this many seconds after the bag's first message.")
-@click.option("--end", type=_positive, help="Import readings up to this many seconds after the bag's first message.")
-@click.option("--window", type=_positive, default=RosbagOptions.window, show_default=True,
+@click.option("--start", type=NON_NEGATIVE, help="Import readings from this many seconds after the bag's first message.")
+@click.option("--end", type=POSITIVE, help="Import readings up to this many seconds after the bag's first message.")
+@click.option("--window", type=POSITIVE, default=RosbagOptions.window, show_default=True,
               help="Longest firing cycle (s) of a ring of Range topics: readings grouped into one scan.")
-@click.option("--max-gap", type=_positive, default=RosbagOptions.max_gap, show_default=True,
+@click.option("--max-gap", type=POSITIVE, default=RosbagOptions.max_gap, show_default=True,
               help="Poses further apart in time (s) do not cover the readings between them.")
 @click.option("--drop-uncovered", is_flag=True,
               help="Drop readings that the poses do not cover (counted in the summary) instead of an error.")
-@click.option("--tilt-tolerance", type=_angle_deg, default=_degrees(RosbagOptions.tilt_tolerance), show_default=True,
+@click.option("--tilt-tolerance", type=ANGLE_DEG, default=degrees_shown(RosbagOptions.tilt_tolerance), show_default=True,
               help="Largest tilt (deg) of a sensor's beam out of the base frame's plane.")
-@click.option("--max-range", type=_positive, help="Max range (m). Default: the messages' own (Range, LaserScan), "
-              f"else {SONAR_MAX_RANGE:g} m. Readings at or beyond it become +inf (no echo).")
-@click.option("--min-range", type=_non_negative, help="Min range (m). Default: the messages' own, else "
-              f"{SONAR_MIN_RANGE:g} m.")
-@click.option("--beam-width", type=_angle_deg, help="Beam (cone) width (deg). Default: a Range's field_of_view, "
-              "0.5 for a laser, 30 for a sonar.")
-@click.option("--noise-sigma", type=_non_negative, help=f"Range noise (m) recorded in the log. Default "
-              f"{LASER_NOISE_SIGMA:g} for lasers, {SONAR_NOISE_SIGMA:g} for sonar.")
+@sensor_options(
+    max_range=f"Max range (m). Default: the messages' own (Range, LaserScan), else {SONAR_MAX_RANGE:g} m. Readings "
+    "at or beyond it become +inf (no echo).",
+    min_range=f"Min range (m). Default: the messages' own, else {SONAR_MIN_RANGE:g} m.",
+    beam_width="Beam (cone) width (deg). Default: a Range's field_of_view, 0.5 for a laser, 30 for a sonar.",
+    noise_sigma=f"Range noise (m) recorded in the log. Default {LASER_NOISE_SIGMA:g} for lasers, {SONAR_NOISE_SIGMA:g} "
+    "for sonar.",
+)
 @quiet_option
 def rosbag(bag: str, output: str, ranges: tuple[str, ...], mounts_file: str | None, tilt_tolerance: float,
            beam_width: float | None, quiet: bool, **settings) -> None:

@@ -15,6 +15,7 @@ its outputs with ``io.outputs.resolve_outputs`` before any work."""
 # --jobs/-j, --scheduler  simulate, compare (``core.executors``: a local process pool, a Dask cluster)
 # --resume                simulate, compare (--maps-dir): skip outputs already complete and valid
 # LOG arguments as a folder or a glob (``expand_log_paths``): train
+# --kind, --max-range, --min-range, --beam-width, --noise-sigma   import carmen, text, rosbag (``sensor_options``)
 
 from __future__ import annotations
 
@@ -49,6 +50,41 @@ class FiniteFloat(click.FloatRange):
         if not math.isfinite(v):
             self.fail(f"expected a finite number, got {value!r}", param, ctx)
         return v
+
+
+FINITE = FiniteFloat()
+POSITIVE = FiniteFloat(min=0, min_open=True)
+NON_NEGATIVE = FiniteFloat(min=0)
+ANGLE_DEG = FiniteFloat(min=0, max=180, min_open=True, max_open=True)  # a beam width (deg)
+
+
+def degrees_shown(radians: float) -> float:
+    """A default angle of the options (radians) as the command line shows and takes it."""
+    return round(math.degrees(radians), 9)
+
+
+# the sensor a log records, as the importers take it: option -> (flag, type, the default that a
+# config dataclass (``io.importers``' TextOptions ...) gives, as the command line takes it)
+SENSOR_OPTIONS = {
+    "kind": ("--kind", click.Choice(["sonar", "laser"]), lambda d: d.kind),
+    "max_range": ("--max-range", POSITIVE, lambda d: d.max_range),
+    "min_range": ("--min-range", NON_NEGATIVE, lambda d: d.min_range),
+    "beam_width": ("--beam-width", ANGLE_DEG, lambda d: degrees_shown(d.beam_width)),
+    "noise_sigma": ("--noise-sigma", NON_NEGATIVE, lambda d: d.noise_sigma),
+}
+
+
+def sensor_options(defaults=None, **helps: str | None):
+    """The ``SENSOR_OPTIONS`` named, each with its help text, listed in the order given (e.g.
+    ``max_range="Max range (m)."``); with ``defaults`` (a config dataclass) each shows its default
+    from there, else it has none (the importer decides)."""
+    def decorate(f):
+        for name, text in reversed(helps.items()):
+            flag, kind, default = SENSOR_OPTIONS[name]
+            shown = {} if defaults is None else {"default": default(defaults), "show_default": True}
+            f = click.option(flag, type=kind, help=text, **shown)(f)
+        return f
+    return decorate
 
 
 MIN_RESOLUTION = 1e-4  # m: a cell no finer than a world's finest truth_resolution

@@ -15,6 +15,7 @@ from aogm_cli.core.errors import InputError
 from aogm_cli.core.frames import sensor_poses
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import Log, SensorSpec
+from aogm_cli.core.scores import SCORE_KEYS as SCORE_KEYS  # ``holdout_scores``'s
 from aogm_cli.evaluation.consistency import reading_endpoints
 from aogm_cli.sensor_models.cone import (
     SPARE_MASK,
@@ -42,7 +43,6 @@ REFERENCE_MODEL = ForwardModelConfig(sigma=0.1, p_rand=0.1, p_hit=0.5, p_max=0.1
 REFERENCE_ALPHA = 2 * REFERENCE_MODEL.sigma  # m: the arc band z -/+ sigma of the reference model
 READING_CHUNK = 8192  # held-out readings per forward-model index: bounds the index's memory
 SCAN_CHUNK = 4096  # scans read from the log at a time
-SCORE_KEYS = ("holdout_auc", "holdout_loglik", "holdout_readings", "holdout_scans")  # ``holdout_scores``'s
 
 
 @dataclass(frozen=True)

@@ -8,9 +8,9 @@ import numpy as np
 from scipy import ndimage
 
 from aogm_cli.core.grid import GridSpec
+from aogm_cli.core.scores import STANDARD_KEYS as STANDARD_KEYS  # without truth, against the standard map
+from aogm_cli.core.scores import TRUTH_KEYS as TRUTH_KEYS  # against a simulated log's truth
 
-TRUTH_KEYS = ("leak", "block", "surface_recall")  # against a simulated log's truth
-STANDARD_KEYS = ("walls_kept", "leak_vs_standard")  # against the standard map (logs without truth)
 STANDARD_ITSELF = {"walls_kept": 1.0, "leak_vs_standard": 0.0}  # the standard map's own values
 ROBOT_RADIUS = 0.2  # m: aogm compare's default --robot-radius
 START_DISTANCE = 0.3  # m: the planner starts anywhere this close to the trajectory

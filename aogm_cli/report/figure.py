@@ -6,8 +6,9 @@ from __future__ import annotations
 
 from aogm_cli.evaluation.planner import ROBOT_RADIUS, map_reach, truth_reach
 from aogm_cli.io.logfile import LogReader
-from aogm_cli.report.compare import LogEntry, ModeResult
+from aogm_cli.io.results import ModeResult
 from aogm_cli.report.picture import draw_map, draw_reach, draw_truth, figure_png
+from aogm_cli.report.scoring import ScoredLog
 
 PANEL_WIDTH = 4.0  # inches
 
@@ -35,7 +36,7 @@ def panel_title(result: ModeResult) -> str:
     return "  ".join(parts)
 
 
-def comparison_figure_png(entries: list[LogEntry], results: list[ModeResult], labels: dict[str, str],
+def comparison_figure_png(entries: list[ScoredLog], results: list[ModeResult], labels: dict[str, str],
                           robot_radius: float = ROBOT_RADIUS) -> bytes:
     """The PNG: a truth panel and one panel per mode for every log; each map tinted where the
     planner of a robot of ``robot_radius`` reaches, leaked cells (truth logs) in red."""

@@ -11,8 +11,9 @@ from dataclasses import dataclass
 
 from aogm_cli.core.errors import InputError
 from aogm_cli.core.occupancy_map import MODES
-from aogm_cli.evaluation.holdout import SCORE_KEYS
-from aogm_cli.evaluation.planner import STANDARD_KEYS, TRUTH_KEYS
+from aogm_cli.core.scores import METRIC_KEYS, PLANNER_KEYS, SCORE_KEYS, STANDARD_KEYS, TRUTH_KEYS
+from aogm_cli.io.results import ModeResult
+from aogm_cli.report.table import checks_passed
 
 # metric names of a gate -> what they mean; runtime is runtime_s, checks_passed a fraction; what a
 # planner sees (``evaluation.planner``: leak, block, surface_recall with truth, walls_kept and
@@ -318,3 +319,38 @@ def evaluate_required_checks(
                 passed = len(checks) - len(failed)
                 failures.append(GateFailure(label, f"{mode} checks  ({passed}/{len(checks)} passed; failed: {', '.join(failed)})"))
     return count, failures
+
+
+def metric_values(result: ModeResult) -> dict[str, float | None]:
+    """The values a gate can name for one (log, mode): metrics, runtime, checks_passed, what a
+    planner sees and the held-out scores (None when not computed)."""
+    values: dict[str, float | None] = {k: (None if result.metrics is None else result.metrics[k]) for k in METRIC_KEYS}
+    values["runtime"] = result.runtime_s
+    values["checks_passed"] = checks_passed(result.metrics)
+    values.update({k: (result.planner or {}).get(k) for k in PLANNER_KEYS})
+    for k in SCORE_KEYS:
+        values[k] = None if result.holdout is None else result.holdout[k]
+    return values
+
+
+def gate_values(results: list[ModeResult]) -> list[tuple[str, dict[tuple[str, str], float | None]]]:
+    """Per log (in order): (log path, {(mode, metric): value})."""
+    by_log: dict[str, dict[tuple[str, str], float | None]] = {}
+    for r in results:
+        values = by_log.setdefault(r.log, {})
+        for metric, v in metric_values(r).items():
+            values[(r.mode, metric)] = v
+    return list(by_log.items())
+
+
+def evaluate_comparison_gates(gates: list[Gate], require_checks: list[str], results: list[ModeResult],
+                              labels: dict[str, str]) -> tuple[int, list[GateFailure]]:
+    """``--require`` and ``--require-checks`` evaluated per log of a comparison's ``results``
+    (``labels`` names the logs, ``report.table.log_labels``): (number evaluated, failures)."""
+    per_log = [(labels[log], values) for log, values in gate_values(results)]
+    n_gates, failures = evaluate_gates(gates, per_log)
+    checks_by_log: dict[str, dict] = {}
+    for r in results:
+        checks_by_log.setdefault(labels[r.log], {})[r.mode] = None if r.metrics is None else r.metrics["checks"]
+    n_checks, check_failures = evaluate_required_checks(list(require_checks), list(checks_by_log.items()))
+    return n_gates + n_checks, failures + check_failures
