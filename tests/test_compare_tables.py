@@ -12,9 +12,9 @@ import yaml
 from click.testing import CliRunner
 
 from aogm_cli.cli import main
-from aogm_cli.evaluation import scoring
 from aogm_cli.io.logfile import read_log, write_log
 from aogm_cli.mapping import modes
+from aogm_cli.report import scoring
 from aogm_cli.simulation.sonar import simulate
 from aogm_cli.world.loader import parse_world
 

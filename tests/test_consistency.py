@@ -90,7 +90,7 @@ ARC = [(5, 7), (4, 7), (6, 7)]
 def sonar_status(occupied, free, z=0.45):
     templates = standard_templates(SONAR_GRID, SONAR)
     contradicted = np.zeros(SONAR_GRID.shape, bool)
-    status = arc_status(occupied, free, np.array([[0.25, 0.55, 0.0]]), np.array([[z]]), SONAR, SONAR_GRID,
+    status = arc_status(occupied, free, (np.array([[0.25, 0.55, 0.0]]), np.array([[z]])), SONAR, SONAR_GRID,
                         templates, 0.1, contradicted)
     return int(status[0, 0]), {(int(r), int(c)) for r, c in zip(*np.nonzero(contradicted), strict=True)}
 

@@ -34,7 +34,7 @@ def problem_for(ranges, occupied=None, config=CONFIG, **kw):
     occupied = np.zeros(N_CELLS, dtype=bool) if occupied is None else occupied
     rd = em_readings((rows, cols, bins, z), tpl, GRID, 4.0, config.forward)
     problem = em_problem(rd, tpl, GRID.shape, occupied, config)
-    return problem, occupied, build_forward_index(rows, cols, bins, z, GRID, tpl, 4.0, config.forward)
+    return problem, occupied, build_forward_index((rows, cols, bins, z), GRID, tpl, 4.0, config.forward)
 
 
 def cone_cells(problem):
@@ -149,7 +149,7 @@ def test_a_mask_keeps_only_the_readings_that_touch_it():
     bins = tpl.heading_bin(np.array([0.0, math.pi / 2]))  # one reading along +x, one along +y
     mask = np.zeros(N_CELLS, dtype=bool)
     mask[10 * GRID.width + 12] = True  # on the +x beam
-    index = build_forward_index(rows, cols, bins, np.array([1.0, 1.0]), GRID, tpl, 4.0, FORWARD, mask=mask)
+    index = build_forward_index((rows, cols, bins, np.array([1.0, 1.0])), GRID, tpl, 4.0, FORWARD, mask=mask)
     assert np.diff(index.ptr).tolist()[1] == 0 and np.diff(index.ptr)[0] > 0
 
 
@@ -159,7 +159,7 @@ def test_leaving_out_cells_held_free_changes_no_likelihood():
     ranges = np.array([1.0, 1.0, 1.5, 1.5, 0.8, np.inf])
     rows, cols = np.full(6, 10), np.full(6, 5)
     bins = tpl.heading_bin(np.array([0.0, 0.1, 0.0, -0.1, 0.05, 0.0]))
-    full = build_forward_index(rows, cols, bins, ranges, GRID, tpl, 4.0, FORWARD)
+    full = build_forward_index((rows, cols, bins, ranges), GRID, tpl, 4.0, FORWARD)
     candidates = np.zeros(N_CELLS, dtype=bool)
     candidates[np.unique(full.cell)[::3]] = True  # a third of the cone cells may flip
     fixed_occupied = np.zeros(N_CELLS, dtype=bool)
@@ -167,7 +167,7 @@ def test_leaving_out_cells_held_free_changes_no_likelihood():
     fixed_occupied[10 * GRID.width + 15] = True  # and one inside them
     fixed_occupied &= ~candidates
     held_free = ~(candidates | fixed_occupied)
-    small = build_forward_index(rows, cols, bins, ranges, GRID, tpl, 4.0, FORWARD, held_free=held_free)
+    small = build_forward_index((rows, cols, bins, ranges), GRID, tpl, 4.0, FORWARD, held_free=held_free)
     assert small.cell.size < full.cell.size and not held_free[small.cell].any()
     rng = np.random.default_rng(3)
     for _ in range(5):  # any map that keeps the held-free cells free: the same likelihoods

@@ -77,7 +77,7 @@ class Case:
     start: np.ndarray
 
     def index(self):
-        return build_forward_index(self.rows, self.cols, self.bins, self.z, self.grid, self.templates, Z_MAX,
+        return build_forward_index((self.rows, self.cols, self.bins, self.z), self.grid, self.templates, Z_MAX,
                                    self.config.forward)
 
     def problem(self, occupied):

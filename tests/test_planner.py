@@ -12,10 +12,10 @@ from click.testing import CliRunner
 
 from aogm_cli.cli import main
 from aogm_cli.core.grid import GridSpec
-from aogm_cli.evaluation import scoring
 from aogm_cli.evaluation.planner import against_standard, map_reach, planner_metrics
 from aogm_cli.io.logfile import read_log, write_log
 from aogm_cli.io.mapfile import read_map_file
+from aogm_cli.report import scoring
 from aogm_cli.simulation.sonar import simulate
 from aogm_cli.world.loader import parse_world
 

@@ -110,21 +110,21 @@ def endpoint_status(occupied: np.ndarray, free: np.ndarray, rows, cols, counted)
 def arc_status(
     occupied: np.ndarray,
     free: np.ndarray,
-    pose: np.ndarray,
-    ranges: np.ndarray,
+    scans: tuple[np.ndarray, np.ndarray],
     sensor: SensorSpec,
     grid: GridSpec,
     templates: ConeTemplates,
     alpha: float,
     contradicted: np.ndarray | None = None,
 ) -> np.ndarray:
-    """Status (int8 (T, S)) of each reading's occupied arc: AGREES when some arc cell is
+    """Status (int8 (T, S)) of each reading of ``scans`` = (pose (T, 3), ranges (T, S))'s occupied arc: AGREES when some arc cell is
     believed occupied, CONTRADICTS when every arc cell in the grid is believed free, else
     UNKNOWN; NOT_COUNTED for readings out of range. The arc is the standard mapper's: template
     cells within alpha/2 of the reading shifted by ``readings.echo_ranges`` and the sensor's axis
     offset. When ``contradicted`` (bool (H, W)) is given, the believed-free arc cells of
     readings with no believed-occupied arc cell are set in it.
     """
+    pose, ranges = scans
     rows, cols, bins, valid, offset = reading_geometry(pose, sensor, grid, templates)
     z = np.asarray(ranges, dtype=np.float64).reshape(rows.shape)
     counted = in_range(z, sensor) & valid
@@ -260,8 +260,8 @@ def log_consistency(reader: LogReader, grid: GridSpec, probability, observed, al
             ends = status == CONTRADICTS
             contradicted[rows[ends], cols[ends]] = True
         else:
-            status = arc_status(occupied, free, pose, ranges, sensor, grid, templates, alpha, contradicted)
-            status_8 = arc_status(occupied_8, free, pose, ranges, sensor, grid, templates, alpha)
+            status = arc_status(occupied, free, (pose, ranges), sensor, grid, templates, alpha, contradicted)
+            status_8 = arc_status(occupied_8, free, (pose, ranges), sensor, grid, templates, alpha)
         statuses.append(status.reshape(-1))
         statuses_8.append(status_8.reshape(-1))
     empty = np.zeros(0, dtype=np.int8)

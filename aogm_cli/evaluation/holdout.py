@@ -281,7 +281,7 @@ def reference_log_likelihoods(pose: np.ndarray, ranges: np.ndarray, sensor: Sens
     out = np.empty(z.size)
     for start in range(0, z.size, chunk):
         part = slice(start, start + chunk)
-        index = build_forward_index(rows[part], cols[part], bins[part], z[part], grid, laid.templates,
+        index = build_forward_index((rows[part], cols[part], bins[part], z[part]), grid, laid.templates,
                                     float(sensor.max_range), REFERENCE_MODEL, held_free=free)
         out[part] = log_likelihoods(index, occupied_flat)
     return out

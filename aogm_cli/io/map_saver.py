@@ -50,33 +50,14 @@ def write_map(
       unobserved; read back with ``read_map_yaml`` its occupancy_probability is within
       0.5/255 of p in observed cells.
 
-    Parameters
-    ----------
-    prefix : output path without extension; its folder must exist.
-    probability : (H, W) occupancy probability in [0, 1], row 0 = lowest y.
-    observed : (H, W) bool.
-    resolution : metres per cell.
-    origin : (x, y) or (x, y, yaw) of the lower-left corner of cell [0, 0].
-
-    Every file is first written under a temporary name in the target folder and renamed at
-    the end, so a failure leaves no partial output.
-    """
+    ``prefix``: the output path without extension (its folder must exist); ``probability``
+    (H, W) in [0, 1] and ``observed`` (H, W) bool, row 0 = lowest y; ``resolution`` in metres
+    per cell; ``origin`` (x, y) or (x, y, yaw) of the lower-left corner of cell [0, 0]. Every
+    file is written under a temporary name in the target folder and renamed at the end."""
     pgm_path, yaml_path, png_path, scale_yaml_path = export_paths(prefix)
     p, obs = _checked_grids(probability, observed)
-    resolution = finite_number(resolution, "resolution", None)
-    if resolution <= 0:
-        raise InputError(f"expected a positive number, got {resolution!r}", key="resolution")
-    origin = list(origin)
-    if len(origin) not in (2, 3):
-        raise InputError(f"expected (x, y) or (x, y, yaw), got {origin!r}", key="origin")
-    ox, oy, oyaw = (finite_number(v, f"origin[{i}]", None) for i, v in enumerate([*origin, 0.0][:3]))
-    occupied_thresh = finite_number(occupied_thresh, "occupied_thresh", None)
-    free_thresh = finite_number(free_thresh, "free_thresh", None)
-    if not 0.0 <= free_thresh <= occupied_thresh <= 1.0:
-        raise InputError(
-            f"expected 0 <= free_thresh <= occupied_thresh <= 1, got {free_thresh!r} and {occupied_thresh!r}",
-            key="free_thresh",
-        )
+    resolution, (ox, oy, oyaw), occupied_thresh, free_thresh = _checked_placement(resolution, origin, occupied_thresh,
+                                                                                 free_thresh)
     pgm_bytes = _pgm_bytes(p, obs, resolution, occupied_thresh, free_thresh)
     png_bytes = _png_bytes(p, obs, occupied_thresh, free_thresh)
     common = f"resolution: {_yaml_float(resolution)}\norigin: [{_yaml_float(ox)}, {_yaml_float(oy)}, {_yaml_float(oyaw)}]\nnegate: 0\n"
@@ -101,6 +82,26 @@ def write_map(
     ]
     write_files_atomically(outputs)
     return [target for target, _ in outputs]
+
+
+def _checked_placement(resolution, origin, occupied_thresh, free_thresh):
+    """(resolution, (x, y, yaw), occupied_thresh, free_thresh) as finite numbers, after checking
+    them; InputError naming the key otherwise."""
+    resolution = finite_number(resolution, "resolution", None)
+    if resolution <= 0:
+        raise InputError(f"expected a positive number, got {resolution!r}", key="resolution")
+    origin = list(origin)
+    if len(origin) not in (2, 3):
+        raise InputError(f"expected (x, y) or (x, y, yaw), got {origin!r}", key="origin")
+    xyz = tuple(finite_number(v, f"origin[{i}]", None) for i, v in enumerate([*origin, 0.0][:3]))
+    occupied_thresh = finite_number(occupied_thresh, "occupied_thresh", None)
+    free_thresh = finite_number(free_thresh, "free_thresh", None)
+    if not 0.0 <= free_thresh <= occupied_thresh <= 1.0:
+        raise InputError(
+            f"expected 0 <= free_thresh <= occupied_thresh <= 1, got {free_thresh!r} and {occupied_thresh!r}",
+            key="free_thresh",
+        )
+    return resolution, xyz, occupied_thresh, free_thresh
 
 
 def _checked_grids(probability, observed) -> tuple[np.ndarray, np.ndarray]:

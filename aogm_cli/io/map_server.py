@@ -101,17 +101,7 @@ def read_map_yaml(path: str | Path) -> RosMap:
     if resolution <= 0:
         raise InputError(f"expected a positive number, got {resolution!r}", file=file, key="resolution")
     negate = _negate(doc, file)
-    occupied_thresh = _number(doc, "occupied_thresh", file)
-    free_thresh = _number(doc, "free_thresh", file)
-    for key, value in (("occupied_thresh", occupied_thresh), ("free_thresh", free_thresh)):
-        if not 0.0 <= value <= 1.0:
-            raise InputError(f"expected a number in [0, 1], got {value!r}", file=file, key=key)
-    if free_thresh > occupied_thresh:
-        raise InputError(
-            f"expected free_thresh <= occupied_thresh ({occupied_thresh!r}), got {free_thresh!r}",
-            file=file,
-            key="free_thresh",
-        )
+    occupied_thresh, free_thresh = _thresholds(doc, file)
     mode = _mode(doc, file)
     origin = _origin(doc, file)
     image = _image_path(doc, path, file)
@@ -140,6 +130,22 @@ def read_map_yaml(path: str | Path) -> RosMap:
     )
 
 
+def _thresholds(doc: dict, file: str) -> tuple[float, float]:
+    """(occupied_thresh, free_thresh), each in [0, 1] and free below occupied."""
+    occupied_thresh = _number(doc, "occupied_thresh", file)
+    free_thresh = _number(doc, "free_thresh", file)
+    for key, value in (("occupied_thresh", occupied_thresh), ("free_thresh", free_thresh)):
+        if not 0.0 <= value <= 1.0:
+            raise InputError(f"expected a number in [0, 1], got {value!r}", file=file, key=key)
+    if free_thresh > occupied_thresh:
+        raise InputError(
+            f"expected free_thresh <= occupied_thresh ({occupied_thresh!r}), got {free_thresh!r}",
+            file=file,
+            key="free_thresh",
+        )
+    return occupied_thresh, free_thresh
+
+
 def pixels_to_occupancy(
     pixels: np.ndarray,
     has_alpha_channel: bool,
@@ -151,19 +157,9 @@ def pixels_to_occupancy(
 ) -> tuple[np.ndarray, np.ndarray]:
     """The loop of map_server's ``loadMapFromFile`` on image bytes, vectorised.
 
-    Parameters
-    ----------
-    pixels : (H, W) or (H, W, C) uint8
-        The bytes of each pixel in the order SDL_image stores them, top image row first.
-    has_alpha_channel : bool
-        Whether SDL gave the surface an alpha mask (the last byte is then alpha).
-    negate, occupied_thresh, free_thresh, mode
-        As in the YAML.
-
-    Returns
-    -------
-    data : (H, W) int8, row 0 = bottom image row.
-    occupancy_probability : (H, W) float64, same order.
+    ``pixels`` (H, W) or (H, W, C) uint8: each pixel's bytes in SDL_image's order, top image row
+    first; ``has_alpha_channel``: SDL gave the surface an alpha mask (the last byte); the rest as
+    in the YAML. Returns (data (H, W) int8, occupancy_probability (H, W) float64), row 0 = bottom.
 
     Notes
     -----
@@ -202,19 +198,28 @@ def pixels_to_occupancy(
     if mode == "raw":
         data = color_avg.astype(np.uint8).view(np.int8)  # C: unsigned char value = color_avg
     else:
-        data = np.full(occ.shape, -1, dtype=np.int8)
-        is_occupied = occ > occupied_thresh
-        is_free = ~is_occupied & (occ < free_thresh)
-        data[is_occupied] = 100
-        data[is_free] = 0
-        if mode == "scale":
-            opaque = np.ones(occ.shape, bool) if n_channels == 1 else pixels[:, :, n_channels - 1] >= 1
-            between = ~is_occupied & ~is_free & opaque
-            if occupied_thresh > free_thresh:
-                ratio = (occ[between] - free_thresh) / (occupied_thresh - free_thresh)
-                data[between] = (1 + 98 * ratio).astype(np.uint8)
-            # equal thresholds: map_server divides 0 by 0 there; we leave those cells at -1
+        last = None if n_channels == 1 else pixels[:, :, n_channels - 1]
+        data = _classified(occ, occupied_thresh, free_thresh, last if mode == "scale" else None, mode == "scale")
     return np.ascontiguousarray(data[::-1]), np.ascontiguousarray(occ[::-1])
+
+
+def _classified(occ: np.ndarray, occupied_thresh: float, free_thresh: float, last: np.ndarray | None,
+                scale: bool) -> np.ndarray:
+    """map_server's trinary values of ``occ`` (100, 0, -1), and with ``scale`` 1..99 between the
+    thresholds where the pixel's last byte (``last``; None: one-byte pixels) is not 0."""
+    data = np.full(occ.shape, -1, dtype=np.int8)
+    is_occupied = occ > occupied_thresh
+    is_free = ~is_occupied & (occ < free_thresh)
+    data[is_occupied] = 100
+    data[is_free] = 0
+    if scale:
+        opaque = np.ones(occ.shape, bool) if last is None else last >= 1
+        between = ~is_occupied & ~is_free & opaque
+        if occupied_thresh > free_thresh:
+            ratio = (occ[between] - free_thresh) / (occupied_thresh - free_thresh)
+            data[between] = (1 + 98 * ratio).astype(np.uint8)
+        # equal thresholds: map_server divides 0 by 0 there; we leave those cells at -1
+    return data
 
 
 def _describe(value: Any) -> str:

@@ -264,10 +264,7 @@ def _fill_index(tpl, flat, grid, readings, sigma, window, out):
 
 
 def build_forward_index(
-    rows: np.ndarray,
-    cols: np.ndarray,
-    bins: np.ndarray,
-    z: np.ndarray,
+    cones: tuple,
     grid,
     templates,
     z_max: float,
@@ -276,8 +273,9 @@ def build_forward_index(
     mask: np.ndarray | None = None,
     held_free: np.ndarray | None = None,
 ) -> ForwardIndex:
-    """The forward model's index for readings ``z`` taken from sensor cells (rows, cols) with
-    heading bins ``bins`` (as ``cone.sensor_cells`` gives them; flat arrays of one length).
+    """The forward model's index for ``cones`` = (rows, cols, bins, z): readings z taken from
+    sensor cells (rows, cols) with heading bins ``bins`` (as ``cone.sensor_cells`` gives them;
+    flat arrays of one length).
 
     NaN readings are dropped; +inf is a max-range reading (cone up to z_max). Other cones end
     ``config.window`` sigmas beyond z. ``reading_ids`` name the readings (default 0..N-1).
@@ -287,6 +285,7 @@ def build_forward_index(
     occupied): a free cell adds nothing to any S_t, so leaving its entries out changes no
     likelihood, and the index of a small cluster holds little more than the cluster's cells.
     """
+    rows, cols, bins, z = cones
     z = np.asarray(z, dtype=np.float64).reshape(-1)
     ids = np.arange(len(z)) if reading_ids is None else np.asarray(reading_ids).reshape(-1)
     keep = ~np.isnan(z)

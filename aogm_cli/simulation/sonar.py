@@ -180,6 +180,42 @@ def side_lobe_offsets(lobes: SideLobes) -> np.ndarray:
 # bounces) is the reading, then crosstalk, random readings, Gaussian noise and the range limits apply.
 # The cause and the noise-free range of the nearest surface of every reading are kept as truth; the
 # logged poses are the odometry's (``simulation.odometry``).
+def _echoes(world: World, time: np.ndarray, pose: np.ndarray, mount: np.ndarray,
+            progress: Callable[[int], None] | None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]:
+    """(echo, ideal range, multipath flag) per (scan, sonar), cast block by block from the true
+    poses (from each sonar's last firing, with ``errors.firing``: then also the scan each reading
+    repeats, else None)."""
+    sonar, errors = world.sonar, world.errors
+    strength = errors.echo_strength
+    n_scans, n_sensors = pose.shape[0], mount.shape[0]
+    geo = geometry(build_scene(world))
+    offsets = sub_ray_offsets(sonar.beam_width, sonar.sub_rays)
+    # the central sub-rays first: their echoes bound the search of the others
+    offsets = offsets[np.argsort(np.abs(offsets), kind="stable")]
+    cos_off, sin_off = np.cos(offsets), np.sin(offsets)
+    reading_pose, source = None, None
+    if errors.firing.on:
+        ages, source = firing.schedule(errors.firing, time, n_sensors)
+        reading_pose = poses_before(world, ages)
+    lobes = errors.side_lobes
+    side = side_lobe_offsets(lobes) if lobes.range > 0 else None
+    cos_side, sin_side = (None, None) if side is None else (np.cos(side), np.sin(side))
+    echo = np.empty((n_scans, n_sensors))
+    ideal = np.empty((n_scans, n_sensors))
+    multipath = np.empty((n_scans, n_sensors), dtype=np.bool_)
+    for start in range(0, n_scans, BLOCK_SCANS):
+        stop = min(n_scans, start + BLOCK_SCANS)
+        echo_block(
+            pose[start:stop], mount, cos_off, sin_off, float(sonar.max_range), int(sonar.max_bounces), geo,
+            echo[start:stop], ideal[start:stop], multipath[start:stop],
+            float(strength.min_strength), float(strength.beam), float(strength.incidence_exponent),
+            None if reading_pose is None else reading_pose[start:stop], cos_side, sin_side, float(lobes.range),
+        )
+        if progress is not None:
+            progress(stop)
+    return echo, ideal, multipath, source
+
+
 def simulate(world: World, seed: int, progress: Callable[[int], None] | None = None) -> Log:
     """Simulate the world's sonar along its trajectory: the log, with its truth.
 
@@ -191,9 +227,8 @@ def simulate(world: World, seed: int, progress: Callable[[int], None] | None = N
     odometry's estimate of them (``odometry.dead_reckoning``); with ``errors.firing`` each
     reading is cast from the true pose when its sonar last fired (``firing.schedule``,
     ``trajectory.poses_before``) and repeated while it has not fired again, while the log keeps
-    one pose per scan. ``progress(n_scans_done)`` is called after each block of scans. A world
-    whose estimate exceeds the limits in force (``core.budget``) is refused first.
-    """
+    one pose per scan. ``progress(n_scans_done)`` after each block of scans. A world whose
+    estimate exceeds the limits in force (``core.budget``) is refused first."""
     sonar = world.sonar
     if sonar is None:
         raise InputError("the world has no sonar", file=world.source, key="sonar")
@@ -208,35 +243,8 @@ def simulate(world: World, seed: int, progress: Callable[[int], None] | None = N
     noise = rng.standard_normal((n_scans, n_sensors))
 
     errors: SimulationErrors = world.errors
-    strength = errors.echo_strength
-
     grid, occupancy = truth_occupancy(world)
-    geo = geometry(build_scene(world))
-    offsets = sub_ray_offsets(sonar.beam_width, sonar.sub_rays)
-    # the central sub-rays first: their echoes bound the search of the others
-    offsets = offsets[np.argsort(np.abs(offsets), kind="stable")]
-    cos_off, sin_off = np.cos(offsets), np.sin(offsets)
-    reading_pose = None
-    if errors.firing.on:
-        ages, source = firing.schedule(errors.firing, time, n_sensors)
-        reading_pose = poses_before(world, ages)
-    lobes = errors.side_lobes
-    side = side_lobe_offsets(lobes) if lobes.range > 0 else None
-    cos_side, sin_side = (None, None) if side is None else (np.cos(side), np.sin(side))
-
-    echo = np.empty((n_scans, n_sensors))
-    ideal = np.empty((n_scans, n_sensors))
-    multipath = np.empty((n_scans, n_sensors), dtype=np.bool_)
-    for start in range(0, n_scans, BLOCK_SCANS):
-        stop = min(n_scans, start + BLOCK_SCANS)
-        echo_block(
-            pose[start:stop], mount, cos_off, sin_off, float(sonar.max_range), int(sonar.max_bounces), geo,
-            echo[start:stop], ideal[start:stop], multipath[start:stop],
-            float(strength.min_strength), float(strength.beam), float(strength.incidence_exponent),
-            None if reading_pose is None else reading_pose[start:stop], cos_side, sin_side, float(lobes.range),
-        )
-        if progress is not None:
-            progress(stop)
+    echo, ideal, multipath, source = _echoes(world, time, pose, mount, progress)
 
     if errors.crosstalk_rate > 0.0:
         rng_crosstalk = error_stream(seed, CROSSTALK_STREAM)
@@ -257,14 +265,8 @@ def simulate(world: World, seed: int, progress: Callable[[int], None] | None = N
         world=world.text,
         checks=tuple(c.as_json() for c in world.checks),
     )
-    sensor = SensorSpec(
-        mount=mount,
-        kind="sonar",
-        beam_width=float(sonar.beam_width),
-        min_range=float(sonar.min_range),
-        max_range=float(sonar.max_range),
-        noise_sigma=float(sonar.noise_sigma),
-    )
+    sensor = SensorSpec(mount=mount, kind="sonar", beam_width=float(sonar.beam_width), min_range=float(sonar.min_range),
+                        max_range=float(sonar.max_range), noise_sigma=float(sonar.noise_sigma))
     return Log(
         time=time,
         pose=logged_pose,
