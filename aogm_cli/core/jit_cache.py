@@ -37,6 +37,25 @@ def load_lean() -> None:
             with self._guard_against_spurious_io_errors():
                 return self._load_overload(sig, target_context)
         except Exception:  # noqa: BLE001 - then numba's own way, which initialises everything
+            pass
+        try:
             return numba_way(self, sig, target_context)
+        except (ImportError, AttributeError):
+            # an index written before a kernel it calls moved to another module (numba keys its
+            # cache on the kernel's own source only): dropped, so that it compiles and writes anew
+            _drop_index(self)
+            return None
 
     Cache.load_overload = load_overload
+
+
+def _drop_index(cache) -> None:
+    """Remove a numba cache's index file (its entries are then compiled again and saved)."""
+    import os
+
+    path = getattr(getattr(cache, "_cache_file", None), "_index_path", None)
+    if path:
+        try:
+            os.remove(path)
+        except OSError:
+            pass
