@@ -10,7 +10,6 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from aogm_cli import __version__
 from aogm_cli.core.errors import InputError
 from aogm_cli.detector.features import FeatureSpec
 from aogm_cli.detector.network import ACTIVATIONS, LAYOUT, Detector, Layer
@@ -25,7 +24,7 @@ from aogm_cli.io.h5file import (
     reading,
     text_attr,
 )
-from aogm_cli.io.provenance import file_sha256, write_provenance
+from aogm_cli.io.provenance import file_sha256, write_header, write_provenance
 
 FORMAT = "aogm-detector"
 FORMAT_VERSION = 1
@@ -46,9 +45,7 @@ def detector_bytes(detector: Detector, provenance: dict | None = None) -> bytes:
     (``io.provenance.provenance``) in the root attribute of that name when given."""
 
     def fill(f: h5py.File) -> None:
-        f.attrs["format"] = FORMAT
-        f.attrs["format_version"] = FORMAT_VERSION
-        f.attrs["aogm_version"] = __version__
+        write_header(f, FORMAT, FORMAT_VERSION)
         f.attrs["features"] = detector.feature_spec.to_json()
         f.attrs["metrics"] = json.dumps(detector.metrics)
         f.attrs["threshold"] = float(detector.threshold)

@@ -14,7 +14,6 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from aogm_cli import __version__
 from aogm_cli.core.errors import InputError
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import CAUSE_ECHO, CAUSE_SPECULAR, CHECK_KINDS, Log, SensorSpec, Truth
@@ -32,7 +31,7 @@ from aogm_cli.io.h5file import (
     text_attr,
     vector_attr,
 )
-from aogm_cli.io.provenance import write_provenance
+from aogm_cli.io.provenance import write_header, write_provenance
 
 FORMAT = "aogm-log"
 FORMAT_VERSION = 1
@@ -42,9 +41,7 @@ def log_bytes(log: Log, provenance: dict | None = None) -> bytes:
     (``io.provenance.provenance``) in the root attribute of that name when given."""
 
     def fill(f: h5py.File) -> None:
-        f.attrs["format"] = FORMAT
-        f.attrs["format_version"] = FORMAT_VERSION
-        f.attrs["aogm_version"] = __version__
+        write_header(f, FORMAT, FORMAT_VERSION)
         f.attrs["source"] = log.source
         if log.seed is not None:
             f.attrs["seed"] = int(log.seed)

@@ -105,6 +105,16 @@ def git_commit(folder: str | Path | None = None) -> str | None:
     return head.strip() + ("-dirty" if status is None or status.strip() else "")
 
 
+def write_header(f: h5py.File, file_format: str, version: int) -> None:
+    """The root attributes every aogm file starts with: its format, the format's version and
+    the aogm version that wrote it (CONTRACT.md)."""
+    from aogm_cli import __version__
+
+    f.attrs["format"] = file_format
+    f.attrs["format_version"] = version
+    f.attrs["aogm_version"] = __version__
+
+
 def write_provenance(f: h5py.File, record: dict | None) -> None:
     """Put ``record`` (from ``provenance``) into ``f``'s root attribute; nothing when None."""
     if record is not None:
