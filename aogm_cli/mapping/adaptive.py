@@ -33,11 +33,10 @@ from aogm_cli.mapping.params import EMConfig, MapParams
 from aogm_cli.mapping.pipeline import Progress, log_grid, params_json
 from aogm_cli.mapping.standard import standard_pass
 from aogm_cli.sensor_models.ray import is_narrow_beam
-from aogm_cli.sensor_models.readings import LaidOutReadings as Readings
-from aogm_cli.sensor_models.readings import cone_bands, lay_out_readings
+from aogm_cli.sensor_models.readings import LaidOutReadings, cone_bands, lay_out_readings
 
 
-def cluster_problem(run: Readings, clusters: np.ndarray, occupied: np.ndarray, config: EMConfig,
+def cluster_problem(run: LaidOutReadings, clusters: np.ndarray, occupied: np.ndarray, config: EMConfig,
                     subset: np.ndarray | None = None) -> EMProblem:
     """EM's problem inside ``clusters`` (ids, 0 outside): the readings whose cones could reach a
     cluster cell (``cluster.readings_near_clusters``; of those ``subset`` marks, if given), under
@@ -68,7 +67,7 @@ def contested_cells(log: Log, grid, params: MapParams, log_odds: np.ndarray) -> 
     return (hits - params.inverse_model.l0 >= params.adaptive.contested) & (log_odds <= 0), seconds
 
 
-def find_clusters(run: Readings, flags: np.ndarray, log_odds: np.ndarray, observed: np.ndarray,
+def find_clusters(run: LaidOutReadings, flags: np.ndarray, log_odds: np.ndarray, observed: np.ndarray,
                   params: MapParams, contested: np.ndarray | None = None) -> tuple[np.ndarray, int]:
     """(cluster ids (H, W), count): a flagged cone's band near its range, z - band_below ..
     z + alpha (where the standard map thickens walls towards the robot), next to cells the
@@ -91,7 +90,7 @@ def find_clusters(run: Readings, flags: np.ndarray, log_odds: np.ndarray, observ
     return label_clusters(observed & grown(region, grow))
 
 
-def em_in_clusters(whole, run: Readings, clusters: np.ndarray, n_clusters: int, occupied: np.ndarray,
+def em_in_clusters(whole, run: LaidOutReadings, clusters: np.ndarray, n_clusters: int, occupied: np.ndarray,
                    params: MapParams, progress: Progress | None = None) -> tuple[EMOutcome, int]:
     """EM over every cluster cell at once, every other cell held at ``occupied`` (flat, updated
     in place): (its outcome, how many groups of coupled clusters it solved). Clusters that share

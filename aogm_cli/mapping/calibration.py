@@ -15,12 +15,12 @@ import numpy as np
 from aogm_cli.mapping.params import CalibrationConfig, EMConfig, MapParams
 from aogm_cli.sensor_models import forward_model as F
 from aogm_cli.sensor_models.cone import flat_offsets
-from aogm_cli.sensor_models.readings import LaidOutReadings as Readings
+from aogm_cli.sensor_models.readings import LaidOutReadings
 
 LEARNED = ("sigma", "p_rand", "p_hit", "p_max")  # the forward model's parameters calibration sets
 
 
-def sample_readings(run: Readings, max_readings: int, select: np.ndarray | None = None) -> F.ExpectationReadings:
+def sample_readings(run: LaidOutReadings, max_readings: int, select: np.ndarray | None = None) -> F.ExpectationReadings:
     """The readings the parameters are fitted on: every valid reading of ``run`` (NaN left out;
     with ``select``, a bool mask, only those it marks), or every n-th of them when there are
     more than ``max_readings`` (deterministic, spread over the whole log)."""
@@ -32,7 +32,7 @@ def sample_readings(run: Readings, max_readings: int, select: np.ndarray | None 
                                  run.bins[keep].astype(np.int64), run.z[keep].astype(np.float64))
 
 
-def expectations(run: Readings, readings: F.ExpectationReadings, occupied: np.ndarray,
+def expectations(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: np.ndarray,
                  forward: F.ForwardModelConfig) -> np.ndarray:
     """The summed expectations (``forward_model.expectation_sums``, E_SIZE,) of ``readings``
     under the flat binary map ``occupied`` and the model ``forward``."""
@@ -84,7 +84,7 @@ class Fit:
     loglik_per_reading: float  # mean log p(z | m) of the sample under ``forward`` at the map
 
 
-def fit_at_map(run: Readings, readings: F.ExpectationReadings, occupied: np.ndarray, forward: F.ForwardModelConfig,
+def fit_at_map(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: np.ndarray, forward: F.ForwardModelConfig,
                config: CalibrationConfig) -> Fit:
     """EM over the parameters alone at a fixed map: expectations, then ``m_step``, until the
     parameters settle (``config.tolerance`` / 10) or ``config.fit_iterations``."""
@@ -115,7 +115,7 @@ class Stage:
     """EM's set-up on one grid: the readings laid out on it, the flat start map (updated in
     place), the EM step over them and the readings the model is fitted on (None: all)."""
 
-    run: Readings
+    run: LaidOutReadings
     occupied: np.ndarray
     em_step: EMStep
     select: np.ndarray | None = None
@@ -187,7 +187,7 @@ def calibrated_em(fine: Stage, em: EMConfig, config: CalibrationConfig,
     return used, result, record
 
 
-def _every_nth_scan(run: Readings, n: int) -> np.ndarray | None:
+def _every_nth_scan(run: LaidOutReadings, n: int) -> np.ndarray | None:
     """A bool mask over ``run``'s readings marking every ``n``-th scan's (None for n = 1)."""
     if n <= 1:
         return None

@@ -102,7 +102,7 @@ def planner_view(probability: np.ndarray, observed: np.ndarray, unseen: np.ndarr
 def em_readings(cones, templates, grid, z_max: float, config: ForwardModelConfig,
                 select: np.ndarray | None = None) -> K.EMReadings:
     """The readings ``cones`` (sensor cells, heading bins, template ranges: flat arrays of one
-    length, as ``pipeline.Readings.cones`` has them) as EM's kernels take them, or those ``select`` picks (a
+    length, as ``sensor_models.readings.LaidOutReadings.cones`` has them) as EM's kernels take them, or those ``select`` picks (a
     bool mask or positions; taken one column at a time, without a copy of every array). NaN
     readings must be left out; +inf is a max-range reading (cone up to z_max); other cones end
     ``config.window`` sigmas beyond z."""
