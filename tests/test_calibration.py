@@ -204,12 +204,12 @@ def test_calibration_maps_the_whole_log_once_and_part_of_it_before(corridor_door
     def em_step(config, occupied, subset):
         calls.append((config.forward.sigma, config.max_sweeps, None if subset is None else subset.copy()))
         occupied[:] = truth  # the map EM would find
-        return 0.0, 1.0, 1, "result"
+        return 1.0, 1, "result"
 
     truth = log.truth.occupancy.reshape(-1).astype(bool)
     occupied = np.zeros(grid.height * grid.width, dtype=bool)
     config = CalibrationConfig(rounds=3)
-    used, result, record = C.calibrated_em(C.Stage(run_, occupied, em_step), EMConfig(), config)
+    used, result, record = C.calibrated_em(run_, occupied, EMConfig(), config, em_step)
     assert result == "result" and record["final"] == C.model_values(used.forward)
     assert len(calls) == 3  # the broad map, a map for the second fit (at which the model settles), the final
     assert [c[2] is None for c in calls] == [False] * (len(calls) - 1) + [True]  # one run over every scan, the last
@@ -221,23 +221,3 @@ def test_calibration_maps_the_whole_log_once_and_part_of_it_before(corridor_door
         assert np.array_equal(np.flatnonzero(subset.reshape(scans, -1)[:, 0]), np.arange(0, scans, 2))
         assert sweeps == config.fit_sweeps
     assert calls[-1][1] == EMConfig().max_sweeps and record["final_em"]["em_sweeps"] == 1
-
-
-def test_coarse_calibration_fits_at_maps_of_larger_cells_and_maps_the_fine_grid_once(corridor_door_log):
-    """calibration.coarse: 2 makes the fits' maps on cells twice as large; the learned sigma is
-    brought back to the map's cells (sigma^2 - (0.1^2 - 0.05^2) / 12) and the map is the fine grid's."""
-    from aogm_cli import api
-
-    m = api.map_log(corridor_door_log, "em", calibration={"coarse": 2})
-    record = m.stats["calibration"]
-    assert record["fitted_at"] == "0.1 m cells, every scan"
-    last_fit = record["rounds"][-1]["sigma"]
-    expected = math.sqrt(max(last_fit ** 2 - (0.1 ** 2 - 0.05 ** 2) / 12, CalibrationConfig().sigma_min ** 2))
-    assert m.params["em"]["sigma"] == pytest.approx(expected)
-    assert m.grid.resolution == 0.05 and m.probability.shape == m.grid.shape
-    assert 0.015 < m.params["em"]["sigma"] < 0.04
-
-
-def test_a_coarsened_grid_covers_the_fine_one_from_the_same_origin():
-    g = GridSpec(1.0, -2.0, 0.05, 5, 8).coarsened(2)
-    assert (g.origin_x, g.origin_y, g.resolution, g.height, g.width) == (1.0, -2.0, 0.1, 3, 4)

@@ -46,11 +46,6 @@ class GridSpec:
         height = max(1, int(math.ceil((y_max - y_min) / resolution - 1e-9)))
         return cls(float(x_min), float(y_min), float(resolution), height, width)
 
-    def coarsened(self, factor: int) -> GridSpec:
-        """The grid of cells ``factor`` times as large, on the same origin, covering this one."""
-        return GridSpec(self.origin_x, self.origin_y, self.resolution * factor, -(-self.height // factor),
-                        -(-self.width // factor))
-
     def world_to_cell(self, x, y):
         """(row, col) integer arrays of the cells holding points (x, y); may lie outside the grid."""
         col = np.floor((np.asarray(x, dtype=np.float64) - self.origin_x) / self.resolution).astype(np.int64)

@@ -19,8 +19,6 @@ from aogm_cli.mapping.cluster import grown, label_clusters, near_occupied, readi
 from aogm_cli.mapping.em import (
     EMOutcome,
     EMProblem,
-    EMSetup,
-    coarse_setup,
     em_problem,
     em_readings,
     em_stats,
@@ -90,7 +88,7 @@ def find_clusters(run: LaidOutReadings, flags: np.ndarray, log_odds: np.ndarray,
     return label_clusters(observed & grown(region, grow))
 
 
-def em_in_clusters(whole, run: LaidOutReadings, clusters: np.ndarray, n_clusters: int, occupied: np.ndarray,
+def em_in_clusters(run: LaidOutReadings, clusters: np.ndarray, n_clusters: int, occupied: np.ndarray,
                    params: MapParams, progress: Progress | None = None) -> tuple[EMOutcome, int]:
     """EM over every cluster cell at once, every other cell held at ``occupied`` (flat, updated
     in place): (its outcome, how many groups of coupled clusters it solved). Clusters that share
@@ -108,9 +106,7 @@ def em_in_clusters(whole, run: LaidOutReadings, clusters: np.ndarray, n_clusters
     near = np.zeros(run.z.size, dtype=bool)
     near[readings_near_clusters(clusters, run.rows, run.cols, run.z, run.grid, run.sensor.max_range,
                                 params.em.forward)] = True
-    coarse, t_coarse = coarse_setup(whole, run.grid, run.sensor, params, near)
-    outcome = em_with_phases(EMSetup(run, occupied, problem_for, near), params, coarse, progress)
-    outcome.seconds["calibration"] += t_coarse
+    outcome = em_with_phases(run, occupied, params, problem_for, select=near, progress=progress)
     return outcome, coupled_groups(outcome.problem, n_clusters)
 
 
@@ -122,7 +118,7 @@ def map_adaptive(log, params: MapParams, detector, detector_name: str = "package
     sensor = log.sensor
     whole = log.read()  # EM needs every reading in memory: read the scans once
     log_odds, observed, t_standard = standard_pass(whole, grid, params)
-    prepared_templates(grid, sensor, params)  # outside the clock
+    prepared_templates(grid, sensor)  # outside the clock
     t0 = time.perf_counter()
     run = lay_out_readings(whole.pose, whole.ranges, sensor, grid)
     t_readings = time.perf_counter() - t0
@@ -137,7 +133,7 @@ def map_adaptive(log, params: MapParams, detector, detector_name: str = "package
     t_cluster = time.perf_counter() - t0
 
     occupied = np.ascontiguousarray((log_odds > 0).reshape(-1))  # the thresholded standard map
-    outcome, groups = em_in_clusters(whole, run, clusters, n_clusters, occupied, params, progress) if n_clusters else (None, 0)
+    outcome, groups = em_in_clusters(run, clusters, n_clusters, occupied, params, progress) if n_clusters else (None, 0)
     t0 = time.perf_counter()
     probability, observed = em_view(log_odds, observed, outcome, grid, whole.pose, sensor, params)
     seconds = outcome.seconds if outcome else {"index": 0.0, "calibration": 0.0, "sweeps": 0.0}

@@ -106,84 +106,63 @@ def model_values(forward: F.ForwardModelConfig) -> dict:
 
 
 # (config, flat occupied updated in place, a bool mask of the readings to map or None for all) ->
-# (EM's objective before its first sweep and after its last, its sweeps, what the caller keeps)
-EMStep = Callable[[EMConfig, np.ndarray, np.ndarray | None], tuple[float, float, int, object]]
+# (EM's objective after its last sweep, its sweeps, what the caller keeps)
+EMStep = Callable[[EMConfig, np.ndarray, np.ndarray | None], tuple[float, int, object]]
 
 
-@dataclass
-class Stage:
-    """EM's set-up on one grid: the readings laid out on it, the flat start map (updated in
-    place), the EM step over them and the readings the model is fitted on (None: all)."""
-
-    run: LaidOutReadings
-    occupied: np.ndarray
-    em_step: EMStep
-    select: np.ndarray | None = None
-
-
-def em_with_model(fine: Stage, params: MapParams, coarse: Stage | None = None) -> tuple[EMConfig, object, dict | None]:
-    """EM with the configured forward model, or calibrated (``calibrated_em``) when
-    ``params.calibration.enabled``: (the EM config used, the final EM step's result, the record
-    or None)."""
+def em_with_model(run: LaidOutReadings, occupied: np.ndarray, params: MapParams, em_step: EMStep,
+                  select: np.ndarray | None = None) -> tuple[EMConfig, object, dict | None]:
+    """EM with the configured forward model, or calibrated (``calibrated_em``, fitted on the
+    readings ``select`` marks, default all) when ``params.calibration.enabled``: (the EM config
+    used, ``em_step``'s last result, the record or None)."""
     if not params.calibration.enabled:
-        return params.em, fine.em_step(params.em, fine.occupied, None)[3], None
-    return calibrated_em(fine, params.em, params.calibration, coarse)
+        return params.em, em_step(params.em, occupied, None)[2], None
+    return calibrated_em(run, occupied, params.em, params.calibration, em_step, select)
 
 
-def calibrated_em(fine: Stage, em: EMConfig, config: CalibrationConfig,
-                  coarse: Stage | None = None) -> tuple[EMConfig, object, dict]:
-    """Alternate EM maps with fits of the forward model at them (``fit_at_map``), then map
-    every scan once with the last fit. The maps the fits are made at are those of ``coarse``
-    (the same log on a grid of larger cells: the fitted sigma, which holds the cells' own
-    spread, is brought back to the fine cells, sigma^2 - (coarse^2 - fine^2) / 12), else of part
-    of the log: every ``config.start_subsample``-th scan for round 0, every ``subsample``-th
-    after. Round 0 maps with the configured model made at least ``config.start_sigma`` broad, in
-    at most ``config.start_sweeps`` sweeps (its map only serves the first fit: a broad model
-    puts each wall at the readings' mean); each later round fits the parameters at the last map
-    and, until they settle (``config.tolerance``) or ``config.rounds``, maps again with them
-    (at most ``fit_sweeps`` sweeps). Every EM run starts from its stage's start map: a warm
-    start from a broad or half-made map keeps walls thick (corridor_door 0.970 against 0.974).
+def calibrated_em(run: LaidOutReadings, occupied: np.ndarray, em: EMConfig, config: CalibrationConfig,
+                  em_step: EMStep, select: np.ndarray | None = None) -> tuple[EMConfig, object, dict]:
+    """Alternate EM maps of part of the log with fits of the forward model at them
+    (``fit_at_map``, on every reading), then map every scan once with the last fit. Round 0
+    maps every ``config.start_subsample``-th scan with the configured model made at least
+    ``config.start_sigma`` broad, in at most ``config.start_sweeps`` sweeps (its map only serves
+    the first fit: a broad model puts each wall at the readings' mean); each later round fits
+    the parameters at the last map and, until they settle (``config.tolerance``) or
+    ``config.rounds``, maps every ``config.subsample``-th scan with them (at most ``fit_sweeps``
+    sweeps). Every EM run starts from the flat binary map ``occupied`` as given (updated in place
+    to the final map): a warm start from a broad or half-made map keeps walls thick
+    (corridor_door 0.970 against 0.974).
 
     Returns (the EM config the final map was made with, the last EM result, the record: the
-    starting values, and per round the fitted values, the mean log-likelihood of the sample at
-    the fit, and EM's objective before and after its sweeps and their number)."""
-    stage = coarse or fine
-    readings = sample_readings(stage.run, config.max_readings, stage.select)
-    if coarse is None:
-        scans, first_scans = _every_nth_scan(fine.run, config.subsample), _every_nth_scan(fine.run, config.start_subsample)
-    else:  # every scan: a quarter of them on the coarse cells left the first fit's sigma 0.062 (0.045 from all)
-        scans = first_scans = None
-    start = stage.occupied.copy()
+    starting values, per round the fitted values, the mean log-likelihood of the sample at the
+    fit and EM's objective and sweeps, and the final map's EM objective and sweeps)."""
+    readings = sample_readings(run, config.max_readings, select)
+    scans, first_scans = _every_nth_scan(run, config.subsample), _every_nth_scan(run, config.start_subsample)
+    start = occupied.copy()
     record = {"initial": model_values(em.forward), "readings_used": int(readings.z.shape[0]),
-              "fitted_at": f"{stage.run.grid.resolution:g} m cells" + (", every scan" if coarse else
-                                                                      f", 1 scan in {config.subsample}"),
-              "rounds": []}
+              "fitted_at": f"1 scan in {config.start_subsample}, then 1 in {config.subsample}", "rounds": []}
     used = dataclasses.replace(em, forward=dataclasses.replace(em.forward, sigma=max(em.forward.sigma, config.start_sigma)))
     step = dataclasses.replace(used, max_sweeps=min(em.max_sweeps, config.start_sweeps))
     entry = {"round": 0, **model_values(used.forward)}
     record["rounds"].append(entry)
     for round_no in range(1, config.rounds + 1):
-        before, after, sweeps, result = stage.em_step(step, stage.occupied, first_scans if round_no == 1 else scans)
-        entry.update(em_objective_before=float(before), em_objective=float(after), em_sweeps=int(sweeps))
+        objective, sweeps, _ = em_step(step, occupied, first_scans if round_no == 1 else scans)
+        entry.update(em_objective=float(objective), em_sweeps=int(sweeps))
         # fitted on every reading (not only those the map was made from, which it explains too
         # well: sigma 0.046 against 0.058 at the simulator's 0.05, 0.088 against 0.118 at 0.12)
-        fit = fit_at_map(stage.run, readings, stage.occupied, used.forward, config)
-        stage.occupied[:] = start
+        fit = fit_at_map(run, readings, occupied, used.forward, config)
+        occupied[:] = start
         entry = {"round": round_no, **model_values(fit.forward), "fit_iterations": fit.iterations,
                  "loglik_per_reading": fit.loglik_per_reading}
         record["rounds"].append(entry)
-        last = settled(fit.forward, used.forward, config.tolerance) or round_no >= config.rounds
+        settled_now = settled(fit.forward, used.forward, config.tolerance)
         used = dataclasses.replace(em, forward=fit.forward)
         step = dataclasses.replace(used, max_sweeps=min(em.max_sweeps, config.fit_sweeps))
-        if last:
+        if settled_now:
             break
-    if coarse is not None:
-        shrink = (coarse.run.grid.resolution ** 2 - fine.run.grid.resolution ** 2) / 12.0
-        sigma = math.sqrt(max(used.forward.sigma ** 2 - shrink, config.sigma_min ** 2))
-        used = dataclasses.replace(used, forward=dataclasses.replace(used.forward, sigma=sigma))
-    before, after, sweeps, result = fine.em_step(used, fine.occupied, None)
+    objective, sweeps, result = em_step(used, occupied, None)
     record["final"] = model_values(used.forward)
-    record["final_em"] = {"em_objective_before": float(before), "em_objective": float(after), "em_sweeps": int(sweeps)}
+    record["final_em"] = {"em_objective": float(objective), "em_sweeps": int(sweeps)}
     return used, result, record
 
 
@@ -191,7 +170,7 @@ def _every_nth_scan(run: LaidOutReadings, n: int) -> np.ndarray | None:
     """A bool mask over ``run``'s readings marking every ``n``-th scan's (None for n = 1)."""
     if n <= 1:
         return None
-    scans, width = run.ranges.shape if run.ranges.ndim == 2 else (run.ranges.shape[0], 1)
+    scans, width = run.ranges.shape
     return np.repeat(np.arange(scans) % n == 0, width)
 
 

@@ -20,7 +20,7 @@ import numpy as np
 
 from aogm_cli.core.occupancy_map import OccupancyMap
 from aogm_cli.mapping import em_kernels as K
-from aogm_cli.mapping.calibration import Stage, em_with_model
+from aogm_cli.mapping.calibration import em_with_model
 from aogm_cli.mapping.params import EMConfig, MapParams
 from aogm_cli.mapping.pipeline import Progress, log_grid, params_json
 from aogm_cli.mapping.standard import probability_from_log_odds, standard_pass
@@ -335,41 +335,27 @@ class EMOutcome:
 ProblemFor = Callable[[EMConfig, np.ndarray, "np.ndarray | None"], tuple[EMProblem, np.ndarray]]
 
 
-@dataclass
-class EMSetup:
-    """EM on one grid: the readings laid out on it, the flat start map (updated in place), the
-    problems EM solves there, and the readings calibration fits on (None: all)."""
-
-    run: object
-    occupied: np.ndarray
-    problem_for: ProblemFor
-    select: np.ndarray | None = None
-
-
-def em_with_phases(fine: EMSetup, params: MapParams, coarse: EMSetup | None = None,
-                   progress: Progress | None = None) -> EMOutcome:
-    """The EM of the em and adaptive modes: EM over the problems ``fine.problem_for`` sets up,
-    its forward model calibrated first when calibration is on (``calibration.em_with_model``; at
-    ``coarse``'s maps when given); ``fine.occupied`` is updated in place, and timed."""
+def em_with_phases(run, occupied: np.ndarray, params: MapParams, problem_for: ProblemFor,
+                   select: np.ndarray | None = None, progress: Progress | None = None) -> EMOutcome:
+    """The EM of the em and adaptive modes: EM over the problems ``problem_for`` sets up, with
+    the forward model calibrated on the readings ``select`` marks when calibration is on
+    (``calibration.em_with_model``); ``occupied`` (flat) is updated in place, and timed."""
     last = {}
 
     def on_sweep(sweep, flips, objective):
         if progress:
             progress("em sweep", sweep, params.em.max_sweeps)
 
-    def stage(setup: EMSetup) -> Stage:
-        def em_step(config: EMConfig, occ: np.ndarray, subset: np.ndarray | None):
-            t0 = time.perf_counter()
-            problem, candidates = setup.problem_for(config, occ, subset)
-            t1 = time.perf_counter()
-            result = run_em(problem, occ, candidates, config, on_sweep, final=subset is None)
-            last.update(index=t1 - t0, sweeps=time.perf_counter() - t1, problem=problem)
-            return result.objective[0], result.objective[-1], result.sweeps, result
-
-        return Stage(setup.run, setup.occupied, em_step, setup.select)
+    def em_step(config: EMConfig, occ: np.ndarray, subset: np.ndarray | None):
+        t0 = time.perf_counter()
+        problem, candidates = problem_for(config, occ, subset)
+        t1 = time.perf_counter()
+        result = run_em(problem, occ, candidates, config, on_sweep, final=subset is None)
+        last.update(index=t1 - t0, sweeps=time.perf_counter() - t1, problem=problem)
+        return result.objective[-1], result.sweeps, result
 
     t0 = time.perf_counter()
-    config, result, calibration = em_with_model(stage(fine), params, stage(coarse) if coarse else None)
+    config, result, calibration = em_with_model(run, occupied, params, em_step, select)
     total = time.perf_counter() - t0
     seconds = {"index": last["index"], "calibration": total - last["index"] - last["sweeps"], "sweeps": last["sweeps"]}
     return EMOutcome(config, result, last["problem"], calibration, seconds)
@@ -419,30 +405,12 @@ def whole_log_problems(run, templates, grid, z_max: float) -> ProblemFor:
     return problem_for
 
 
-def prepared_templates(grid, sensor, params: MapParams):
-    """The forward templates of ``grid`` (and of calibration's coarse grid, when used), built or
-    loaded before any clock starts: a one-time set-up, cached."""
+def prepared_templates(grid, sensor):
+    """The forward templates of ``grid`` with their row groups, built or loaded before any clock
+    starts: a one-time set-up, cached."""
     templates = forward_templates(grid, sensor)
     K.row_groups(templates)
-    if params.calibration.enabled and params.calibration.coarse > 1:
-        K.row_groups(forward_templates(grid.coarsened(params.calibration.coarse), sensor))
     return templates
-
-
-def coarse_setup(whole, grid, sensor, params: MapParams, select: np.ndarray | None = None) -> tuple[EMSetup | None, float]:
-    """(calibration's EM over every cell of the grid of ``calibration.coarse`` times larger
-    cells, started from its thresholded standard map and fitted on the readings ``select``
-    marks, or None when it is 1 or calibration is off; the seconds its set-up took)."""
-    factor = params.calibration.coarse
-    if not params.calibration.enabled or factor <= 1:
-        return None, 0.0
-    t0 = time.perf_counter()
-    coarse = grid.coarsened(factor)
-    log_odds, _, _ = standard_pass(whole, coarse, params)
-    start = (log_odds > 0).reshape(-1) if params.em.start == "standard" else np.zeros(coarse.height * coarse.width, bool)
-    run = lay_out_readings(whole.pose, whole.ranges, sensor, coarse)
-    problems = whole_log_problems(run, run.templates, coarse, sensor.max_range)
-    return EMSetup(run, np.ascontiguousarray(start), problems, select), time.perf_counter() - t0
 
 
 def map_em(log, params: MapParams, progress: Progress | None = None) -> OccupancyMap:
@@ -451,16 +419,14 @@ def map_em(log, params: MapParams, progress: Progress | None = None) -> Occupanc
     grid = log_grid(log, params.resolution)
     whole = log.read()  # EM needs every reading in memory: read the scans once
     log_odds, observed, t_standard = standard_pass(whole, grid, params)
-    templates = prepared_templates(grid, log.sensor, params)  # outside the clock
+    templates = prepared_templates(grid, log.sensor)  # outside the clock
     t0 = time.perf_counter()
     run = lay_out_readings(whole.pose, whole.ranges, log.sensor, grid)
     t_readings = time.perf_counter() - t0
     start = (log_odds > 0).reshape(-1) if params.em.start == "standard" else np.zeros(grid.height * grid.width, bool)
     occupied = np.ascontiguousarray(start)
-    fine = EMSetup(run, occupied, whole_log_problems(run, templates, grid, log.sensor.max_range))
-    coarse, t_coarse = coarse_setup(whole, grid, log.sensor, params)
-    outcome = em_with_phases(fine, params, coarse, progress)
-    outcome.seconds["calibration"] += t_coarse
+    problems = whole_log_problems(run, templates, grid, log.sensor.max_range)
+    outcome = em_with_phases(run, occupied, params, problems, progress=progress)
     t0 = time.perf_counter()
     probability, observed = em_view(log_odds, observed, outcome, grid, whole.pose, log.sensor, params)
     phases = {"standard": t_standard, "readings": t_readings, **outcome.seconds, "view": time.perf_counter() - t0}

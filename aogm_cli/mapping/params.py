@@ -147,10 +147,6 @@ class CalibrationConfig:
     # +17%; bench/calibration_recovery.py)
     subsample: int = 2
     start_subsample: int = 4
-    # the maps the fits are made at have cells this many times larger (1: the map's own cells, of
-    # part of the scans). 2 makes calibration about 35% cheaper but lets the learned model leak:
-    # glass_corridor leak 0.017 -> 0.029, corridor_specular 0.004 -> 0.013 (README, "aogm calibrate")
-    coarse: int = 1
     # bounds: sigma from a tenth of a typical 5 cm cell to half a metre; p_rand, p_max below one
     # half each (a model that calls most readings random or dropped explains nothing); p_hit
     # away from 0 and 1 (EM needs q = 1 - p_hit > 0, and a wall missed by every reading is no wall)
@@ -170,7 +166,7 @@ class CalibrationConfig:
         if unknown or not self.learned:
             raise InputError(f"expected a comma-separated list of sigma, p_rand, p_hit, p_max, got {self.learn!r}",
                              key="learn")
-        for key in ("rounds", "fit_iterations", "max_readings", "start_sweeps", "fit_sweeps", "subsample", "start_subsample", "coarse"):
+        for key in ("rounds", "fit_iterations", "max_readings", "start_sweeps", "fit_sweeps", "subsample", "start_subsample"):
             if getattr(self, key) < 1:
                 raise InputError(f"expected a whole number >= 1, got {getattr(self, key)}", key=key)
         if not 0 < self.tolerance < 1:
