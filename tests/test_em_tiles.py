@@ -8,6 +8,7 @@ wide and narrow beams, candidate subsets, fixed obstacles) ``run_em`` must make 
 track the true objective and give each candidate the residual of its exact flip gain.
 """
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -21,6 +22,7 @@ from aogm_cli.mapping.params import EMConfig
 from aogm_cli.sensor_models import readings as laid_out
 from aogm_cli.sensor_models.cone import build_cone_templates
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig, build_forward_index, log_likelihoods
+from aogm_cli.sensor_models.surface import Surfaces, surface_bits
 
 GRID = GridSpec(0.0, 0.0, 0.1, 30, 70)
 Z_MAX = 2.5
@@ -75,14 +77,15 @@ class Case:
     config: EMConfig
     candidates: np.ndarray
     start: np.ndarray
+    surfaces: Surfaces | None = None
 
     def index(self):
         return build_forward_index((self.rows, self.cols, self.bins, self.z), self.grid, self.templates, Z_MAX,
-                                   self.config.forward)
+                                   self.config.forward, surfaces=self.surfaces)
 
     def problem(self, occupied):
         rd = em_readings((self.rows, self.cols, self.bins, self.z), self.templates, self.grid, Z_MAX, self.config.forward)
-        return em_problem(rd, self.templates, self.grid.shape, occupied, self.config)
+        return em_problem(rd, self.templates, self.grid.shape, occupied, self.config, surfaces=self.surfaces)
 
 
 def border_distance(grid, row, col, yaw):
@@ -140,7 +143,8 @@ def random_case(seed, grid=GRID, n_readings=(4, 41), max_sweeps=20, beams=(2.0, 
 def check_against_reference(case, result, occupied, problem):
     index = case.index()
     l_prior = case.config.l_prior
-    assert np.array_equal(np.flatnonzero(problem.seen), np.unique(index.cell))  # the cells the cones hold
+    cones = index if case.surfaces is None else dataclasses.replace(case, surfaces=None).index()
+    assert np.array_equal(np.flatnonzero(problem.seen), np.unique(cones.cell))  # the cells the cones hold, hidden or not
     m, flips, objective = climb(index, case.start, case.candidates, l_prior, case.config.max_sweeps)
     assert np.array_equal(result.candidates, np.unique(case.candidates))
     assert result.flips == flips and result.sweeps == len(flips)
@@ -169,6 +173,35 @@ def test_run_em_makes_the_reference_climbs_flips(seed):
     result, occupied, problem = run_case(case)
     assert result.flips[-1] == 0  # converged: the residual comes from the last sweep's scores
     check_against_reference(case, result, occupied, problem)
+
+
+def random_surfaces(rng, shape, share):
+    """Random unit normals on ``share`` of the cells (NaN elsewhere)."""
+    surface = rng.random(shape) < share
+    angle = rng.uniform(0, math.pi, shape)
+    normal = np.full((2, surface.size), np.nan)
+    flat = surface.reshape(-1)
+    normal[0, flat], normal[1, flat] = np.cos(angle).reshape(-1)[flat], np.sin(angle).reshape(-1)[flat]
+    return Surfaces(normal, surface_bits(surface))
+
+
+@pytest.mark.parametrize("seed", range(200, 212))
+def test_hidden_surface_cells_climb_as_the_reference(seed):
+    # surface cells met beyond the specular angle before a reading's window leave its cone: in the
+    # tiles' far runs (holes in the run), window rows' pairs and the readings' state alike
+    height, width = SHAPES[seed % len(SHAPES)]
+    case = random_case(seed, GridSpec(0.0, 0.0, 0.1, height, width), n_readings=(10, 60))
+    rng = np.random.default_rng(seed)
+    case.surfaces = random_surfaces(rng, case.grid.shape, float(rng.choice([0.3, 0.7, 1.0])))
+    forward = dataclasses.replace(case.config.forward, specular_deg=float(rng.choice([15.0, 30.0, 60.0])))
+    case.config = dataclasses.replace(case.config, forward=forward)
+    if seed % 3 == 1:  # the subset's cells, for a random subset of a cone's cells
+        case.candidates = np.unique(case.index().cell)
+    result, occupied, problem = run_case(case)
+    check_against_reference(case, result, occupied, problem)
+    everything = build_forward_index((case.rows, case.cols, case.bins, case.z), case.grid, case.templates, Z_MAX,
+                                     case.config.forward)
+    assert case.index().cell.size < everything.cell.size  # the surfaces hid some cells
 
 
 @pytest.mark.parametrize("seed", range(100, 106))
@@ -287,7 +320,7 @@ def tiny_work(rd, n_seg):
     """EM's tile scratch with every growable buffer one element long: every tile asks for more."""
     work = ORIGINAL_WORK(rd, n_seg)
     one = {name: np.empty(1, dtype=getattr(work, name).dtype)
-           for name in ("seg_list", "far_lo", "far_hi", "pair_pos", "pair_j", "pair_g", "obs_j", "obs_g", "pre")}
+           for name in ("seg_list", "far_lo", "far_hi", "far_hole", "pair_pos", "pair_j", "pair_g", "obs_j", "obs_g", "pre")}
     return work._replace(spans=np.empty((work.spans.shape[0], 1), dtype=np.int64), **one)
 
 

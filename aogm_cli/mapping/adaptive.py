@@ -26,6 +26,7 @@ from aogm_cli.mapping.em import (
     em_with_phases,
     find_root,
     prepared_templates,
+    with_surfaces,
 )
 from aogm_cli.mapping.params import EMConfig, MapParams
 from aogm_cli.mapping.pipeline import Progress, log_grid, params_json
@@ -44,7 +45,8 @@ def cluster_problem(run: LaidOutReadings, clusters: np.ndarray, occupied: np.nda
         near = near[subset[near]]
     rd = em_readings(run.cones, run.templates, run.grid, run.sensor.max_range,
                      config.forward, select=near)
-    return em_problem(rd, run.templates, run.grid.shape, occupied, config, labels=clusters.reshape(-1))
+    return em_problem(rd, run.templates, run.grid.shape, occupied, config, labels=clusters.reshape(-1),
+                      surfaces=run.surfaces)
 
 
 def coupled_groups(problem: EMProblem, n_clusters: int) -> int:
@@ -120,7 +122,7 @@ def map_adaptive(log, params: MapParams, detector, detector_name: str = "package
     log_odds, observed, t_standard = standard_pass(whole, grid, params)
     prepared_templates(grid, sensor)  # outside the clock
     t0 = time.perf_counter()
-    run = lay_out_readings(whole.pose, whole.ranges, sensor, grid)
+    run = with_surfaces(lay_out_readings(whole.pose, whole.ranges, sensor, grid), params)
     t_readings = time.perf_counter() - t0
 
     t0 = time.perf_counter()

@@ -16,6 +16,7 @@ from aogm_cli.mapping.params import CalibrationConfig, EMConfig, MapParams
 from aogm_cli.sensor_models import forward_model as F
 from aogm_cli.sensor_models.cone import flat_offsets
 from aogm_cli.sensor_models.readings import LaidOutReadings
+from aogm_cli.sensor_models.surface import cos2_of
 
 LEARNED = ("sigma", "p_rand", "p_hit", "p_max")  # the forward model's parameters calibration sets
 
@@ -39,9 +40,10 @@ def expectations(run: LaidOutReadings, readings: F.ExpectationReadings, occupied
     out = np.zeros(F.E_SIZE)
     templates = run.templates
     model = (float(forward.p_rand), float(forward.p_max), float(forward.p_hit), float(forward.sigma),
-             float(forward.window), float(run.sensor.max_range))
+             float(forward.window), float(run.sensor.max_range), cos2_of(forward.specular_deg))
+    normal = np.zeros((2, 0)) if run.surfaces is None else run.surfaces.normal
     F.expectation_sums(templates.kernel_arrays, flat_offsets(templates, run.grid.width), run.grid.shape, readings,
-                       np.ascontiguousarray(occupied, dtype=np.bool_), model, out)
+                       np.ascontiguousarray(occupied, dtype=np.bool_), model, normal, out)
     return out
 
 

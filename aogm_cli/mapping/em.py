@@ -26,7 +26,9 @@ from aogm_cli.mapping.pipeline import Progress, log_grid, params_json
 from aogm_cli.mapping.standard import probability_from_log_odds, standard_pass
 from aogm_cli.sensor_models.cone import flat_offsets
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig, reading_constants
-from aogm_cli.sensor_models.readings import forward_templates, lay_out_readings, reading_spans
+from aogm_cli.sensor_models.ray import is_narrow_beam
+from aogm_cli.sensor_models.readings import LaidOutReadings, forward_templates, lay_out_readings, reading_spans
+from aogm_cli.sensor_models.surface import Surfaces, cos2_of, no_surfaces, surface_normals
 
 
 @dataclass
@@ -159,17 +161,21 @@ class EMProblem:
 
 
 def em_problem(rd: K.EMReadings, templates, shape: tuple[int, int], occupied: np.ndarray, config: EMConfig,
-               labels: np.ndarray | None = None) -> EMProblem:
+               labels: np.ndarray | None = None, surfaces: Surfaces | None = None) -> EMProblem:
     """Every reading's likelihood state under the flat binary map ``occupied`` (one walk of its
     cone), the cells the cones hold, and with ``labels`` (flat cluster ids, 0 outside; EM's
     candidates are then the cluster cells) which clusters share a reading, each reading's
     extent narrowed to its cluster cells. The state is written into ``rd``'s own tables (and,
-    with ``labels``, the narrowed extents): build one problem per ``em_readings`` result."""
+    with ``labels``, the narrowed extents): build one problem per ``em_readings`` result.
+    ``surfaces`` (``surface.surface_normals``; default none) hide the surface cells a reading
+    meets beyond ``forward.specular_deg`` before its window."""
     fwd = config.forward
     p_hit = float(fwd.p_hit)
     top = int(rd.m.max()) if rd.m.size else 0
+    surfaces = no_surfaces(shape) if surfaces is None else surfaces
     model = K.EMModel(p_hit, float(config.l_prior), (1.0 - p_hit) ** np.arange(top + 1, dtype=np.float64),
-                      1.0 - fwd.p_rand - fwd.p_max, float(fwd.sigma), float(fwd.window))
+                      1.0 - fwd.p_rand - fwd.p_max, float(fwd.sigma), float(fwd.window), surfaces.normal,
+                      surfaces.bits, cos2_of(fwd.specular_deg))
     n = rd.z.shape[0]
     ints, floats = rd.ints, rd.floats
     state = K.EMState(floats[:, K.F_S], floats[:, K.F_WSUM], ints[:, K.I_NOBS], ints[:, K.I_NFAR],
@@ -226,7 +232,7 @@ def _work(rd: K.EMReadings, n_seg: int) -> K.TileWork:
                       np.empty(pairs, dtype=np.int64), np.empty(pairs), rd.ints[:, K.I_SLOT],
                       np.empty(room, dtype=np.int64), np.empty(room), np.empty(room), np.zeros(n_seg, dtype=np.int64),
                       np.empty(1024, dtype=np.int64), np.empty(1024, dtype=np.int64), np.empty(1024, dtype=np.int64),
-                      np.zeros((2, K.SEGMENT + 1)),
+                      np.empty(1024, dtype=np.int64), np.zeros((2, K.SEGMENT + 1)),
                       np.empty((11, max(1024, n_readings // 8)), dtype=np.int64), np.zeros(n_seg, dtype=np.int64))
 
 
@@ -240,7 +246,7 @@ def _grown(work: K.TileWork) -> K.TileWork:
         grow["spans"] = np.empty((11, int(ctl[K.CTL_NEED_LIST] * 1.5) + 1), dtype=np.int64)
     if ctl[K.CTL_NEED_LIST] > work.far_lo.shape[0]:
         size = int(ctl[K.CTL_NEED_LIST] * 1.5) + 1
-        grow |= {name: np.empty(size, dtype=np.int64) for name in ("tile_t", "far_lo", "far_hi")}
+        grow |= {name: np.empty(size, dtype=np.int64) for name in ("tile_t", "far_lo", "far_hi", "far_hole")}
     if ctl[K.CTL_NEED_PAIRS] > work.pair_pos.shape[0]:
         size = int(ctl[K.CTL_NEED_PAIRS] * 1.5) + 1
         grow |= {"pair_pos": np.empty(size, dtype=np.int64), "pair_j": np.empty(size, dtype=np.int64),
@@ -391,6 +397,18 @@ def em_view(log_odds: np.ndarray, observed: np.ndarray, outcome: EMOutcome | Non
     return probability, observed
 
 
+def with_surfaces(run: LaidOutReadings, params: MapParams) -> LaidOutReadings:
+    """``run`` with the surfaces its echoes came from (``surface.surface_normals``), for the
+    forward model's angle of incidence; a narrow beam (a laser, which echoes off a wall at any
+    angle but the most grazing) and ``surface.enabled`` false keep none."""
+    if not params.surface.enabled or is_narrow_beam(run.sensor, run.grid.resolution):
+        return run
+    grid = run.grid
+    surfaces = surface_normals(run.templates.kernel_arrays, flat_offsets(run.templates, grid.width), grid.shape,
+                               run.cones, run.sensor.max_range, grid.resolution, params.surface)
+    return dataclasses.replace(run, surfaces=surfaces)
+
+
 def whole_log_problems(run, templates, grid, z_max: float) -> ProblemFor:
     """The em mode's problems: every valid reading of ``run`` (of a subset, if given), every cell
     some cone holds a candidate."""
@@ -399,7 +417,7 @@ def whole_log_problems(run, templates, grid, z_max: float) -> ProblemFor:
     def problem_for(config: EMConfig, occ: np.ndarray, subset: np.ndarray | None):
         rd = em_readings(run.cones, templates, grid, z_max, config.forward,
                          select=keep if subset is None else keep & subset)
-        problem = em_problem(rd, templates, grid.shape, occ, config)
+        problem = em_problem(rd, templates, grid.shape, occ, config, surfaces=run.surfaces)
         return problem, np.flatnonzero(problem.seen)
 
     return problem_for
@@ -421,7 +439,7 @@ def map_em(log, params: MapParams, progress: Progress | None = None) -> Occupanc
     log_odds, observed, t_standard = standard_pass(whole, grid, params)
     templates = prepared_templates(grid, log.sensor)  # outside the clock
     t0 = time.perf_counter()
-    run = lay_out_readings(whole.pose, whole.ranges, log.sensor, grid)
+    run = with_surfaces(lay_out_readings(whole.pose, whole.ranges, log.sensor, grid), params)
     t_readings = time.perf_counter() - t0
     start = (log_odds > 0).reshape(-1) if params.em.start == "standard" else np.zeros(grid.height * grid.width, bool)
     occupied = np.ascontiguousarray(start)

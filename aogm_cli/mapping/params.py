@@ -13,6 +13,7 @@ from aogm_cli.core.errors import InputError
 from aogm_cli.io.yamlfile import read_yaml
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig
 from aogm_cli.sensor_models.inverse_model import InverseModelConfig
+from aogm_cli.sensor_models.surface import SurfaceConfig
 
 
 def check_field_types(config) -> None:
@@ -204,10 +205,12 @@ class MapParams:
     em: EMConfig = field(default_factory=EMConfig)
     adaptive: AdaptiveConfig = field(default_factory=AdaptiveConfig)
     calibration: CalibrationConfig = field(default_factory=CalibrationConfig)
+    surface: SurfaceConfig = field(default_factory=SurfaceConfig)
 
     def as_dict(self) -> dict:
         return {"resolution": self.resolution, "inverse_model": self.inverse_model.as_dict(), "em": self.em.as_dict(),
-                "adaptive": self.adaptive.as_dict(), "calibration": self.calibration.as_dict()}
+                "adaptive": self.adaptive.as_dict(), "calibration": self.calibration.as_dict(),
+                "surface": self.surface.as_dict()}
 
 
 SECTIONS = {
@@ -216,6 +219,7 @@ SECTIONS = {
     | {f.name for f in dataclasses.fields(ForwardModelConfig)},
     "adaptive": {f.name for f in dataclasses.fields(AdaptiveConfig)},
     "calibration": {f.name for f in dataclasses.fields(CalibrationConfig)},
+    "surface": {f.name for f in dataclasses.fields(SurfaceConfig)},
 }
 
 
@@ -227,7 +231,8 @@ def resolve_params(params_file: str | None = None, overrides: dict[str, dict[str
     if params_file:
         raw = read_yaml(params_file)[1] or {}
         if not isinstance(raw, dict):
-            raise InputError("expected a mapping with sections inverse_model, em, adaptive, calibration and key resolution", file=file)
+            raise InputError("expected a mapping with sections inverse_model, em, adaptive, calibration, surface and key resolution",
+                             file=file)
     for key in raw:
         if key not in SECTIONS and key != "resolution":
             raise InputError(f"unknown key; expected resolution, {', '.join(SECTIONS)}", file=file, key=str(key))
@@ -274,7 +279,8 @@ def resolve_params(params_file: str | None = None, overrides: dict[str, dict[str
     )
     adaptive = build("adaptive", lambda v: AdaptiveConfig(**v).validate())
     calibration = build("calibration", lambda v: CalibrationConfig(**v).validate())
+    surface = build("surface", lambda v: SurfaceConfig(**v).validate())
     if (isinstance(resolution, bool) or not isinstance(resolution, (int, float)) or not math.isfinite(resolution)
             or not resolution > 0):
         raise InputError(f"expected a positive number (m per cell), got {resolution!r}", file=file, key="resolution")
-    return MapParams(float(resolution), inverse, em, adaptive, calibration)
+    return MapParams(float(resolution), inverse, em, adaptive, calibration, surface)

@@ -13,6 +13,7 @@ import numpy as np
 
 from aogm_cli.core.errors import InputError
 from aogm_cli.sensor_models.cone import cone_flat_cells, flat_offsets
+from aogm_cli.sensor_models.surface import Surfaces, cos2_of, hidden
 
 
 # A reading has one cause: random (uniform 1/z_max), a max-range dropout (optional point mass), no
@@ -40,6 +41,12 @@ class ForwardModelConfig:
     p_hit: float = 0.7  # probability that each obstacle in the cone, nearest first, is detected
     p_max: float = 0.1  # point mass of a max-range dropout (specular reflection)
     window: float = 4.0  # sigmas beyond z up to which a cone's cells count
+    # the largest angle between a reading's direction and a surface's normal (``surface.py``) at
+    # which the surface still echoes: a surface cell met more obliquely, before the reading's
+    # window, is left out of its cone (no echo comes back from a grazing pass, so the pass is no
+    # evidence against the surface). 90: every cell counts at any angle (Thrun's model). A 40 kHz
+    # sonar sees a painted wall within 15-30 deg of its normal; calibration learns it from the log
+    specular_deg: float = 90.0
 
     def validate(self) -> ForwardModelConfig:
         def bad(key, msg):
@@ -55,6 +62,8 @@ class ForwardModelConfig:
             raise bad("p_max", f"expected p_max in [0, 1) with p_rand + p_max < 1, got {self.p_max:g}")
         if not self.window > 0:
             raise bad("window", f"expected a positive number, got {self.window:g}")
+        if not 0 < self.specular_deg <= 90:
+            raise bad("specular_deg", f"expected an angle in (0, 90] degrees, got {self.specular_deg:g}")
         return self
 
     def as_dict(self) -> dict:
@@ -111,12 +120,15 @@ class ForwardReadings(NamedTuple):
 
 
 class IndexGrid(NamedTuple):
-    """``_fill_index``'s grid: its shape and two optional flat bool masks (empty: none)."""
+    """``_fill_index``'s grid: its shape, two optional flat bool masks (empty: none) and the
+    surfaces' normals with the specular angle's cos^2 (``surface.hidden``)."""
 
     height: int
     width: int
     mask: np.ndarray  # readings none of whose cells is in it get no entries
     held_free: np.ndarray  # cells left out of every cone
+    normal: np.ndarray  # (2, H * W) float64 surface normals ((2, 0): none)
+    cos2: float
 
 
 class IndexBuffers(NamedTuple):
@@ -254,8 +266,11 @@ def _fill_index(tpl, flat, grid, readings, sigma, window, out):
                 touches = True
             if drop and held_free[c]:
                 continue
+            g = gaussian_at(z[t], r[j], sigma, window)
+            if g == 0.0 and hidden(grid.normal, grid.cos2, c, row0, col0, width):
+                continue  # a surface met at a grazing angle before the window: no evidence
             out_cell[pos + n] = c
-            out_g[pos + n] = gaussian_at(z[t], r[j], sigma, window)
+            out_g[pos + n] = g
             n += 1
         if touches:  # else none of its cells is in the mask: the reading keeps no entry
             counts[t] = n
@@ -272,6 +287,7 @@ def build_forward_index(
     reading_ids: np.ndarray | None = None,
     mask: np.ndarray | None = None,
     held_free: np.ndarray | None = None,
+    surfaces: Surfaces | None = None,
 ) -> ForwardIndex:
     """The forward model's index for ``cones`` = (rows, cols, bins, z): readings z taken from
     sensor cells (rows, cols) with heading bins ``bins`` (as ``cone.sensor_cells`` gives them;
@@ -284,6 +300,8 @@ def build_forward_index(
     that are free and stay free while the index is used (neither candidates of EM nor
     occupied): a free cell adds nothing to any S_t, so leaving its entries out changes no
     likelihood, and the index of a small cluster holds little more than the cluster's cells.
+    ``surfaces`` (``surface.surface_normals``) leave out the surface cells a reading meets at
+    more than ``config.specular_deg`` before its window.
     """
     rows, cols, bins, z = cones
     z = np.asarray(z, dtype=np.float64).reshape(-1)
@@ -307,7 +325,9 @@ def build_forward_index(
     mask, held_free = (np.zeros(0, dtype=np.bool_) if a is None else np.ascontiguousarray(a, dtype=np.bool_).reshape(-1)
                        for a in (mask, held_free))
     n = _fill_index(templates.kernel_arrays, flat_offsets(templates, grid.width),
-                    IndexGrid(grid.height, grid.width, mask, held_free), ForwardReadings(rows, cols, bins, z_eff, limits),
+                    IndexGrid(grid.height, grid.width, mask, held_free,
+                              np.zeros((2, 0)) if surfaces is None else surfaces.normal, cos2_of(config.specular_deg)),
+                    ForwardReadings(rows, cols, bins, z_eff, limits),
                     float(config.sigma), float(config.window), IndexBuffers(out_cell, out_g, counts, scratch))
     ptr = np.zeros(len(z) + 1, dtype=np.int64)
     np.cumsum(counts, out=ptr[1:])
@@ -329,10 +349,11 @@ class ExpectationReadings(NamedTuple):
 
 
 @numba.njit(cache=True)
-def expectation_sums(tpl, flat, shape, readings, occupied, model, out):
+def expectation_sums(tpl, flat, shape, readings, occupied, model, normal, out):
     """The expectations of every reading's cause under the flat binary map ``occupied``, summed.
 
-    ``model`` is (p_rand, p_max, p_hit, sigma, window, z_max). For reading t with obstacles
+    ``model`` is (p_rand, p_max, p_hit, sigma, window, z_max, cos2) and ``normal`` the surfaces'
+    normals (``surface.hidden``: hidden cells before the window are left out). For reading t with obstacles
     d_1 <= ... <= d_K in its cone (cells up to z + window sigma; up to z_max for a max-range
     reading), the causes' posteriors are e_rand = (p_rand / z_max) / p, e_dropout = p_max G0 / p,
     e_k = w q^(k-1) p_hit g(d_k) / p and e_0 = w q^K G0 / p, with p = p(z_t | m) (the comment
@@ -340,7 +361,7 @@ def expectation_sums(tpl, flat, shape, readings, occupied, model, out):
     sum_k e_k (detections), sum_k k e_k + K e_0 (obstacles examined), sum_k e_k (z - d_k)^2,
     sum e_0 (no obstacle detected).
     """
-    p_rand, p_max, p_hit, sigma, window, z_max = model
+    p_rand, p_max, p_hit, sigma, window, z_max, cos2 = model
     height, width = shape
     q = 1.0 - p_hit
     w = 1.0 - p_rand - p_max
@@ -368,8 +389,11 @@ def expectation_sums(tpl, flat, shape, readings, occupied, model, out):
             for j in range(m):
                 c = ib[j]
                 if c < n_cells and occupied[c]:
+                    g = gaussian_at(z, r[j], sigma, window)
+                    if g == 0.0 and hidden(normal, cos2, c, row0, col0, width):
+                        continue
                     d[n_obs] = r[j]
-                    gk[n_obs] = gaussian_at(z, r[j], sigma, window)
+                    gk[n_obs] = g
                     n_obs += 1
         u0 = (z - z_max) / sigma
         g0 = math.exp(-0.5 * u0 * u0) / (math.sqrt(2.0 * math.pi) * sigma)
