@@ -14,11 +14,11 @@ from aogm_cli.sensor_models.surface import SurfaceConfig, cos2_of, hidden, surfa
 GRID = GridSpec(0.0, 0.0, 0.1, 40, 40)
 
 
-def normals_of(rows, cols, yaw, z, config=SurfaceConfig(), beam_deg=10.0):
+def normals_of(rows, cols, yaw, z, config=None, beam_deg=10.0):
     tpl = build_cone_templates(GRID.resolution, math.radians(beam_deg), 3.0)
     cones = (np.array(rows), np.array(cols), tpl.heading_bin(np.array(yaw)), np.array(z, dtype=float))
     return surface_normals(tpl.kernel_arrays, flat_offsets(tpl, GRID.width), GRID.shape, cones, 3.0,
-                           GRID.resolution, config)
+                           GRID.resolution, config or SurfaceConfig())
 
 
 def test_hidden_by_hand():

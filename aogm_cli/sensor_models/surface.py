@@ -10,6 +10,7 @@ from typing import NamedTuple
 
 import numba
 import numpy as np
+
 from aogm_cli.core.errors import InputError
 from aogm_cli.sensor_models.cone import cone_flat_cells
 
