@@ -30,7 +30,7 @@ def run(*args):
 
 def reference_sums(tpl, rows, cols, bins, z, occupied, model):
     """The E-step's sums written out reading by reading from the templates' own cell lists."""
-    p_rand, p_max, p_hit, sigma, window, z_max, _ = model
+    p_rand, p_max, p_hit, sigma, window, z_max = model
     q, w = 1.0 - p_hit, 1.0 - p_rand - p_max
     out = np.zeros(F.E_SIZE)
     for row, col, k, zt in zip(rows, cols, bins, z, strict=True):
@@ -70,10 +70,10 @@ def test_expectation_sums_match_the_reference_reading_by_reading():
     z = rng.uniform(0.3, 2.6, n)
     z[::7] = np.inf  # max-range readings: their cones reach z_max
     occupied = wall_map()
-    model = (0.07, 0.05, 0.6, 0.04, 4.0, Z_MAX, 0.0)
+    model = (0.07, 0.05, 0.6, 0.04, 4.0, Z_MAX)
     out = np.zeros(F.E_SIZE)
     F.expectation_sums(tpl.kernel_arrays, flat_offsets(tpl, GRID.width), GRID.shape,
-                       F.ExpectationReadings(rows, cols, bins, z), occupied, model, np.zeros((2, 0)), out)
+                       F.ExpectationReadings(rows, cols, bins, z, np.full(n, np.inf)), occupied, model, out)
     expected = reference_sums(tpl, rows, cols, bins, z, occupied, model)
     np.testing.assert_allclose(out, expected, rtol=1e-10)
     # every reading's causes add up to one: random + dropout + detections + no detection
@@ -86,11 +86,11 @@ def test_one_reading_one_obstacle_by_hand():
     tpl = build_cone_templates(grid.resolution, math.radians(2), 4.0)
     occupied = np.zeros(grid.height * grid.width, dtype=bool)
     occupied[10 * grid.width + 15] = True
-    model = (0.1, 0.0, 0.5, 0.05, 4.0, 4.0, 0.0)
+    model = (0.1, 0.0, 0.5, 0.05, 4.0, 4.0)
     out = np.zeros(F.E_SIZE)
     F.expectation_sums(tpl.kernel_arrays, flat_offsets(tpl, grid.width), grid.shape,
                        F.ExpectationReadings(np.array([10]), np.array([5]), tpl.heading_bin(np.zeros(1)),
-                                             np.array([1.02])), occupied, model, np.zeros((2, 0)), out)
+                                             np.array([1.02]), np.array([np.inf])), occupied, model, out)
     g = math.exp(-0.5 * (0.02 / 0.05) ** 2) / (math.sqrt(2 * math.pi) * 0.05)  # N(1.02; 1.0, 0.05^2)
     g0 = math.exp(-0.5 * (2.98 / 0.05) ** 2) / (math.sqrt(2 * math.pi) * 0.05)  # N(1.02; 4.0): 0
     hit = 0.9 * 0.5 * g
@@ -143,10 +143,12 @@ def test_calibrated_map_records_the_learned_model_and_its_rounds(corridor_door_l
     assert result.exit_code == 0, result.output
     m = read_map_file(out)
     record = m.stats["calibration"]
-    assert record["initial"] == {"sigma": 0.03, "p_rand": 0.05, "p_hit": 0.7, "p_max": 0.1}
+    assert record["initial"] == {"sigma": 0.03, "p_rand": 0.05, "p_hit": 0.7, "p_max": 0.1, "specular_deg": 90.0}
     assert record["rounds"][0]["sigma"] == 0.1  # round 0 maps with the broad start
-    assert {k: m.params["em"][k] for k in C.LEARNED} == record["final"]
+    assert {k: m.params["em"][k] for k in record["final"]} == record["final"]
     assert m.params["calibration"]["enabled"] is True
+    # corridor_door's walls are rough: they echo at every angle, so nothing is deflected
+    assert record["incidence"]["specular_deg"] == 90.0
     # the learned noise is the simulator's 0.02 m and the grid's quantisation (0.05 / sqrt 12)
     assert 0.015 < record["final"]["sigma"] < 0.04
     fits = [r["loglik_per_reading"] for r in record["rounds"][1:]]

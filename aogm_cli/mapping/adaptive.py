@@ -33,6 +33,7 @@ from aogm_cli.mapping.pipeline import Progress, log_grid, params_json
 from aogm_cli.mapping.standard import standard_pass
 from aogm_cli.sensor_models.ray import is_narrow_beam
 from aogm_cli.sensor_models.readings import LaidOutReadings, cone_bands, lay_out_readings
+from aogm_cli.sensor_models.surface import reading_shadows
 
 
 def cluster_problem(run: LaidOutReadings, clusters: np.ndarray, occupied: np.ndarray, config: EMConfig,
@@ -44,9 +45,8 @@ def cluster_problem(run: LaidOutReadings, clusters: np.ndarray, occupied: np.nda
     if subset is not None:
         near = near[subset[near]]
     rd = em_readings(run.cones, run.templates, run.grid, run.sensor.max_range,
-                     config.forward, select=near)
-    return em_problem(rd, run.templates, run.grid.shape, occupied, config, labels=clusters.reshape(-1),
-                      surfaces=run.surfaces)
+                     config.forward, select=near, shadow=reading_shadows(run, config.forward))
+    return em_problem(rd, run.templates, run.grid.shape, occupied, config, labels=clusters.reshape(-1))
 
 
 def coupled_groups(problem: EMProblem, n_clusters: int) -> int:
@@ -122,7 +122,7 @@ def map_adaptive(log, params: MapParams, detector, detector_name: str = "package
     log_odds, observed, t_standard = standard_pass(whole, grid, params)
     prepared_templates(grid, sensor)  # outside the clock
     t0 = time.perf_counter()
-    run = with_surfaces(lay_out_readings(whole.pose, whole.ranges, sensor, grid), params)
+    run = with_surfaces(lay_out_readings(whole.pose, whole.ranges, sensor, grid), params, log_odds)
     t_readings = time.perf_counter() - t0
 
     t0 = time.perf_counter()

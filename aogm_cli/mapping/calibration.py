@@ -14,23 +14,29 @@ import numpy as np
 
 from aogm_cli.mapping.params import CalibrationConfig, EMConfig, MapParams
 from aogm_cli.sensor_models import forward_model as F
+from aogm_cli.sensor_models import surface
 from aogm_cli.sensor_models.cone import flat_offsets
 from aogm_cli.sensor_models.readings import LaidOutReadings
-from aogm_cli.sensor_models.surface import cos2_of
+from aogm_cli.sensor_models.surface import INCIDENCE_BINS, incidence_counts, specular_angle
 
 LEARNED = ("sigma", "p_rand", "p_hit", "p_max")  # the forward model's parameters calibration sets
 
 
-def sample_readings(run: LaidOutReadings, max_readings: int, select: np.ndarray | None = None) -> F.ExpectationReadings:
+def sample_readings(run: LaidOutReadings, max_readings: int, select: np.ndarray | None = None,
+                    forward: F.ForwardModelConfig | None = None) -> F.ExpectationReadings:
     """The readings the parameters are fitted on: every valid reading of ``run`` (NaN left out;
     with ``select``, a bool mask, only those it marks), or every n-th of them when there are
-    more than ``max_readings`` (deterministic, spread over the whole log)."""
+    more than ``max_readings`` (deterministic, spread over the whole log); with ``forward``, cut
+    short where its specular angle deflects them (``surface.reading_shadows``)."""
     valid = ~np.isnan(run.z)
     keep = np.flatnonzero(valid if select is None else valid & select)
     if keep.size > max_readings:
         keep = keep[:: -(-keep.size // max_readings)]
+    shadow = None if forward is None else surface.reading_shadows(run, forward, keep)
+    z = run.z[keep].astype(np.float64)
+    z, limit = (z, np.full(z.shape, np.inf)) if shadow is None else F.cone_limits(z, run.sensor.max_range, forward, shadow)
     return F.ExpectationReadings(run.rows[keep].astype(np.int64), run.cols[keep].astype(np.int64),
-                                 run.bins[keep].astype(np.int64), run.z[keep].astype(np.float64))
+                                 run.bins[keep].astype(np.int64), z, limit)
 
 
 def expectations(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: np.ndarray,
@@ -40,10 +46,9 @@ def expectations(run: LaidOutReadings, readings: F.ExpectationReadings, occupied
     out = np.zeros(F.E_SIZE)
     templates = run.templates
     model = (float(forward.p_rand), float(forward.p_max), float(forward.p_hit), float(forward.sigma),
-             float(forward.window), float(run.sensor.max_range), cos2_of(forward.specular_deg))
-    normal = np.zeros((2, 0)) if run.surfaces is None else run.surfaces.normal
+             float(forward.window), float(run.sensor.max_range))
     F.expectation_sums(templates.kernel_arrays, flat_offsets(templates, run.grid.width), run.grid.shape, readings,
-                       np.ascontiguousarray(occupied, dtype=np.bool_), model, normal, out)
+                       np.ascontiguousarray(occupied, dtype=np.bool_), model, out)
     return out
 
 
@@ -103,8 +108,25 @@ def fit_at_map(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: 
     return Fit(forward, iterations, float(sums[F.E_LOGLIK] / n))
 
 
+def incidence_at(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: np.ndarray,
+                 forward: F.ForwardModelConfig, config: CalibrationConfig) -> dict:
+    """The specular angle learned from ``readings`` at the flat binary map ``occupied`` (the
+    standard map's, which keeps the walls that grazing passes would make EM erase): per 10-degree
+    bin of incidence the readings that echoed from a surface cell and those that passed one
+    (``surface.incidence_counts``), and where the echo rate falls to half (``specular_angle``)."""
+    counts = np.zeros((2, INCIDENCE_BINS))
+    templates = run.templates
+    incidence_counts(templates.kernel_arrays, flat_offsets(templates, run.grid.width), run.grid.shape,
+                     (readings.rows, readings.cols, readings.bins, readings.z),
+                     np.ascontiguousarray(occupied, dtype=np.bool_), run.normals,
+                     (float(forward.sigma), float(forward.window), float(run.sensor.max_range), config.pass_margin), counts)
+    return {"echoes": counts[0].astype(int).tolist(), "passes": counts[1].astype(int).tolist(),
+            "specular_deg": specular_angle(counts)}
+
+
 def model_values(forward: F.ForwardModelConfig) -> dict:
-    return {k: float(getattr(forward, k)) for k in LEARNED}
+    """The learned parameters' values (LEARNED, and the specular angle, learned once)."""
+    return {k: float(getattr(forward, k)) for k in (*LEARNED, "specular_deg")}
 
 
 # (config, flat occupied updated in place, a bool mask of the readings to map or None for all) ->
@@ -143,6 +165,11 @@ def calibrated_em(run: LaidOutReadings, occupied: np.ndarray, em: EMConfig, conf
     start = occupied.copy()
     record = {"initial": model_values(em.forward), "readings_used": int(readings.z.shape[0]),
               "fitted_at": f"1 scan in {config.start_subsample}, then 1 in {config.subsample}", "rounds": []}
+    if "specular_deg" in config.learned and run.normals is not None:
+        incidence = incidence_at(run, readings, start, em.forward, config)
+        em = dataclasses.replace(em, forward=dataclasses.replace(em.forward, specular_deg=incidence["specular_deg"]))
+        record["incidence"] = incidence
+    readings = sample_readings(run, config.max_readings, select, em.forward)
     used = dataclasses.replace(em, forward=dataclasses.replace(em.forward, sigma=max(em.forward.sigma, config.start_sigma)))
     step = dataclasses.replace(used, max_sweeps=min(em.max_sweeps, config.start_sweeps))
     entry = {"round": 0, **model_values(used.forward)}
@@ -190,13 +217,19 @@ def calibration_table(record: dict) -> str:
     if "final_em" in record:
         lines.append(f"final map, every scan with the last fit: EM objective {record['final_em']['em_objective']:.2f}, "
                      f"{record['final_em']['em_sweeps']} sweeps (the rounds' maps: {record['fitted_at']})")
+    if "incidence" in record:
+        inc = record["incidence"]
+        lines.append("echo rate by angle of incidence at the standard map's surfaces (10-degree bins): "
+                     + " ".join(f"{e / (e + p):.2f}" if e + p else "-" for e, p in zip(inc["echoes"], inc["passes"],
+                                                                                      strict=True))
+                     + f" -> specular_deg {inc['specular_deg']:.1f}")
     lines.append(f"learned from {record['readings_used']} readings: "
-                 + ", ".join(f"{k} {final[k]:.4g}" for k in LEARNED))
+                 + ", ".join(f"{k} {final[k]:.4g}" for k in (*LEARNED, "specular_deg") if k in final))
     return "\n".join(lines)
 
 
 def learned_params_yaml(record: dict, source: str) -> str:
     """A ``--params`` file holding the learned model (calibration off, so it is used as it is)."""
     final = record["final"]
-    body = "\n".join(f"  {k}: {final[k]!r}" for k in LEARNED)
+    body = "\n".join(f"  {k}: {final[k]!r}" for k in (*LEARNED, "specular_deg") if k in final)
     return f"# forward model learned by aogm calibrate from {source}\nem:\n{body}\ncalibration:\n  enabled: false\n"

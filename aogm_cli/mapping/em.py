@@ -25,10 +25,10 @@ from aogm_cli.mapping.params import EMConfig, MapParams
 from aogm_cli.mapping.pipeline import Progress, log_grid, params_json
 from aogm_cli.mapping.standard import probability_from_log_odds, standard_pass
 from aogm_cli.sensor_models.cone import flat_offsets
-from aogm_cli.sensor_models.forward_model import ForwardModelConfig, reading_constants
+from aogm_cli.sensor_models.forward_model import ForwardModelConfig, cone_limits, reading_constants
 from aogm_cli.sensor_models.ray import is_narrow_beam
 from aogm_cli.sensor_models.readings import LaidOutReadings, forward_templates, lay_out_readings, reading_spans
-from aogm_cli.sensor_models.surface import Surfaces, cos2_of, no_surfaces, surface_normals
+from aogm_cli.sensor_models.surface import reading_shadows, surface_normals
 
 
 @dataclass
@@ -102,17 +102,19 @@ def planner_view(probability: np.ndarray, observed: np.ndarray, unseen: np.ndarr
 
 
 def em_readings(cones, templates, grid, z_max: float, config: ForwardModelConfig,
-                select: np.ndarray | None = None) -> K.EMReadings:
+                select: np.ndarray | None = None, shadow: np.ndarray | None = None) -> K.EMReadings:
     """The readings ``cones`` (sensor cells, heading bins, template ranges: flat arrays of one
     length, as ``sensor_models.readings.LaidOutReadings.cones`` has them) as EM's kernels take them, or those ``select`` picks (a
     bool mask or positions; taken one column at a time, without a copy of every array). NaN
     readings must be left out; +inf is a max-range reading (cone up to z_max); other cones end
-    ``config.window`` sigmas beyond z."""
+    ``config.window`` sigmas beyond z; ``shadow`` (one per reading of ``cones``) cuts them short
+    (``forward_model.cone_limits``)."""
     rows, cols, bins, z = cones
     pick = (lambda a: np.asarray(a).reshape(-1)) if select is None else (lambda a: np.asarray(a).reshape(-1)[select])
     z = pick(z).astype(np.float64, copy=False)
     if np.isnan(z).any():
         raise ValueError("NaN readings must be left out of EM's readings")
+    z, limits = cone_limits(z, z_max, config, None if shadow is None else pick(shadow))
     n = z.shape[0]
     ints = np.zeros((n, K.INTS), dtype=np.int32)  # every integer of a reading fits (see em_kernels.EMReadings)
     floats = np.zeros((n, K.FLOATS))
@@ -121,7 +123,6 @@ def em_readings(cones, templates, grid, z_max: float, config: ForwardModelConfig
     rows, cols, bins = ints[:, K.I_ROW0], ints[:, K.I_COL0], ints[:, K.I_BIN]
     z_eff = floats[:, K.F_Z]
     z_eff[:] = np.where(np.isfinite(z), np.minimum(z, z_max), z_max)
-    limits = np.where(np.isfinite(z), np.minimum(z + config.window * config.sigma, z_max), z_max)
     # entries before this range are beyond the Gaussian's window (a margin against rounding)
     lower = z_eff - config.window * config.sigma - 1e-9
     m, jlo = ints[:, K.I_M], ints[:, K.I_JLO]
@@ -161,21 +162,17 @@ class EMProblem:
 
 
 def em_problem(rd: K.EMReadings, templates, shape: tuple[int, int], occupied: np.ndarray, config: EMConfig,
-               labels: np.ndarray | None = None, surfaces: Surfaces | None = None) -> EMProblem:
+               labels: np.ndarray | None = None) -> EMProblem:
     """Every reading's likelihood state under the flat binary map ``occupied`` (one walk of its
     cone), the cells the cones hold, and with ``labels`` (flat cluster ids, 0 outside; EM's
     candidates are then the cluster cells) which clusters share a reading, each reading's
     extent narrowed to its cluster cells. The state is written into ``rd``'s own tables (and,
-    with ``labels``, the narrowed extents): build one problem per ``em_readings`` result.
-    ``surfaces`` (``surface.surface_normals``; default none) hide the surface cells a reading
-    meets beyond ``forward.specular_deg`` before its window."""
+    with ``labels``, the narrowed extents): build one problem per ``em_readings`` result."""
     fwd = config.forward
     p_hit = float(fwd.p_hit)
     top = int(rd.m.max()) if rd.m.size else 0
-    surfaces = no_surfaces(shape) if surfaces is None else surfaces
     model = K.EMModel(p_hit, float(config.l_prior), (1.0 - p_hit) ** np.arange(top + 1, dtype=np.float64),
-                      1.0 - fwd.p_rand - fwd.p_max, float(fwd.sigma), float(fwd.window), surfaces.normal,
-                      surfaces.bits, cos2_of(fwd.specular_deg))
+                      1.0 - fwd.p_rand - fwd.p_max, float(fwd.sigma), float(fwd.window))
     n = rd.z.shape[0]
     ints, floats = rd.ints, rd.floats
     state = K.EMState(floats[:, K.F_S], floats[:, K.F_WSUM], ints[:, K.I_NOBS], ints[:, K.I_NFAR],
@@ -232,7 +229,7 @@ def _work(rd: K.EMReadings, n_seg: int) -> K.TileWork:
                       np.empty(pairs, dtype=np.int64), np.empty(pairs), rd.ints[:, K.I_SLOT],
                       np.empty(room, dtype=np.int64), np.empty(room), np.empty(room), np.zeros(n_seg, dtype=np.int64),
                       np.empty(1024, dtype=np.int64), np.empty(1024, dtype=np.int64), np.empty(1024, dtype=np.int64),
-                      np.empty(1024, dtype=np.int64), np.zeros((2, K.SEGMENT + 1)),
+                      np.zeros((2, K.SEGMENT + 1)),
                       np.empty((11, max(1024, n_readings // 8)), dtype=np.int64), np.zeros(n_seg, dtype=np.int64))
 
 
@@ -246,7 +243,7 @@ def _grown(work: K.TileWork) -> K.TileWork:
         grow["spans"] = np.empty((11, int(ctl[K.CTL_NEED_LIST] * 1.5) + 1), dtype=np.int64)
     if ctl[K.CTL_NEED_LIST] > work.far_lo.shape[0]:
         size = int(ctl[K.CTL_NEED_LIST] * 1.5) + 1
-        grow |= {name: np.empty(size, dtype=np.int64) for name in ("tile_t", "far_lo", "far_hi", "far_hole")}
+        grow |= {name: np.empty(size, dtype=np.int64) for name in ("tile_t", "far_lo", "far_hi")}
     if ctl[K.CTL_NEED_PAIRS] > work.pair_pos.shape[0]:
         size = int(ctl[K.CTL_NEED_PAIRS] * 1.5) + 1
         grow |= {"pair_pos": np.empty(size, dtype=np.int64), "pair_j": np.empty(size, dtype=np.int64),
@@ -397,28 +394,33 @@ def em_view(log_odds: np.ndarray, observed: np.ndarray, outcome: EMOutcome | Non
     return probability, observed
 
 
-def with_surfaces(run: LaidOutReadings, params: MapParams) -> LaidOutReadings:
+def with_surfaces(run: LaidOutReadings, params: MapParams, log_odds: np.ndarray | None = None) -> LaidOutReadings:
     """``run`` with the surfaces its echoes came from (``surface.surface_normals``), for the
     forward model's angle of incidence; a narrow beam (a laser, which echoes off a wall at any
     angle but the most grazing) and ``surface.enabled`` false keep none."""
     if not params.surface.enabled or is_narrow_beam(run.sensor, run.grid.resolution):
         return run
     grid = run.grid
-    surfaces = surface_normals(run.templates.kernel_arrays, flat_offsets(run.templates, grid.width), grid.shape,
-                               run.cones, run.sensor.max_range, grid.resolution, params.surface)
-    return dataclasses.replace(run, surfaces=surfaces)
+    normals = surface_normals(run.templates.kernel_arrays, flat_offsets(run.templates, grid.width), grid.shape,
+                              run.cones, run.sensor.max_range, grid.resolution, params.surface,
+                              None if log_odds is None else np.asarray(log_odds).reshape(grid.shape) > 0)
+    return dataclasses.replace(run, normals=normals)
 
 
-def whole_log_problems(run, templates, grid, z_max: float) -> ProblemFor:
+def whole_log_problems(run, templates, grid, z_max: float, observed: np.ndarray | None = None) -> ProblemFor:
     """The em mode's problems: every valid reading of ``run`` (of a subset, if given), every cell
-    some cone holds a candidate."""
+    some cone holds a candidate, and every cell of ``observed`` (the standard map's, flat bool):
+    the cells beyond a deflected beam's cut (``surface.reading_shadows``), which the standard
+    map's cones cleared and no reading of EM's may, are left to the prior there."""
     keep = ~np.isnan(run.z)
 
     def problem_for(config: EMConfig, occ: np.ndarray, subset: np.ndarray | None):
+        shadow = reading_shadows(run, config.forward)
         rd = em_readings(run.cones, templates, grid, z_max, config.forward,
-                         select=keep if subset is None else keep & subset)
-        problem = em_problem(rd, templates, grid.shape, occ, config, surfaces=run.surfaces)
-        return problem, np.flatnonzero(problem.seen)
+                         select=keep if subset is None else keep & subset, shadow=shadow)
+        problem = em_problem(rd, templates, grid.shape, occ, config)
+        seen = problem.seen if shadow is None or observed is None else problem.seen | observed
+        return problem, np.flatnonzero(seen)
 
     return problem_for
 
@@ -439,11 +441,11 @@ def map_em(log, params: MapParams, progress: Progress | None = None) -> Occupanc
     log_odds, observed, t_standard = standard_pass(whole, grid, params)
     templates = prepared_templates(grid, log.sensor)  # outside the clock
     t0 = time.perf_counter()
-    run = with_surfaces(lay_out_readings(whole.pose, whole.ranges, log.sensor, grid), params)
+    run = with_surfaces(lay_out_readings(whole.pose, whole.ranges, log.sensor, grid), params, log_odds)
     t_readings = time.perf_counter() - t0
     start = (log_odds > 0).reshape(-1) if params.em.start == "standard" else np.zeros(grid.height * grid.width, bool)
     occupied = np.ascontiguousarray(start)
-    problems = whole_log_problems(run, templates, grid, log.sensor.max_range)
+    problems = whole_log_problems(run, templates, grid, log.sensor.max_range, observed.reshape(-1))
     outcome = em_with_phases(run, occupied, params, problems, progress=progress)
     t0 = time.perf_counter()
     probability, observed = em_view(log_odds, observed, outcome, grid, whole.pose, log.sensor, params)

@@ -13,7 +13,6 @@ import numpy as np
 
 from aogm_cli.core.errors import InputError
 from aogm_cli.sensor_models.cone import cone_flat_cells, flat_offsets
-from aogm_cli.sensor_models.surface import Surfaces, cos2_of, hidden
 
 
 # A reading has one cause: random (uniform 1/z_max), a max-range dropout (optional point mass), no
@@ -120,15 +119,12 @@ class ForwardReadings(NamedTuple):
 
 
 class IndexGrid(NamedTuple):
-    """``_fill_index``'s grid: its shape, two optional flat bool masks (empty: none) and the
-    surfaces' normals with the specular angle's cos^2 (``surface.hidden``)."""
+    """``_fill_index``'s grid: its shape and two optional flat bool masks (empty: none)."""
 
     height: int
     width: int
     mask: np.ndarray  # readings none of whose cells is in it get no entries
     held_free: np.ndarray  # cells left out of every cone
-    normal: np.ndarray  # (2, H * W) float64 surface normals ((2, 0): none)
-    cos2: float
 
 
 class IndexBuffers(NamedTuple):
@@ -266,16 +262,28 @@ def _fill_index(tpl, flat, grid, readings, sigma, window, out):
                 touches = True
             if drop and held_free[c]:
                 continue
-            g = gaussian_at(z[t], r[j], sigma, window)
-            if g == 0.0 and hidden(grid.normal, grid.cos2, c, row0, col0, width):
-                continue  # a surface met at a grazing angle before the window: no evidence
             out_cell[pos + n] = c
-            out_g[pos + n] = g
+            out_g[pos + n] = gaussian_at(z[t], r[j], sigma, window)
             n += 1
         if touches:  # else none of its cells is in the mask: the reading keeps no entry
             counts[t] = n
             pos += n
     return pos
+
+
+def cone_limits(z: np.ndarray, z_max: float, config: ForwardModelConfig,
+                shadow: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(z, limit) of each reading as the forward model takes it: a cone counts up to ``config.window``
+    sigmas beyond its range, a max-range reading's (+inf) up to z_max. A reading with a finite
+    ``shadow`` (``surface.reading_shadows``: it met a surface at a grazing angle before its window)
+    becomes a max-range reading whose cone ends just before that surface: it says that nothing
+    nearer echoed, and nothing of the cells beyond, which the deflected beam never crossed."""
+    z = np.asarray(z, dtype=np.float64)
+    limits = np.where(np.isfinite(z), np.minimum(z + config.window * config.sigma, z_max), z_max)
+    if shadow is None:
+        return z, limits
+    cut = np.isfinite(shadow) & ~np.isnan(z)
+    return np.where(cut, np.inf, z), np.where(cut, np.nextafter(np.minimum(shadow, z_max), 0.0), limits)
 
 
 def build_forward_index(
@@ -287,7 +295,7 @@ def build_forward_index(
     reading_ids: np.ndarray | None = None,
     mask: np.ndarray | None = None,
     held_free: np.ndarray | None = None,
-    surfaces: Surfaces | None = None,
+    shadow: np.ndarray | None = None,
 ) -> ForwardIndex:
     """The forward model's index for ``cones`` = (rows, cols, bins, z): readings z taken from
     sensor cells (rows, cols) with heading bins ``bins`` (as ``cone.sensor_cells`` gives them;
@@ -300,8 +308,7 @@ def build_forward_index(
     that are free and stay free while the index is used (neither candidates of EM nor
     occupied): a free cell adds nothing to any S_t, so leaving its entries out changes no
     likelihood, and the index of a small cluster holds little more than the cluster's cells.
-    ``surfaces`` (``surface.surface_normals``) leave out the surface cells a reading meets at
-    more than ``config.specular_deg`` before its window.
+    ``shadow`` (per reading, ``surface.reading_shadows``) cuts readings short (``cone_limits``).
     """
     rows, cols, bins, z = cones
     z = np.asarray(z, dtype=np.float64).reshape(-1)
@@ -309,8 +316,8 @@ def build_forward_index(
     keep = ~np.isnan(z)
     rows, cols, bins = (np.asarray(a, dtype=np.int64).reshape(-1)[keep] for a in (rows, cols, bins))
     z, ids = z[keep], ids[keep]
+    z, limits = cone_limits(z, z_max, config, None if shadow is None else np.asarray(shadow).reshape(-1)[keep])
     z_eff = np.where(np.isfinite(z), np.minimum(z, z_max), z_max)
-    limits = np.where(np.isfinite(z), np.minimum(z + config.window * config.sigma, z_max), z_max)
     # an upper bound of each reading's entry count: template entries within its limit
     base = templates.base_bin[bins]
     upper = 0
@@ -325,9 +332,7 @@ def build_forward_index(
     mask, held_free = (np.zeros(0, dtype=np.bool_) if a is None else np.ascontiguousarray(a, dtype=np.bool_).reshape(-1)
                        for a in (mask, held_free))
     n = _fill_index(templates.kernel_arrays, flat_offsets(templates, grid.width),
-                    IndexGrid(grid.height, grid.width, mask, held_free,
-                              np.zeros((2, 0)) if surfaces is None else surfaces.normal, cos2_of(config.specular_deg)),
-                    ForwardReadings(rows, cols, bins, z_eff, limits),
+                    IndexGrid(grid.height, grid.width, mask, held_free), ForwardReadings(rows, cols, bins, z_eff, limits),
                     float(config.sigma), float(config.window), IndexBuffers(out_cell, out_g, counts, scratch))
     ptr = np.zeros(len(z) + 1, dtype=np.int64)
     np.cumsum(counts, out=ptr[1:])
@@ -346,14 +351,14 @@ class ExpectationReadings(NamedTuple):
     cols: np.ndarray
     bins: np.ndarray  # heading bin (int64)
     z: np.ndarray  # float64 range in template ranges; +inf (or >= z_max): a max-range reading
+    limit: np.ndarray  # float64 where a shadow cuts the cone (``cone_limits``; +inf: none)
 
 
 @numba.njit(cache=True)
-def expectation_sums(tpl, flat, shape, readings, occupied, model, normal, out):
+def expectation_sums(tpl, flat, shape, readings, occupied, model, out):
     """The expectations of every reading's cause under the flat binary map ``occupied``, summed.
 
-    ``model`` is (p_rand, p_max, p_hit, sigma, window, z_max, cos2) and ``normal`` the surfaces'
-    normals (``surface.hidden``: hidden cells before the window are left out). For reading t with obstacles
+    ``model`` is (p_rand, p_max, p_hit, sigma, window, z_max). For reading t with obstacles
     d_1 <= ... <= d_K in its cone (cells up to z + window sigma; up to z_max for a max-range
     reading), the causes' posteriors are e_rand = (p_rand / z_max) / p, e_dropout = p_max G0 / p,
     e_k = w q^(k-1) p_hit g(d_k) / p and e_0 = w q^K G0 / p, with p = p(z_t | m) (the comment
@@ -361,7 +366,7 @@ def expectation_sums(tpl, flat, shape, readings, occupied, model, normal, out):
     sum_k e_k (detections), sum_k k e_k + K e_0 (obstacles examined), sum_k e_k (z - d_k)^2,
     sum e_0 (no obstacle detected).
     """
-    p_rand, p_max, p_hit, sigma, window, z_max, cos2 = model
+    p_rand, p_max, p_hit, sigma, window, z_max = model
     height, width = shape
     q = 1.0 - p_hit
     w = 1.0 - p_rand - p_max
@@ -376,7 +381,7 @@ def expectation_sums(tpl, flat, shape, readings, occupied, model, normal, out):
         at_max = not z < z_max
         if at_max:
             z = z_max
-        limit = z_max if at_max else min(z + window * sigma, z_max)
+        limit = min(z_max if at_max else min(z + window * sigma, z_max), readings.limit[t])
         row0 = readings.rows[t]
         col0 = readings.cols[t]
         n_obs = 0
@@ -389,11 +394,8 @@ def expectation_sums(tpl, flat, shape, readings, occupied, model, normal, out):
             for j in range(m):
                 c = ib[j]
                 if c < n_cells and occupied[c]:
-                    g = gaussian_at(z, r[j], sigma, window)
-                    if g == 0.0 and hidden(normal, cos2, c, row0, col0, width):
-                        continue
                     d[n_obs] = r[j]
-                    gk[n_obs] = g
+                    gk[n_obs] = gaussian_at(z, r[j], sigma, window)
                     n_obs += 1
         u0 = (z - z_max) / sigma
         g0 = math.exp(-0.5 * u0 * u0) / (math.sqrt(2.0 * math.pi) * sigma)

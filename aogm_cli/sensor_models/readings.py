@@ -14,7 +14,6 @@ from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import SensorSpec
 from aogm_cli.sensor_models.cone import ConeTemplates, build_cone_templates, cone_cells, flat_offsets, reading_geometry
 from aogm_cli.sensor_models.ray import is_narrow_beam
-from aogm_cli.sensor_models.surface import Surfaces
 
 # readings per call of the kernels that walk every reading's cone once (``reading_spans``)
 READINGS_PER_CALL = 1 << 14
@@ -79,9 +78,9 @@ class LaidOutReadings:
     cols: np.ndarray
     bins: np.ndarray
     z: np.ndarray
-    # the surfaces the readings meet (``surface.surface_normals`` of the standard map): the forward
-    # model leaves a surface met at a grazing angle out of a reading's cone; None: no surface known
-    surfaces: Surfaces | None = None
+    # the normals of the surfaces the readings echoed from (``surface.surface_normals``), where the
+    # forward model's beams are deflected at a grazing angle (``surface.reading_shadows``); None: none known
+    normals: np.ndarray | None = None
 
     @property
     def cones(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

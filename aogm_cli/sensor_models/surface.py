@@ -1,20 +1,17 @@
 """The surfaces a sonar's readings meet: each wall cell's normal, from the directions it echoed in
-(``surface_normals``), and the angle-of-incidence test of the forward model (``hidden``): a reading
-that passes a surface at a grazing angle is no evidence against it (no echo comes back)."""
+(``surface_normals``), the angle of incidence beyond which they stop echoing (``incidence_counts``),
+and where a reading's beam met one at a grazing angle and was deflected (``reading_shadows``)."""
 
 from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
-from typing import NamedTuple
 
 import numba
 import numpy as np
 
 from aogm_cli.core.errors import InputError
-from aogm_cli.sensor_models.cone import cone_flat_cells
-
-SEGMENT_BITS = 32  # columns per word of ``Surfaces.bits`` (EM's tiles are this wide)
+from aogm_cli.sensor_models.cone import cone_flat_cells, flat_offsets
 
 
 @dataclass(frozen=True)
@@ -33,53 +30,85 @@ class SurfaceConfig:
     # the doubled-angle resultant length: directions spread evenly over +-30 deg give 0.83, +-45
     # deg 0.64, +-60 deg 0.41; a corner heard from all around 0
     min_coherence: float = 0.5
+    # and is passed by few readings that meet it head-on (within head_on_deg of its normal), which a
+    # surface there would have echoed: at most this share of those readings passed it. A doorway,
+    # which the echoes of the wall beside it smear over, is passed head-on; a wall is not
+    max_pass_share: float = 0.5
+    head_on_deg: float = 20.0
 
     def validate(self) -> SurfaceConfig:
         if not isinstance(self.enabled, bool):
             raise InputError(f"expected true or false, got {self.enabled!r}", key="enabled")
         if isinstance(self.min_echoes, bool) or not isinstance(self.min_echoes, int) or self.min_echoes < 1:
             raise InputError(f"expected a whole number >= 1, got {self.min_echoes!r}", key="min_echoes")
-        v = self.min_coherence
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v <= 1:
-            raise InputError(f"expected a number in [0, 1], got {v!r}", key="min_coherence")
+        for key in ("min_coherence", "max_pass_share"):
+            v = getattr(self, key)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v <= 1:
+                raise InputError(f"expected a number in [0, 1], got {v!r}", key=key)
+        v = self.head_on_deg
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v < 90:
+            raise InputError(f"expected an angle in (0, 90) degrees, got {v!r}", key="head_on_deg")
         return self
 
     def as_dict(self) -> dict:
         return asdict(self)
 
 
-class Surfaces(NamedTuple):
-    """Each grid cell's surface normal, as kernels take it."""
-
-    normal: np.ndarray  # (2, H * W) float64 unit normal (d row, d col) of each surface cell; NaN elsewhere
-    bits: np.ndarray  # (H, ceil(W / SEGMENT_BITS)) int64: bit k of word s set when column s * 32 + k is a surface cell
-
-
-def no_surfaces(shape: tuple[int, int]) -> Surfaces:
-    """No surface anywhere: every cell visible at any angle (lasers, or the model turned off)."""
-    return Surfaces(np.zeros((2, 0)), np.zeros((shape[0], -(-shape[1] // SEGMENT_BITS)), dtype=np.int64))
-
-
 def surface_normals(tpl, flat, shape: tuple[int, int], cones: tuple, z_max: float, resolution: float,
-                    config: SurfaceConfig) -> Surfaces:
-    """The ``Surfaces`` that the readings ``cones`` = (sensor rows, cols, heading bins, template
-    ranges; NaN invalid, >= z_max no echo) echoed from, on a grid of ``shape``: ``tpl`` and
-    ``flat`` are the cone templates' kernel arrays and flat offsets."""
-    if not config.enabled:
-        return no_surfaces(shape)
+                    config: SurfaceConfig, believed: np.ndarray | None = None) -> np.ndarray:
+    """(2, H * W) float64: the unit normal (d row, d col) of each surface the readings ``cones`` =
+    (sensor rows, cols, heading bins, template ranges; NaN invalid, >= z_max no echo) echoed from,
+    NaN elsewhere, on a grid of ``shape``: ``tpl`` and ``flat`` are the cone templates' kernel
+    arrays and flat offsets. With ``believed`` (bool, the grid's shape), only the cells it marks
+    (a map's occupied cells) can be surfaces."""
     rows, cols, bins, z = (np.ascontiguousarray(a).reshape(-1) for a in cones)
+    readings = (rows.astype(np.int64), cols.astype(np.int64), bins.astype(np.int64), z.astype(np.float64))
     sums = np.zeros((3, shape[0] * shape[1]))
-    echo_direction_sums(tpl, flat, shape, (rows.astype(np.int64), cols.astype(np.int64), bins.astype(np.int64),
-                                           z.astype(np.float64)), float(resolution), float(z_max), sums)
+    echo_direction_sums(tpl, flat, shape, readings, float(resolution), float(z_max), sums)
     count = sums[2]
     with np.errstate(invalid="ignore", divide="ignore"):
         coherence = np.hypot(sums[0], sums[1]) / count
     surface = (count >= config.min_echoes) & (coherence >= config.min_coherence)
+    if believed is not None:
+        surface &= np.asarray(believed, dtype=bool).reshape(-1)
     angle = 0.5 * np.arctan2(sums[1, surface], sums[0, surface])  # the mean axis, from the doubled angles
     normal = np.full((2, count.size), np.nan)
     normal[0, surface] = np.cos(angle)
     normal[1, surface] = np.sin(angle)
-    return Surfaces(normal, surface_bits(surface.reshape(shape)))
+    passes = np.zeros(count.size)
+    head_on_passes(tpl, flat, shape, readings, normal, math.cos(math.radians(config.head_on_deg)) ** 2,
+                   float(resolution), float(z_max), passes)
+    passed = passes > config.max_pass_share * (passes + count)
+    normal[:, passed] = np.nan
+    return normal
+
+
+@numba.njit(cache=True)
+def head_on_passes(tpl, flat, shape, readings, normal, cos2, margin, z_max, out):
+    """out[c] += 1 for every reading of ``readings`` = (rows, cols, bins, z) whose cone holds the
+    surface cell c (``normal`` not NaN) more than ``margin`` before its range (every cell of a
+    reading without echo), met within the angle whose cos^2 is ``cos2`` of its normal."""
+    height, width = shape
+    rows, cols, bins, z = readings
+    n_cells = height * width
+    ext = tpl.extent
+    ib = np.empty(int(np.max(np.diff(tpl.offsets))), dtype=np.int32)
+    for t in range(z.shape[0]):
+        if not z[t] == z[t]:
+            continue
+        before = z_max if not z[t] < z_max else z[t] - margin
+        row0, col0 = rows[t], cols[t]
+        if before <= 0.0 or row0 + ext < 0 or row0 - ext >= height or col0 + ext < 0 or col0 - ext >= width:
+            continue
+        k = bins[t]
+        b = tpl.base_bin[k]
+        r = tpl.ranges[tpl.offsets[b] : tpl.offsets[b + 1]]
+        m = np.searchsorted(r, before, side="left")
+        cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width)
+        for j in range(m):
+            c = np.int64(ib[j])
+            if c < n_cells and normal[0, c] == normal[0, c] and not hidden(normal, cos2, c, row0, col0, width):
+                out[c] += 1.0
 
 
 @numba.njit(cache=True)
@@ -120,16 +149,6 @@ def echo_direction_sums(tpl, flat, shape, readings, half_band, z_max, out):
             out[2, c] += 1.0
 
 
-def surface_bits(surface: np.ndarray) -> np.ndarray:
-    """(H, ceil(W / 32)) int64 words: bit k of word s is column s * 32 + k of ``surface`` (H, W)."""
-    height, width = surface.shape
-    n_seg = -(-width // SEGMENT_BITS)
-    padded = np.zeros((height, n_seg * SEGMENT_BITS), dtype=np.int64)
-    padded[:, :width] = surface
-    weights = np.int64(1) << np.arange(SEGMENT_BITS, dtype=np.int64)
-    return (padded.reshape(height, n_seg, SEGMENT_BITS) * weights).sum(axis=2).astype(np.int64)
-
-
 def cos2_of(specular_deg: float) -> float:
     """cos^2 of the largest incidence angle that still echoes (0 at 90 deg: nothing hidden)."""
     if specular_deg >= 90.0:
@@ -142,8 +161,6 @@ def hidden(normal, cos2, cell, row0, col0, width):
     """True when the flat ``cell`` is a surface cell that a reading from sensor cell (row0, col0)
     meets at more than the specular angle from its normal (cos^2 of that angle: ``cos2``): a
     grazing pass, which returns no echo, so the reading says nothing of the cell before its echo."""
-    if normal.shape[1] == 0:
-        return False
     n_r = normal[0, cell]
     if not n_r == n_r:  # NaN: no surface there
         return False
@@ -152,3 +169,136 @@ def hidden(normal, cos2, cell, row0, col0, width):
     d_c = float(cell - row * width - col0)
     dot = d_r * n_r + d_c * normal[1, cell]
     return dot * dot < cos2 * (d_r * d_r + d_c * d_c)
+
+
+INCIDENCE_BINS = 9  # of 10 degrees, 0-90: ``incidence_counts``
+
+
+@numba.njit(cache=True)
+def incidence_counts(tpl, flat, shape, readings, occupied, normal, model, out):
+    """How often the readings echoed from, and passed, the occupied surface cells of the flat map
+    ``occupied`` (normals ``normal``), by angle of incidence: ``out`` (2, INCIDENCE_BINS) gets, per
+    10-degree bin, in row 0 the readings whose first occupied cell inside the Gaussian window (the
+    echo) is a surface met at that angle, and in row 1 the readings that passed an occupied surface
+    cell met at that angle at least ``margin`` before its range (once per reading and bin; a
+    reading without echo passes every one in its cone).
+
+    ``readings`` = (rows, cols, bins, z) (template ranges; >= z_max: no echo), ``model`` =
+    (sigma, window, z_max, margin)."""
+    sigma, window, z_max, margin = model
+    height, width = shape
+    rows, cols, bins, z_all = readings
+    n_cells = height * width
+    ext = tpl.extent
+    ib = np.empty(int(np.max(np.diff(tpl.offsets))), dtype=np.int32)
+    passed = np.zeros(INCIDENCE_BINS, dtype=np.bool_)
+    for t in range(z_all.shape[0]):
+        z = z_all[t]
+        if not z == z:  # NaN
+            continue
+        at_max = not z < z_max
+        limit = z_max if at_max else min(z + window * sigma, z_max)
+        row0, col0 = rows[t], cols[t]
+        if row0 + ext < 0 or row0 - ext >= height or col0 + ext < 0 or col0 - ext >= width:
+            continue
+        k = bins[t]
+        b = tpl.base_bin[k]
+        r = tpl.ranges[tpl.offsets[b] : tpl.offsets[b + 1]]
+        m = np.searchsorted(r, limit, side="right")
+        cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width)
+        passed[:] = False
+        for j in range(m):
+            c = np.int64(ib[j])
+            if c >= n_cells or not occupied[c]:
+                continue
+            in_window = not at_max and abs(r[j] - z) <= window * sigma
+            n_r = normal[0, c]
+            if n_r == n_r:
+                row = c // width
+                d_r = float(row - row0)
+                d_c = float(c - row * width - col0)
+                d2 = d_r * d_r + d_c * d_c
+                if d2 > 0.0:
+                    cos_i = min(abs(d_r * n_r + d_c * normal[1, c]) / math.sqrt(d2), 1.0)
+                    a = min(int(math.degrees(math.acos(cos_i)) / 10.0), INCIDENCE_BINS - 1)
+                    if in_window:
+                        out[0, a] += 1.0
+                    elif not passed[a] and (at_max or r[j] < z - margin):
+                        passed[a] = True
+                        out[1, a] += 1.0
+            if in_window:
+                break
+
+
+def specular_angle(counts: np.ndarray, min_readings: int = 30) -> float:
+    """The incidence angle (degrees) beyond which surfaces stop echoing, from ``incidence_counts``:
+    where the echo rate echoes / (echoes + passes) first falls below half its largest value within
+    30 degrees of the normal (linear between the bins' centres), 90 when it never does. Bins with
+    fewer than ``min_readings`` readings are skipped; without any within 30 degrees, 90."""
+    total = counts[0] + counts[1]
+    ok = total >= min_readings
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rate = np.where(ok, counts[0] / total, np.nan)
+    if not ok[:3].any():
+        return 90.0
+    half = 0.5 * np.nanmax(rate[:3])
+    centres = 10.0 * np.arange(INCIDENCE_BINS) + 5.0
+    prev = None
+    for a in np.flatnonzero(ok):
+        if rate[a] < half:
+            if prev is None:
+                return float(centres[a])
+            x0, y0, x1, y1 = centres[prev], rate[prev], centres[a], rate[a]
+            return float(x0 + (y0 - half) * (x1 - x0) / (y0 - y1))
+        prev = a
+    return 90.0
+
+
+@numba.njit(cache=True)
+def shadow_ranges(tpl, flat, shape, readings, normal, cos2, model, out):
+    """out[t] = the template range of the first cell of reading t's cone, before its Gaussian
+    window, that is a surface met beyond the specular angle (``hidden``; out[t] untouched when
+    there is none). ``readings`` = (rows, cols, bins, z) (template ranges; >= z_max: no echo),
+    ``model`` = (sigma, window, z_max)."""
+    sigma, window, z_max = model
+    height, width = shape
+    rows, cols, bins, z_all = readings
+    n_cells = height * width
+    ext = tpl.extent
+    ib = np.empty(int(np.max(np.diff(tpl.offsets))), dtype=np.int32)
+    for t in range(z_all.shape[0]):
+        z = z_all[t]
+        if not z == z:
+            continue
+        before = z_max if not z < z_max else z - window * sigma
+        row0, col0 = rows[t], cols[t]
+        if before <= 0.0 or row0 + ext < 0 or row0 - ext >= height or col0 + ext < 0 or col0 - ext >= width:
+            continue
+        k = bins[t]
+        b = tpl.base_bin[k]
+        r = tpl.ranges[tpl.offsets[b] : tpl.offsets[b + 1]]
+        m = np.searchsorted(r, before, side="left")
+        cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width)
+        for j in range(m):
+            c = np.int64(ib[j])
+            if c < n_cells and hidden(normal, cos2, c, row0, col0, width):
+                out[t] = r[j]
+                break
+
+
+def reading_shadows(run, forward, keep: np.ndarray | None = None) -> np.ndarray | None:
+    """Per reading of ``run`` (a ``readings.LaidOutReadings``; of those ``keep`` indexes), the range
+    where its beam met one of ``run.normals``' surfaces beyond ``forward.specular_deg`` before its
+    window (+inf: none): the beam was deflected there (``forward_model.cone_limits``). None when
+    the log has no surfaces or the angle is 90 degrees."""
+    if run.normals is None or forward.specular_deg >= 90.0:
+        return None
+    pick = (lambda a: a) if keep is None else (lambda a: a[keep])
+    z = pick(run.z).astype(np.float64)
+    out = np.full(z.shape[0], np.inf)
+    grid = run.grid
+    shadow_ranges(run.templates.kernel_arrays, flat_offsets(run.templates, grid.width), grid.shape,
+                  (pick(run.rows).astype(np.int64), pick(run.cols).astype(np.int64), pick(run.bins).astype(np.int64), z),
+                  run.normals, cos2_of(forward.specular_deg),
+                  (float(forward.sigma), float(forward.window), float(run.sensor.max_range)), out)
+    return out

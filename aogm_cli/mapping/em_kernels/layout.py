@@ -101,9 +101,6 @@ class EMModel(NamedTuple):
     w: float  # 1 - p_rand - p_max
     sigma: float
     window: float  # sigmas: the Gaussian is 0 beyond
-    normal: np.ndarray  # (2, H * W) float64 surface normals (``surface.Surfaces``; (2, 0): none)
-    surf_bits: np.ndarray  # (H, n_seg) int64 the surface cells of each row, a bit per column of a tile
-    cos2: float  # cos^2 of the specular angle: a surface cell met more obliquely, before a reading's window, is hidden
 
 
 class EMState(NamedTuple):
@@ -153,7 +150,6 @@ class TileWork(NamedTuple):
     tile_t: np.ndarray  # int64 per listing: its reading
     far_lo: np.ndarray  # int64 per listing: the tile columns where the cone's cells lie before its window
     far_hi: np.ndarray  # (far_hi < far_lo: none)
-    far_hole: np.ndarray  # int64 per listing: bit x set where the far run's cell at tile column x is hidden from the reading
     far_sum: np.ndarray  # (2, SEGMENT + 1) float64 differences of sum_t log far ratio along the tile (add, remove)
     spans: np.ndarray  # (11, n) int64 the row's active readings' ``RowSpan``s, readings and columns (seg_list points into it)
     seg_mask: np.ndarray  # (n_seg,) int64 bit k of segment s: column s * SEGMENT + k holds a candidate

@@ -9,11 +9,9 @@ import math
 import numba
 import numpy as np
 
-from aogm_cli.mapping.em_kernels.layout import _trailing_zeros
 from aogm_cli.mapping.em_kernels.readings import _entry_cell
 from aogm_cli.mapping.em_kernels.windows import _rank
 from aogm_cli.sensor_models.forward_model import gaussian_at
-from aogm_cli.sensor_models.surface import hidden
 
 
 @numba.njit(cache=True, inline="always")
@@ -108,8 +106,7 @@ def _init_state(tpl, flat, rd, model, occupied, grid_shape, marks, state, span):
                     continue
                 g = 0.0 if j < rd.jlo[t] else gaussian_at(rd.z[t], tpl.ranges[s0 + j], model.sigma, model.window)
                 if g == 0.0:
-                    if not hidden(model.normal, model.cos2, cell, rd.row0[t], rd.col0[t], width):
-                        far += 1
+                    far += 1
                     continue
                 acc += qpow[k] * p_hit * g
                 k += 1
@@ -177,27 +174,10 @@ def _far_changed(li, t, x, old_add, old_rem, state, work):
         return
     d_add = state.far_log[t, 0] - old_add
     d_rem = state.far_log[t, 1] - old_rem
-    _far_run(work.far_sum, lo, hi, work.far_hole[li], d_add, d_rem)
-
-
-@numba.njit(cache=True, inline="always")
-def _far_run(far_sum, lo, hi, holes, d_add, d_rem):
-    """Add (d_add, d_rem) to the tile's sums of log far ratios (differences along the tile) at
-    columns lo..hi, but for the columns of ``holes`` (bits: cells hidden from the reading)."""
-    far_sum[0, lo] += d_add
-    far_sum[0, hi + 1] -= d_add
-    far_sum[1, lo] += d_rem
-    far_sum[1, hi + 1] -= d_rem
-    bits = holes & ~((np.int64(1) << np.int64(lo)) - 1)
-    while bits != 0:
-        x = np.int64(_trailing_zeros(np.uint64(bits)))
-        bits &= bits - 1
-        if x > hi:
-            break
-        far_sum[0, x] -= d_add
-        far_sum[0, x + 1] += d_add
-        far_sum[1, x] -= d_rem
-        far_sum[1, x + 1] += d_rem
+    work.far_sum[0, lo] += d_add
+    work.far_sum[0, hi + 1] -= d_add
+    work.far_sum[1, lo] += d_rem
+    work.far_sum[1, hi + 1] -= d_rem
 
 
 @numba.njit(cache=True, inline="always")

@@ -43,10 +43,9 @@ from aogm_cli.mapping.em_kernels.layout import (
     SWEEP,
     _trailing_zeros,
 )
-from aogm_cli.mapping.em_kernels.likelihood import _far_changed, _far_run, _flip_gain, _set_sum, _update_reading
+from aogm_cli.mapping.em_kernels.likelihood import _far_changed, _flip_gain, _set_sum, _update_reading
 from aogm_cli.mapping.em_kernels.windows import _build_window, _make_room, _room, _row_group
 from aogm_cli.sensor_models.forward_model import gaussian_at
-from aogm_cli.sensor_models.surface import hidden
 
 
 @numba.njit(cache=True, inline="always")
@@ -129,9 +128,6 @@ def _window_pairs(i, t, span, r, c0, c1, c_start, fill, tpl, groups, rd, model, 
             ci = cand.of_cell[at + span.sign * o]
             if ci < 0:
                 continue
-            if hidden(model.normal, model.cos2, at + span.sign * o, rd.row0[t], col0, width) and gaussian_at(
-                    rd.z[t], tpl.ranges[s0 + gj[span.first + o - span.o_first]], model.sigma, model.window) == 0.0:
-                continue  # before the window and hidden from the reading: not in its cone
             n += 1
             local = ci - c_start
             if not fill:
@@ -144,19 +140,6 @@ def _window_pairs(i, t, span, r, c0, c1, c_start, fill, tpl, groups, rd, model, 
             work.pair_j[pos] = j
             work.pair_g[pos] = gaussian_at(rd.z[t], tpl.ranges[s0 + j], model.sigma, model.window)
     return n
-
-
-@numba.njit(cache=True, inline="always")
-def _far_holes(model, rd, t, cell0, bits, width):
-    """The bits of ``bits`` (surface cells of a tile's far run, bit x: the cell cell0 + x)
-    whose cells are hidden from reading t (``surface.hidden``)."""
-    holes = np.int64(0)
-    while bits != 0:
-        x = np.int64(_trailing_zeros(np.uint64(bits)))
-        bits &= bits - 1
-        if hidden(model.normal, model.cos2, cell0 + x, rd.row0[t], rd.col0[t], width):
-            holes |= np.int64(1) << x
-    return holes
 
 
 @numba.njit(cache=True, inline="always")
@@ -397,7 +380,6 @@ def _sweep_tiles(tpl, flat, groups, rd, model, cand, state, work):
                 work.tile_t[li] = t
                 work.far_lo[li] = 1
                 work.far_hi[li] = 0
-                work.far_hole[li] = 0
                 if span.o_hi < span.o_lo:
                     continue
                 f_lo, f_hi = _o_range(span, rd.col0[t], c0, c1, span.f_lo, span.f_hi)
@@ -406,9 +388,10 @@ def _sweep_tiles(tpl, flat, groups, rd, model, cand, state, work):
                     a, b = (col0 + f_lo, col0 + f_hi) if span.sign > 0 else (col0 - f_hi, col0 - f_lo)
                     work.far_lo[li] = a - c0
                     work.far_hi[li] = b - c0
-                    holes = _far_holes(model, rd, t, row_base + c0, model.surf_bits[r, sg] & _span_mask(a, b, sg), width)
-                    work.far_hole[li] = holes
-                    _far_run(work.far_sum, a - c0, b - c0, holes, state.far_log[t, 0], state.far_log[t, 1])
+                    work.far_sum[0, a - c0] += state.far_log[t, 0]
+                    work.far_sum[0, b - c0 + 1] -= state.far_log[t, 0]
+                    work.far_sum[1, a - c0] += state.far_log[t, 1]
+                    work.far_sum[1, b - c0 + 1] -= state.far_log[t, 1]
                 k = _window_pairs(li, t, span, r, c0, c1, c_start, False, tpl, groups, rd, model, cand, work)
                 n_pairs += k
                 if k > 0 and work.slot[t] < 0:
@@ -452,7 +435,7 @@ def _sweep_tiles(tpl, flat, groups, rd, model, cand, state, work):
                     adding = occupied[cell]
                     now = ctl[CTL_CLOCK]
                     for i in range(n_list):  # the readings that hold the cell before their windows
-                        if work.far_lo[i] <= x <= work.far_hi[i] and not (work.far_hole[i] >> x) & 1:
+                        if work.far_lo[i] <= x <= work.far_hi[i]:
                             t = work.tile_t[i]
                             old_add, old_rem = state.far_log[t, 0], state.far_log[t, 1]
                             state.nfar[t] += 1 if adding else -1
