@@ -103,7 +103,8 @@ def test_adaptive_cli_writes_clusters_and_stats(corridor_door_log, tmp_path):
     assert m.stats["clusters"] == int(m.clusters.max())
     # the runtime is the sum of the phases, each recorded, named as the em mode names its own
     phases = m.stats["phase_seconds"]
-    assert set(phases) == {"standard", "readings", "detector", "clusters", "index", "calibration", "sweeps", "view"}
+    assert set(phases) == {"standard", "readings", "deflections", "detector", "clusters", "index", "calibration", "sweeps",
+                           "view"}
     assert m.runtime_s == pytest.approx(sum(phases.values()), rel=1e-12)
     em = read_map_file(_em_map(corridor_door_log, tmp_path))
     assert set(em.stats["phase_seconds"]) == set(phases) - {"detector", "clusters"}

@@ -14,7 +14,7 @@ from aogm_cli.core.frames import sensor_poses
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import SensorSpec
 from aogm_cli.io.logfile import LogReader
-from aogm_cli.sensor_models.cone import ConeReadings, ConeTemplates, range_search, reading_geometry
+from aogm_cli.sensor_models.cone import NO_CUT, ConeReadings, ConeTemplates, range_search, reading_geometry
 from aogm_cli.sensor_models.inverse_model import InverseModelConfig, occupied_arc
 from aogm_cli.sensor_models.ray import is_narrow_beam
 from aogm_cli.sensor_models.readings import cone_templates, echo_ranges
@@ -139,7 +139,8 @@ def arc_status(
         grid.height,
         grid.width,
     )
-    readings = ConeReadings(rows.reshape(-1), cols.reshape(-1), bins.reshape(-1), zt.reshape(-1), offset.reshape(-1))
+    readings = ConeReadings(rows.reshape(-1), cols.reshape(-1), bins.reshape(-1), zt.reshape(-1), offset.reshape(-1),
+                            NO_CUT)
     _arc_kernel(maps, readings, templates.kernel_arrays, 0.5 * float(alpha), float(sensor.max_range), status)
     return status.reshape(z.shape)
 

@@ -18,6 +18,7 @@ from aogm_cli.core.log import Log, SensorSpec
 from aogm_cli.core.scores import SCORE_KEYS as SCORE_KEYS  # ``holdout_scores``'s
 from aogm_cli.evaluation.consistency import reading_endpoints
 from aogm_cli.sensor_models.cone import (
+    NO_CUT,
     SPARE_MASK,
     ConeReadings,
     cone_flat_cells,
@@ -201,7 +202,8 @@ def cone_labels(pose: np.ndarray, ranges: np.ndarray, sensor: SensorSpec, grid: 
     templates = cone_templates(grid, sensor)
     rows, cols, bins, valid, offset = reading_geometry(pose, sensor, grid, templates)
     z = np.where(valid, echo_ranges(ranges, grid), np.nan)
-    readings = ConeReadings(rows.reshape(-1), cols.reshape(-1), bins.reshape(-1), z.reshape(-1), offset.reshape(-1))
+    readings = ConeReadings(rows.reshape(-1), cols.reshape(-1), bins.reshape(-1), z.reshape(-1), offset.reshape(-1),
+                            NO_CUT)
     n = grid.height * grid.width
     counts = np.zeros((2, n + SPARE_MASK + 1), dtype=np.int32)
     scratch = np.empty(int(np.diff(templates.offsets).max()), dtype=np.int32)

@@ -19,6 +19,7 @@ from aogm_cli.mapping.cluster import grown, label_clusters, near_occupied, readi
 from aogm_cli.mapping.em import (
     EMOutcome,
     EMProblem,
+    deflected,
     em_problem,
     em_readings,
     em_stats,
@@ -26,14 +27,12 @@ from aogm_cli.mapping.em import (
     em_with_phases,
     find_root,
     prepared_templates,
-    with_surfaces,
 )
 from aogm_cli.mapping.params import EMConfig, MapParams
 from aogm_cli.mapping.pipeline import Progress, log_grid, params_json
 from aogm_cli.mapping.standard import standard_pass
 from aogm_cli.sensor_models.ray import is_narrow_beam
 from aogm_cli.sensor_models.readings import LaidOutReadings, cone_bands, lay_out_readings
-from aogm_cli.sensor_models.surface import reading_shadows
 
 
 def cluster_problem(run: LaidOutReadings, clusters: np.ndarray, occupied: np.ndarray, config: EMConfig,
@@ -45,7 +44,7 @@ def cluster_problem(run: LaidOutReadings, clusters: np.ndarray, occupied: np.nda
     if subset is not None:
         near = near[subset[near]]
     rd = em_readings(run.cones, run.templates, run.grid, run.sensor.max_range,
-                     config.forward, select=near, shadow=reading_shadows(run, config.forward))
+                     config.forward, select=near, shadow=run.shadow)
     return em_problem(rd, run.templates, run.grid.shape, occupied, config, labels=clusters.reshape(-1))
 
 
@@ -57,13 +56,16 @@ def coupled_groups(problem: EMProblem, n_clusters: int) -> int:
     return len(roots)
 
 
-def contested_cells(log: Log, grid, params: MapParams, log_odds: np.ndarray) -> tuple[np.ndarray, float]:
+def contested_cells(log: Log, grid, params: MapParams, log_odds: np.ndarray,
+                    shadow: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     """(cells (H, W) whose occupied evidence alone reaches ``adaptive.contested`` log-odds but
     which the standard map holds free, seconds): where the readings disagree and the standard
     map cannot explain them (walls that specular or multipath readings, too long, cleared).
-    One more standard pass, with the inverse model's free evidence set to nothing."""
+    One more standard pass, with the inverse model's free evidence set to nothing (and the
+    deflected beams, ``shadow``, stopped: they hit nothing)."""
     inverse = dataclasses.replace(params.inverse_model, l_free=params.inverse_model.l0)
-    hits, _, seconds = standard_pass(log, grid, dataclasses.replace(params, inverse_model=inverse))
+    cuts = None if shadow is None else shadow.reshape(np.shape(log.ranges))
+    hits, _, seconds = standard_pass(log, grid, dataclasses.replace(params, inverse_model=inverse), cuts=cuts)
     return (hits - params.inverse_model.l0 >= params.adaptive.contested) & (log_odds <= 0), seconds
 
 
@@ -91,7 +93,8 @@ def find_clusters(run: LaidOutReadings, flags: np.ndarray, log_odds: np.ndarray,
 
 
 def em_in_clusters(run: LaidOutReadings, clusters: np.ndarray, n_clusters: int, occupied: np.ndarray,
-                   params: MapParams, progress: Progress | None = None) -> tuple[EMOutcome, int]:
+                   params: MapParams, progress: Progress | None = None,
+                   incidence: dict | None = None) -> tuple[EMOutcome, int]:
     """EM over every cluster cell at once, every other cell held at ``occupied`` (flat, updated
     in place): (its outcome, how many groups of coupled clusters it solved). Clusters that share
     no reading are independent (as the paper has them): one run gives each its own result."""
@@ -108,7 +111,7 @@ def em_in_clusters(run: LaidOutReadings, clusters: np.ndarray, n_clusters: int, 
     near = np.zeros(run.z.size, dtype=bool)
     near[readings_near_clusters(clusters, run.rows, run.cols, run.z, run.grid, run.sensor.max_range,
                                 params.em.forward)] = True
-    outcome = em_with_phases(run, occupied, params, problem_for, select=near, progress=progress)
+    outcome = em_with_phases(run, occupied, params, problem_for, select=near, progress=progress, incidence=incidence)
     return outcome, coupled_groups(outcome.problem, n_clusters)
 
 
@@ -122,24 +125,29 @@ def map_adaptive(log, params: MapParams, detector, detector_name: str = "package
     log_odds, observed, t_standard = standard_pass(whole, grid, params)
     prepared_templates(grid, sensor)  # outside the clock
     t0 = time.perf_counter()
-    run = with_surfaces(lay_out_readings(whole.pose, whole.ranges, sensor, grid), params, log_odds)
+    run = lay_out_readings(whole.pose, whole.ranges, sensor, grid)
     t_readings = time.perf_counter() - t0
+    angle = deflected(whole, run, params, log_odds, observed)
+    run, params, log_odds, observed = angle.run, angle.params, angle.log_odds, angle.observed
 
     t0 = time.perf_counter()
     flags = detector.flag(whole.ranges, sensor.max_range).reshape(-1)
     t_detect = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    contested, t_hits = contested_cells(whole, grid, params, log_odds) if params.adaptive.contested > 0 else (None, 0.0)
+    contested, t_hits = (contested_cells(whole, grid, params, log_odds, run.shadow) if params.adaptive.contested > 0
+                         else (None, 0.0))
     clusters, n_clusters = find_clusters(run, flags, log_odds, observed, params, contested)
     t_cluster = time.perf_counter() - t0
 
     occupied = np.ascontiguousarray((log_odds > 0).reshape(-1))  # the thresholded standard map
-    outcome, groups = em_in_clusters(run, clusters, n_clusters, occupied, params, progress) if n_clusters else (None, 0)
+    outcome, groups = (em_in_clusters(run, clusters, n_clusters, occupied, params, progress, angle.incidence)
+                       if n_clusters else (None, 0))
     t0 = time.perf_counter()
     probability, observed = em_view(log_odds, observed, outcome, grid, whole.pose, sensor, params)
     seconds = outcome.seconds if outcome else {"index": 0.0, "calibration": 0.0, "sweeps": 0.0}
-    phases = {"standard": t_standard, "readings": t_readings, "detector": t_detect, "clusters": t_cluster,
+    phases = {"standard": t_standard, "readings": t_readings, "deflections": angle.seconds, "detector": t_detect,
+              "clusters": t_cluster,
               **seconds, "view": time.perf_counter() - t0}
     stats = {
         "clusters": n_clusters,

@@ -14,7 +14,6 @@ import numpy as np
 
 from aogm_cli.mapping.params import CalibrationConfig, EMConfig, MapParams
 from aogm_cli.sensor_models import forward_model as F
-from aogm_cli.sensor_models import surface
 from aogm_cli.sensor_models.cone import flat_offsets
 from aogm_cli.sensor_models.readings import LaidOutReadings
 from aogm_cli.sensor_models.surface import INCIDENCE_BINS, incidence_counts, specular_angle
@@ -22,19 +21,17 @@ from aogm_cli.sensor_models.surface import INCIDENCE_BINS, incidence_counts, spe
 LEARNED = ("sigma", "p_rand", "p_hit", "p_max")  # the forward model's parameters calibration sets
 
 
-def sample_readings(run: LaidOutReadings, max_readings: int, select: np.ndarray | None = None,
-                    forward: F.ForwardModelConfig | None = None) -> F.ExpectationReadings:
+def sample_readings(run: LaidOutReadings, max_readings: int, select: np.ndarray | None = None) -> F.ExpectationReadings:
     """The readings the parameters are fitted on: every valid reading of ``run`` (NaN left out;
     with ``select``, a bool mask, only those it marks), or every n-th of them when there are
-    more than ``max_readings`` (deterministic, spread over the whole log); with ``forward``, cut
-    short where its specular angle deflects them (``surface.reading_shadows``)."""
+    more than ``max_readings`` (deterministic, spread over the whole log); deflected beams
+    (``run.shadow``) as the forward model takes them (``forward_model.deflect``)."""
     valid = ~np.isnan(run.z)
     keep = np.flatnonzero(valid if select is None else valid & select)
     if keep.size > max_readings:
         keep = keep[:: -(-keep.size // max_readings)]
-    shadow = None if forward is None else surface.reading_shadows(run, forward, keep)
-    z = run.z[keep].astype(np.float64)
-    z, limit = (z, np.full(z.shape, np.inf)) if shadow is None else F.cone_limits(z, run.sensor.max_range, forward, shadow)
+    z, limit = F.deflect(run.z[keep].astype(np.float64), None if run.shadow is None else run.shadow[keep],
+                         run.sensor.max_range)
     return F.ExpectationReadings(run.rows[keep].astype(np.int64), run.cols[keep].astype(np.int64),
                                  run.bins[keep].astype(np.int64), z, limit)
 
@@ -109,16 +106,17 @@ def fit_at_map(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: 
 
 
 def incidence_at(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: np.ndarray,
-                 forward: F.ForwardModelConfig, config: CalibrationConfig) -> dict:
+                 forward: F.ForwardModelConfig, config: CalibrationConfig, normals: np.ndarray) -> dict:
     """The specular angle learned from ``readings`` at the flat binary map ``occupied`` (the
     standard map's, which keeps the walls that grazing passes would make EM erase): per 10-degree
     bin of incidence the readings that echoed from a surface cell and those that passed one
-    (``surface.incidence_counts``), and where the echo rate falls to half (``specular_angle``)."""
+    (``surface.incidence_counts``, surfaces ``normals``), and where the echo rate falls to half
+    (``specular_angle``)."""
     counts = np.zeros((2, INCIDENCE_BINS))
     templates = run.templates
     incidence_counts(templates.kernel_arrays, flat_offsets(templates, run.grid.width), run.grid.shape,
                      (readings.rows, readings.cols, readings.bins, readings.z),
-                     np.ascontiguousarray(occupied, dtype=np.bool_), run.normals,
+                     np.ascontiguousarray(occupied, dtype=np.bool_), normals,
                      (float(forward.sigma), float(forward.window), float(run.sensor.max_range), config.pass_margin), counts)
     return {"echoes": counts[0].astype(int).tolist(), "passes": counts[1].astype(int).tolist(),
             "specular_deg": specular_angle(counts)}
@@ -165,11 +163,6 @@ def calibrated_em(run: LaidOutReadings, occupied: np.ndarray, em: EMConfig, conf
     start = occupied.copy()
     record = {"initial": model_values(em.forward), "readings_used": int(readings.z.shape[0]),
               "fitted_at": f"1 scan in {config.start_subsample}, then 1 in {config.subsample}", "rounds": []}
-    if "specular_deg" in config.learned and run.normals is not None:
-        incidence = incidence_at(run, readings, start, em.forward, config)
-        em = dataclasses.replace(em, forward=dataclasses.replace(em.forward, specular_deg=incidence["specular_deg"]))
-        record["incidence"] = incidence
-    readings = sample_readings(run, config.max_readings, select, em.forward)
     used = dataclasses.replace(em, forward=dataclasses.replace(em.forward, sigma=max(em.forward.sigma, config.start_sigma)))
     step = dataclasses.replace(used, max_sweeps=min(em.max_sweeps, config.start_sweeps))
     entry = {"round": 0, **model_values(used.forward)}

@@ -20,7 +20,7 @@ import numpy as np
 
 from aogm_cli.core.occupancy_map import OccupancyMap
 from aogm_cli.mapping import em_kernels as K
-from aogm_cli.mapping.calibration import em_with_model
+from aogm_cli.mapping.calibration import em_with_model, incidence_at, sample_readings
 from aogm_cli.mapping.params import EMConfig, MapParams
 from aogm_cli.mapping.pipeline import Progress, log_grid, params_json
 from aogm_cli.mapping.standard import probability_from_log_odds, standard_pass
@@ -339,10 +339,12 @@ ProblemFor = Callable[[EMConfig, np.ndarray, "np.ndarray | None"], tuple[EMProbl
 
 
 def em_with_phases(run, occupied: np.ndarray, params: MapParams, problem_for: ProblemFor,
-                   select: np.ndarray | None = None, progress: Progress | None = None) -> EMOutcome:
+                   select: np.ndarray | None = None, progress: Progress | None = None,
+                   incidence: dict | None = None) -> EMOutcome:
     """The EM of the em and adaptive modes: EM over the problems ``problem_for`` sets up, with
     the forward model calibrated on the readings ``select`` marks when calibration is on
-    (``calibration.em_with_model``); ``occupied`` (flat) is updated in place, and timed."""
+    (``calibration.em_with_model``); ``occupied`` (flat) is updated in place, and timed. The
+    calibration's record gets ``incidence`` (how the specular angle was learned, ``deflected``)."""
     last = {}
 
     def on_sweep(sweep, flips, objective):
@@ -360,6 +362,8 @@ def em_with_phases(run, occupied: np.ndarray, params: MapParams, problem_for: Pr
     t0 = time.perf_counter()
     config, result, calibration = em_with_model(run, occupied, params, em_step, select)
     total = time.perf_counter() - t0
+    if calibration is not None and incidence is not None:
+        calibration["incidence"] = incidence
     seconds = {"index": last["index"], "calibration": total - last["index"] - last["sweeps"], "sweeps": last["sweeps"]}
     return EMOutcome(config, result, last["problem"], calibration, seconds)
 
@@ -394,33 +398,58 @@ def em_view(log_odds: np.ndarray, observed: np.ndarray, outcome: EMOutcome | Non
     return probability, observed
 
 
-def with_surfaces(run: LaidOutReadings, params: MapParams, log_odds: np.ndarray | None = None) -> LaidOutReadings:
-    """``run`` with the surfaces its echoes came from (``surface.surface_normals``), for the
-    forward model's angle of incidence; a narrow beam (a laser, which echoes off a wall at any
-    angle but the most grazing) and ``surface.enabled`` false keep none."""
+@dataclass
+class Deflected:
+    """What the angle of incidence leaves for a mode (``deflected``): the readings with where
+    their beams were deflected, the parameters with the learned specular angle, the standard map
+    those readings make, and what learning the angle found (None: not learned)."""
+
+    run: LaidOutReadings
+    params: MapParams
+    log_odds: np.ndarray
+    observed: np.ndarray
+    incidence: dict | None
+    seconds: float
+
+
+def deflected(whole, run: LaidOutReadings, params: MapParams, log_odds: np.ndarray, observed: np.ndarray) -> Deflected:
+    """The angle of incidence for the em and adaptive modes: the surfaces the echoes came from
+    (``surface.surface_normals``, among the cells the standard map ``log_odds`` holds occupied),
+    the specular angle learned at that map when calibration learns it (``calibration.incidence_at``),
+    the readings whose beams met a surface beyond it before their windows (``surface.reading_shadows``)
+    and the standard map made again with those beams stopped there (``standard.standard_pass``).
+    A narrow beam (a laser, which echoes off a wall at any angle but the most grazing), a
+    specular angle of 90 deg or ``surface.enabled`` false leave everything as it is."""
+    t0 = time.perf_counter()
     if not params.surface.enabled or is_narrow_beam(run.sensor, run.grid.resolution):
-        return run
+        return Deflected(run, params, log_odds, observed, None, 0.0)
     grid = run.grid
+    believed = np.asarray(log_odds).reshape(grid.shape) > 0
     normals = surface_normals(run.templates.kernel_arrays, flat_offsets(run.templates, grid.width), grid.shape,
-                              run.cones, run.sensor.max_range, grid.resolution, params.surface,
-                              None if log_odds is None else np.asarray(log_odds).reshape(grid.shape) > 0)
-    return dataclasses.replace(run, normals=normals)
+                              run.cones, run.sensor.max_range, grid.resolution, params.surface, believed)
+    incidence = None
+    if params.calibration.enabled and "specular_deg" in params.calibration.learned:
+        incidence = incidence_at(run, sample_readings(run, params.calibration.max_readings), believed.reshape(-1),
+                                 params.em.forward, params.calibration, normals)
+        forward = dataclasses.replace(params.em.forward, specular_deg=incidence["specular_deg"])
+        params = dataclasses.replace(params, em=dataclasses.replace(params.em, forward=forward))
+    shadow = reading_shadows(run, normals, params.em.forward)
+    if shadow is not None and np.isfinite(shadow).any():
+        run = dataclasses.replace(run, shadow=shadow)
+        log_odds, observed, _ = standard_pass(whole, grid, params, cuts=shadow.reshape(np.shape(whole.ranges)))
+    return Deflected(run, params, log_odds, observed, incidence, time.perf_counter() - t0)
 
 
-def whole_log_problems(run, templates, grid, z_max: float, observed: np.ndarray | None = None) -> ProblemFor:
+def whole_log_problems(run, templates, grid, z_max: float) -> ProblemFor:
     """The em mode's problems: every valid reading of ``run`` (of a subset, if given), every cell
-    some cone holds a candidate, and every cell of ``observed`` (the standard map's, flat bool):
-    the cells beyond a deflected beam's cut (``surface.reading_shadows``), which the standard
-    map's cones cleared and no reading of EM's may, are left to the prior there."""
+    some cone holds a candidate."""
     keep = ~np.isnan(run.z)
 
     def problem_for(config: EMConfig, occ: np.ndarray, subset: np.ndarray | None):
-        shadow = reading_shadows(run, config.forward)
         rd = em_readings(run.cones, templates, grid, z_max, config.forward,
-                         select=keep if subset is None else keep & subset, shadow=shadow)
+                         select=keep if subset is None else keep & subset, shadow=run.shadow)
         problem = em_problem(rd, templates, grid.shape, occ, config)
-        seen = problem.seen if shadow is None or observed is None else problem.seen | observed
-        return problem, np.flatnonzero(seen)
+        return problem, np.flatnonzero(problem.seen)
 
     return problem_for
 
@@ -441,15 +470,18 @@ def map_em(log, params: MapParams, progress: Progress | None = None) -> Occupanc
     log_odds, observed, t_standard = standard_pass(whole, grid, params)
     templates = prepared_templates(grid, log.sensor)  # outside the clock
     t0 = time.perf_counter()
-    run = with_surfaces(lay_out_readings(whole.pose, whole.ranges, log.sensor, grid), params, log_odds)
+    run = lay_out_readings(whole.pose, whole.ranges, log.sensor, grid)
     t_readings = time.perf_counter() - t0
+    angle = deflected(whole, run, params, log_odds, observed)
+    run, params, log_odds, observed = angle.run, angle.params, angle.log_odds, angle.observed
     start = (log_odds > 0).reshape(-1) if params.em.start == "standard" else np.zeros(grid.height * grid.width, bool)
     occupied = np.ascontiguousarray(start)
-    problems = whole_log_problems(run, templates, grid, log.sensor.max_range, observed.reshape(-1))
-    outcome = em_with_phases(run, occupied, params, problems, progress=progress)
+    problems = whole_log_problems(run, templates, grid, log.sensor.max_range)
+    outcome = em_with_phases(run, occupied, params, problems, progress=progress, incidence=angle.incidence)
     t0 = time.perf_counter()
     probability, observed = em_view(log_odds, observed, outcome, grid, whole.pose, log.sensor, params)
-    phases = {"standard": t_standard, "readings": t_readings, **outcome.seconds, "view": time.perf_counter() - t0}
+    phases = {"standard": t_standard, "readings": t_readings, "deflections": angle.seconds, **outcome.seconds,
+              "view": time.perf_counter() - t0}
     return OccupancyMap(
         grid=grid,
         probability=probability,

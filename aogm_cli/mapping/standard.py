@@ -19,6 +19,7 @@ from aogm_cli.mapping.beam import BeamMapper
 from aogm_cli.mapping.params import MapParams
 from aogm_cli.mapping.pipeline import Progress, Timed, log_grid, params_json
 from aogm_cli.sensor_models.cone import (
+    NO_CUT,
     SPARE_MASK,
     ConeReadings,
     ConeTemplates,
@@ -145,12 +146,15 @@ class StandardMapper:
         padded = flat[: hp * wp].reshape(hp, wp)
         self.state = padded[self.pad : self.pad + grid.height, self.pad : self.pad + grid.width]
 
-    def update(self, pose: np.ndarray, ranges: np.ndarray) -> None:
-        """Apply scans (pose (T, 3), ranges (T, S)) in order: every reading's cone, clamped."""
+    def update(self, pose: np.ndarray, ranges: np.ndarray, cut: np.ndarray | None = None) -> None:
+        """Apply scans (pose (T, 3), ranges (T, S)) in order: every reading's cone, clamped; a
+        reading with a finite ``cut`` ((T, S) template ranges, ``surface.reading_shadows``) is a
+        deflected beam: free space up to the cut, nothing beyond."""
         rows, cols, bins, valid, offset = reading_geometry(pose, self.sensor, self.grid, self.templates)
         z = np.where(valid, np.asarray(ranges, dtype=np.float32), np.float32(np.nan)).astype(np.float32)
         readings = ConeReadings(rows.reshape(-1) + self.pad, cols.reshape(-1) + self.pad, bins.reshape(-1),
-                                z.reshape(-1), offset.reshape(-1))
+                                z.reshape(-1), offset.reshape(-1),
+                                NO_CUT if cut is None else np.asarray(cut, dtype=np.float32).reshape(-1))
         for span in reading_spans(z.size):  # back in Python between spans, where a signal's handler runs
             _standard_kernel(self._grid, readings, self.templates.kernel_arrays, self.flat_offsets, self.entries,
                              self.update_constants, span)
@@ -180,6 +184,7 @@ def standard_map(
     *,
     templates: ConeTemplates | None = None,
     narrow: bool | None = None,
+    cuts: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Standard log-odds map of logged scans: (log_odds float32 (H, W), observed bool (H, W)).
 
@@ -191,19 +196,25 @@ def standard_map(
     templates and one chunk. Unobserved cells hold the prior l0. ``templates`` defaults to
     ``readings.cone_templates(grid, sensor)``; rays need none. ``narrow`` is
     ``ray.is_narrow_beam(sensor, grid.resolution)``, decided here unless the caller has.
+    ``cuts`` ((scans, sensors) template ranges, cones only) stops deflected beams
+    (``StandardMapper.update``).
     """
     if narrow is None:
         narrow = is_narrow_beam(sensor, grid.resolution)
     mapper = _mapper_for(sensor, grid, config, templates, narrow)
-    for _start, _time, pose, ranges in chunks:
+    for start, _time, pose, ranges in chunks:
         z = np.asarray(ranges, dtype=np.float32) if narrow else echo_ranges(ranges, grid).astype(np.float32)
-        mapper.update(pose, z)
+        if cuts is None:
+            mapper.update(pose, z)
+        else:
+            mapper.update(pose, z, cuts[start : start + len(pose)])
     return mapper.result()
 
 
-def standard_pass(log, grid: GridSpec, params: MapParams, chunk: int = 4096, chunks=None):
+def standard_pass(log, grid: GridSpec, params: MapParams, chunk: int = 4096, chunks=None, cuts=None):
     """(log_odds, observed, seconds of mapping work) for a whole log source, streamed in chunks
-    (``log.chunks(chunk)``, or ``chunks`` when the caller already holds the scans).
+    (``log.chunks(chunk)``, or ``chunks`` when the caller already holds the scans); ``cuts``
+    stops deflected beams (``standard_map``).
 
     One-time set-up is done before the clock starts, like compilation: the cone templates
     and their per-grid-width tables are built (or found in their caches) by mapping no scans.
@@ -214,7 +225,7 @@ def standard_pass(log, grid: GridSpec, params: MapParams, chunk: int = 4096, chu
     timed = Timed(log.chunks(chunk) if chunks is None else chunks)
     t0 = time.perf_counter()
     log_odds, observed = standard_map(timed, log.sensor, grid, params.inverse_model, templates=templates,
-                                      narrow=narrow)
+                                      narrow=narrow, cuts=cuts)
     seconds = time.perf_counter() - t0 - timed.io_seconds
     return log_odds, observed, seconds
 
@@ -323,7 +334,12 @@ def _standard_kernel(grid, readings, tpl, flat, entries, update, span):
         # region boundaries, in template ranges (= real ranges + the sensor's axis offset)
         shift = offset[t]
         blind_end = range_search(r, ri, resolution, min_range + shift, False)
-        if zt >= max_range:  # max-range reading: free space only, up to max_range
+        ct = np.float64(readings.cut[t]) if readings.cut.shape[0] > 0 else np.inf
+        if ct < max_range + shift:  # a deflected beam: free space only, up to where it was deflected
+            f1 = range_search(r, ri, resolution, ct, False)
+            m = f1
+            span = ct - shift - min_range
+        elif zt >= max_range:  # max-range reading: free space only, up to max_range
             f1 = range_search(r, ri, resolution, max_range + shift, True)
             m = f1
             span = max_range - min_range

@@ -87,6 +87,9 @@ class FlatOffsets(NamedTuple):
     sel: np.ndarray  # (n_bins, 2) int64: per heading bin, which of the four, and its sign (+/-1)
 
 
+NO_CUT = np.zeros(0, dtype=np.float32)  # ``ConeReadings.cut`` when no reading is cut
+
+
 class ConeReadings(NamedTuple):
     """Readings as the compiled cone kernels take them: flat arrays of one length."""
 
@@ -95,6 +98,9 @@ class ConeReadings(NamedTuple):
     bins: np.ndarray  # heading bin (int64)
     z: np.ndarray  # the range (m; NaN or negative: no information, >= max_range: max-range reading)
     offset: np.ndarray  # the sensor's axis offset (m; see ``reading_geometry``)
+    # the template range where a deflected beam stops (``surface.reading_shadows``; +inf: none);
+    # empty: no reading is cut. Read by standard mapping only
+    cut: np.ndarray
 
 
 @dataclass(frozen=True, eq=False)

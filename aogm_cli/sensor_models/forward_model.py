@@ -271,19 +271,26 @@ def _fill_index(tpl, flat, grid, readings, sigma, window, out):
     return pos
 
 
+def deflect(z: np.ndarray, shadow: np.ndarray | None, z_max: float) -> tuple[np.ndarray, np.ndarray]:
+    """(z, limit) of readings whose beams a surface deflected (``surface.reading_shadows``: a finite
+    ``shadow``): each becomes a max-range reading (+inf) whose cone ends just before that surface
+    (limit), saying that nothing nearer echoed and nothing of the cells beyond, which the beam
+    never crossed; the others keep z and no limit (+inf)."""
+    z = np.asarray(z, dtype=np.float64)
+    if shadow is None:
+        return z, np.full(z.shape, np.inf)
+    cut = np.isfinite(shadow) & ~np.isnan(z)
+    return np.where(cut, np.inf, z), np.where(cut, np.nextafter(np.minimum(shadow, z_max), 0.0), np.inf)
+
+
 def cone_limits(z: np.ndarray, z_max: float, config: ForwardModelConfig,
                 shadow: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(z, limit) of each reading as the forward model takes it: a cone counts up to ``config.window``
-    sigmas beyond its range, a max-range reading's (+inf) up to z_max. A reading with a finite
-    ``shadow`` (``surface.reading_shadows``: it met a surface at a grazing angle before its window)
-    becomes a max-range reading whose cone ends just before that surface: it says that nothing
-    nearer echoed, and nothing of the cells beyond, which the deflected beam never crossed."""
-    z = np.asarray(z, dtype=np.float64)
+    sigmas beyond its range, a max-range reading's (+inf) up to z_max, a deflected one's up to its
+    shadow (``deflect``)."""
+    z, cut = deflect(z, shadow, z_max)
     limits = np.where(np.isfinite(z), np.minimum(z + config.window * config.sigma, z_max), z_max)
-    if shadow is None:
-        return z, limits
-    cut = np.isfinite(shadow) & ~np.isnan(z)
-    return np.where(cut, np.inf, z), np.where(cut, np.nextafter(np.minimum(shadow, z_max), 0.0), limits)
+    return z, np.minimum(limits, cut)
 
 
 def build_forward_index(

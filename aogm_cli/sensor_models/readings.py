@@ -78,9 +78,9 @@ class LaidOutReadings:
     cols: np.ndarray
     bins: np.ndarray
     z: np.ndarray
-    # the normals of the surfaces the readings echoed from (``surface.surface_normals``), where the
-    # forward model's beams are deflected at a grazing angle (``surface.reading_shadows``); None: none known
-    normals: np.ndarray | None = None
+    # per reading, the template range where a surface deflected its beam (``surface.reading_shadows``;
+    # +inf: none); None: no beam deflected
+    shadow: np.ndarray | None = None
 
     @property
     def cones(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

@@ -286,19 +286,17 @@ def shadow_ranges(tpl, flat, shape, readings, normal, cos2, model, out):
                 break
 
 
-def reading_shadows(run, forward, keep: np.ndarray | None = None) -> np.ndarray | None:
-    """Per reading of ``run`` (a ``readings.LaidOutReadings``; of those ``keep`` indexes), the range
-    where its beam met one of ``run.normals``' surfaces beyond ``forward.specular_deg`` before its
-    window (+inf: none): the beam was deflected there (``forward_model.cone_limits``). None when
-    the log has no surfaces or the angle is 90 degrees."""
-    if run.normals is None or forward.specular_deg >= 90.0:
+def reading_shadows(run, normals: np.ndarray, forward) -> np.ndarray | None:
+    """Per reading of ``run`` (a ``readings.LaidOutReadings``), the template range where its beam
+    met one of the surfaces ``normals`` (``surface_normals``) beyond ``forward.specular_deg``
+    before its window (+inf: none): the beam was deflected there (``forward_model.deflect``).
+    None when the angle is 90 degrees."""
+    if forward.specular_deg >= 90.0:
         return None
-    pick = (lambda a: a) if keep is None else (lambda a: a[keep])
-    z = pick(run.z).astype(np.float64)
-    out = np.full(z.shape[0], np.inf)
+    out = np.full(run.z.shape[0], np.inf)
     grid = run.grid
     shadow_ranges(run.templates.kernel_arrays, flat_offsets(run.templates, grid.width), grid.shape,
-                  (pick(run.rows).astype(np.int64), pick(run.cols).astype(np.int64), pick(run.bins).astype(np.int64), z),
-                  run.normals, cos2_of(forward.specular_deg),
+                  (run.rows.astype(np.int64), run.cols.astype(np.int64), run.bins.astype(np.int64),
+                   run.z.astype(np.float64)), normals, cos2_of(forward.specular_deg),
                   (float(forward.sigma), float(forward.window), float(run.sensor.max_range)), out)
     return out
