@@ -260,3 +260,25 @@ def test_standard_map_takes_logged_ranges_half_a_cell_long():
     np.testing.assert_array_equal(logged[1], shifted[1])
     unshifted = kernel_map([(0, None, pose, ranges)], sensor, grid, config)
     assert not np.array_equal(logged[0], unshifted[0])
+
+
+def test_a_deflected_beam_clears_up_to_its_cut_and_nothing_beyond():
+    # the constant model's reading at 0.5 m (the first test), its beam deflected at template range
+    # 0.35 m: free evidence on the cells before 0.35 m only, no occupied arc, nothing beyond observed
+    grid = GridSpec(0.0, 0.0, 0.1, 11, 11)
+    config = InverseModelConfig(alpha=0.1, model="constant")
+    mapper = StandardMapper(ONE_SONAR, grid, config)
+    mapper.update(np.array([POSE]), np.array([[0.5]], dtype=np.float32), cut=np.array([[0.35]]))
+    log_odds, observed = mapper.result()
+    expected = np.zeros((11, 11), dtype=np.float32)
+    for r, c in [(5, 3), (5, 4), (5, 5)]:  # template ranges 0.1, 0.2, 0.3
+        expected[r, c] = np.float32(-0.41)
+    np.testing.assert_array_equal(log_odds, expected)
+    assert {(int(r), int(c)) for r, c in zip(*np.nonzero(observed), strict=True)} == {(5, 2), (5, 3), (5, 4), (5, 5)}
+    # a cut at or beyond max range, or none (+inf), changes nothing
+    for cut in (np.inf, 9.0):
+        again = StandardMapper(ONE_SONAR, grid, config)
+        again.update(np.array([POSE]), np.array([[0.5]], dtype=np.float32), cut=np.array([[cut]]))
+        plain = StandardMapper(ONE_SONAR, grid, config)
+        plain.update(np.array([POSE]), np.array([[0.5]], dtype=np.float32))
+        np.testing.assert_array_equal(again.result()[0], plain.result()[0])

@@ -8,8 +8,20 @@ import pytest
 
 from aogm_cli.core.errors import InputError
 from aogm_cli.core.grid import GridSpec
+from aogm_cli.core.log import SensorSpec
 from aogm_cli.sensor_models.cone import build_cone_templates, flat_offsets
-from aogm_cli.sensor_models.surface import SurfaceConfig, cos2_of, hidden, surface_normals
+from aogm_cli.sensor_models.forward_model import ForwardModelConfig, cone_limits, deflect
+from aogm_cli.sensor_models.readings import LaidOutReadings
+from aogm_cli.sensor_models.surface import (
+    INCIDENCE_BINS,
+    SurfaceConfig,
+    cos2_of,
+    hidden,
+    incidence_counts,
+    reading_shadows,
+    specular_angle,
+    surface_normals,
+)
 
 GRID = GridSpec(0.0, 0.0, 0.1, 40, 40)
 
@@ -78,3 +90,92 @@ def test_bad_surface_config_names_its_key(key, value):
     with pytest.raises(InputError) as err:
         SurfaceConfig(**{key: value}).validate()
     assert err.value.key == key
+
+
+def wall_run(yaw, z, beam_deg=10.0):
+    """One sensor at cell (5, 20) of GRID with readings at ``yaw`` and ranges ``z``, and a wall along
+    the columns at row 20 whose normal lies along the rows (a surface the readings may meet)."""
+    tpl = build_cone_templates(GRID.resolution, math.radians(beam_deg), 3.0)
+    n = len(z)
+    sensor = SensorSpec(mount=np.zeros((1, 3)), beam_width=math.radians(beam_deg), max_range=3.0)
+    run = LaidOutReadings(GRID, sensor, tpl, np.zeros((n, 1)), np.full(n, 5), np.full(n, 20),
+                          tpl.heading_bin(np.array(yaw)), np.array(z, dtype=float))
+    normal = np.full((2, GRID.height * GRID.width), np.nan)
+    normal[0, 20 * GRID.width:21 * GRID.width] = 1.0
+    normal[1, 20 * GRID.width:21 * GRID.width] = 0.0
+    return run, normal
+
+
+def test_a_beam_that_grazes_a_surface_before_its_echo_is_deflected_there():
+    # head-on (yaw 90 deg) to the wall 1.5 m away, echo there: nothing deflected; at 60 deg off the
+    # normal (yaw 30 deg) the beam meets the wall 3.0 m along it... beyond max range: none; at yaw
+    # 50 deg (40 deg off the normal) it meets the wall at 1.5 / sin 50 = 1.96 m, before its echo at
+    # 2.9 m: deflected where its cone first meets a wall cell (its nearest edge, a little nearer)
+    run, normal = wall_run([math.pi / 2, math.radians(30), math.radians(50), math.radians(50)],
+                           [1.5, 2.9, 2.9, 1.9])
+    shadow = reading_shadows(run, normal, ForwardModelConfig(specular_deg=30.0))
+    assert shadow[0] == np.inf and shadow[1] == np.inf
+    assert 1.7 < shadow[2] < 1.96
+    assert shadow[3] == np.inf  # the wall lies within its window (1.9 m): the echo may be the wall's
+    # a specular angle of 50 deg keeps the 40-deg pass; of 90 deg nothing is deflected
+    assert reading_shadows(run, normal, ForwardModelConfig(specular_deg=50.0))[2] == np.inf
+    assert reading_shadows(run, normal, ForwardModelConfig(specular_deg=90.0)) is None
+
+
+def test_deflect_makes_max_range_readings_that_end_before_the_shadow():
+    z, limit = deflect(np.array([2.9, 1.5, np.nan]), np.array([1.9, np.inf, 1.0]), 3.0)
+    assert z[0] == np.inf and limit[0] == np.nextafter(1.9, 0.0)
+    assert z[1] == 1.5 and limit[1] == np.inf
+    assert np.isnan(z[2]) and limit[2] == np.inf  # a NaN reading stays out
+    z, limits = cone_limits(np.array([2.9, 1.5]), 3.0, ForwardModelConfig(sigma=0.05, window=4.0),
+                            np.array([1.9, np.inf]))
+    assert limits[0] == np.nextafter(1.9, 0.0) and limits[1] == pytest.approx(1.7)
+
+
+def test_the_echo_rate_by_angle_and_where_it_halves():
+    # echoes 50 of 100 within 30 deg of the normal, then 40, 20, 10 and 0 of 100
+    counts = np.zeros((2, 9))
+    counts[0] = [50, 50, 50, 40, 20, 10, 0, 0, 0]
+    counts[1] = 100 - counts[0]
+    # half the head-on rate (0.25) falls between 35 deg (0.40) and 45 deg (0.20): 42.5 deg
+    assert specular_angle(counts) == pytest.approx(42.5)
+    rough = np.array([[50.0] * 9, [50.0] * 9])
+    assert specular_angle(rough) == 90.0
+    sparse = counts.copy()
+    sparse[:, :3] = 5  # too few readings within 30 deg of the normal to say
+    assert specular_angle(sparse) == 90.0
+
+
+def test_incidence_counts_by_hand():
+    # the wall of wall_run occupied: the head-on reading echoes from it (bin 0); the 40-deg reading
+    # at 2.9 m passes it (bin 3 or 4: its cone spans 35-45 deg); a reading without echo at 30 deg
+    # yaw passes nothing within 3 m
+    run, normal = wall_run([math.pi / 2, math.radians(50), math.radians(30)], [1.5, 2.9, np.inf])
+    occupied = np.zeros(GRID.height * GRID.width, dtype=bool)
+    occupied[20 * GRID.width:21 * GRID.width] = True
+    out = np.zeros((2, INCIDENCE_BINS))
+    incidence_counts(run.templates.kernel_arrays, flat_offsets(run.templates, GRID.width), GRID.shape,
+                     (run.rows.astype(np.int64), run.cols.astype(np.int64), run.bins.astype(np.int64), run.z),
+                     occupied, normal, (0.05, 4.0, 3.0, 0.3), out)
+    assert out[0].tolist() == [1, 0, 0, 0, 0, 0, 0, 0, 0]
+    assert out[1, :3].sum() == 0 and out[1, 3:5].sum() >= 1 and out[1, 5:].sum() == 0
+
+
+def test_a_doorway_passed_head_on_is_no_surface():
+    # echoes from a wall 1.5 m ahead of sensors at columns 10..30 (two readings each: the arcs of
+    # those at columns 19..21 cover cell (20, 20) six times), and eight readings at column 20 that
+    # pass straight through it (echo 2.9 m): cells passed head-on more often than heard are a
+    # doorway, not a surface; the cells only echoes reach stay one
+    cols = list(range(10, 31)) * 2 + [20] * 8
+    z = [1.5] * 42 + [2.9] * 8
+    tpl = build_cone_templates(GRID.resolution, math.radians(10.0), 3.0)
+    cones = (np.full(len(z), 5), np.array(cols), tpl.heading_bin(np.full(len(z), math.pi / 2)), np.array(z))
+    normal = surface_normals(tpl.kernel_arrays, flat_offsets(tpl, GRID.width), GRID.shape, cones, 3.0,
+                             GRID.resolution, SurfaceConfig()).reshape(2, *GRID.shape)
+    assert np.isnan(normal[0, 20, 20])
+    assert abs(normal[0, 20, 12]) == pytest.approx(1.0) and abs(normal[0, 20, 28]) == pytest.approx(1.0)
+    believed = np.zeros(GRID.shape, dtype=bool)
+    believed[20, 25:] = True  # only where a map believes the cells occupied
+    only = surface_normals(tpl.kernel_arrays, flat_offsets(tpl, GRID.width), GRID.shape, cones, 3.0,
+                           GRID.resolution, SurfaceConfig(), believed).reshape(2, *GRID.shape)
+    assert np.isnan(only[0, 20, 12]) and abs(only[0, 20, 28]) == pytest.approx(1.0)
