@@ -433,7 +433,7 @@ def deflected(whole, run: LaidOutReadings, params: MapParams, log_odds: np.ndarr
                                  params.em.forward, params.calibration, normals)
         forward = dataclasses.replace(params.em.forward, specular_deg=incidence["specular_deg"])
         params = dataclasses.replace(params, em=dataclasses.replace(params.em, forward=forward))
-    shadow = reading_shadows(run, normals, params.em.forward)
+    shadow = reading_shadows(run, normals, params.em.forward, params.surface.core)
     if shadow is not None and np.isfinite(shadow).any():
         run = dataclasses.replace(run, shadow=shadow)
         log_odds, observed, _ = standard_pass(whole, grid, params, cuts=shadow.reshape(np.shape(whole.ranges)))
