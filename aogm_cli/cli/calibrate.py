@@ -36,7 +36,7 @@ from aogm_cli.io.outputs import resolve_outputs
 @budget_options
 def calibrate(log_file, mode, output, detector, params_file, resolution, quiet, max_memory=16e9, max_work=None,
               **options) -> None:
-    """Learn the forward model (sigma, p_rand, p_hit, p_max) from LOG.h5 and print it.
+    """Learn the forward model (sigma, p_rand, p_hit, p_max, specular_deg) from LOG.h5 and print it.
 
     Thrun's EM learns its sensor model too: at a binary map, the expectations of each
     reading's cause (random, max-range dropout, the k-th obstacle of its cone, no obstacle
@@ -46,8 +46,13 @@ def calibrate(log_file, mode, output, detector, params_file, resolution, quiet, 
     map until they settle. Round 0 maps with the configured model made at least
     calibration.start_sigma (0.1 m) broad; each round fits at the last map and maps again,
     until no parameter moves by more than calibration.tolerance, or calibration.rounds.
-    Every value is clipped to bounds (section calibration: of --params). `aogm map` and
-    `aogm compare` do this by default in em and adaptive modes.
+    Every value is clipped to bounds (section calibration: of --params). Before the rounds,
+    a sonar log's specular angle is learned once at the standard map: the share of readings
+    that echo from a surface cell (one heard from one direction) rather than pass it, by angle
+    of incidence, and the angle where that share falls to half its head-on value (90: the walls
+    echo at any angle). Beams whose core meets a surface beyond it before their echo are taken
+    as deflected there. `aogm map` and `aogm compare` do all this by default in em and adaptive
+    modes.
 
     \b
     Example:
