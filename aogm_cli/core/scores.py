@@ -10,4 +10,5 @@ PLANNER_KEYS = (*TRUTH_KEYS, *STANDARD_KEYS)  # ``evaluation.planner``: with tru
 CONSISTENCY_KEYS = ("method", "readings", "endpoint_occupied", "endpoint_occupied_8", "endpoint_free", "free_cells",
                     "free_contradicted")  # ``evaluation.consistency.summarize``: a log without truth
 SCORE_KEYS = ("holdout_auc", "holdout_loglik", "holdout_readings", "holdout_scans")  # ``evaluation.holdout``
-LEARNED_KEYS = ("sigma", "p_rand", "p_hit", "p_max")  # ``mapping.calibration.LEARNED``: stats["calibration"]["final"]
+# ``mapping.calibration.model_values``: stats["calibration"]["final"]
+LEARNED_KEYS = ("sigma", "p_rand", "p_hit", "p_max", "specular_deg")
