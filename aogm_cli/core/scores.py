@@ -9,5 +9,5 @@ STANDARD_KEYS = ("walls_kept", "leak_vs_standard")  # what a planner sees, again
 PLANNER_KEYS = (*TRUTH_KEYS, *STANDARD_KEYS)  # ``evaluation.planner``: with truth the first, without the others
 CONSISTENCY_KEYS = ("method", "readings", "endpoint_occupied", "endpoint_occupied_8", "endpoint_free", "free_cells",
                     "free_contradicted")  # ``evaluation.consistency.summarize``: a log without truth
-SCORE_KEYS = ("holdout_auc", "holdout_loglik", "holdout_readings", "holdout_scans")  # ``evaluation.holdout``
+SCORE_KEYS = ("holdout_auc", "holdout_auc_band", "holdout_loglik", "holdout_readings", "holdout_scans")  # ``evaluation.holdout``
 LEARNED_KEYS = ("sigma", "p_rand", "p_hit", "p_max")  # ``mapping.calibration.LEARNED``: stats["calibration"]["final"]
