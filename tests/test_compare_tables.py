@@ -39,7 +39,7 @@ checks:
     passable: {from: [0.6, 0.8], to: [0.6, 2.8], robot_radius: 0.1}
 """
 FIXED = ["log", "world", "mode", "truth", "runtime_s", "runtime_vs_standard", "accuracy", "occupied_precision",
-         "occupied_recall", "occupied_f1", "brier", "checks_passed", "leak", "block", "surface_recall", "walls_kept",
+         "occupied_recall", "occupied_f1", "brier", "ece", "checks_passed", "leak", "block", "surface_recall", "walls_kept",
          "leak_vs_standard", "consistency_method", "consistency_readings",
          "consistency_endpoint_occupied", "consistency_endpoint_occupied_8", "consistency_endpoint_free",
          "consistency_free_cells", "consistency_free_contradicted", "holdout_auc", "holdout_auc_band", "holdout_loglik",

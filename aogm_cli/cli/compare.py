@@ -110,7 +110,7 @@ def compare(inputs, modes_text, detector, params_file, json_out, csv_out, figure
     Gates (exit status 1 when one fails, after --json, --csv and --figure are written):
       --require EXPR       MODE.METRIC names, numbers, + - * /, ( ), one of < <= > >= == !=
                            METRIC: accuracy, occupied_precision, occupied_recall,
-                           occupied_f1, brier, runtime (= runtime_s), checks_passed (fraction),
+                           occupied_f1, brier, ece, runtime (= runtime_s), checks_passed (fraction),
                            leak, block, surface_recall, walls_kept, leak_vs_standard;
                            with --holdout: holdout_auc, holdout_auc_band, holdout_loglik,
                            holdout_readings, holdout_scans
@@ -119,7 +119,7 @@ def compare(inputs, modes_text, detector, params_file, json_out, csv_out, figure
     \b
     CSV (--csv): one row per log and mode, always these columns in this order, empty where a
     value does not apply: log, world, mode, truth, runtime_s, runtime_vs_standard, accuracy,
-    occupied_precision, occupied_recall, occupied_f1, brier, checks_passed, leak, block,
+    occupied_precision, occupied_recall, occupied_f1, brier, ece, checks_passed, leak, block,
     surface_recall (truth), walls_kept, leak_vs_standard (no truth), consistency_* (logs
     without truth), holdout_* (--holdout), learned_sigma, learned_p_rand,
     learned_p_hit, learned_p_max, learned_from_readings (the forward model an em or adaptive

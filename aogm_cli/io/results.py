@@ -14,7 +14,15 @@ from pathlib import Path
 from aogm_cli import __version__
 from aogm_cli.core.errors import InputError
 from aogm_cli.core.occupancy_map import MODES, OccupancyMap
-from aogm_cli.core.scores import CONSISTENCY_KEYS, LEARNED_KEYS, METRIC_KEYS, SCORE_KEYS, STANDARD_KEYS, TRUTH_KEYS
+from aogm_cli.core.scores import (
+    CONSISTENCY_KEYS,
+    LATER_METRIC_KEYS,
+    LEARNED_KEYS,
+    METRIC_KEYS,
+    SCORE_KEYS,
+    STANDARD_KEYS,
+    TRUTH_KEYS,
+)
 
 RESULTS_FORMAT = "aogm-compare"  # the "format" of a --json file; "format_version" RESULTS_FORMAT_VERSION
 RESULTS_FORMAT_VERSION = 1
@@ -292,7 +300,8 @@ class _ResultsReader:
                           results_file=self.path, planner={k: _nan(v) for k, v in found.items()} or None)
 
     def truth_metrics(self, metrics: dict, where: str) -> dict:
-        out = {k: _nan(self.get(metrics, k, where, _number_or_null, "a number or null")) for k in METRIC_KEYS}
+        out = {k: _nan(self.get(metrics, k, where, _number_or_null, "a number or null",
+                                required=k not in LATER_METRIC_KEYS)) for k in METRIC_KEYS}
         checks = self.get(metrics, "checks", where, lambda v: isinstance(v, list), "a list of {name, passed}")
         out["checks"] = []
         for j, c in enumerate(checks):

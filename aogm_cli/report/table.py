@@ -114,7 +114,7 @@ def print_table(results: list[ModeResult], labels: dict[str, str], quiet: bool) 
 def table_columns(shown: Shown) -> list[tuple[str, str]]:
     """(header, justification) of every column of the printed table."""
     columns = [("World", "left"), ("Mode", "left"), ("Accuracy", "right"), ("Occ. F1", "right"), ("Brier", "right"),
-               ("Checks", "right")]
+               ("ECE", "right"), ("Checks", "right")]
     if shown.consistency:
         columns += [("Ends on occ.", "right"), ("±1 cell", "right"), ("Free contra.", "right")]
     columns += [(PLANNER_COLUMNS[k], "right") for k in shown.planner]
@@ -127,14 +127,15 @@ def table_columns(shown: Shown) -> list[tuple[str, str]]:
 def table_row(r: ModeResult, label: str, relative: float | None, shown: Shown) -> list[str]:
     """The cells of one result's row of the printed table (``table_columns``)."""
     if r.metrics is None:
-        acc = f1 = brier = checks = "n/a"
+        acc = f1 = brier = ece = checks = "n/a"
     else:
         acc = f"{r.metrics['accuracy']:.4f}"
         f1 = f"{r.metrics['occupied_f1']:.4f}"
         brier = f"{r.metrics['brier']:.4f}"
+        ece = _share(r.metrics.get("ece"))
         passed = sum(c["passed"] for c in r.metrics["checks"])
         checks = f"{passed}/{len(r.metrics['checks'])}"
-    row = [label, r.mode, acc, f1, brier, checks]
+    row = [label, r.mode, acc, f1, brier, ece, checks]
     if shown.consistency:
         c = r.consistency or {}
         row += [_share(c.get("endpoint_occupied")), _share(c.get("endpoint_occupied_8")),
