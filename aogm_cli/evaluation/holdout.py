@@ -27,7 +27,7 @@ from aogm_cli.sensor_models.cone import (
 )
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig, build_forward_index, log_likelihoods
 from aogm_cli.sensor_models.inverse_model import occupied_arc
-from aogm_cli.sensor_models.ray import is_narrow_beam, ray_cells
+from aogm_cli.sensor_models.ray import AXIS_SHORT, axis_counts, is_narrow_beam, ray_cells
 from aogm_cli.sensor_models.readings import cone_templates, echo_ranges, lay_out_readings
 
 OPTION = "--holdout"
@@ -41,7 +41,6 @@ MAX_FRACTION = 0.5  # at most every second scan held out: the map keeps at least
 # own parameters and of any calibration, so that modes compare fairly.
 REFERENCE_MODEL = ForwardModelConfig(sigma=0.1, p_rand=0.1, p_hit=0.5, p_max=0.1, window=4.0).validate()
 REFERENCE_ALPHA = 2 * REFERENCE_MODEL.sigma  # m: the arc band z -/+ sigma of the reference model
-AXIS_SHORT = 2  # cells: a held-out echo's negatives on its axis stop this many cells short of its range
 READING_CHUNK = 8192  # held-out readings per forward-model index: bounds the index's memory
 SCAN_CHUNK = 4096  # scans read from the log at a time
 
@@ -273,23 +272,12 @@ def cell_labels(pose: np.ndarray, ranges: np.ndarray, sensor: SensorSpec, grid: 
 
 def axis_labels(pose: np.ndarray, ranges: np.ndarray, sensor: SensorSpec, grid: GridSpec) -> tuple[np.ndarray, np.ndarray]:
     """(positives, negatives), each int32 (H, W), of the held-out protocol after Hilbert maps that
-    ``holdout_auc`` scores: each echo (a finite range below max_range, of a finite pose) makes
-    the cell at its range on the sensor's axis a positive (when inside the grid), and every cell
-    that axis crosses from the sensor out to ``AXIS_SHORT`` cells short of the range (z - 2
-    resolution) a negative, one count per reading. A no-echo or NaN reading labels nothing;
-    sonar and laser alike (the axis, not the cone)."""
-    n = grid.height * grid.width
-    rows, cols, counted = reading_endpoints(pose, ranges, sensor, grid)
-    inside = counted & grid.contains(rows, cols)
-    positives = np.bincount(rows[inside] * grid.width + cols[inside], minlength=n)
-    sp = sensor_poses(np.asarray(pose, dtype=np.float64).reshape(-1, 3), sensor.mount).reshape(-1, 3)
-    z = np.asarray(ranges, dtype=np.float64).reshape(-1)
-    cells = [np.zeros(0, dtype=np.int64)]
-    for t in np.flatnonzero(counted.reshape(-1) & (z > AXIS_SHORT * grid.resolution)):
-        r, c, _enter, _exit = ray_cells(grid, sp[t, 0], sp[t, 1], sp[t, 2], z[t] - AXIS_SHORT * grid.resolution)
-        cells.append(r * grid.width + c)
-    negatives = np.bincount(np.concatenate(cells), minlength=n)
-    return positives.astype(np.int32).reshape(grid.shape), negatives.astype(np.int32).reshape(grid.shape)
+    ``holdout_auc`` scores (``ray.axis_counts``): each echo (a finite range below max_range, of a
+    finite pose) makes the cell at its range on the sensor's axis a positive (when inside the
+    grid), and every cell that axis crosses from the sensor out to ``AXIS_SHORT`` cells short of
+    the range (z - 2 resolution) a negative, one count per reading. A no-echo or NaN reading
+    labels nothing; sonar and laser alike (the axis, not the cone)."""
+    return axis_counts(pose, ranges, sensor, grid, AXIS_SHORT)
 
 
 def reference_log_likelihoods(pose: np.ndarray, ranges: np.ndarray, sensor: SensorSpec, grid: GridSpec,
