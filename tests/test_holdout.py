@@ -278,7 +278,7 @@ def test_holdout_scores_are_in_the_json_and_the_table(room_log, compared):
         assert metrics["holdout_readings"] == 12 * metrics["holdout_scans"]  # no NaN reading in a simulated log
         assert r["params"]["holdout"] == split.as_dict()
     assert doc["holdout"]["period"] == 10 and doc["holdout"]["reference"]["forward_model"]["sigma"] == 0.1
-    for column in ("Held-out AUC", "Held-out loglik", "Held-out readings", "Held-out scans"):
+    for column in ("Held-out AUC", "AUC (band)", "Held-out loglik", "Held-out readings", "Held-out scans"):
         assert column in output
     assert "gates: 2 of 2 passed" in output
     with h5py.File(out / "maps" / "room_em.h5") as f:

@@ -119,8 +119,8 @@ def table_columns(shown: Shown) -> list[tuple[str, str]]:
         columns += [("Ends on occ.", "right"), ("±1 cell", "right"), ("Free contra.", "right")]
     columns += [(PLANNER_COLUMNS[k], "right") for k in shown.planner]
     if shown.holdout:
-        columns += [("Held-out AUC", "right"), ("Held-out loglik", "right"), ("Held-out readings", "right"),
-                    ("Held-out scans", "right")]
+        columns += [("Held-out AUC", "right"), ("AUC (band)", "right"), ("Held-out loglik", "right"),
+                    ("Held-out readings", "right"), ("Held-out scans", "right")]
     return [*columns, ("Runtime (s)", "right"), ("vs standard", "right"), ("Map", "left")]
 
 
@@ -143,8 +143,8 @@ def table_row(r: ModeResult, label: str, relative: float | None, shown: Shown) -
     row += [_share((r.planner or {}).get(k)) for k in shown.planner]
     if shown.holdout:
         h = r.holdout or {}
-        row += [_share(h.get("holdout_auc")), _share(h.get("holdout_loglik")), str(h.get("holdout_readings", "n/a")),
-                str(h.get("holdout_scans", "n/a"))]
+        row += [_share(h.get("holdout_auc")), _share(h.get("holdout_auc_band")), _share(h.get("holdout_loglik")),
+                str(h.get("holdout_readings", "n/a")), str(h.get("holdout_scans", "n/a"))]
     return [*row, f"{r.runtime_s:.3f}", "–" if relative is None else f"x{relative:.2f}", _source(r)]
 
 
