@@ -201,7 +201,7 @@ def _log(log_or_path: Log | str | Path) -> Log:
 
 def evaluate(m: OccupancyMap, log: Log | str | Path, robot_radius: float | None = None) -> dict:
     """The metrics ``aogm compare`` reports for map ``m`` against the truth of its simulated
-    ``log`` (a ``Log`` or a path): accuracy, occupied precision/recall/F1, brier,
+    ``log`` (a ``Log`` or a path): accuracy, occupied precision/recall/F1, brier, ece,
     observed_cells and the world's checks (``evaluation.metrics.evaluate``), and what a planner
     with a robot of ``robot_radius`` (default: compare's, 0.2 m) sees: leak, block and
     surface_recall (``evaluation.planner.planner_metrics``). A log without truth: ValueError.

@@ -9,12 +9,13 @@ import pytest
 from click.testing import CliRunner
 
 from aogm_cli.cli import main
+from aogm_cli.core.errors import InputError
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.io.detectorfile import load_detector, save_detector
 from aogm_cli.io.logfile import LogReader
 from aogm_cli.io.mapfile import read_map_file
 from aogm_cli.mapping import cluster
-from aogm_cli.mapping.adaptive import coupled_groups
+from aogm_cli.mapping.adaptive import coupled_groups, hit_rate_curve, one_scale, pool_adjacent_violators
 from aogm_cli.mapping.cluster import label_clusters
 from aogm_cli.mapping.em import em_problem, em_readings, find_root, footprint
 from aogm_cli.mapping.modes import map_file
@@ -41,7 +42,8 @@ def test_no_flagged_reading_gives_the_standard_map(corridor_door_log, tmp_path):
 
 
 def test_em_changes_nothing_outside_the_clusters(corridor_door_log):
-    params = resolve_params()
+    """With ``adaptive.scale: mixed``, the standard map's own probabilities outside the clusters."""
+    params = resolve_params(overrides={"adaptive": {"scale": "mixed"}})
     adaptive = map_file(corridor_door_log, "adaptive", params)
     standard = map_file(corridor_door_log, "standard", params)
     # outside the clusters and the robot's footprint (cleared, as EM's map is)
@@ -58,6 +60,80 @@ def test_em_changes_nothing_outside_the_clusters(corridor_door_log):
     unseen = standard.observed & ~adaptive.observed
     assert unseen.any() and np.all(inside[unseen]) and np.all(standard.probability[unseen] <= 0.5)
     assert np.all(adaptive.observed[body]) and np.all(adaptive.probability[body] < 0.5)
+
+
+def test_one_scale_keeps_what_the_map_believes_and_the_order_outside(corridor_door_log):
+    """The default scale changes only the probabilities outside the clusters: every cell keeps
+    its side of 0.5 (and so accuracy, checks and what a planner sees), the cells inside keep
+    EM's residuals, and the cells outside keep their order."""
+    mixed = map_file(corridor_door_log, "adaptive", resolve_params(overrides={"adaptive": {"scale": "mixed"}}))
+    one = map_file(corridor_door_log, "adaptive", resolve_params())
+    assert one.params["adaptive"]["scale"] == "em" and mixed.params["adaptive"]["scale"] == "mixed"
+    assert np.array_equal(one.observed, mixed.observed) and np.array_equal(one.occupied, mixed.occupied)
+    np.testing.assert_array_equal(np.sign(one.probability - 0.5), np.sign(mixed.probability - 0.5))
+    inside = mixed.clusters > 0
+    np.testing.assert_array_equal(one.probability[inside], mixed.probability[inside])
+    outside = mixed.observed & ~inside
+    order = np.argsort(mixed.probability[outside], kind="stable")
+    assert np.all(np.diff(one.probability[outside][order]) >= 0)
+    assert not np.array_equal(one.probability[outside], mixed.probability[outside])
+
+
+def test_a_bad_scale_is_refused_naming_it():
+    with pytest.raises(InputError) as err:
+        resolve_params(overrides={"adaptive": {"scale": "standard"}})
+    assert err.value.key.endswith("scale")
+
+
+def test_pool_adjacent_violators_pools_what_does_not_rise():
+    pooled, starts = pool_adjacent_violators(np.array([0.1, 0.3, 0.2, 0.4]), np.ones(4))
+    np.testing.assert_allclose(pooled, [0.1, 0.25, 0.4])
+    assert starts.tolist() == [0, 1, 3]
+    pooled, starts = pool_adjacent_violators(np.array([0.1, 0.3, 0.2, 0.2]), np.array([1.0, 3.0, 1.0, 1.0]))
+    np.testing.assert_allclose(pooled, [0.1, (0.9 + 0.2 + 0.2) / 5])  # 0.3 (w 3) falls to 0.2, then to 0.2
+    assert starts.tolist() == [0, 1]
+
+
+def one_row():
+    """One row of seven cells: two inside a cluster (EM's 0.01 and 0.9), four outside (the
+    standard map's 0.12, 0.3, 0.6, 0.97) and one at 0.5; per cell, the echoes that end in it and
+    that pass it on their axis."""
+    probability = np.array([[0.01, 0.9, 0.12, 0.3, 0.6, 0.97, 0.5]], dtype=np.float32)
+    ends = np.array([[0, 4, 0, 1, 2, 7, 0]])
+    passes = np.array([[9, 5, 99, 8, 8, 2, 0]])
+    inside = np.array([[True, True, False, False, False, False, False]])
+    return probability, ends, passes, inside, np.ones_like(inside)
+
+
+def test_hit_rate_curves_by_hand():
+    probability, ends, passes, inside, observed = one_row()
+    ins = hit_rate_curve(probability, ends, passes, inside)
+    np.testing.assert_allclose(ins.rate, [0.5 / 10, 4.5 / 10])  # (ends + 1/2) / (reaches + 1)
+    np.testing.assert_allclose(ins.low, [0.01, 0.9], rtol=1e-6)
+    np.testing.assert_allclose(ins.high, [0.01, 0.9], rtol=1e-6)
+    outs = hit_rate_curve(probability, ends, passes, observed & ~inside)  # 0.5: reached by no echo
+    np.testing.assert_allclose(outs.rate, [0.5 / 100, 1.5 / 10, 2.5 / 11, 7.5 / 10])
+    np.testing.assert_allclose(outs.mean, [0.12, 0.3, 0.6, 0.97], rtol=1e-6)
+    # a rate that falls is pooled with the one before, weighted by reaches
+    passes[0, 4] = 20  # 0.6: 2.5 / 23, below 0.3's 1.5 / 10
+    outs = hit_rate_curve(probability, ends, passes, observed & ~inside)
+    np.testing.assert_allclose(outs.rate, [0.005, (9 * 0.15 + 22 * 2.5 / 23) / 31, 0.75])
+    np.testing.assert_allclose([outs.low[1], outs.high[1]], [0.3, 0.6], rtol=1e-6)
+
+
+def test_one_scale_by_hand():
+    """Inside pools: rate 0.05 at 0.01, rate 0.45 at 0.9. Outside: 0.12 has rate 0.005, below
+    the inside's lowest: 0.01 * 0.005 / 0.05; 0.3 has 0.15, a quarter of the way from 0.05 to
+    0.45: 0.01 + 0.25 * (0.9 - 0.01); 0.6 has 2.5 / 11, which would put it at 0.404, below 0.5:
+    it stops at 0.501; 0.97 has 0.75, above the highest: 1 - 0.1 * 0.25 / 0.55; 0.5 stays."""
+    probability, ends, passes, inside, observed = one_row()
+    out = one_scale(probability, observed, inside, ends, passes)
+    expected = [0.01, 0.9, 0.001, 0.01 + 0.25 * 0.89, 0.501, 1 - 0.1 * 0.25 / 0.55, 0.5]
+    np.testing.assert_allclose(out[0], expected, rtol=1e-6)
+    assert out.dtype == np.float32 and probability[0, 2] == np.float32(0.12)  # a copy
+    # no echo reaches the inside: nothing to join by
+    np.testing.assert_array_equal(one_scale(probability, observed, inside, ends * ~inside, passes * ~inside),
+                                  probability)
 
 
 def test_contested_cells_alone_make_clusters(corridor_door_log, tmp_path):

@@ -20,7 +20,7 @@ from aogm_cli.mapping import modes
 from aogm_cli.simulation.sonar import simulate
 from aogm_cli.world.loader import parse_world
 
-METRICS = ("accuracy", "occupied_precision", "occupied_recall", "occupied_f1", "brier")
+METRICS = ("accuracy", "occupied_precision", "occupied_recall", "occupied_f1", "brier", "ece")
 PLANNER = ("leak", "block", "surface_recall")  # against the truth, for the default --robot-radius 0.2
 
 
@@ -99,6 +99,21 @@ def test_json_follows_the_contract_and_matches_the_map_files(logs, compared):
         assert r["metrics"]["checks"] == expected["checks"]
         assert [c["name"] for c in r["metrics"]["checks"]] == ["door_passable", "through_wall"]
         assert r["runtime_s"] == runtime and r["runtime_s"] > 0
+
+
+def test_a_results_file_without_ece_reads_back_with_ece_null(compared, tmp_path):
+    """A --json file written before the ECE was measured reads back, its ECE null (a gate naming
+    it fails, NaN); the same file with it passes."""
+    out, data, _ = compared
+    old = json.loads(json.dumps(data))
+    for r in old["results"]:
+        del r["metrics"]["ece"]
+    (tmp_path / "old.json").write_text(json.dumps(old))
+    result = run("compare", "--from-json", tmp_path / "old.json", "--require", "em.ece <= 1", "--json",
+                 tmp_path / "again.json")
+    assert result.exit_code == 1 and "em.ece <= 1  (nan <= 1; not a number)" in result.output
+    assert all(r["metrics"]["ece"] is None for r in json.loads((tmp_path / "again.json").read_text())["results"])
+    assert run("compare", "--from-json", out / "r.json", "--require", "em.ece <= 1", "-q").exit_code == 0
 
 
 def test_table_names_worlds_modes_and_relative_runtime(compared):

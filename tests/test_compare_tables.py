@@ -39,10 +39,10 @@ checks:
     passable: {from: [0.6, 0.8], to: [0.6, 2.8], robot_radius: 0.1}
 """
 FIXED = ["log", "world", "mode", "truth", "runtime_s", "runtime_vs_standard", "accuracy", "occupied_precision",
-         "occupied_recall", "occupied_f1", "brier", "checks_passed", "leak", "block", "surface_recall", "walls_kept",
+         "occupied_recall", "occupied_f1", "brier", "ece", "checks_passed", "leak", "block", "surface_recall", "walls_kept",
          "leak_vs_standard", "consistency_method", "consistency_readings",
          "consistency_endpoint_occupied", "consistency_endpoint_occupied_8", "consistency_endpoint_free",
-         "consistency_free_cells", "consistency_free_contradicted", "holdout_auc", "holdout_loglik",
+         "consistency_free_cells", "consistency_free_contradicted", "holdout_auc", "holdout_auc_band", "holdout_loglik",
          "holdout_readings", "holdout_scans", "learned_sigma", "learned_p_rand", "learned_p_hit", "learned_p_max",
          "learned_specular_deg", "learned_from_readings"]
 LEARNED = ("sigma", "p_rand", "p_hit", "p_max", "specular_deg")
@@ -205,9 +205,10 @@ def test_results_in_two_files_or_of_two_splits_exit_2_naming_both(runs, tmp_path
     assert twice.exit_code == 2 and "Traceback" not in twice.output
     assert f"{tmp_path / 'copy.json'}: results[0]:" in twice.output and f"{out / 'a.json'} results[0]" in twice.output
     doc = json.loads((out / "b.json").read_text())
-    doc["holdout"] = {"fraction": 0.1, "seed": 0}
+    doc["holdout"] = {"fraction": 0.1, "seed": 0, "reference": {"auc": {}}}
     for r in doc["results"]:
-        r["metrics"].update(holdout_auc=0.7, holdout_loglik=1.0, holdout_readings=12, holdout_scans=1)
+        r["metrics"].update(holdout_auc=0.7, holdout_auc_band=0.8, holdout_loglik=1.0, holdout_readings=12,
+                            holdout_scans=1)
     (tmp_path / "split.json").write_text(json.dumps(doc))
     split = run("compare", "--from-json", out / "a.json", tmp_path / "split.json", "-q")
     assert split.exit_code == 2

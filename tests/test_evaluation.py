@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from aogm_cli.core.grid import GridSpec
-from aogm_cli.evaluation.metrics import map_metrics, passable, run_checks
+from aogm_cli.evaluation.metrics import expected_calibration_error, map_metrics, passable, run_checks
 
 
 def test_metrics_on_a_hand_made_map():
@@ -20,6 +20,19 @@ def test_metrics_on_a_hand_made_map():
     assert m["occupied_f1"] == pytest.approx(2 * 0.5 * (1 / 3) / (0.5 + 1 / 3))
     brier = np.mean([(0.9 - 1) ** 2, 0.6**2, 0.1**2, (0.2 - 1) ** 2, (0.5 - 1) ** 2])
     assert m["brier"] == pytest.approx(brier)
+    # ECE: each observed cell alone in its bin (0.9, 0.6, 0.1, 0.2, 0.5 in bins 9, 6, 1, 2, 5)
+    assert m["ece"] == pytest.approx((0.1 + 0.6 + 0.1 + 0.8 + 0.5) / 5)
+
+
+def test_ece_pools_each_bins_cells_and_closes_the_last_bin():
+    """Bin 0 (0.0, 0.05: mean 0.025, none occupied), bin 1 (0.15, occupied), bin 9 (1.0, 0.95,
+    0.92: mean 0.9567, two of three occupied): (2 * 0.025 + 1 * 0.85 + 3 * (0.9567 - 2/3)) / 6."""
+    p = [0.0, 0.05, 0.15, 1.0, 0.95, 0.92]
+    t = [0, 0, 1, 1, 1, 0]
+    assert expected_calibration_error(p, t) == pytest.approx((0.05 + 0.85 + (2.87 - 2)) / 6)
+    assert expected_calibration_error([0.3, 0.3, 0.3], [1, 0, 0]) == pytest.approx(1 / 30)  # calibrated to 0.33
+    assert expected_calibration_error([0.7, 0.2], [1, 0], bins=1) == pytest.approx(abs(0.45 - 0.5))
+    assert np.isnan(expected_calibration_error([], []))
 
 
 def door_map(gap_cells: int):

@@ -22,6 +22,7 @@ from aogm_cli.evaluation.holdout import (
     HoldoutSplit,
     arc_alpha,
     auc_from_counts,
+    axis_labels,
     cell_labels,
     reading_scores,
     reference_log_likelihoods,
@@ -178,6 +179,40 @@ def test_a_laser_readings_positive_is_the_largest_probability_in_its_hit_band():
     assert negatives[1, :4].tolist() == [1, 1, 1, 1] and negatives.sum() == 4
 
 
+# --- the axis protocol (holdout_auc) ----------------------------------------------------------
+
+
+@pytest.mark.parametrize("kind", ["sonar", "laser"])
+def test_axis_labels_and_their_auc_by_hand(kind):
+    """A sensor at x = 0.05 facing +x on one row of 0.1 m cells. The echo at 0.6 m ends in col 6
+    (x = 0.65), its negatives the cells its axis crosses up to 0.6 - 2 * 0.1 = 0.4 m (x = 0.45:
+    cols 0-4); the echo at 0.8 m: col 8, negatives cols 0-6. No echo and NaN label nothing, and
+    a sonar is scored on its axis as a laser is."""
+    grid = GridSpec(0.0, 0.0, 0.1, 1, 10)
+    sensor = SensorSpec(mount=np.zeros((4, 3)), kind=kind, max_range=1.0, min_range=0.0,
+                        beam_width=math.radians(0.5 if kind == "laser" else 30))
+    pose = np.array([[0.05, 0.05, 0.0]])
+    ranges = np.array([[0.6, 0.8, np.inf, np.nan]], dtype=np.float32)
+    pos, neg = axis_labels(pose, ranges, sensor, grid)
+    assert pos[0].tolist() == [0, 0, 0, 0, 0, 0, 1, 0, 1, 0]
+    assert neg[0].tolist() == [2, 2, 2, 2, 2, 1, 1, 0, 0, 0]
+    probability = np.array([[0.1, 0.2, 0.3, 0.5, 0.7, 0.5, 0.6, 0.9, 0.4, 0.5]])
+    # positive 0.6 beats 9 of the 12 negatives and ties one (col 6 itself, as B's negative): 9.5;
+    # positive 0.4 beats the six below 0.4: 6. (9.5 + 6) / (2 * 12)
+    assert auc_from_counts(probability, pos, neg) == pytest.approx(15.5 / 24)
+
+
+def test_axis_labels_follow_the_mount_and_leave_the_grid_out():
+    """A sensor mounted facing +y on a robot facing -y looks along +x; an echo beyond the grid
+    gives no positive, but its negatives inside the grid count."""
+    grid = GridSpec(0.0, 0.0, 0.1, 1, 5)
+    sensor = SensorSpec(mount=np.array([[0.0, 0.0, math.pi / 2]]), max_range=2.0, min_range=0.0)
+    pose = np.array([[0.05, 0.05, -math.pi / 2], [0.05, 0.05, -math.pi / 2]])
+    pos, neg = axis_labels(pose, np.array([[0.3], [0.9]], dtype=np.float32), sensor, grid)
+    assert pos[0].tolist() == [0, 0, 0, 1, 0]  # x 0.35; the other ends at x 0.95, outside
+    assert neg[0].tolist() == [2, 2, 1, 1, 1]  # to x 0.15 (cols 0-1) and to x 0.75 (every col)
+
+
 # --- the reference log-likelihood ------------------------------------------------------------
 
 
@@ -243,7 +278,7 @@ def test_holdout_scores_are_in_the_json_and_the_table(room_log, compared):
         assert metrics["holdout_readings"] == 12 * metrics["holdout_scans"]  # no NaN reading in a simulated log
         assert r["params"]["holdout"] == split.as_dict()
     assert doc["holdout"]["period"] == 10 and doc["holdout"]["reference"]["forward_model"]["sigma"] == 0.1
-    for column in ("Held-out AUC", "Held-out loglik", "Held-out readings", "Held-out scans"):
+    for column in ("Held-out AUC", "AUC (band)", "Held-out loglik", "Held-out readings", "Held-out scans"):
         assert column in output
     assert "gates: 2 of 2 passed" in output
     with h5py.File(out / "maps" / "room_em.h5") as f:
@@ -259,6 +294,27 @@ def test_holdout_maps_come_back_with_the_same_split_only(room_log, compared, tmp
     for args in ([], ["--holdout", 0.1, "--seed", 5]):
         refused = run("compare", maps[0], *args, "-q")
         assert refused.exit_code == 2 and "--holdout" in refused.output and "room_standard.h5" in refused.output
+
+
+def test_a_results_file_of_before_the_axis_auc_reads_back_as_the_band_auc(compared, tmp_path):
+    """A --json file written before issue 28 (its reference records no AUC protocol) scored
+    holdout_auc as holdout_auc_band is scored now: read back so, with holdout_auc not available,
+    and written again as it now reads."""
+    out, doc, _ = compared
+    old = json.loads(json.dumps(doc))
+    del old["holdout"]["reference"]["auc"]
+    for r in old["results"]:
+        r["metrics"]["holdout_auc"] = r["metrics"].pop("holdout_auc_band")
+    (tmp_path / "old.json").write_text(json.dumps(old))
+    result = run("compare", "--from-json", tmp_path / "old.json", "--json", tmp_path / "again.json", "-q",
+                 "--require", "em.holdout_auc > 0")
+    assert result.exit_code == 1 and "em.holdout_auc > 0  (nan > 0; not a number)" in result.output, result.output
+    for before, again in zip(doc["results"], json.loads((tmp_path / "again.json").read_text())["results"], strict=True):
+        assert again["metrics"]["holdout_auc"] is None
+        assert again["metrics"]["holdout_auc_band"] == before["metrics"]["holdout_auc_band"]
+    twice = run("compare", "--from-json", tmp_path / "again.json", "--json", tmp_path / "twice.json", "-q")
+    first, second = (json.loads((tmp_path / name).read_text()) for name in ("again.json", "twice.json"))
+    assert twice.exit_code == 0 and (first["results"], first["holdout"]) == (second["results"], second["holdout"])
 
 
 def test_a_failed_holdout_gate_names_its_numbers(room_log):

@@ -97,10 +97,12 @@ def compare(inputs, modes_text, detector, params_file, json_out, csv_out, figure
     Held-out scores (--holdout FRACTION, with or without truth):
       every round(1/FRACTION)-th scan is held out, from an offset that --seed fixes; each map
       is made from the other scans and scored on the held-out readings: holdout_auc, the ROC
-      AUC of its occupancy at the cells they end in against the cells they pass through, and
-      holdout_loglik, their mean log-likelihood under one fixed reference forward model
-      (sigma 0.1 m, p_rand 0.1, p_hit 0.5, p_max 0.1; higher is better), plus
-      holdout_readings and holdout_scans. The truth metrics (accuracy, ...) of a simulated
+      AUC of its occupancy at each echo's cell on the sensor's axis against the cells that axis
+      crosses up to two cells short of it (Hilbert maps' protocol); holdout_auc_band, the same
+      with a reading's largest occupancy within 0.1 m of its range and its whole cone (the
+      definition before issue 28; README); holdout_loglik, their mean log-likelihood under one
+      fixed reference forward model (sigma 0.1 m, p_rand 0.1, p_hit 0.5, p_max 0.1; higher is
+      better); holdout_readings and holdout_scans. The truth metrics (accuracy, ...) of a simulated
       log are then those of the map made from the kept scans. Map files given must have been
       made with the same --holdout and --seed (--maps-dir records them).
 
@@ -108,16 +110,16 @@ def compare(inputs, modes_text, detector, params_file, json_out, csv_out, figure
     Gates (exit status 1 when one fails, after --json, --csv and --figure are written):
       --require EXPR       MODE.METRIC names, numbers, + - * /, ( ), one of < <= > >= == !=
                            METRIC: accuracy, occupied_precision, occupied_recall,
-                           occupied_f1, brier, runtime (= runtime_s), checks_passed (fraction),
+                           occupied_f1, brier, ece, runtime (= runtime_s), checks_passed (fraction),
                            leak, block, surface_recall, walls_kept, leak_vs_standard;
-                           with --holdout: holdout_auc, holdout_loglik, holdout_readings,
-                           holdout_scans
+                           with --holdout: holdout_auc, holdout_auc_band, holdout_loglik,
+                           holdout_readings, holdout_scans
       --require-checks M   every check of every log passes in mode M
 
     \b
     CSV (--csv): one row per log and mode, always these columns in this order, empty where a
     value does not apply: log, world, mode, truth, runtime_s, runtime_vs_standard, accuracy,
-    occupied_precision, occupied_recall, occupied_f1, brier, checks_passed, leak, block,
+    occupied_precision, occupied_recall, occupied_f1, brier, ece, checks_passed, leak, block,
     surface_recall (truth), walls_kept, leak_vs_standard (no truth), consistency_* (logs
     without truth), holdout_* (--holdout), learned_sigma, learned_p_rand,
     learned_p_hit, learned_p_max, learned_specular_deg, learned_from_readings (the forward

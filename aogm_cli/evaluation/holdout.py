@@ -1,6 +1,6 @@
 """Scoring a map without ground truth by the field's held-out protocol (ALGORITHMS.md section 7): which
 scans are held out (``HoldoutSplit``, ``split_log``), and how well a map made from the others predicts
-their readings (``holdout_scores``: a ROC AUC and the log-likelihood under a fixed reference model)."""
+their readings (``holdout_scores``: ROC AUCs and the log-likelihood under a fixed reference model)."""
 
 from __future__ import annotations
 
@@ -28,7 +28,7 @@ from aogm_cli.sensor_models.cone import (
 )
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig, build_forward_index, log_likelihoods
 from aogm_cli.sensor_models.inverse_model import occupied_arc
-from aogm_cli.sensor_models.ray import is_narrow_beam, ray_cells
+from aogm_cli.sensor_models.ray import AXIS_SHORT, axis_counts, is_narrow_beam, ray_cells
 from aogm_cli.sensor_models.readings import cone_templates, echo_ranges, lay_out_readings
 
 OPTION = "--holdout"
@@ -77,9 +77,16 @@ class HoldoutSplit:
         return {"fraction": float(self.fraction), "seed": int(self.seed), "period": self.period, "offset": self.offset}
 
 
+# How ``holdout_auc`` labels cells (``axis_labels``), as the JSON of a comparison records it: a results
+# file whose reference lacks it scored ``holdout_auc`` as ``holdout_auc_band`` does now
+AUC_PROTOCOL = {"positive": "the echo's cell on the sensor's axis",
+                "negatives": f"the cells on that axis from the sensor to {AXIS_SHORT} cells short of it"}
+
+
 def reference_json() -> dict:
-    """The fixed scoring model, for the JSON of a comparison."""
-    return {"forward_model": REFERENCE_MODEL.as_dict(), "alpha": REFERENCE_ALPHA, "map": "probability > 0.5"}
+    """The fixed scoring model and the AUC's protocol, for the JSON of a comparison."""
+    return {"forward_model": REFERENCE_MODEL.as_dict(), "alpha": REFERENCE_ALPHA, "map": "probability > 0.5",
+            "auc": AUC_PROTOCOL}
 
 
 def split_log(log, split: HoldoutSplit) -> tuple[Log, np.ndarray]:
@@ -265,6 +272,16 @@ def cell_labels(pose: np.ndarray, ranges: np.ndarray, sensor: SensorSpec, grid: 
     return labels(pose, ranges, sensor, grid)
 
 
+def axis_labels(pose: np.ndarray, ranges: np.ndarray, sensor: SensorSpec, grid: GridSpec) -> tuple[np.ndarray, np.ndarray]:
+    """(positives, negatives), each int32 (H, W), of the held-out protocol after Hilbert maps that
+    ``holdout_auc`` scores (``ray.axis_counts``): each echo (a finite range below max_range, of a
+    finite pose) makes the cell at its range on the sensor's axis a positive (when inside the
+    grid), and every cell that axis crosses from the sensor out to ``AXIS_SHORT`` cells short of
+    the range (z - 2 resolution) a negative, one count per reading. A no-echo or NaN reading
+    labels nothing; sonar and laser alike (the axis, not the cone)."""
+    return axis_counts(pose, ranges, sensor, grid, AXIS_SHORT)
+
+
 def reference_log_likelihoods(pose: np.ndarray, ranges: np.ndarray, sensor: SensorSpec, grid: GridSpec,
                               occupied: np.ndarray, chunk: int = READING_CHUNK) -> np.ndarray:
     """log p(z | m) under ``REFERENCE_MODEL`` of every reading of (pose (T, 3), ranges (T, S))
@@ -292,41 +309,46 @@ def reference_log_likelihoods(pose: np.ndarray, ranges: np.ndarray, sensor: Sens
 # What is measured. Every ``period``-th scan is held out, period = round(1 / fraction), starting at an
 # offset drawn from the seed: whole scans on a fixed pattern, so that neighbouring readings of one scan
 # do not leak into the map that scores them. The map is made from the other scans; then:
-# * ``holdout_auc``: the ROC AUC of the map's occupancy probability where the held-out readings end
-#   (positives, one per reading) against the cells they pass through (negatives, each (reading, cell)
-#   pair counted once), ties by average ranks (Mann-Whitney). Sonar cones: a reading's positive is the
-#   largest probability over the cells of its occupied arc (one cell of the arc echoed, the rest may
-#   well be free: scoring every arc cell as a positive ranks a map that keeps the free cells of a
-#   30-degree arc free below one that smears the arc), the negatives the cells of its free region,
-#   both drawn as the standard mapper's inverse model draws them (``mapping.standard``: arc z -/+
-#   alpha/2, free from min_range up to the arc); a no-echo (max-range) reading gives negatives only,
-#   its cone from min_range up to max_range. Narrow beams (lasers, ``ray.is_narrow_beam``): the
-#   positive is the largest probability over the cells the ray crosses within alpha/2 of z (the hit
-#   band), the negatives the cells it crosses before the hit band and past min_range (as
-#   ``beam.BeamMapper`` marks them free). The arc's thickness is fixed, ``REFERENCE_ALPHA`` = z -/+
-#   the reference model's sigma (0.1 m), or one cell if larger, whatever the maps were made with: a
-#   held-out reading's surface lies within its noise of z, and a one-cell arc missed the wall of a
-#   sharp (EM) map behind noisy readings. Unobserved cells score 0.5; cells outside the grid are left
-#   out. NaN when no reading gives a positive or none a negative.
+# * ``holdout_auc``: the protocol after Hilbert maps (``axis_labels``): the ROC AUC of the map's
+#   occupancy probability at the cell of each held-out echo on its sensor's axis (a positive) against
+#   the cells that axis crosses from the sensor to two cells short of the echo (negatives), each
+#   (reading, cell) pair counted once, ties by average ranks (Mann-Whitney); no-echo readings label
+#   nothing. Every cell is scored by what the map says of that very cell: a map that puts a wall one
+#   cell off where held-out readings end, or holds the cell confidently free, is penalised.
+# * ``holdout_auc_band``: the definition before (issue 28), kept under its own name: a reading's
+#   positive is the largest probability over a band of cells around its range, the negatives the cells
+#   before the band. Sonar cones: the band is its occupied arc (one cell of the arc echoed), the
+#   negatives the cells of its free region, both drawn as the standard mapper's inverse model draws
+#   them (``mapping.standard``: arc z -/+ alpha/2, free from min_range up to the arc); a no-echo
+#   (max-range) reading gives negatives only, its cone from min_range up to max_range. Narrow beams
+#   (lasers, ``ray.is_narrow_beam``): the band is the cells the ray crosses within alpha/2 of z, the
+#   negatives the cells it crosses before it and past min_range (as ``beam.BeamMapper`` marks them
+#   free), up to max_range for no echo. The band's thickness is fixed, ``REFERENCE_ALPHA`` = z -/+ the
+#   reference model's sigma (0.1 m), or one cell if larger. The largest over the band forgives a
+#   sharp map a wall one cell off, and the band's cells are never negatives: it ranks a thin (EM)
+#   wall above a thick (standard) one where the map's probability at the echo's own cell does not.
+#   Both: unobserved cells score 0.5, cells outside the grid are left out, NaN when no reading gives
+#   a positive or none a negative.
 # * ``holdout_loglik``: the mean of log p(z | m) over the held-out readings (NaN ones left out; no
 #   echo, or a range at or beyond max_range, is a max-range reading) under Thrun's forward model
 #   (``sensor_models.forward_model``, the formula EM maximises) with the fixed ``REFERENCE_MODEL``,
 #   for the binary map p > 0.5. It is a density (per metre): higher is better, and it can be positive.
 def holdout_scores(log, m, split: HoldoutSplit) -> dict:
     """The held-out scores of map ``m`` (an ``OccupancyMap`` made from the kept scans of ``split``)
-    against the held-out scans of the log source ``log``: ``holdout_auc``, ``holdout_loglik``
-    (NaN when nothing scores), ``holdout_readings`` (readings in the log-likelihood) and
-    ``holdout_scans``."""
+    against the held-out scans of the log source ``log``: ``holdout_auc``, ``holdout_auc_band``,
+    ``holdout_loglik`` (NaN when nothing scores), ``holdout_readings`` (readings in the
+    log-likelihood) and ``holdout_scans``."""
     pose, ranges = held_out_scans(log, split)
     ll = reference_log_likelihoods(pose, ranges, log.sensor, m.grid, np.asarray(m.probability) > 0.5)
     probability = np.asarray(m.probability, dtype=np.float64)
-    positives, negatives = reading_scores(pose, ranges, log.sensor, m.grid, probability)
+    band, negatives = reading_scores(pose, ranges, log.sensor, m.grid, probability)
     free = negatives > 0
-    n_pos = positives.size
+    n_band = band.size
     return {
-        "holdout_auc": auc_from_counts(np.concatenate([positives, probability[free]]),
-                                       np.concatenate([np.ones(n_pos), np.zeros(int(free.sum()))]),
-                                       np.concatenate([np.zeros(n_pos), negatives[free]])),
+        "holdout_auc": auc_from_counts(probability, *axis_labels(pose, ranges, log.sensor, m.grid)),
+        "holdout_auc_band": auc_from_counts(np.concatenate([band, probability[free]]),
+                                            np.concatenate([np.ones(n_band), np.zeros(int(free.sum()))]),
+                                            np.concatenate([np.zeros(n_band), negatives[free]])),
         "holdout_loglik": float(ll.mean()) if ll.size else math.nan,
         "holdout_readings": int(ll.size),
         "holdout_scans": int(pose.shape[0]),

@@ -14,7 +14,15 @@ from pathlib import Path
 from aogm_cli import __version__
 from aogm_cli.core.errors import InputError
 from aogm_cli.core.occupancy_map import MODES, OccupancyMap
-from aogm_cli.core.scores import CONSISTENCY_KEYS, LEARNED_KEYS, METRIC_KEYS, SCORE_KEYS, STANDARD_KEYS, TRUTH_KEYS
+from aogm_cli.core.scores import (
+    CONSISTENCY_KEYS,
+    LATER_METRIC_KEYS,
+    LEARNED_KEYS,
+    METRIC_KEYS,
+    SCORE_KEYS,
+    STANDARD_KEYS,
+    TRUTH_KEYS,
+)
 
 RESULTS_FORMAT = "aogm-compare"  # the "format" of a --json file; "format_version" RESULTS_FORMAT_VERSION
 RESULTS_FORMAT_VERSION = 1
@@ -166,7 +174,9 @@ def merge_results_files(paths: list[str]) -> MergedResults:
 def _split_text(split: dict | None) -> str:
     if split is None:
         return "no held-out scores"
-    return f"held-out scores of --holdout {split.get('fraction')} --seed {split.get('seed')}"
+    auc = (split.get("reference") or {}).get("auc") if isinstance(split.get("reference"), dict) else None
+    protocol = f" (AUC: {auc})" if isinstance(auc, str) else ""
+    return f"held-out scores of --holdout {split.get('fraction')} --seed {split.get('seed')}{protocol}"
 
 
 def read_results_file(path: str) -> tuple[list[ModeResult], dict | None]:
@@ -185,6 +195,18 @@ def read_results_file(path: str) -> tuple[list[ModeResult], dict | None]:
     except OSError as exc:
         raise InputError(f"cannot be read ({exc.strerror}); expected {EXPECTED_FILE}", file=path) from None
     return _ResultsReader(path).document(doc)
+
+
+BAND_AUC = "holdout_auc_band"  # ``evaluation.holdout``: the held-out AUC's definition before issue 28
+BANDED = "holdout_auc not measured (a file written before issue 28; its AUC is holdout_auc_band)"
+
+
+def _axis_auc(holdout: dict) -> bool:
+    """Whether a results file's ``holdout`` object records the AUC's protocol (its reference's
+    ``auc``, ``evaluation.holdout.AUC_PROTOCOL``): files written before scored ``holdout_auc`` as
+    ``holdout_auc_band`` is scored now, and are read back so (``holdout_auc`` then NaN)."""
+    reference = holdout.get("reference")
+    return isinstance(reference, dict) and "auc" in reference
 
 
 def _is_number(v) -> bool:
@@ -231,9 +253,15 @@ class _ResultsReader:
         self.get(doc, "aogm_version", "", lambda v: isinstance(v, str), "a version string")
         holdout = self.get(doc, "holdout", "", lambda v: isinstance(v, dict), "an object", required=False)
         items = self.get(doc, "results", "", lambda v: isinstance(v, list) and len(v) > 0, "a non-empty list")
-        return [self.result(item, f"results[{i}]", holdout is not None) for i, item in enumerate(items)], holdout
+        banded = holdout is not None and not _axis_auc(holdout)
+        results = [self.result(item, f"results[{i}]", holdout is not None, banded) for i, item in enumerate(items)]
+        if banded:  # as read back, so that it is written again as it now reads
+            reference = holdout.get("reference") if isinstance(holdout.get("reference"), dict) else {}
+            holdout = {**holdout, "reference": {**reference, "auc": BANDED}}
+        return results, holdout
 
-    def result(self, item, where: str, holdout: bool) -> ModeResult:
+    def result(self, item, where: str, holdout: bool, banded: bool = False) -> ModeResult:
+
         if not isinstance(item, dict):
             raise InputError(f"expected an object, got {_shown(item)}", file=self.path, key=where)
         get = self.get
@@ -260,7 +288,9 @@ class _ResultsReader:
         scores = None
         if holdout:
             scores = {k: _nan(get(metrics, k, f"{where}.metrics", _number_or_null, "a number or null"))
-                      for k in SCORE_KEYS}
+                      for k in SCORE_KEYS if not (banded and k == BAND_AUC)}
+            if banded:  # written before issue 28: its holdout_auc is what holdout_auc_band is now
+                scores[BAND_AUC], scores["holdout_auc"] = scores["holdout_auc"], math.nan
         truth_metrics = self.truth_metrics(metrics, f"{where}.metrics") if truth else None
         # what a planner sees: optional, as files written before it was measured lack it
         found = {k: get(metrics, k, f"{where}.metrics", _number_or_null, "a number or null")
@@ -270,7 +300,8 @@ class _ResultsReader:
                           results_file=self.path, planner={k: _nan(v) for k, v in found.items()} or None)
 
     def truth_metrics(self, metrics: dict, where: str) -> dict:
-        out = {k: _nan(self.get(metrics, k, where, _number_or_null, "a number or null")) for k in METRIC_KEYS}
+        out = {k: _nan(self.get(metrics, k, where, _number_or_null, "a number or null",
+                                required=k not in LATER_METRIC_KEYS)) for k in METRIC_KEYS}
         checks = self.get(metrics, "checks", where, lambda v: isinstance(v, list), "a list of {name, passed}")
         out["checks"] = []
         for j, c in enumerate(checks):

@@ -102,9 +102,15 @@ class AdaptiveConfig:
     # accuracy 0.9598 -> 0.9716 at 2; 1 gave 0.9725 but lower surface recall elsewhere); sonar
     # cones only (narrow beams: 0), as it cost the intel laser log's held-out AUC 0.9863 -> 0.9737
     grow: int = 2
+    # the scale of the probabilities outside the clusters (issue 28): "em", the EM probability of
+    # the cluster cells that the log's readings end in as often (``adaptive.one_scale``); "mixed",
+    # the standard map's own (before: two scales that rank cells unlike each other)
+    scale: str = "em"
 
     def validate(self) -> AdaptiveConfig:
         check_field_types(self)
+        if self.scale not in ("em", "mixed"):
+            raise InputError(f"expected 'em' or 'mixed', got {self.scale!r}", key="scale")
         if isinstance(self.grow, bool) or not isinstance(self.grow, int) or self.grow < 0:
             raise InputError(f"expected a whole number >= 0, got {self.grow!r}", key="grow")
         for key in ("contested", "weak"):

@@ -19,7 +19,7 @@ from aogm_cli.report.table import checks_passed
 # planner sees (``evaluation.planner``: leak, block, surface_recall with truth, walls_kept and
 # leak_vs_standard without); the held-out scores (``evaluation.holdout``) exist only with --holdout
 HOLDOUT_METRICS = SCORE_KEYS
-METRICS = ("accuracy", "occupied_precision", "occupied_recall", "occupied_f1", "brier", "runtime", "checks_passed",
+METRICS = ("accuracy", "occupied_precision", "occupied_recall", "occupied_f1", "brier", "ece", "runtime", "checks_passed",
            *TRUTH_KEYS, *STANDARD_KEYS, *HOLDOUT_METRICS)
 COMPARISONS = ("<=", ">=", "==", "!=", "<", ">")
 OPTION = "--require"
@@ -324,7 +324,7 @@ def evaluate_required_checks(
 def metric_values(result: ModeResult) -> dict[str, float | None]:
     """The values a gate can name for one (log, mode): metrics, runtime, checks_passed, what a
     planner sees and the held-out scores (None when not computed)."""
-    values: dict[str, float | None] = {k: (None if result.metrics is None else result.metrics[k]) for k in METRIC_KEYS}
+    values: dict[str, float | None] = {k: (result.metrics or {}).get(k) for k in METRIC_KEYS}
     values["runtime"] = result.runtime_s
     values["checks_passed"] = checks_passed(result.metrics)
     values.update({k: (result.planner or {}).get(k) for k in PLANNER_KEYS})

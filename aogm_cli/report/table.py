@@ -114,27 +114,28 @@ def print_table(results: list[ModeResult], labels: dict[str, str], quiet: bool) 
 def table_columns(shown: Shown) -> list[tuple[str, str]]:
     """(header, justification) of every column of the printed table."""
     columns = [("World", "left"), ("Mode", "left"), ("Accuracy", "right"), ("Occ. F1", "right"), ("Brier", "right"),
-               ("Checks", "right")]
+               ("ECE", "right"), ("Checks", "right")]
     if shown.consistency:
         columns += [("Ends on occ.", "right"), ("±1 cell", "right"), ("Free contra.", "right")]
     columns += [(PLANNER_COLUMNS[k], "right") for k in shown.planner]
     if shown.holdout:
-        columns += [("Held-out AUC", "right"), ("Held-out loglik", "right"), ("Held-out readings", "right"),
-                    ("Held-out scans", "right")]
+        columns += [("Held-out AUC", "right"), ("AUC (band)", "right"), ("Held-out loglik", "right"),
+                    ("Held-out readings", "right"), ("Held-out scans", "right")]
     return [*columns, ("Runtime (s)", "right"), ("vs standard", "right"), ("Map", "left")]
 
 
 def table_row(r: ModeResult, label: str, relative: float | None, shown: Shown) -> list[str]:
     """The cells of one result's row of the printed table (``table_columns``)."""
     if r.metrics is None:
-        acc = f1 = brier = checks = "n/a"
+        acc = f1 = brier = ece = checks = "n/a"
     else:
         acc = f"{r.metrics['accuracy']:.4f}"
         f1 = f"{r.metrics['occupied_f1']:.4f}"
         brier = f"{r.metrics['brier']:.4f}"
+        ece = _share(r.metrics.get("ece"))
         passed = sum(c["passed"] for c in r.metrics["checks"])
         checks = f"{passed}/{len(r.metrics['checks'])}"
-    row = [label, r.mode, acc, f1, brier, checks]
+    row = [label, r.mode, acc, f1, brier, ece, checks]
     if shown.consistency:
         c = r.consistency or {}
         row += [_share(c.get("endpoint_occupied")), _share(c.get("endpoint_occupied_8")),
@@ -142,8 +143,8 @@ def table_row(r: ModeResult, label: str, relative: float | None, shown: Shown) -
     row += [_share((r.planner or {}).get(k)) for k in shown.planner]
     if shown.holdout:
         h = r.holdout or {}
-        row += [_share(h.get("holdout_auc")), _share(h.get("holdout_loglik")), str(h.get("holdout_readings", "n/a")),
-                str(h.get("holdout_scans", "n/a"))]
+        row += [_share(h.get("holdout_auc")), _share(h.get("holdout_auc_band")), _share(h.get("holdout_loglik")),
+                str(h.get("holdout_readings", "n/a")), str(h.get("holdout_scans", "n/a"))]
     return [*row, f"{r.runtime_s:.3f}", "–" if relative is None else f"x{relative:.2f}", _source(r)]
 
 

@@ -1,6 +1,7 @@
 """A narrow beam as a ray: which sensors are traced as rays rather than cones (``is_narrow_beam``)
 and which grid cells a ray crosses (Amanatides & Woo 1987: ``ray_cells``, and the compiled steps
-``ray_start`` and ``next_cell`` that ``mapping.beam`` walks)."""
+``ray_start`` and ``next_cell`` that ``mapping.beam`` walks); per cell, how many echoes end in it
+on their sensor's axis and how many axes cross it before (``axis_counts``)."""
 
 from __future__ import annotations
 
@@ -10,12 +11,14 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
+from aogm_cli.core.frames import sensor_poses
 from aogm_cli.core.grid import GridSpec, dda_steps
 from aogm_cli.core.log import SensorSpec
 
 # a ray that stays in a cell for at most this many cells' length only touches it (a corner,
 # up to rounding) and leaves it alone
 TOUCH = 1e-9
+AXIS_SHORT = 2  # cells: an echo's axis counts as crossing the cells up to this many cells short of it
 
 
 class Ray(NamedTuple):
@@ -156,3 +159,42 @@ def _ray_cells_kernel(ray, grid, out):
         )
         t0 = max(t0, t1)
     return n
+
+
+def axis_counts(pose: np.ndarray, ranges: np.ndarray, sensor: SensorSpec, grid: GridSpec,
+                short_cells: float = AXIS_SHORT) -> tuple[np.ndarray, np.ndarray]:
+    """(ends, passes), each int32 (H, W), of the echoes among the readings (pose (T, 3), ranges
+    (T, S)): a finite range below max_range, from a finite pose. ``ends``: per cell, the echoes
+    whose point on their sensor's axis (the sensor's position plus the range along its heading)
+    lies in it; ``passes``: the echoes whose axis crosses it from the sensor out to
+    ``short_cells`` cells short of the range (``ray_cells``'s cells of length z - short_cells *
+    resolution), one count per echo. No-echo and NaN readings count nothing; cells outside the
+    grid are left out. The held-out AUC's labels (``evaluation.holdout``) and the evidence by
+    which adaptive joins its two maps (``mapping.adaptive``)."""
+    sp = sensor_poses(np.asarray(pose, dtype=np.float64).reshape(-1, 3), sensor.mount).reshape(-1, 3)
+    z = np.asarray(ranges, dtype=np.float64).reshape(-1)
+    with np.errstate(invalid="ignore"):
+        echo = np.isfinite(z) & (z >= 0.0) & (z < sensor.max_range) & np.isfinite(sp).all(axis=1)
+    sp, z = sp[echo], z[echo]
+    n = grid.height * grid.width
+    ux, uy = np.cos(sp[:, 2]), np.sin(sp[:, 2])
+    rows, cols = grid.world_to_cell(sp[:, 0] + z * ux, sp[:, 1] + z * uy)
+    inside = grid.contains(rows, cols)
+    ends = np.bincount(rows[inside] * grid.width + cols[inside], minlength=n).astype(np.int32)
+    passes = np.zeros(n, dtype=np.int32)
+    m = grid.height + grid.width + 2
+    cells = RayCells(np.empty(m, np.int64), np.empty(m, np.int64), np.empty(m), np.empty(m))
+    _pass_counts(sp[:, 0] - grid.origin_x, sp[:, 1] - grid.origin_y, ux, uy, z - short_cells * grid.resolution,
+                 RayGrid(grid.height, grid.width, float(grid.resolution)), cells, passes)
+    return ends.reshape(grid.shape), passes.reshape(grid.shape)
+
+
+@numba.njit(cache=True)
+def _pass_counts(px, py, ux, uy, length, grid, cells, counts):
+    """Add one to ``counts`` (flat, height * width) at every cell each ray (from (px, py), m from
+    the grid's origin, along (ux, uy), up to ``length``; nothing for length <= 0) crosses;
+    ``cells``: a ``RayCells`` with room for one ray."""
+    for i in range(length.size):
+        n = _ray_cells_kernel(Ray(px[i], py[i], ux[i], uy[i], length[i]), grid, cells)
+        for j in range(n):
+            counts[cells.rows[j] * grid.width + cells.cols[j]] += 1
