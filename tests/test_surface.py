@@ -189,3 +189,11 @@ def test_only_the_core_of_a_cone_is_deflected():
     forward = ForwardModelConfig(specular_deg=30.0)
     assert 2.3 < reading_shadows(run, normal, forward)[0] < 2.58
     assert reading_shadows(run, normal, forward, core=0.25)[0] == np.inf
+
+
+def test_the_specular_angle_at_a_smaller_share_of_the_head_on_rate():
+    counts = np.zeros((2, 9))
+    counts[0] = [50, 50, 50, 40, 20, 10, 0, 0, 0]
+    counts[1] = 100 - counts[0]
+    # a tenth of the head-on rate (0.05) falls between 55 deg (0.10) and 65 deg (0.00): 60 deg
+    assert specular_angle(counts, 0.1) == pytest.approx(60.0)

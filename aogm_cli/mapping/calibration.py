@@ -119,7 +119,7 @@ def incidence_at(run: LaidOutReadings, readings: F.ExpectationReadings, occupied
                      np.ascontiguousarray(occupied, dtype=np.bool_), normals,
                      (float(forward.sigma), float(forward.window), float(run.sensor.max_range), config.pass_margin), counts)
     return {"echoes": counts[0].astype(int).tolist(), "passes": counts[1].astype(int).tolist(),
-            "specular_deg": specular_angle(counts)}
+            "specular_deg": specular_angle(counts, config.specular_rate)}
 
 
 def model_values(forward: F.ForwardModelConfig) -> dict:

@@ -235,18 +235,19 @@ def incidence_counts(tpl, flat, shape, readings, occupied, normal, model, out):
                 break
 
 
-def specular_angle(counts: np.ndarray, min_readings: int = 30) -> float:
+def specular_angle(counts: np.ndarray, fraction: float = 0.5, min_readings: int = 30) -> float:
     """The incidence angle (degrees) beyond which surfaces stop echoing, from ``incidence_counts``:
-    where the echo rate echoes / (echoes + passes) first falls below half its largest value within
-    30 degrees of the normal (linear between the bins' centres), 90 when it never does. Bins with
-    fewer than ``min_readings`` readings are skipped; without any within 30 degrees, 90."""
+    where the echo rate echoes / (echoes + passes) first falls below ``fraction`` of its largest
+    value within 30 degrees of the normal (linear between the bins' centres), 90 when it never
+    does. Bins with fewer than ``min_readings`` readings are skipped; without any within 30
+    degrees, 90."""
     total = counts[0] + counts[1]
     ok = total >= min_readings
     with np.errstate(invalid="ignore", divide="ignore"):
         rate = np.where(ok, counts[0] / total, np.nan)
     if not ok[:3].any():
         return 90.0
-    half = 0.5 * np.nanmax(rate[:3])
+    half = fraction * np.nanmax(rate[:3])
     centres = 10.0 * np.arange(INCIDENCE_BINS) + 5.0
     prev = None
     for a in np.flatnonzero(ok):
