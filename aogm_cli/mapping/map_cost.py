@@ -19,6 +19,11 @@ BYTES_PER_PADDED_CELL = 4  # the standard mapper's padded float32 state
 # their cones' extents, likelihood state and tile slot (int32 68 + float64 72), their orders
 # (12), the set-up's temporaries and the log's ranges (measured: 337 per reading at 200k scans)
 BYTES_PER_READING = 300
+# EM / adaptive on a sonar log: where beams were deflected (float64 a reading), and a cell's surface
+# normal (float32 x 2) beside its echo sums (float32 x 3) and head-on passes (float32) while they
+# are made (``sensor_models.surface``)
+BYTES_PER_SHADOW = 8
+BYTES_PER_SURFACE_CELL = 24
 BYTES_PER_TEMPLATE_CELL = 48  # the disc the cone templates are cut from (int64 offsets, ranges, angles)
 SAMPLE_BLOCKS, BLOCK_SCANS = 32, 64  # ranges read to estimate the cones' mean size
 
@@ -62,6 +67,8 @@ def map_estimate(reader, mode: str, params: MapParams) -> Estimate:
     work = entries
     if mode != "standard":
         memory += readings * BYTES_PER_READING
+        if not narrow and params.surface.enabled:
+            memory += readings * BYTES_PER_SHADOW + cells * BYTES_PER_SURFACE_CELL
         work += entries * params.em.max_sweeps
     detail = (f"a {grid.height} x {grid.width} grid at {res:g} m, {readings:.3g} readings, "
               f"about {per_reading:.3g} cone cells each")

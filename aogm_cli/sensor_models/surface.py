@@ -63,29 +63,34 @@ class SurfaceConfig:
 
 def surface_normals(tpl, flat, shape: tuple[int, int], cones: tuple, z_max: float, resolution: float,
                     config: SurfaceConfig, believed: np.ndarray | None = None) -> np.ndarray:
-    """(2, H * W) float64: the unit normal (d row, d col) of each surface the readings ``cones`` =
+    """(2, H * W) float32: the unit normal (d row, d col) of each surface the readings ``cones`` =
     (sensor rows, cols, heading bins, template ranges; NaN invalid, >= z_max no echo) echoed from,
     NaN elsewhere, on a grid of ``shape``: ``tpl`` and ``flat`` are the cone templates' kernel
     arrays and flat offsets. With ``believed`` (bool, the grid's shape), only the cells it marks
     (a map's occupied cells) can be surfaces."""
     rows, cols, bins, z = (np.ascontiguousarray(a).reshape(-1) for a in cones)
     readings = (rows.astype(np.int64), cols.astype(np.int64), bins.astype(np.int64), z.astype(np.float64))
-    sums = np.zeros((3, shape[0] * shape[1]))
+    # float32 sums and normals (12 + 8 bytes a cell at their largest; sums of whole counts and of
+    # unit doubled-angle terms, exact enough for a threshold on their ratio)
+    sums = np.zeros((3, shape[0] * shape[1]), dtype=np.float32)
     echo_direction_sums(tpl, flat, shape, readings, float(resolution), float(z_max), sums)
     count = sums[2]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        coherence = np.hypot(sums[0], sums[1]) / count
-    surface = (count >= config.min_echoes) & (coherence >= config.min_coherence)
+    surface = count >= config.min_echoes
     if believed is not None:
         surface &= np.asarray(believed, dtype=bool).reshape(-1)
-    angle = 0.5 * np.arctan2(sums[1, surface], sums[0, surface])  # the mean axis, from the doubled angles
-    normal = np.full((2, count.size), np.nan)
-    normal[0, surface] = np.cos(angle)
-    normal[1, surface] = np.sin(angle)
-    passes = np.zeros(count.size)
+    cells = np.flatnonzero(surface)
+    coherent = np.hypot(sums[0, cells], sums[1, cells]) >= config.min_coherence * count[cells]
+    cells = cells[coherent]
+    angle = 0.5 * np.arctan2(sums[1, cells], sums[0, cells])  # the mean axis, from the doubled angles
+    echoes = count[cells]
+    del sums, count
+    normal = np.full((2, shape[0] * shape[1]), np.nan, dtype=np.float32)
+    normal[0, cells] = np.cos(angle)
+    normal[1, cells] = np.sin(angle)
+    passes = np.zeros(normal.shape[1], dtype=np.float32)
     head_on_passes(tpl, flat, shape, readings, normal, math.cos(math.radians(config.head_on_deg)) ** 2,
                    float(resolution), float(z_max), passes)
-    passed = passes > config.max_pass_share * (passes + count)
+    passed = cells[passes[cells] > config.max_pass_share * (passes[cells] + echoes)]
     normal[:, passed] = np.nan
     return normal
 
