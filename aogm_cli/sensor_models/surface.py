@@ -95,31 +95,45 @@ def surface_normals(tpl, flat, shape: tuple[int, int], cones: tuple, z_max: floa
     return normal
 
 
+@numba.njit(cache=True, inline="always")
+def _offset(cell, row0, col0, width):
+    """(d row, d col) of the flat ``cell`` from the sensor cell (row0, col0)."""
+    row = cell // width
+    return float(row - row0), float(cell - row * width - col0)
+
+
+@numba.njit(cache=True, inline="always")
+def _cone(tpl, flat, shape, row0, col0, k, end, right, ib):
+    """The cells of heading bin k's cone from (row0, col0) up to template range ``end`` (``right``:
+    ranges <= end, else < end) into ``ib`` (``cone.cone_flat_cells``): (their count, the bin's
+    ranges); none when the cone cannot touch the grid or ``end`` <= 0."""
+    height, width = shape
+    ext = tpl.extent
+    b = tpl.base_bin[k]
+    r = tpl.ranges[tpl.offsets[b] : tpl.offsets[b + 1]]
+    if not end > 0.0 or row0 + ext < 0 or row0 - ext >= height or col0 + ext < 0 or col0 - ext >= width:
+        return 0, r
+    m = np.searchsorted(r, end, side="right") if right else np.searchsorted(r, end, side="left")
+    cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width)
+    return m, r
+
+
 @numba.njit(cache=True)
 def head_on_passes(tpl, flat, shape, readings, normal, cos2, margin, z_max, out):
     """out[c] += 1 for every reading of ``readings`` = (rows, cols, bins, z) whose cone holds the
     surface cell c (``normal`` not NaN) more than ``margin`` before its range (every cell of a
     reading without echo), met within the angle whose cos^2 is ``cos2`` of its normal."""
-    height, width = shape
     rows, cols, bins, z = readings
-    n_cells = height * width
-    ext = tpl.extent
+    n_cells = shape[0] * shape[1]
     ib = np.empty(int(np.max(np.diff(tpl.offsets))), dtype=np.int32)
     for t in range(z.shape[0]):
         if not z[t] == z[t]:
             continue
-        before = z_max if not z[t] < z_max else z[t] - margin
-        row0, col0 = rows[t], cols[t]
-        if before <= 0.0 or row0 + ext < 0 or row0 - ext >= height or col0 + ext < 0 or col0 - ext >= width:
-            continue
-        k = bins[t]
-        b = tpl.base_bin[k]
-        r = tpl.ranges[tpl.offsets[b] : tpl.offsets[b + 1]]
-        m = np.searchsorted(r, before, side="left")
-        cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width)
+        m, _ = _cone(tpl, flat, shape, rows[t], cols[t], bins[t], z_max if not z[t] < z_max else z[t] - margin,
+                     False, ib)
         for j in range(m):
             c = np.int64(ib[j])
-            if c < n_cells and normal[0, c] == normal[0, c] and not hidden(normal, cos2, c, row0, col0, width):
+            if c < n_cells and normal[0, c] == normal[0, c] and not hidden(normal, cos2, c, rows[t], cols[t], shape[1]):
                 out[c] += 1.0
 
 
@@ -129,30 +143,18 @@ def echo_direction_sums(tpl, flat, shape, readings, half_band, z_max, out):
     its cone within ``half_band`` of its range, the doubled angle of the direction from the sensor
     to the cell, (cos 2 phi, sin 2 phi) in (row, col) axes, into out[0], out[1] and 1 into out[2]
     (``out`` (3, H * W))."""
-    height, width = shape
     rows, cols, bins, z = readings
-    n_cells = height * width
-    ext = tpl.extent
+    n_cells = shape[0] * shape[1]
     ib = np.empty(int(np.max(np.diff(tpl.offsets))), dtype=np.int32)
     for t in range(z.shape[0]):
         if not z[t] < z_max:  # no echo (or NaN)
             continue
-        row0, col0 = rows[t], cols[t]
-        if row0 + ext < 0 or row0 - ext >= height or col0 + ext < 0 or col0 - ext >= width:
-            continue
-        k = bins[t]
-        b = tpl.base_bin[k]
-        r = tpl.ranges[tpl.offsets[b] : tpl.offsets[b + 1]]
-        lo = np.searchsorted(r, z[t] - half_band, side="left")
-        m = np.searchsorted(r, z[t] + half_band, side="right")
-        cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width)
-        for j in range(lo, m):
+        m, r = _cone(tpl, flat, shape, rows[t], cols[t], bins[t], z[t] + half_band, True, ib)
+        for j in range(np.searchsorted(r[:m], z[t] - half_band, side="left"), m):
             c = np.int64(ib[j])
             if c >= n_cells:
                 continue
-            row = c // width
-            d_r = float(row - row0)
-            d_c = float(c - row * width - col0)
+            d_r, d_c = _offset(c, rows[t], cols[t], shape[1])
             d2 = d_r * d_r + d_c * d_c
             if d2 == 0.0:
                 continue
@@ -176,9 +178,7 @@ def hidden(normal, cos2, cell, row0, col0, width):
     n_r = normal[0, cell]
     if not n_r == n_r:  # NaN: no surface there
         return False
-    row = cell // width
-    d_r = float(row - row0)
-    d_c = float(cell - row * width - col0)
+    d_r, d_c = _offset(cell, row0, col0, width)
     dot = d_r * n_r + d_c * normal[1, cell]
     return dot * dot < cos2 * (d_r * d_r + d_c * d_c)
 
@@ -198,10 +198,8 @@ def incidence_counts(tpl, flat, shape, readings, occupied, normal, model, out):
     ``readings`` = (rows, cols, bins, z) (template ranges; >= z_max: no echo), ``model`` =
     (sigma, window, z_max, margin)."""
     sigma, window, z_max, margin = model
-    height, width = shape
     rows, cols, bins, z_all = readings
-    n_cells = height * width
-    ext = tpl.extent
+    n_cells = shape[0] * shape[1]
     ib = np.empty(int(np.max(np.diff(tpl.offsets))), dtype=np.int32)
     passed = np.zeros(INCIDENCE_BINS, dtype=np.bool_)
     for t in range(z_all.shape[0]):
@@ -209,35 +207,24 @@ def incidence_counts(tpl, flat, shape, readings, occupied, normal, model, out):
         if not z == z:  # NaN
             continue
         at_max = not z < z_max
-        limit = z_max if at_max else min(z + window * sigma, z_max)
-        row0, col0 = rows[t], cols[t]
-        if row0 + ext < 0 or row0 - ext >= height or col0 + ext < 0 or col0 - ext >= width:
-            continue
-        k = bins[t]
-        b = tpl.base_bin[k]
-        r = tpl.ranges[tpl.offsets[b] : tpl.offsets[b + 1]]
-        m = np.searchsorted(r, limit, side="right")
-        cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width)
+        m, r = _cone(tpl, flat, shape, rows[t], cols[t], bins[t], z_max if at_max else min(z + window * sigma, z_max),
+                     True, ib)
         passed[:] = False
         for j in range(m):
             c = np.int64(ib[j])
             if c >= n_cells or not occupied[c]:
                 continue
             in_window = not at_max and abs(r[j] - z) <= window * sigma
-            n_r = normal[0, c]
-            if n_r == n_r:
-                row = c // width
-                d_r = float(row - row0)
-                d_c = float(c - row * width - col0)
-                d2 = d_r * d_r + d_c * d_c
-                if d2 > 0.0:
-                    cos_i = min(abs(d_r * n_r + d_c * normal[1, c]) / math.sqrt(d2), 1.0)
-                    a = min(int(math.degrees(math.acos(cos_i)) / 10.0), INCIDENCE_BINS - 1)
-                    if in_window:
-                        out[0, a] += 1.0
-                    elif not passed[a] and (at_max or r[j] < z - margin):
-                        passed[a] = True
-                        out[1, a] += 1.0
+            d_r, d_c = _offset(c, rows[t], cols[t], shape[1])
+            d2 = d_r * d_r + d_c * d_c
+            if normal[0, c] == normal[0, c] and d2 > 0.0:
+                cos_i = min(abs(d_r * normal[0, c] + d_c * normal[1, c]) / math.sqrt(d2), 1.0)
+                a = min(int(math.degrees(math.acos(cos_i)) / 10.0), INCIDENCE_BINS - 1)
+                if in_window:
+                    out[0, a] += 1.0
+                elif not passed[a] and (at_max or r[j] < z - margin):
+                    passed[a] = True
+                    out[1, a] += 1.0
             if in_window:
                 break
 
@@ -276,33 +263,22 @@ def shadow_ranges(tpl, flat, shape, readings, normal, cos2, model, out):
     z_max, core_cos)."""
     sigma, window, z_max, core_cos = model
     n_bins = tpl.base_bin.shape[0]
-    height, width = shape
     rows, cols, bins, z_all = readings
-    n_cells = height * width
-    ext = tpl.extent
+    n_cells = shape[0] * shape[1]
     ib = np.empty(int(np.max(np.diff(tpl.offsets))), dtype=np.int32)
     for t in range(z_all.shape[0]):
         z = z_all[t]
         if not z == z:
             continue
-        before = z_max if not z < z_max else z - window * sigma
-        row0, col0 = rows[t], cols[t]
-        if before <= 0.0 or row0 + ext < 0 or row0 - ext >= height or col0 + ext < 0 or col0 - ext >= width:
-            continue
         k = bins[t]
-        b = tpl.base_bin[k]
-        r = tpl.ranges[tpl.offsets[b] : tpl.offsets[b + 1]]
-        m = np.searchsorted(r, before, side="left")
-        cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width)
+        m, r = _cone(tpl, flat, shape, rows[t], cols[t], k, z_max if not z < z_max else z - window * sigma, False, ib)
         a_c = math.cos(2.0 * math.pi * k / n_bins)
         a_r = math.sin(2.0 * math.pi * k / n_bins)
         for j in range(m):
             c = np.int64(ib[j])
-            if c >= n_cells or not hidden(normal, cos2, c, row0, col0, width):
+            if c >= n_cells or not hidden(normal, cos2, c, rows[t], cols[t], shape[1]):
                 continue
-            row = c // width
-            d_r = float(row - row0)
-            d_c = float(c - row * width - col0)
+            d_r, d_c = _offset(c, rows[t], cols[t], shape[1])
             if d_c * a_c + d_r * a_r >= core_cos * math.sqrt(d_r * d_r + d_c * d_c):
                 out[t] = r[j]
                 break
