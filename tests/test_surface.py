@@ -9,6 +9,7 @@ import pytest
 from aogm_cli.core.errors import InputError
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import SensorSpec
+from aogm_cli.mapping.params import resolve_params
 from aogm_cli.sensor_models.cone import build_cone_templates, flat_offsets
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig, cone_limits, deflect
 from aogm_cli.sensor_models.readings import LaidOutReadings
@@ -85,11 +86,13 @@ def test_min_echoes_and_no_echo():
 
 
 @pytest.mark.parametrize("key,value", [("min_echoes", 0), ("min_echoes", 1.5), ("min_coherence", 1.5),
-                                       ("enabled", "yes")])
-def test_bad_surface_config_names_its_key(key, value):
+                                       ("enabled", "yes"), ("core", True), ("head_on_deg", 90)])
+def test_bad_surface_config_names_the_file_and_key(key, value, tmp_path):
+    params = tmp_path / "p.yaml"
+    params.write_text(f"surface:\n  {key}: {value!r}\n".replace("True", "true"))
     with pytest.raises(InputError) as err:
-        SurfaceConfig(**{key: value}).validate()
-    assert err.value.key == key
+        resolve_params(str(params))
+    assert err.value.key == f"surface.{key}" and err.value.file == str(params)
 
 
 def wall_run(yaw, z, beam_deg=10.0):

@@ -301,7 +301,12 @@ def resolve_params(params_file: str | None = None, overrides: dict[str, dict[str
     )
     adaptive = build("adaptive", lambda v: AdaptiveConfig(**v).validate())
     calibration = build("calibration", lambda v: CalibrationConfig(**v).validate())
-    surface = build("surface", lambda v: SurfaceConfig(**v).validate())
+    def surface_config(values):
+        config = SurfaceConfig(**values)
+        check_field_types(config)
+        return config.validate()
+
+    surface = build("surface", surface_config)
     if (isinstance(resolution, bool) or not isinstance(resolution, (int, float)) or not math.isfinite(resolution)
             or not resolution > 0):
         raise InputError(f"expected a positive number (m per cell), got {resolution!r}", file=file, key="resolution")

@@ -44,17 +44,17 @@ class SurfaceConfig:
     core: float = 0.1
 
     def validate(self) -> SurfaceConfig:
+        """Return self, or raise ``InputError(key=<field>)`` for an impossible value (the fields'
+        types are checked where the parameters are read: ``mapping.params.check_field_types``)."""
         if not isinstance(self.enabled, bool):
             raise InputError(f"expected true or false, got {self.enabled!r}", key="enabled")
-        if isinstance(self.min_echoes, bool) or not isinstance(self.min_echoes, int) or self.min_echoes < 1:
+        if self.min_echoes < 1:
             raise InputError(f"expected a whole number >= 1, got {self.min_echoes!r}", key="min_echoes")
         for key in ("min_coherence", "max_pass_share", "core"):
-            v = getattr(self, key)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v <= 1:
-                raise InputError(f"expected a number in [0, 1], got {v!r}", key=key)
-        v = self.head_on_deg
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v < 90:
-            raise InputError(f"expected an angle in (0, 90) degrees, got {v!r}", key="head_on_deg")
+            if not 0 <= getattr(self, key) <= 1:
+                raise InputError(f"expected a number in [0, 1], got {getattr(self, key)!r}", key=key)
+        if not 0 < self.head_on_deg < 90:
+            raise InputError(f"expected an angle in (0, 90) degrees, got {self.head_on_deg!r}", key="head_on_deg")
         return self
 
     def as_dict(self) -> dict:
