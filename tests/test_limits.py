@@ -156,3 +156,19 @@ def test_warnings_are_silenced_unless_debug(tmp_path, monkeypatch):
     r = CliRunner().invoke(
         main, ["--debug", "map", str(log), "--mode", "standard", "-o", str(tmp_path / "m2.h5")])
     assert r.exit_code == 0 and "RuntimeWarning" in r.stderr
+
+
+def test_a_map_that_does_not_fit_names_what_makes_it_fit(tmp_path):
+    # the grid fits, the em map does not: the refusal names the resolution and the readings' share
+    log = a_log(tmp_path)
+    from aogm_cli.io.logfile import LogReader
+    from aogm_cli.mapping.params import MapParams
+
+    with LogReader(log) as reader:
+        need = map_estimate(reader, "em", MapParams()).memory
+    r, _ = run("map", log, "--mode", "em", "-o", tmp_path / "m.h5", "--max-memory", str(need * 0.9))
+    assert r.exit_code == 2 and not (tmp_path / "m.h5").exists()
+    assert "--max-memory" in r.output and "a coarser --resolution" in r.output
+    assert "the readings' share" in r.output and "standard mode" in r.output
+    r, _ = run("map", log, "--mode", "standard", "-o", tmp_path / "m.h5", "--max-memory", "1k")
+    assert r.exit_code == 2 and "a coarser --resolution" in r.output and "readings' share" not in r.output

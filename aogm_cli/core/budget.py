@@ -38,6 +38,7 @@ class Estimate:
     work: float
     unit: str
     detail: str = ""  # what the estimate is made of, for the message
+    advice: str = ""  # besides a higher --max-memory, what makes it fit ("a coarser --resolution ...")
 
 
 _active = Limits()
@@ -91,7 +92,8 @@ def check(estimate: Estimate, limits: Limits | None = None, *, file: str | None 
     if not estimate.memory <= limits.max_memory:
         raise InputError(
             f"{what} would need about {format_bytes(estimate.memory)} of memory "
-            f"(limit {format_bytes(limits.max_memory)}); use --max-memory to raise the limit", file=file)
+            f"(limit {format_bytes(limits.max_memory)}); use --max-memory to raise the limit"
+            + (f", or {estimate.advice}" if estimate.advice else ""), file=file)
     max_work = limits.work_limit(estimate.unit)
     if not estimate.work <= max_work:
         hours = estimate.work / DEFAULT_MAX_WORK[estimate.unit]

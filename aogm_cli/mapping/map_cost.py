@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from aogm_cli.core.budget import Estimate
+from aogm_cli.core.budget import Estimate, format_bytes
 from aogm_cli.mapping.params import MapParams
 from aogm_cli.mapping.pipeline import log_grid
 from aogm_cli.sensor_models.ray import is_narrow_beam
@@ -63,16 +63,25 @@ def map_estimate(reader, mode: str, params: MapParams) -> Estimate:
     templates = 0.0 if narrow and mode == "standard" else (2 * pad + 1) ** 2
     per_reading = float(cone_cells(np.array(mean_reach(reader, params, res) / res), sensor.beam_width))
     entries = readings * per_reading
-    memory = cells * BYTES_PER_CELL + padded * BYTES_PER_PADDED_CELL + templates * BYTES_PER_TEMPLATE_CELL
+    grid_bytes = cells * BYTES_PER_CELL + padded * BYTES_PER_PADDED_CELL + templates * BYTES_PER_TEMPLATE_CELL
+    reading_bytes = 0.0
     work = entries
     if mode != "standard":
-        memory += readings * BYTES_PER_READING
+        reading_bytes = readings * BYTES_PER_READING
         if not narrow and params.surface.enabled:
-            memory += readings * BYTES_PER_SHADOW + cells * BYTES_PER_SURFACE_CELL
+            reading_bytes += readings * BYTES_PER_SHADOW
+            grid_bytes += cells * BYTES_PER_SURFACE_CELL
         work += entries * params.em.max_sweeps
+    memory = grid_bytes + reading_bytes
     detail = (f"a {grid.height} x {grid.width} grid at {res:g} m, {readings:.3g} readings, "
               f"about {per_reading:.3g} cone cells each")
-    return Estimate(f"the {mode} map of this log", memory, work, "cell updates", detail)
+    # what else makes it fit: the grid's share shrinks with the square of a coarser resolution; the
+    # readings' share (em, adaptive) only in the standard mode or with fewer scans
+    advice = f"a coarser --resolution (the grid's share is {format_bytes(grid_bytes)}, a quarter of it at {2 * res:g} m)"
+    if reading_bytes:
+        advice += (f"; the readings' share ({format_bytes(reading_bytes)}) no resolution changes: map part of the "
+                   f"log at a time, or in the standard mode")
+    return Estimate(f"the {mode} map of this log", memory, work, "cell updates", detail, advice)
 
 
 def check_logs(tasks, params: MapParams, limits=None) -> None:
