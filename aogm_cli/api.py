@@ -17,8 +17,9 @@ __all__ = ["bundled_world", "check", "evaluate", "info", "load_log", "load_map",
 
 
 def bundled_world(name: str) -> Path:
-    """The path of a world file bundled in the source tree's ``worlds/`` folder (next to the
-    package), e.g. ``"corridor_door"``; ``worlds/README.md`` describes them.
+    """The path of a bundled world file, e.g. ``"corridor_door"``: the repository's ``worlds/``
+    folder, which the package links in as ``data/worlds`` and the wheel carries, so that it is
+    found from a checkout and after ``pip install`` alike; ``worlds/README.md`` describes them.
 
     Examples:
 
@@ -29,7 +30,7 @@ def bundled_world(name: str) -> Path:
     """
     import aogm_cli
 
-    return Path(aogm_cli.__file__).resolve().parents[1] / "worlds" / f"{name}.yaml"
+    return Path(aogm_cli.__file__).parent / "data" / "worlds" / f"{name}.yaml"
 
 
 def load_log(path: str | Path) -> Log:

@@ -2,15 +2,18 @@
 the top-level re-exports (loaded on first use) and the checks on keyword parameters."""
 
 import doctest
+import os
 import re
 import subprocess
 import sys
+import zipfile
 from pathlib import Path
 
 import pytest
 
 import aogm_cli
 import aogm_cli.api
+from aogm_cli.world.loader import load_world
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -74,3 +77,22 @@ def test_a_map_from_a_path_equals_the_map_of_the_log_in_memory(tmp_path):
     assert (from_file.probability == in_memory.probability).all()
     assert aogm_cli.evaluate(from_file, tmp_path / "door.h5")["accuracy"] == aogm_cli.evaluate(in_memory, log)["accuracy"]
     assert aogm_cli.check(tmp_path / "door.h5").as_dict()["scans"] == log.n_scans
+
+
+def test_bundled_worlds_travel_in_the_wheel(tmp_path):
+    # issue 30: after `pip install .`, outside the checkout, bundled_world() finds a world that
+    # simulates. Build the wheel, unpack it, and import the package from there in a fresh process
+    wheel_dir = tmp_path / "wheel"
+    subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", str(ROOT), "-w", str(wheel_dir)],
+                   check=True, cwd=tmp_path, capture_output=True)
+    (wheel,) = wheel_dir.glob("aogm-*.whl")
+    unpacked = tmp_path / "site"
+    with zipfile.ZipFile(wheel) as z:
+        z.extractall(unpacked)
+    script = ("import aogm_cli, sys; p = aogm_cli.bundled_world('corridor_door'); "
+              "assert str(p).startswith(sys.argv[1]), p; print(p)")
+    out = subprocess.run([sys.executable, "-c", script, str(unpacked)], check=True, cwd=tmp_path, capture_output=True,
+                         text=True, env={**os.environ, "PYTHONPATH": str(unpacked)}).stdout.strip()
+    world = Path(out)
+    assert world.is_file() and world.read_text() == (ROOT / "worlds" / "corridor_door.yaml").read_text()
+    assert load_world(world).name == "corridor_door"  # what `aogm simulate` reads and checks first
