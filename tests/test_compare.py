@@ -4,6 +4,7 @@ import dataclasses
 import hashlib
 import json
 import shutil
+from pathlib import Path
 
 import h5py
 import numpy as np
@@ -278,3 +279,14 @@ def test_results_are_small_records_unless_a_figure_or_maps_dir_needs_the_maps(lo
     assert [r.metrics for r in small] == [r.metrics for r in full]
     in_dir, _ = lib.run_comparison(entries, ("standard",), job, maps_dir=str(tmp_path), keep_maps=False)
     assert in_dir[0].map is not None and in_dir[0].map_file == str(tmp_path / f"{logs[0].stem}_standard.h5")
+
+
+def test_the_json_follows_its_schema(compared, require):
+    # docs/schemas/compare.schema.json: what scripts may rely on in `aogm compare --json`
+    jsonschema = require.module("jsonschema")
+    schema = json.loads((Path(__file__).resolve().parents[1] / "docs" / "schemas" / "compare.schema.json").read_text())
+    _, data, _ = compared
+    jsonschema.validate(data, schema)
+    broken = {**data, "results": [{**data["results"][0], "mode": "magic"}]}
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate(broken, schema)

@@ -170,3 +170,16 @@ def test_every_import_ends_with_the_check(tmp_path):
                               for k in range(3)))
     result = run("import", "carmen", carmen, "-o", tmp_path / "c.h5", "--max-range", "30")  # beam 2 reads 80 m
     assert result.exit_code == 0 and "warning: sensor 2: no valid echo in 3 scans" in result.output, result.output
+
+
+def test_the_json_follows_its_schema_with_and_without_warnings(door, tmp_path, require):
+    # docs/schemas/check.schema.json: what scripts may rely on in `aogm check --json`
+    jsonschema = require.module("jsonschema")
+    schema = json.loads((Path(__file__).resolve().parents[1] / "docs" / "schemas" / "check.schema.json").read_text())
+    clean, faulty = tmp_path / "door.h5", tmp_path / "bad.h5"
+    write_log(clean, door)
+    write_log(faulty, FAULTS[0][1](door))
+    for path in (clean, faulty):
+        jsonschema.validate(json.loads(run("check", path, "--json").output), schema)
+    with pytest.raises(jsonschema.ValidationError):
+        jsonschema.validate({"format": "aogm-check", "scans": -1}, schema)
