@@ -27,8 +27,9 @@ demo: $(STAMP)
 	  --maps-dir $(OUT)/maps --json $(OUT)/report.json --figure $(OUT)/report.png --quiet
 	@echo "table above; figure $(OUT)/report.png, JSON $(OUT)/report.json, maps in $(OUT)/maps/"
 
+# one pytest worker per core (pytest-xdist): the suite is CPU-bound numba and numpy
 test: $(STAMP)
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n auto
 
 # Property-based fuzzing (hypothesis, fixed seed) of world files and of damaged logs, maps and
 # detectors: FUZZ_EXAMPLES per file kind (make test runs 15); prints per kind the examples,
