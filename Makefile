@@ -7,7 +7,7 @@ OUT    := out
 SEED   := 1
 WORLDS := $(wildcard worlds/*.yaml)
 
-.PHONY: demo test bench lint install clean
+.PHONY: demo test bench lint install clean figure
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -83,6 +83,12 @@ detector: $(STAMP)
 	$(BIN)/aogm train $(patsubst worlds/%.yaml,$(OUT)/detector/%.h5,$(DETECTOR_WORLDS)) \
 	  $(foreach n,$(DETECTOR_VALIDATION),--validation-logs $(OUT)/detector/$(n).h5) \
 	  -o $(DETECTOR_OUT) --seed $(SEED) --quiet
+
+# The README's picture: corridor_door at seed 1, its truth and the three modes (docs/modes.png)
+figure: $(STAMP)
+	@mkdir -p $(OUT)
+	$(BIN)/aogm simulate worlds/corridor_door.yaml -o $(OUT)/figure_door.h5 --seed 1 --quiet
+	$(BIN)/aogm compare $(OUT)/figure_door.h5 --modes standard,em,adaptive --figure docs/modes.png --quiet
 
 clean:
 	rm -rf $(OUT) .pytest_cache .hypothesis

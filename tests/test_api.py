@@ -1,4 +1,4 @@
-"""aogm from Python (``aogm_cli.api``): its doctests, the README's "From Python" script as written,
+"""aogm from Python (``aogm_cli.api``): its doctests, docs/python.md's "From Python" script as written,
 the top-level re-exports (loaded on first use) and the checks on keyword parameters."""
 
 import doctest
@@ -31,7 +31,7 @@ def test_every_api_function_has_an_example():
 
 
 def readme_script() -> str:
-    section = (ROOT / "README.md").read_text().split("\n## From Python\n", 1)[1].split("\n## ", 1)[0]
+    section = (ROOT / "docs" / "python.md").read_text().split("\n## From Python\n", 1)[1].split("\n## ", 1)[0]
     blocks = re.findall(r"```python\n(.*?)```", section, re.S)
     assert len(blocks) == 1
     return blocks[0]

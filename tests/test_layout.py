@@ -1,4 +1,4 @@
-"""The package's layout: the layers of pyproject.toml hold (import-linter), the README's layout
+"""The package's layout: the layers of pyproject.toml hold (import-linter), docs/layout.md's layout
 tables name exactly those layers in that order, and every package and module is in one of them."""
 
 import re
@@ -22,8 +22,8 @@ def layer_names(contract: dict) -> list[str]:
 
 
 def readme_rows(heading: str, prefix: str) -> list[str]:
-    """The names in the first column of the README table under ``heading`` (``prefix`` stripped)."""
-    text = (ROOT / "README.md").read_text()
+    """The names in the first column of the docs/layout.md table under ``heading`` (``prefix`` stripped)."""
+    text = (ROOT / "docs" / "layout.md").read_text()
     section = text.split(heading, 1)[1].split("\n#", 1)[0]
     return [m.group(1) for m in re.finditer(rf"^\| `{re.escape(prefix)}([\w]+)(?:/|\.py)?` \|", section, re.M)]
 

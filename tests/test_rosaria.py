@@ -1,7 +1,7 @@
 """A Pioneer 3-DX under RosAria (issue 23): /RosAria/sonar clouds of 16 points whose 8 rear sonars
 are disabled (RosAria puts their points at the robot's origin), poses as nav_msgs/Odometry
 /RosAria/pose. The rear readings are stored as invalid and named in the summary, the standard map
-has no phantom wall along the path, ``--mounts p3dx`` is ARIA's table, the README's example runs as
+has no phantom wall along the path, ``--mounts p3dx`` is ARIA's table, docs/your-robot.md's example runs as
 written, and long imports show a progress bar on a terminal only."""
 
 from __future__ import annotations
@@ -148,7 +148,7 @@ def test_every_preset_reads_and_names_its_source_in_the_readme(preset, count):
     mounts, _ = load_mounts(preset)
     assert mounts.shape == (count, 3)
     assert np.all(np.hypot(mounts[:, 0], mounts[:, 1]) < 0.35)  # metres, not millimetres
-    readme = (ROOT / "README.md").read_text()
+    readme = (ROOT / "docs" / "your-robot.md").read_text()
     assert re.search(rf"`{preset}`[^\n]*\n?[^\n]*(ARIA|Player)", readme), preset
 
 
@@ -161,7 +161,7 @@ def test_an_unknown_preset_or_missing_file_names_the_option(bag, tmp_path):
 
 
 def test_the_readmes_p3dx_example_runs_as_written(pioneer, tmp_path, monkeypatch):
-    line = next(line.strip() for line in (ROOT / "README.md").read_text().splitlines()
+    line = next(line.strip() for line in (ROOT / "docs" / "your-robot.md").read_text().splitlines()
                 if line.strip().startswith("aogm import rosbag p3dx.bag"))
     args = shlex.split(line)
     assert args[args.index("--mounts") + 1] == "p3dx"
