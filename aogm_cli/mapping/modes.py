@@ -110,11 +110,10 @@ def warm_up(sensor: SensorSpec, params: MapParams, mode: str) -> None:
     log = tiny_log(sensor)
     map_in_mode(log, mode, params, ConstantDetector(True), "all")
     if mode != "standard":
-        one_sweep = dataclasses.replace(params, em=dataclasses.replace(params.em, max_sweeps=1))
-        map_in_mode(log, mode, one_sweep, ConstantDetector(True), "all")
-        # the deflected beams' kernels: the tiny log learns no specular angle (too few readings)
+        # stopped by the sweep limit, and with a specular angle given (the tiny log learns none: too
+        # few readings), so that the deflected beams' kernel runs too
         forward = dataclasses.replace(params.em.forward, specular_deg=30.0)
         learn = ",".join(k for k in params.calibration.learned if k != "specular_deg") or "sigma"
-        angled = dataclasses.replace(params, em=dataclasses.replace(params.em, forward=forward, max_sweeps=1),
-                                     calibration=dataclasses.replace(params.calibration, learn=learn))
-        map_in_mode(log, mode, angled, ConstantDetector(True), "all")
+        one_sweep = dataclasses.replace(params, em=dataclasses.replace(params.em, forward=forward, max_sweeps=1),
+                                        calibration=dataclasses.replace(params.calibration, learn=learn))
+        map_in_mode(log, mode, one_sweep, ConstantDetector(True), "all")

@@ -150,12 +150,13 @@ class CalibrationConfig:
     start_sigma: float = 0.1
     start_sweeps: int = 3  # the first (broad) EM run's sweep limit: its map only serves the first fit
     # specular_deg's passes: a reading passed a surface cell when its echo lies at least this far
-    # beyond it (nearer, the cell may be the same wall, which the standard map draws thick; at 0.15
-    # m the rough walls of corridor_door echo 0.28 -> 0.07 of the time from 0 to 90 deg, at 0.3 m
-    # 0.37 -> 0.47: rough walls echo at any angle, as simulated)
+    # beyond it (nearer, the cell may be the same wall, which the standard map draws thick;
+    # `aogm calibrate corridor_door.h5` with pass_margin 0.15: its rough walls echo 0.18 -> 0.14 of
+    # the time from 0 to 90 deg, with 0.3: 0.28 -> 0.50; both learn 90: rough walls echo at any
+    # angle, as simulated)
     pass_margin: float = 0.3
     # the specular angle is where the echo rate falls below this share of its head-on value
-    # (measured, EM at seed 1: 0.25 and 0.1 learn wider angles that deflect fewer beams, and give up
+    # (measured, EM at seed 1 with surface.core 0.25: 0.25 and 0.1 learn wider angles that deflect fewer beams, and give up
     # the gains of 0.5 on the *_real worlds and corridor_specular; corridor_specular_pioneer without
     # drift loses its corridor check at all three)
     specular_rate: float = 0.5

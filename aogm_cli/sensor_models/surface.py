@@ -37,10 +37,10 @@ class SurfaceConfig:
     head_on_deg: float = 20.0
     # a beam is deflected where the core of its cone (this share of its opening about the axis,
     # about the axis itself at 0.1) meets a surface at a grazing angle: a cone whose edge clips a
-    # door frame mostly passes the door. Measured (EM, seed 1): the whole cone (1.0) closed
-    # l_corridor's door a little (block 0.032 -> 0.048) and failed corridor_door_pioneer's door
-    # check; 0.5 -> 0.040; 0.25 -> 0.037; 0.1 -> 0.034. On the real 8-sonar log walls_kept is
-    # 0.943 at 0.25 and 0.955 at 0.1 (0.966 without deflections)
+    # door frame mostly passes the door. Measured (EM, seed 1, `aogm map --params` with
+    # `surface: {core: C}`): l_corridor's block 0.046 at 1.0 (the whole cone), 0.040 at 0.5,
+    # 0.037 at 0.25, 0.034 at 0.1; on the real 8-sonar log at 0.1 m (`aogm compare`) walls_kept
+    # 0.937 at 0.25 and 0.955 at 0.1
     core: float = 0.1
 
     def validate(self) -> SurfaceConfig:
@@ -174,7 +174,7 @@ def cos2_of(specular_deg: float) -> float:
 def hidden(normal, cos2, cell, row0, col0, width):
     """True when the flat ``cell`` is a surface cell that a reading from sensor cell (row0, col0)
     meets at more than the specular angle from its normal (cos^2 of that angle: ``cos2``): a
-    grazing pass, which returns no echo, so the reading says nothing of the cell before its echo."""
+    grazing pass, which returns no echo; the beam is deflected there (``shadow_ranges``)."""
     n_r = normal[0, cell]
     if not n_r == n_r:  # NaN: no surface there
         return False
