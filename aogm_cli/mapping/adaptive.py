@@ -64,7 +64,9 @@ def contested_cells(log: Log, grid, params: MapParams, log_odds: np.ndarray,
     map cannot explain them (walls that specular or multipath readings, too long, cleared).
     One more standard pass, with the inverse model's free evidence set to nothing (and the
     deflected beams, ``shadow``, stopped: they hit nothing)."""
-    inverse = dataclasses.replace(params.inverse_model, l_free=params.inverse_model.l0)
+    # Elfes' occupied arcs, whatever model the map uses (the exact model has no evidence of its own)
+    inverse = dataclasses.replace(params.inverse_model, l_free=params.inverse_model.l0,
+                                  model="elfes" if params.inverse_model.model == "exact" else params.inverse_model.model)
     cuts = None if shadow is None else shadow.reshape(np.shape(log.ranges))
     hits, _, seconds = standard_pass(log, grid, dataclasses.replace(params, inverse_model=inverse), cuts=cuts)
     return (hits - params.inverse_model.l0 >= params.adaptive.contested) & (log_odds <= 0), seconds

@@ -11,6 +11,7 @@ from typing import Any
 
 from aogm_cli.core.errors import InputError
 from aogm_cli.io.yamlfile import read_yaml
+from aogm_cli.sensor_models.exact_inverse import ExactModelConfig
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig
 from aogm_cli.sensor_models.inverse_model import InverseModelConfig
 from aogm_cli.sensor_models.surface import SurfaceConfig
@@ -229,11 +230,12 @@ class MapParams:
     adaptive: AdaptiveConfig = field(default_factory=AdaptiveConfig)
     calibration: CalibrationConfig = field(default_factory=CalibrationConfig)
     surface: SurfaceConfig = field(default_factory=SurfaceConfig)
+    exact: ExactModelConfig = field(default_factory=ExactModelConfig)
 
     def as_dict(self) -> dict:
         return {"resolution": self.resolution, "inverse_model": self.inverse_model.as_dict(), "em": self.em.as_dict(),
                 "adaptive": self.adaptive.as_dict(), "calibration": self.calibration.as_dict(),
-                "surface": self.surface.as_dict()}
+                "surface": self.surface.as_dict(), "exact": self.exact.as_dict()}
 
 
 SECTIONS = {
@@ -243,6 +245,7 @@ SECTIONS = {
     "adaptive": {f.name for f in dataclasses.fields(AdaptiveConfig)},
     "calibration": {f.name for f in dataclasses.fields(CalibrationConfig)},
     "surface": {f.name for f in dataclasses.fields(SurfaceConfig)},
+    "exact": {f.name for f in dataclasses.fields(ExactModelConfig)},
 }
 
 
@@ -254,7 +257,7 @@ def resolve_params(params_file: str | None = None, overrides: dict[str, dict[str
     if params_file:
         raw = read_yaml(params_file)[1] or {}
         if not isinstance(raw, dict):
-            raise InputError("expected a mapping with sections inverse_model, em, adaptive, calibration, surface and key resolution",
+            raise InputError("expected a mapping with sections inverse_model, em, adaptive, calibration, surface, exact and key resolution",
                              file=file)
     for key in raw:
         if key not in SECTIONS and key != "resolution":
@@ -308,7 +311,14 @@ def resolve_params(params_file: str | None = None, overrides: dict[str, dict[str
         return config.validate()
 
     surface = build("surface", surface_config)
+
+    def exact_config(values):
+        config = ExactModelConfig(**values)
+        check_field_types(config)
+        return config.validate()
+
+    exact = build("exact", exact_config)
     if (isinstance(resolution, bool) or not isinstance(resolution, (int, float)) or not math.isfinite(resolution)
             or not resolution > 0):
         raise InputError(f"expected a positive number (m per cell), got {resolution!r}", file=file, key="resolution")
-    return MapParams(float(resolution), inverse, em, adaptive, calibration, surface)
+    return MapParams(float(resolution), inverse, em, adaptive, calibration, surface, exact)

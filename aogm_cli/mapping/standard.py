@@ -16,6 +16,7 @@ from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import Log, SensorSpec
 from aogm_cli.core.occupancy_map import OccupancyMap
 from aogm_cli.mapping.beam import BeamMapper
+from aogm_cli.mapping.exact import ExactMapper, thinned
 from aogm_cli.mapping.params import MapParams
 from aogm_cli.mapping.pipeline import Progress, Timed, log_grid, params_json
 from aogm_cli.sensor_models.cone import (
@@ -28,6 +29,8 @@ from aogm_cli.sensor_models.cone import (
     range_search,
     reading_geometry,
 )
+from aogm_cli.sensor_models.exact_inverse import ExactModelConfig
+from aogm_cli.sensor_models.forward_model import ForwardModelConfig
 from aogm_cli.sensor_models.inverse_model import (
     InverseModelConfig,
     angular_profile,
@@ -168,9 +171,14 @@ class StandardMapper:
 
 
 def _mapper_for(sensor: SensorSpec, grid: GridSpec, config: InverseModelConfig, templates: ConeTemplates | None,
-                narrow: bool):
-    """Rays (``beam.BeamMapper``) for a ``narrow`` beam (``ray.is_narrow_beam``), else cone
-    templates (``StandardMapper``; ``templates`` is ignored for rays)."""
+                narrow: bool, models: tuple[ForwardModelConfig, ExactModelConfig] | None = None):
+    """The exact inverse model (``exact.ExactMapper``; ``models`` its forward model and settings,
+    defaults without) when ``config.model`` is "exact"; else rays (``beam.BeamMapper``) for a
+    ``narrow`` beam (``ray.is_narrow_beam``), else cone templates (``StandardMapper``;
+    ``templates`` is ignored for rays)."""
+    if config.model == "exact":
+        forward, exact = models or (ForwardModelConfig(), ExactModelConfig())
+        return ExactMapper(sensor, grid, exact, forward, templates)
     if narrow:
         return BeamMapper(sensor, grid, config)
     return StandardMapper(sensor, grid, config, templates=templates)
@@ -185,6 +193,7 @@ def standard_map(
     templates: ConeTemplates | None = None,
     narrow: bool | None = None,
     cuts: np.ndarray | None = None,
+    models: tuple[ForwardModelConfig, ExactModelConfig] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Standard log-odds map of logged scans: (log_odds float32 (H, W), observed bool (H, W)).
 
@@ -197,18 +206,29 @@ def standard_map(
     ``readings.cone_templates(grid, sensor)``; rays need none. ``narrow`` is
     ``ray.is_narrow_beam(sensor, grid.resolution)``, decided here unless the caller has.
     ``cuts`` ((scans, sensors) template ranges, cones only) stops deflected beams
-    (``StandardMapper.update``).
+    (``StandardMapper.update``). ``models``: the forward model the exact inverse model derives
+    from and its settings (``config.model`` "exact", or ``thin``: the map thinned by it,
+    ``exact.thinned``; its cones take ``echo_ranges``, a laser's too).
     """
     if narrow is None:
         narrow = is_narrow_beam(sensor, grid.resolution)
-    mapper = _mapper_for(sensor, grid, config, templates, narrow)
+    mapper = _mapper_for(sensor, grid, config, templates, narrow, models)
+    forward, exact = models or (ForwardModelConfig(), ExactModelConfig())
+    mappers = [mapper]
+    if exact.thin and config.model != "exact":
+        mappers.append(ExactMapper(sensor, grid, exact, forward))
     for start, _time, pose, ranges in chunks:
-        z = np.asarray(ranges, dtype=np.float32) if narrow else echo_ranges(ranges, grid).astype(np.float32)
-        if cuts is None:
-            mapper.update(pose, z)
-        else:
-            mapper.update(pose, z, cuts[start : start + len(pose)])
-    return mapper.result()
+        for m in mappers:
+            z = (np.asarray(ranges, dtype=np.float32) if narrow and not isinstance(m, ExactMapper)
+                 else echo_ranges(ranges, grid).astype(np.float32))
+            if cuts is None:
+                m.update(pose, z)
+            else:
+                m.update(pose, z, cuts[start : start + len(pose)])
+    log_odds, observed = mapper.result()
+    if len(mappers) > 1:
+        log_odds = thinned(log_odds, observed, mappers[1].result(), exact, config.clamp_min)
+    return log_odds, observed
 
 
 def standard_pass(log, grid: GridSpec, params: MapParams, chunk: int = 4096, chunks=None, cuts=None):
@@ -221,11 +241,12 @@ def standard_pass(log, grid: GridSpec, params: MapParams, chunk: int = 4096, chu
     """
     narrow = is_narrow_beam(log.sensor, grid.resolution)  # decided once, for the templates and both calls
     templates = None if narrow else cone_templates(grid, log.sensor, narrow=narrow)
-    standard_map([], log.sensor, grid, params.inverse_model, templates=templates, narrow=narrow)
+    models = (params.em.forward, params.exact)
+    standard_map([], log.sensor, grid, params.inverse_model, templates=templates, narrow=narrow, models=models)
     timed = Timed(log.chunks(chunk) if chunks is None else chunks)
     t0 = time.perf_counter()
     log_odds, observed = standard_map(timed, log.sensor, grid, params.inverse_model, templates=templates,
-                                      narrow=narrow, cuts=cuts)
+                                      narrow=narrow, cuts=cuts, models=models)
     seconds = time.perf_counter() - t0 - timed.io_seconds
     return log_odds, observed, seconds
 

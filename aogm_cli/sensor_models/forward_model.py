@@ -158,6 +158,16 @@ def gaussian_at(z, r, sigma, window):
     return 0.0
 
 
+@numba.njit(cache=True, inline="always")
+def cone_reach(z, cut, z_max, sigma, window):
+    """Compiled (z, limit) of a reading as the forward model takes it: z at most z_max (a longer
+    one, or +inf, is a max-range reading, whose cone reaches z_max), and the template range its
+    cone counts up to: ``window`` sigmas beyond z, at most z_max and the ``cut`` of a deflected beam."""
+    if not z < z_max:
+        return z_max, min(z_max, cut)
+    return z, min(min(z + window * sigma, z_max), cut)
+
+
 @numba.njit(cache=True)
 def cone_entries(r, z, limit, sigma, window):
     """How many of a template bin's entries (ranges ``r``, sorted) a reading's cone holds: those
@@ -384,11 +394,7 @@ def expectation_sums(tpl, flat, shape, readings, occupied, model, out):
     d = np.empty(ib.shape[0])
     gk = np.empty(ib.shape[0])
     for t in range(readings.z.shape[0]):
-        z = readings.z[t]
-        at_max = not z < z_max
-        if at_max:
-            z = z_max
-        limit = min(z_max if at_max else min(z + window * sigma, z_max), readings.limit[t])
+        z, limit = cone_reach(readings.z[t], readings.limit[t], z_max, sigma, window)
         row0 = readings.rows[t]
         col0 = readings.cols[t]
         n_obs = 0

@@ -13,7 +13,7 @@ import numpy as np
 
 from aogm_cli.core.errors import InputError
 
-MODELS = ("elfes", "constant")
+MODELS = ("elfes", "constant", "exact")  # exact: derived from the forward model (mapping.exact)
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,65 @@
+"""The exact inverse model on a log (``inverse_model.model: exact``, or ``exact.thin``): readings
+applied in log order, each cell independent as in Elfes' map, each reading's update computed from
+the forward model given the map so far (``sensor_models.exact_inverse``); and the thinned map."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from aogm_cli.core.grid import GridSpec
+from aogm_cli.core.log import SensorSpec
+from aogm_cli.sensor_models.cone import ConeTemplates, flat_offsets, reading_geometry
+from aogm_cli.sensor_models.exact_inverse import ExactModelConfig, cone_scratch, exact_inverse_updates
+from aogm_cli.sensor_models.forward_model import ExpectationReadings, ForwardModelConfig, deflect
+from aogm_cli.sensor_models.readings import forward_templates, reading_spans
+
+
+class ExactMapper:
+    """``update`` with chunks of scans (ranges as ``readings.echo_ranges`` gives them), then
+    ``result``, as ``standard.StandardMapper``; the cones are the forward model's (EM's), and
+    ``forward`` its parameters. The state is one flat float32 grid, -inf until observed; the
+    prior and the bounds are ``config``'s."""
+
+    def __init__(self, sensor: SensorSpec, grid: GridSpec, config: ExactModelConfig, forward: ForwardModelConfig,
+                 templates: ConeTemplates | None = None):
+        config.validate()
+        forward.validate()
+        self.sensor, self.grid, self.config = sensor, grid, config
+        self.templates = forward_templates(grid, sensor) if templates is None else templates
+        self.flat = flat_offsets(self.templates, grid.width)
+        self.model = (float(forward.p_rand), float(forward.p_max), float(forward.p_hit), float(forward.sigma),
+                      float(forward.window), float(sensor.max_range))
+        self.bounds = (-float(config.bound), float(config.bound), float(config.l0))
+        self.scratch = cone_scratch(self.templates)
+        self.state = np.full(grid.height * grid.width, -np.inf, dtype=np.float32)
+
+    def update(self, pose: np.ndarray, ranges: np.ndarray, cut: np.ndarray | None = None) -> None:
+        """Apply scans (pose (T, 3), ranges (T, S)) in order; a finite ``cut`` ((T, S) template
+        ranges) is a deflected beam (``forward_model.deflect``)."""
+        rows, cols, bins, valid, offset = reading_geometry(pose, self.sensor, self.grid, self.templates)
+        z = np.where(valid, np.asarray(ranges, dtype=np.float64), np.nan) + offset
+        z, limit = deflect(z.reshape(-1), None if cut is None else np.asarray(cut, dtype=np.float64).reshape(-1),
+                           self.sensor.max_range)
+        readings = ExpectationReadings(rows.reshape(-1).astype(np.int64), cols.reshape(-1).astype(np.int64),
+                                       bins.reshape(-1).astype(np.int64), z, limit)
+        for span in reading_spans(z.size):  # back in Python between spans, where a signal's handler runs
+            exact_inverse_updates(self.templates.kernel_arrays, self.flat, self.grid.shape, readings, self.state,
+                                  self.model, self.bounds, self.scratch, span)
+
+    def result(self) -> tuple[np.ndarray, np.ndarray]:
+        """(log_odds float32 (H, W), observed bool (H, W)); unobserved cells hold the prior l0."""
+        log_odds = self.state.reshape(self.grid.shape).copy()
+        observed = log_odds != -np.inf
+        log_odds[~observed] = np.float32(self.config.l0)
+        return log_odds, observed
+
+
+def thinned(log_odds: np.ndarray, observed: np.ndarray, exact: tuple[np.ndarray, np.ndarray], config: ExactModelConfig,
+            free: float) -> np.ndarray:
+    """The standard map ``log_odds`` (H, W) with the observed cells that the exact model's map
+    ``exact`` (its log-odds and observed) holds free, more than ``config.margin`` below its
+    prior, set to ``free`` (the standard map's free clamp)."""
+    exact_log_odds, exact_observed = exact
+    out = log_odds.copy()
+    out[observed & exact_observed & (exact_log_odds < config.l0 - config.margin)] = np.float32(free)
+    return out

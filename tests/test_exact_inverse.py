@@ -1,0 +1,122 @@
+"""The exact inverse sensor model: the linear-time posterior against brute force over every binary
+map of a cone, a hand-computed two-cell cone, and one reading on a tiny grid (free before the echo,
+occupied at it, untouched behind an obstacle the map believes in)."""
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+
+from aogm_cli.core.grid import GridSpec
+from aogm_cli.core.log import SensorSpec
+from aogm_cli.mapping.exact import ExactMapper
+from aogm_cli.mapping.standard import standard_map
+from aogm_cli.sensor_models.exact_inverse import ExactModelConfig, cone_log_ratios
+from aogm_cli.sensor_models.forward_model import ForwardModelConfig
+from aogm_cli.sensor_models.inverse_model import InverseModelConfig
+
+
+def ratios(p, g, g0, p_hit, const, w):
+    n = len(p)
+    out = np.empty(n)
+    cone_log_ratios(np.asarray(p, float), np.asarray(g, float), g0, p_hit, const, w, n,
+                    np.empty(n), np.empty(n), np.empty(n), out)
+    return out
+
+
+def brute_force(p, g, g0, p_hit, const, w):
+    """log p(z | m_j = 1) - log p(z | m_j = 0) by summing the forward model over every binary map."""
+    n = len(p)
+    mass = np.zeros((n, 2))
+    for m in itertools.product((0, 1), repeat=n):
+        s, qk = 0.0, 1.0
+        for i in range(n):
+            if m[i]:
+                s += qk * p_hit * g[i]
+                qk *= 1.0 - p_hit
+        likelihood = const + w * (s + qk * g0)
+        for j in range(n):
+            others = np.prod([p[i] if m[i] else 1.0 - p[i] for i in range(n) if i != j])
+            mass[j, m[j]] += others * likelihood
+    return np.log(mass[:, 1]) - np.log(mass[:, 0])
+
+
+def test_linear_pass_matches_brute_force_on_random_cones():
+    rng = np.random.default_rng(7)
+    for _ in range(100):
+        n = int(rng.integers(1, 8))
+        p = rng.uniform(0.01, 0.99, n)
+        g = rng.uniform(0.0, 12.0, n) * (rng.random(n) < 0.6)  # cells before the window have g = 0
+        args = (p, g, rng.uniform(0.0, 5.0), rng.uniform(0.1, 0.99), rng.uniform(1e-3, 0.1), rng.uniform(0.5, 0.95))
+        np.testing.assert_allclose(ratios(*args), brute_force(*args), rtol=0, atol=1e-9)
+
+
+def test_two_cells_by_hand():
+    # cell 1 before the window (g = 0), cell 2 at the echo (g = 10); G0 = 0, C = 0.01, w = 0.85
+    p_hit, const, w = 0.5, 0.01, 0.85
+    out = ratios([0.5, 0.5], [0.0, 10.0], 0.0, p_hit, const, w)
+    # cell 1: occupied, it is detected first (no echo there) or missed (q = 0.5) before cell 2,
+    # whose expected term is 0.5 * 0.5 * 10 = 2.5: S(1) = 0.5 * 2.5, S(0) = 2.5
+    assert out[0] == pytest.approx(math.log(const + w * 1.25) - math.log(const + w * 2.5))
+    # cell 2: A = 1 - 0.25 = 0.75 of the beams reach it; S(1) = 0.75 * 0.5 * 10, S(0) = 0
+    assert out[1] == pytest.approx(math.log(const + w * 3.75) - math.log(const))
+
+
+SONAR = SensorSpec(mount=np.zeros((1, 3)), beam_width=math.radians(30.0), min_range=0.05, max_range=2.0)
+GRID = GridSpec(0.0, 0.0, 0.1, 11, 21)
+FORWARD = ForwardModelConfig(sigma=0.05, p_rand=0.05, p_hit=0.7, p_max=0.1)
+CONFIG = ExactModelConfig(prior=1.0 / (1.0 + math.exp(2.0)))  # log-odds -2
+MODELS = (FORWARD, CONFIG)
+
+
+def one_reading(z, prior=None):
+    mapper = ExactMapper(SONAR, GRID, CONFIG, FORWARD)
+    if prior is not None:
+        mapper.state[:] = prior.reshape(-1)
+    # the sensor at the centre of cell (row 5, col 1), pointing +x
+    mapper.update(np.array([[0.15, 0.55, 0.0]]), np.array([[z]], dtype=np.float32))
+    return mapper.result()
+
+
+def test_one_reading_frees_before_the_echo_and_marks_it():
+    log_odds, observed = one_reading(1.0)  # a template range: the echo at col 11
+    axis = log_odds[5]
+    assert observed[5, 1:13].all() and not observed[5, 15:].any()  # the cone ends 4 sigma beyond z
+    assert (axis[2:9] < CONFIG.l0).all()  # free before the echo
+    # occupied at it; the echo's credit shared by the arc's five cells at that range
+    assert axis[11] > CONFIG.l0 + 0.5
+    assert axis[11] == log_odds.max() and (log_odds[3:8, 11] > CONFIG.l0 + 0.5).all()
+
+
+def test_nothing_learned_behind_a_believed_obstacle():
+    prior = np.full(GRID.shape, -np.inf, dtype=np.float32)
+    prior[:, 6] = 4.0  # a wall the map is sure of, at col 6
+    log_odds, _ = one_reading(1.0, prior)
+    # the reading most likely echoed off the wall... or is random: cells behind it barely move
+    assert abs(log_odds[5, 8] - CONFIG.l0) < abs(one_reading(1.0)[0][5, 8] - CONFIG.l0)
+
+
+def test_the_standard_mode_takes_the_exact_model():
+    ranges = np.full((1, 1), 1.0, dtype=np.float32)
+    chunks = [(0, np.zeros(1), np.array([[0.15, 0.55, 0.0]]), ranges)]
+    log_odds, observed = standard_map(chunks, SONAR, GRID, InverseModelConfig(model="exact"), models=MODELS)
+    assert observed[5, 5] and log_odds[5, 5] < CONFIG.l0
+
+
+def test_thinning_frees_what_the_exact_model_holds_free(corridor_door_log, tmp_path):
+    # the map file records the section; the thinned map frees cells of the Elfes map's walls'
+    # thickness and keeps its walls (a cell the exact model is unsure of keeps Elfes' value)
+    from aogm_cli.mapping.modes import map_file
+    from aogm_cli.mapping.params import resolve_params
+
+    params = tmp_path / "p.yaml"
+    params.write_text("exact: {thin: true}\n")
+    plain = map_file(corridor_door_log, "standard", resolve_params())
+    thin = map_file(corridor_door_log, "standard", resolve_params(str(params)))
+    assert thin.params["exact"]["thin"] is True and plain.params["exact"]["thin"] is False
+    assert (thin.observed == plain.observed).all()
+    changed = thin.probability != plain.probability
+    assert changed.any() and (thin.probability[changed] < plain.probability[changed]).all()
+    walls = plain.probability > 0.5
+    assert 0.2 < (thin.probability[walls] > 0.5).mean() < 0.95
