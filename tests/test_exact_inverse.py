@@ -12,7 +12,7 @@ from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import SensorSpec
 from aogm_cli.mapping.exact import ExactMapper
 from aogm_cli.mapping.standard import standard_map
-from aogm_cli.sensor_models.exact_inverse import ExactModelConfig, cone_log_ratios
+from aogm_cli.sensor_models.exact_inverse import ExactModelConfig, cone_ratios
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig
 from aogm_cli.sensor_models.inverse_model import InverseModelConfig
 
@@ -20,9 +20,9 @@ from aogm_cli.sensor_models.inverse_model import InverseModelConfig
 def ratios(p, g, g0, p_hit, const, w):
     n = len(p)
     out = np.empty(n)
-    cone_log_ratios(np.asarray(p, float), np.asarray(g, float), g0, p_hit, const, w, n,
-                    np.empty(n), np.empty(n), np.empty(n), out)
-    return out
+    cone_ratios(np.asarray(p, float), np.asarray(g, float), g0, p_hit, const, w, n,
+                np.empty(n), np.empty(n), np.empty(n), out)
+    return np.log(out)
 
 
 def brute_force(p, g, g0, p_hit, const, w):
@@ -72,8 +72,8 @@ MODELS = (FORWARD, CONFIG)
 
 def one_reading(z, prior=None):
     mapper = ExactMapper(SONAR, GRID, CONFIG, FORWARD)
-    if prior is not None:
-        mapper.state[:] = prior.reshape(-1)
+    if prior is not None:  # log-odds, -inf unobserved
+        mapper.state[:] = np.where(np.isfinite(prior), 1.0 / (1.0 + np.exp(-prior)), -1.0).reshape(-1)
     # the sensor at the centre of cell (row 5, col 1), pointing +x
     mapper.update(np.array([[0.15, 0.55, 0.0]]), np.array([[z]], dtype=np.float32))
     return mapper.result()

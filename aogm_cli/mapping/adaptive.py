@@ -31,7 +31,7 @@ from aogm_cli.mapping.em import (
 )
 from aogm_cli.mapping.params import EMConfig, MapParams
 from aogm_cli.mapping.pipeline import Progress, log_grid, params_json
-from aogm_cli.mapping.standard import standard_pass
+from aogm_cli.mapping.standard import standard_pass, thin_pass
 from aogm_cli.sensor_models.ray import axis_counts, is_narrow_beam
 from aogm_cli.sensor_models.readings import LaidOutReadings, cone_bands, lay_out_readings
 
@@ -132,6 +132,8 @@ def map_adaptive(log, params: MapParams, detector, detector_name: str = "package
     t_readings = time.perf_counter() - t0
     angle = deflected(whole, run, params, log_odds, observed)
     run, params, log_odds, observed = angle.run, angle.params, angle.log_odds, angle.observed
+    log_odds, t_thin = thin_pass(whole, grid, params, log_odds, observed,
+                                 None if run.shadow is None else run.shadow.reshape(np.shape(whole.ranges)))
 
     t0 = time.perf_counter()
     flags = detector.flag(whole.ranges, sensor.max_range).reshape(-1)
@@ -149,8 +151,8 @@ def map_adaptive(log, params: MapParams, detector, detector_name: str = "package
     t0 = time.perf_counter()
     probability, observed = joined_view(log_odds, observed, outcome, clusters, whole, grid, params)
     seconds = outcome.seconds if outcome else {"index": 0.0, "calibration": 0.0, "sweeps": 0.0}
-    phases = {"standard": t_standard, "readings": t_readings, "deflections": angle.seconds, "detector": t_detect,
-              "clusters": t_cluster,
+    phases = {"standard": t_standard, "readings": t_readings, "deflections": angle.seconds,
+              **({"thinning": t_thin} if t_thin else {}), "detector": t_detect, "clusters": t_cluster,
               **seconds, "view": time.perf_counter() - t0}
     stats = {
         "clusters": n_clusters,

@@ -23,7 +23,7 @@ from aogm_cli.mapping import em_kernels as K
 from aogm_cli.mapping.calibration import em_with_model, incidence_at, sample_readings
 from aogm_cli.mapping.params import EMConfig, MapParams
 from aogm_cli.mapping.pipeline import Progress, log_grid, params_json
-from aogm_cli.mapping.standard import probability_from_log_odds, standard_pass
+from aogm_cli.mapping.standard import probability_from_log_odds, standard_pass, thin_pass
 from aogm_cli.sensor_models.cone import flat_offsets
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig, cone_limits, reading_constants
 from aogm_cli.sensor_models.ray import is_narrow_beam
@@ -474,13 +474,16 @@ def map_em(log, params: MapParams, progress: Progress | None = None) -> Occupanc
     t_readings = time.perf_counter() - t0
     angle = deflected(whole, run, params, log_odds, observed)
     run, params, log_odds, observed = angle.run, angle.params, angle.log_odds, angle.observed
+    log_odds, t_thin = thin_pass(whole, grid, params, log_odds, observed,
+                                 None if run.shadow is None else run.shadow.reshape(np.shape(whole.ranges)))
     start = (log_odds > 0).reshape(-1) if params.em.start == "standard" else np.zeros(grid.height * grid.width, bool)
     occupied = np.ascontiguousarray(start)
     problems = whole_log_problems(run, templates, grid, log.sensor.max_range)
     outcome = em_with_phases(run, occupied, params, problems, progress=progress, incidence=angle.incidence)
     t0 = time.perf_counter()
     probability, observed = em_view(log_odds, observed, outcome, grid, whole.pose, log.sensor, params)
-    phases = {"standard": t_standard, "readings": t_readings, "deflections": angle.seconds, **outcome.seconds,
+    phases = {"standard": t_standard, "readings": t_readings, "deflections": angle.seconds,
+              **({"thinning": t_thin} if t_thin else {}), **outcome.seconds,
               "view": time.perf_counter() - t0}
     return OccupancyMap(
         grid=grid,

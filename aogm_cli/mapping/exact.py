@@ -4,6 +4,8 @@ the forward model given the map so far (``sensor_models.exact_inverse``); and th
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from aogm_cli.core.grid import GridSpec
@@ -17,8 +19,8 @@ from aogm_cli.sensor_models.readings import forward_templates, reading_spans
 class ExactMapper:
     """``update`` with chunks of scans (ranges as ``readings.echo_ranges`` gives them), then
     ``result``, as ``standard.StandardMapper``; the cones are the forward model's (EM's), and
-    ``forward`` its parameters. The state is one flat float32 grid, -inf until observed; the
-    prior and the bounds are ``config``'s."""
+    ``forward`` its parameters. The state is one flat float32 grid of probabilities, -1 until
+    observed; the prior and the bounds are ``config``'s."""
 
     def __init__(self, sensor: SensorSpec, grid: GridSpec, config: ExactModelConfig, forward: ForwardModelConfig,
                  templates: ConeTemplates | None = None):
@@ -29,9 +31,9 @@ class ExactMapper:
         self.flat = flat_offsets(self.templates, grid.width)
         self.model = (float(forward.p_rand), float(forward.p_max), float(forward.p_hit), float(forward.sigma),
                       float(forward.window), float(sensor.max_range))
-        self.bounds = (-float(config.bound), float(config.bound), float(config.l0))
+        self.bounds = (_sigmoid(-config.bound), _sigmoid(config.bound), float(config.prior))
         self.scratch = cone_scratch(self.templates)
-        self.state = np.full(grid.height * grid.width, -np.inf, dtype=np.float32)
+        self.state = np.full(grid.height * grid.width, -1.0, dtype=np.float32)
 
     def update(self, pose: np.ndarray, ranges: np.ndarray, cut: np.ndarray | None = None) -> None:
         """Apply scans (pose (T, 3), ranges (T, S)) in order; a finite ``cut`` ((T, S) template
@@ -48,10 +50,14 @@ class ExactMapper:
 
     def result(self) -> tuple[np.ndarray, np.ndarray]:
         """(log_odds float32 (H, W), observed bool (H, W)); unobserved cells hold the prior l0."""
-        log_odds = self.state.reshape(self.grid.shape).copy()
-        observed = log_odds != -np.inf
-        log_odds[~observed] = np.float32(self.config.l0)
-        return log_odds, observed
+        p = self.state.reshape(self.grid.shape).astype(np.float64)
+        observed = p >= 0.0
+        p[~observed] = self.config.prior
+        return np.log(p / (1.0 - p)).astype(np.float32), observed
+
+
+def _sigmoid(x: float) -> float:
+    return 1.0 / (1.0 + math.exp(-x))
 
 
 def thinned(log_odds: np.ndarray, observed: np.ndarray, exact: tuple[np.ndarray, np.ndarray], config: ExactModelConfig,

@@ -4,6 +4,7 @@ reading and every cell of its cone, adds ``inverse_model - l0`` and clamps; narr
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import time
 from collections.abc import Iterable
@@ -207,28 +208,19 @@ def standard_map(
     ``ray.is_narrow_beam(sensor, grid.resolution)``, decided here unless the caller has.
     ``cuts`` ((scans, sensors) template ranges, cones only) stops deflected beams
     (``StandardMapper.update``). ``models``: the forward model the exact inverse model derives
-    from and its settings (``config.model`` "exact", or ``thin``: the map thinned by it,
-    ``exact.thinned``; its cones take ``echo_ranges``, a laser's too).
+    from and its settings (``config.model`` "exact"; its cones take ``echo_ranges``, a laser's too).
     """
     if narrow is None:
         narrow = is_narrow_beam(sensor, grid.resolution)
     mapper = _mapper_for(sensor, grid, config, templates, narrow, models)
-    forward, exact = models or (ForwardModelConfig(), ExactModelConfig())
-    mappers = [mapper]
-    if exact.thin and config.model != "exact":
-        mappers.append(ExactMapper(sensor, grid, exact, forward))
+    exact = isinstance(mapper, ExactMapper)
     for start, _time, pose, ranges in chunks:
-        for m in mappers:
-            z = (np.asarray(ranges, dtype=np.float32) if narrow and not isinstance(m, ExactMapper)
-                 else echo_ranges(ranges, grid).astype(np.float32))
-            if cuts is None:
-                m.update(pose, z)
-            else:
-                m.update(pose, z, cuts[start : start + len(pose)])
-    log_odds, observed = mapper.result()
-    if len(mappers) > 1:
-        log_odds = thinned(log_odds, observed, mappers[1].result(), exact, config.clamp_min)
-    return log_odds, observed
+        z = np.asarray(ranges, dtype=np.float32) if narrow and not exact else echo_ranges(ranges, grid).astype(np.float32)
+        if cuts is None:
+            mapper.update(pose, z)
+        else:
+            mapper.update(pose, z, cuts[start : start + len(pose)])
+    return mapper.result()
 
 
 def standard_pass(log, grid: GridSpec, params: MapParams, chunk: int = 4096, chunks=None, cuts=None):
@@ -251,6 +243,19 @@ def standard_pass(log, grid: GridSpec, params: MapParams, chunk: int = 4096, chu
     return log_odds, observed, seconds
 
 
+def thin_pass(log, grid: GridSpec, params: MapParams, log_odds: np.ndarray, observed: np.ndarray, cuts=None):
+    """(the standard map ``log_odds`` thinned by the exact inverse model, ``exact.thinned``,
+    seconds): one more pass over ``log`` with the exact model (``cuts`` stop deflected beams)
+    when ``params.exact.thin``; else ``log_odds`` as it is. The em and adaptive modes thin the
+    map after the angle of incidence is learned from the map as Elfes' model makes it."""
+    if not params.exact.thin or params.inverse_model.model == "exact":
+        return log_odds, 0.0
+    exact_params = dataclasses.replace(params, inverse_model=dataclasses.replace(params.inverse_model, model="exact"))
+    exact_log_odds, exact_observed, seconds = standard_pass(log, grid, exact_params, cuts=cuts)
+    return thinned(log_odds, observed, (exact_log_odds, exact_observed), params.exact,
+                   params.inverse_model.clamp_min), seconds
+
+
 def truth_grid_map(log: Log) -> tuple[np.ndarray, np.ndarray]:
     """(probability float32, observed bool) (H, W): the standard map of an in-memory simulated
     ``log`` on its truth grid at the default inverse model, in one chunk: the map the detector's
@@ -265,16 +270,17 @@ def map_standard(log, params: MapParams, progress: Progress | None = None) -> Oc
     """The standard mode: the log-odds map of a log source (``pipeline``), streamed."""
     grid = log_grid(log, params.resolution)
     log_odds, observed, seconds = standard_pass(log, grid, params)
+    log_odds, t_thin = thin_pass(log, grid, params, log_odds, observed)
     return OccupancyMap(
         grid=grid,
         probability=probability_from_log_odds(log_odds, observed),
         observed=observed,
         mode="standard",
         params=params_json(params, "standard", grid),
-        runtime_s=seconds,
+        runtime_s=seconds + t_thin,
         source_log=log.path,
         log_odds=log_odds,
-        stats={"scans": log.n_scans, "phase_seconds": {"standard": seconds}},
+        stats={"scans": log.n_scans, "phase_seconds": {"standard": seconds, **({"thinning": t_thin} if t_thin else {})}},
     )
 
 

@@ -71,18 +71,19 @@ class ExactModelConfig:
 #     A_j = prod_{i<j} a_i,   U_j = sum_{i<j} P_i p_hit g_i A_i,
 #     R_j = sum_{i>j} P_i p_hit g_i prod_{j<l<i} a_l + G0 prod_{l>j} a_l,
 #
-# one pass forward (A, U) and one backward (R). The reading moves cell j's log-odds by
-# log p(z | m_j = 1) - log p(z | m_j = 0): negative before the echo (the more so the likelier the
-# beam got that far), positive at it, near 0 behind a likely obstacle, which the beam did not
-# reach. No division: a cell believed occupied (a_j -> 1 - p_hit) costs nothing extra.
+# one pass forward (A, U) and one backward (R). The reading multiplies cell j's odds by
+# p(z | m_j = 1) / p(z | m_j = 0): below 1 before the echo (the more so the likelier the beam got
+# that far), above at it, near 1 behind a likely obstacle, which the beam did not reach. No division
+# by a_j: a cell believed occupied (a_j -> 1 - p_hit) costs nothing extra; and the map is kept as
+# probabilities, so that a cell's update is a few multiplications (no exp or log per cell).
 
 
 @numba.njit(cache=True)
-def cone_log_ratios(p, g, g0, p_hit, const, w, n, a, u, r, out):
-    """out[j] = log p(z | m_j = 1) - log p(z | m_j = 0) for the first ``n`` cells of one cone:
-    ``p`` their occupancy, ``g`` their Gaussians N(z; d_j, sigma^2), ``g0`` G0 = N(z; z_max),
-    ``const`` C and ``w`` of the reading (see the comment above). ``a``, ``u``, ``r`` are scratch
-    of at least ``n`` entries."""
+def cone_ratios(p, g, g0, p_hit, const, w, n, a, u, r, out):
+    """out[j] = p(z | m_j = 1) / p(z | m_j = 0) for the first ``n`` cells of one cone: ``p``
+    their occupancy, ``g`` their Gaussians N(z; d_j, sigma^2), ``g0`` G0 = N(z; z_max), ``const``
+    C and ``w`` of the reading (see the comment above). ``a``, ``u``, ``r`` are scratch of at
+    least ``n`` entries."""
     q = 1.0 - p_hit
     prod = 1.0
     acc = 0.0
@@ -98,15 +99,16 @@ def cone_log_ratios(p, g, g0, p_hit, const, w, n, a, u, r, out):
     for j in range(n):
         s1 = u[j] + a[j] * (p_hit * g[j] + q * r[j])
         s0 = u[j] + a[j] * r[j]
-        out[j] = math.log(const + w * s1) - math.log(const + w * s0)
+        out[j] = (const + w * s1) / (const + w * s0)
 
 
 # _nrt=False (as the standard kernel): nothing is allocated per reading; the scratch comes in
 @numba.njit(cache=True, _nrt=False)
 def exact_inverse_updates(tpl, flat, shape, readings, state, model, bounds, scratch, span):
-    """Apply readings t = span[0] .. span[1] - 1 in order to the flat float32 log-odds ``state``
-    (-inf: not yet observed, taken as ``bounds[2]``, the prior l0): each cell of the reading's cone
-    moves by its ``cone_log_ratios`` under the map as it stands, clamped to [bounds[0], bounds[1]].
+    """Apply readings t = span[0] .. span[1] - 1 in order to the flat float32 occupancy ``state``
+    (negative: not yet observed, taken as ``bounds[2]``, the prior): each cell of the reading's
+    cone has its odds multiplied by its ``cone_ratios`` under the map as it stands, its
+    probability then clamped to [bounds[0], bounds[1]].
 
     ``tpl``, ``flat``: the forward templates and their ``cone.FlatOffsets`` for the grid's width;
     ``shape`` (height, width) of the grid ``state`` covers (plus the spare cells ``cone_flat_cells``
@@ -115,7 +117,7 @@ def exact_inverse_updates(tpl, flat, shape, readings, state, model, bounds, scra
     p_hit, sigma, window, z_max); ``scratch`` (``cone_scratch``): (int32 (longest template,),
     float64 (7, same): p, g, a, u, r, out and the cells' flat ids)."""
     p_rand, p_max, p_hit, sigma, window, z_max = model
-    clamp_min, clamp_max, l0 = bounds
+    p_min, p_max_clamp, prior = bounds
     height, width = shape
     n_cells = height * width
     ext = tpl.extent
@@ -150,23 +152,18 @@ def exact_inverse_updates(tpl, flat, shape, readings, state, model, bounds, scra
             if c >= n_cells:  # outside the grid: no cell, no term
                 continue
             v = state[c]
-            if v == -np.inf:
-                v = l0
-            p[n] = 1.0 / (1.0 + math.exp(-v))
+            p[n] = prior if v < 0.0 else v
             g[n] = gaussian_at(z, rk[j], sigma, window)
             where[n] = c
             n += 1
         u0 = (z - z_max) / sigma
         g0 = math.exp(-0.5 * u0 * u0) / (math.sqrt(2.0 * math.pi) * sigma)
         const = p_rand / z_max + p_max * g0
-        cone_log_ratios(p, g, g0, p_hit, const, w, n, a, u, r, out)
+        cone_ratios(p, g, g0, p_hit, const, w, n, a, u, r, out)
         for j in range(n):
             c = np.int64(where[j])
-            v = state[c]
-            if v == -np.inf:
-                v = l0
-            v += out[j]
-            state[c] = min(max(v, clamp_min), clamp_max)
+            odds = p[j] * out[j]
+            state[c] = min(max(odds / (odds + 1.0 - p[j]), p_min), p_max_clamp)
 
 
 def cone_scratch(templates) -> tuple[np.ndarray, np.ndarray]:
