@@ -80,6 +80,31 @@ def test_expectation_sums_match_the_reference_reading_by_reading():
     assert out[F.E_RANDOM] + out[F.E_DROPOUT] + out[F.E_DETECTED] + out[F.E_MISSED] == pytest.approx(n)
 
 
+def test_obstacles_found_at_a_broader_sigma_give_the_same_sums():
+    # a fit keeps the cones' obstacles while sigma changes: found at 0.12, summed at 0.04 and 0.09,
+    # they must give what a fresh walk of every cone gives, bit for bit
+    tpl = build_cone_templates(GRID.resolution, math.radians(25), Z_MAX)
+    rng = np.random.default_rng(5)
+    n = 60
+    rows, cols = rng.integers(20, 40, n), rng.integers(2, 20, n)
+    bins = tpl.heading_bin(rng.uniform(-0.6, 0.6, n))
+    z = rng.uniform(0.3, 2.6, n)
+    z[::9] = np.inf
+    readings = F.ExpectationReadings(rows, cols, bins, z, np.where(np.arange(n) % 5 == 0, 1.5, np.inf))
+    flat, occupied = flat_offsets(tpl, GRID.width), wall_map()
+    broad = F.find_obstacles(tpl.kernel_arrays, flat, GRID.shape, readings, occupied, 0.12, 4.0, Z_MAX)
+    for sigma in (0.04, 0.09):
+        model = (0.07, 0.05, 0.6, sigma, 4.0, Z_MAX)
+        fresh, kept = np.zeros(F.E_SIZE), np.zeros(F.E_SIZE)
+        F.expectation_sums(tpl.kernel_arrays, flat, GRID.shape, readings, occupied, model, fresh)
+        used = F.expectation_sums(tpl.kernel_arrays, flat, GRID.shape, readings, occupied, model, kept, broad)
+        assert used is broad and (fresh == kept).all() and fresh[F.E_DETECTED] > 0
+    # a sigma beyond the obstacles' finds them again
+    model = (0.07, 0.05, 0.6, 0.2, 4.0, Z_MAX)
+    assert F.expectation_sums(tpl.kernel_arrays, flat, GRID.shape, readings, occupied, model, np.zeros(F.E_SIZE),
+                              broad).sigma == 0.2
+
+
 def test_one_reading_one_obstacle_by_hand():
     """A reading at 1.0 m, the only obstacle of its cone at the axis cell 1.0 m away."""
     grid = GridSpec(0.0, 0.0, 0.1, 21, 41)

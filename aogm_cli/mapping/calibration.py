@@ -37,16 +37,17 @@ def sample_readings(run: LaidOutReadings, max_readings: int, select: np.ndarray 
 
 
 def expectations(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: np.ndarray,
-                 forward: F.ForwardModelConfig) -> np.ndarray:
+                 forward: F.ForwardModelConfig, obstacles: F.Obstacles | None = None) -> tuple[np.ndarray, F.Obstacles]:
     """The summed expectations (``forward_model.expectation_sums``, E_SIZE,) of ``readings``
-    under the flat binary map ``occupied`` and the model ``forward``."""
+    under the flat binary map ``occupied`` and the model ``forward``, and the cones' obstacles
+    they were taken from (pass them back while the map stands: ``fit_at_map``)."""
     out = np.zeros(F.E_SIZE)
     templates = run.templates
     model = (float(forward.p_rand), float(forward.p_max), float(forward.p_hit), float(forward.sigma),
              float(forward.window), float(run.sensor.max_range))
-    F.expectation_sums(templates.kernel_arrays, flat_offsets(templates, run.grid.width), run.grid.shape, readings,
-                       np.ascontiguousarray(occupied, dtype=np.bool_), model, out)
-    return out
+    obstacles = F.expectation_sums(templates.kernel_arrays, flat_offsets(templates, run.grid.width), run.grid.shape,
+                                   readings, np.ascontiguousarray(occupied, dtype=np.bool_), model, out, obstacles)
+    return out, obstacles
 
 
 def m_step(sums: np.ndarray, forward: F.ForwardModelConfig, config: CalibrationConfig) -> F.ForwardModelConfig:
@@ -93,14 +94,22 @@ def fit_at_map(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: 
     """EM over the parameters alone at a fixed map: expectations, then ``m_step``, until the
     parameters settle (``config.tolerance`` / 10) or ``config.fit_iterations``."""
     iterations = 0
+    # the cones' obstacles found once, at twice the starting sigma, serve every iteration whose
+    # sigma stays below (found again if it grows beyond): the same sums, one cone walk
+    templates = run.templates
+    obstacles = F.find_obstacles(templates.kernel_arrays, flat_offsets(templates, run.grid.width), run.grid.shape,
+                                 readings, np.ascontiguousarray(occupied, dtype=np.bool_),
+                                 min(2.0 * forward.sigma, config.sigma_max), float(forward.window),
+                                 float(run.sensor.max_range))
     while iterations < config.fit_iterations:
         iterations += 1
-        new = m_step(expectations(run, readings, occupied, forward), forward, config)
+        sums, obstacles = expectations(run, readings, occupied, forward, obstacles)
+        new = m_step(sums, forward, config)
         done = settled(new, forward, config.tolerance / 10)
         forward = new
         if done:
             break
-    sums = expectations(run, readings, occupied, forward)
+    sums, _ = expectations(run, readings, occupied, forward, obstacles)
     n = max(sums[F.E_READINGS], 1.0)
     return Fit(forward, iterations, float(sums[F.E_LOGLIK] / n))
 

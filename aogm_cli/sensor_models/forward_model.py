@@ -372,32 +372,24 @@ class ExpectationReadings(NamedTuple):
 
 
 @numba.njit(cache=True)
-def expectation_sums(tpl, flat, shape, readings, occupied, model, out):
-    """The expectations of every reading's cause under the flat binary map ``occupied``, summed.
-
-    ``model`` is (p_rand, p_max, p_hit, sigma, window, z_max). For reading t with obstacles
-    d_1 <= ... <= d_K in its cone (cells up to z + window sigma; up to z_max for a max-range
-    reading), the causes' posteriors are e_rand = (p_rand / z_max) / p, e_dropout = p_max G0 / p,
-    e_k = w q^(k-1) p_hit g(d_k) / p and e_0 = w q^K G0 / p, with p = p(z_t | m) (the comment
-    above ``ForwardModelConfig``). Adds into ``out`` (E_SIZE,): readings, sum of log p, sum e_rand, sum e_dropout,
-    sum_k e_k (detections), sum_k k e_k + K e_0 (obstacles examined), sum_k e_k (z - d_k)^2,
-    sum e_0 (no obstacle detected).
-    """
-    p_rand, p_max, p_hit, sigma, window, z_max = model
+def cone_obstacles(tpl, flat, shape, readings, occupied, sigma, window, z_max, ptr, d):
+    """The template ranges of the occupied cells (flat bool ``occupied``) of each reading's cone
+    as the forward model takes it at ``sigma`` (``cone_reach``, ``cone_entries``), in range order,
+    reading t's at ``d[ptr[t]:ptr[t + 1]]``. Returns how many there are: when ``d`` holds fewer,
+    only ``ptr`` is right (call again with ``d`` that large). ``expectation_sums`` at any sigma up
+    to this one needs only these (``obstacle_sums``)."""
     height, width = shape
-    q = 1.0 - p_hit
-    w = 1.0 - p_rand - p_max
     n_cells = height * width
     ext = tpl.extent
     ranges = tpl.ranges
+    room = d.shape[0]
     ib = np.empty(int(np.max(np.diff(tpl.offsets))), dtype=np.int32)
-    d = np.empty(ib.shape[0])
-    gk = np.empty(ib.shape[0])
+    ptr[0] = 0
     for t in range(readings.z.shape[0]):
         z, limit = cone_reach(readings.z[t], readings.limit[t], z_max, sigma, window)
         row0 = readings.rows[t]
         col0 = readings.cols[t]
-        n_obs = 0
+        n = ptr[t]
         if not (row0 + ext < 0 or row0 - ext >= height or col0 + ext < 0 or col0 - ext >= width):
             k = readings.bins[t]
             b = tpl.base_bin[k]
@@ -407,15 +399,35 @@ def expectation_sums(tpl, flat, shape, readings, occupied, model, out):
             for j in range(m):
                 c = ib[j]
                 if c < n_cells and occupied[c]:
-                    d[n_obs] = r[j]
-                    gk[n_obs] = gaussian_at(z, r[j], sigma, window)
-                    n_obs += 1
+                    if n < room:
+                        d[n] = r[j]
+                    n += 1
+        ptr[t + 1] = n
+    return ptr[readings.z.shape[0]]
+
+
+@numba.njit(cache=True)
+def obstacle_sums(ptr, d, readings, model, out):
+    """``expectation_sums`` from each reading's obstacles (``cone_obstacles``, found at a sigma at
+    least ``model``'s): those beyond the cone at this sigma are left out as ``cone_entries`` leaves
+    them (beyond the limit, or beyond z where the Gaussian is 0: beyond z it only falls)."""
+    p_rand, p_max, p_hit, sigma, window, z_max = model
+    q = 1.0 - p_hit
+    w = 1.0 - p_rand - p_max
+    for t in range(readings.z.shape[0]):
+        z, limit = cone_reach(readings.z[t], readings.limit[t], z_max, sigma, window)
+        lo = ptr[t]
+        n_obs = 0
+        for i in range(lo, ptr[t + 1]):
+            if d[i] > limit or (d[i] > z and gaussian_at(z, d[i], sigma, window) == 0.0):
+                break
+            n_obs += 1
         u0 = (z - z_max) / sigma
         g0 = math.exp(-0.5 * u0 * u0) / (math.sqrt(2.0 * math.pi) * sigma)
         s = 0.0
         qk = 1.0
         for i in range(n_obs):
-            s += qk * p_hit * gk[i]
+            s += qk * p_hit * gaussian_at(z, d[lo + i], sigma, window)
             qk *= q
         s_miss = qk * g0
         p = p_rand / z_max + p_max * g0 + w * (s + s_miss)
@@ -428,8 +440,49 @@ def expectation_sums(tpl, flat, shape, readings, occupied, model, out):
         out[E_EXAMINED] += n_obs * e_miss
         qk = 1.0
         for i in range(n_obs):
-            e = w * qk * p_hit * gk[i] / p
+            e = w * qk * p_hit * gaussian_at(z, d[lo + i], sigma, window) / p
             qk *= q
             out[E_DETECTED] += e
             out[E_EXAMINED] += (i + 1) * e
-            out[E_SQUARED] += e * (z - d[i]) ** 2
+            out[E_SQUARED] += e * (z - d[lo + i]) ** 2
+
+
+class Obstacles(NamedTuple):
+    """``cone_obstacles``' result: per reading, its cone's obstacles, found at ``sigma``."""
+
+    ptr: np.ndarray
+    d: np.ndarray
+    sigma: float
+
+
+def find_obstacles(tpl, flat, shape, readings, occupied, sigma: float, window: float, z_max: float) -> Obstacles:
+    """``cone_obstacles`` of ``readings`` at ``sigma``: one walk of every cone, two when there
+    are more than 16 obstacles per reading."""
+    ptr = np.zeros(readings.z.shape[0] + 1, dtype=np.int64)
+    d = np.empty(16 * readings.z.shape[0] + 1)
+    n = cone_obstacles(tpl, flat, shape, readings, occupied, sigma, window, z_max, ptr, d)
+    if n > d.shape[0]:
+        d = np.empty(n)
+        cone_obstacles(tpl, flat, shape, readings, occupied, sigma, window, z_max, ptr, d)
+    return Obstacles(ptr, d, float(sigma))
+
+
+def expectation_sums(tpl, flat, shape, readings, occupied, model, out, obstacles: Obstacles | None = None) -> Obstacles:
+    """The expectations of every reading's cause under the flat binary map ``occupied``, summed.
+
+    ``model`` is (p_rand, p_max, p_hit, sigma, window, z_max). For reading t with obstacles
+    d_1 <= ... <= d_K in its cone (cells up to z + window sigma; up to z_max for a max-range
+    reading), the causes' posteriors are e_rand = (p_rand / z_max) / p, e_dropout = p_max G0 / p,
+    e_k = w q^(k-1) p_hit g(d_k) / p and e_0 = w q^K G0 / p, with p = p(z_t | m) (the comment
+    above ``ForwardModelConfig``). Adds into ``out`` (E_SIZE,): readings, sum of log p, sum e_rand, sum e_dropout,
+    sum_k e_k (detections), sum_k k e_k + K e_0 (obstacles examined), sum_k e_k (z - d_k)^2,
+    sum e_0 (no obstacle detected).
+
+    ``obstacles`` found at a sigma at least ``model``'s are used as they are (else found here);
+    returns those used, for the next call (a fit changes sigma, not the map).
+    """
+    sigma, window, z_max = model[3], model[4], model[5]
+    if obstacles is None or obstacles.sigma < sigma:
+        obstacles = find_obstacles(tpl, flat, shape, readings, occupied, sigma, window, z_max)
+    obstacle_sums(obstacles.ptr, obstacles.d, readings, model, out)
+    return obstacles
