@@ -17,6 +17,7 @@ from aogm_cli.core.grid import GridSpec
 from aogm_cli.evaluation.metrics import map_metrics, run_checks
 from aogm_cli.evaluation.planner import planner_metrics
 from aogm_cli.io.logfile import read_log, write_log
+from aogm_cli.io.mapfile import read_map_file
 from aogm_cli.mapping import modes
 from aogm_cli.simulation.sonar import simulate
 from aogm_cli.world.loader import parse_world
@@ -290,3 +291,25 @@ def test_the_json_follows_its_schema(compared, require):
     broken = {**data, "results": [{**data["results"][0], "mode": "magic"}]}
     with pytest.raises(jsonschema.ValidationError):
         jsonschema.validate(broken, schema)
+
+
+def test_em_and_adaptive_share_one_calibration_per_log(logs, tmp_path):
+    # with calibration on, the adaptive map takes the model the em map of the same log learned;
+    # its file says so, records calibration as configured (on), and is taken back by --resume
+    maps = tmp_path / "maps"
+    args = ["compare", logs[0], "--modes", "em,adaptive", "--maps-dir", maps, "--json", tmp_path / "r.json", "-q"]
+    result = run(*args)
+    assert result.exit_code == 0, result.output
+    em, adaptive = (read_map_file(maps / f"door_1_{mode}.h5") for mode in ("em", "adaptive"))
+    assert "made_by" not in em.stats["calibration"] and adaptive.stats["calibration"]["made_by"] == "em"
+    assert adaptive.stats["calibration"]["final"] == em.stats["calibration"]["final"]
+    for key, value in em.stats["calibration"]["final"].items():
+        assert adaptive.params["em"][key] == value
+    assert adaptive.params["calibration"]["enabled"] is True
+    assert "calibration" not in adaptive.stats["phase_seconds"] or adaptive.stats["phase_seconds"]["calibration"] < 1e-3
+    again = run(*args[:-1], "--resume")  # not quiet: it says what it took
+    assert again.exit_code == 0 and "resume: 2 map(s)" in again.output, again.output
+    # alone (or with --no-calibrate) each mode does its own
+    alone = run("compare", logs[0], "--modes", "adaptive", "--maps-dir", tmp_path / "alone", "-q")
+    assert alone.exit_code == 0, alone.output
+    assert "made_by" not in read_map_file(tmp_path / "alone" / "door_1_adaptive.h5").stats["calibration"]

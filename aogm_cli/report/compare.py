@@ -5,6 +5,7 @@ worker processes or on a Dask cluster, and gather their results (``io.results.Mo
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 from collections.abc import Callable
@@ -25,7 +26,7 @@ from aogm_cli.io.mapfile import is_map_file, map_bytes, read_map_file, read_map_
 from aogm_cli.io.provenance import file_sha256, read_provenance
 from aogm_cli.io.results import ModeResult, json_bytes
 from aogm_cli.mapping.params import MapParams
-from aogm_cli.report.scoring import CompareJob, ScoredLog, map_and_score, score_map
+from aogm_cli.report.scoring import CompareJob, ScoredLog, map_and_score, map_and_score_calibrated_once, score_map
 from aogm_cli.report.table import csv_bytes
 
 
@@ -192,6 +193,9 @@ def check_map_holdout(m: OccupancyMap, holdout: HoldoutSplit | None, path: str) 
     raise InputError(f"{found}; expected {expected}", file=path, key="--holdout")
 
 
+SHARED = ("em", "adaptive")  # the modes one task maps with one calibration (``compute_maps``)
+
+
 def run_comparison(entries: list[LogEntry], modes: tuple[str, ...], job: CompareJob, jobs: int = 1,
                    scheduler: str | None = None, maps_dir: str | None = None, keep_maps: bool = True,
                    on_map: Callable[[int, str, ModeResult], None] | None = None) -> tuple[list[ModeResult], list[Failure]]:
@@ -238,9 +242,30 @@ def compute_maps(entries: list[LogEntry], tasks: list[tuple[int, str]], job: Com
     results and the tasks that failed (keyed (log index, mode)); a failed task does not stop the
     others. ``on_map`` is called in this process as each result comes in (in order of completion)."""
     identity = detector_identity(job.detector) if any(mode == "adaptive" for _, mode in tasks) else None
-    work = [Task((i, mode), map_and_score, (job, entries[i].path, entries[i].world, mode, identity, keep_maps))
-            for i, mode in tasks]
-    return run_tasks(work, jobs, scheduler, on_done=(lambda key, r: on_map(key[0], key[1], r)) if on_map else None)
+    # with calibration on, a log's em and adaptive maps are one task that calibrates once
+    # (``map_and_score_calibrated_once``), keyed (log index, ("em", "adaptive"))
+    once = {i for i, mode in tasks if mode == "em" and (i, "adaptive") in tasks} if job.params.calibration.enabled else set()
+    work = []
+    for i, mode in tasks:
+        e = entries[i]
+        if i in once and mode == "em":
+            work.append(Task((i, SHARED), map_and_score_calibrated_once, (job, e.path, e.world, identity, keep_maps)))
+        elif not (i in once and mode == "adaptive"):
+            work.append(Task((i, mode), map_and_score, (job, e.path, e.world, mode, identity, keep_maps)))
+
+    def each(key, value):
+        """(key, result) per mode of a task's outcome."""
+        return list(zip(((key[0], m) for m in key[1]), value, strict=True)) if key[1] == SHARED else [(key, value)]
+
+    def done(key, value):
+        for (i, mode), result in each(key, value):
+            on_map(i, mode, result)
+
+    results, failed = run_tasks(work, jobs, scheduler, on_done=done if on_map else None)
+    expanded = {k: v for key, value in results.items() for k, v in each(key, value)}
+    failures = [dataclasses.replace(f, key=(f.key[0], m)) for f in failed
+                for m in (f.key[1] if f.key[1] == SHARED else (f.key[1],))]
+    return expanded, failures
 
 
 def resume_maps(entries: list[LogEntry], modes: tuple[str, ...], maps_dir: str, job: CompareJob) -> list[str]:

@@ -91,6 +91,39 @@ def map_and_score(job: CompareJob, path: str, world: str, mode: str, identity: d
     return result
 
 
+def calibrated_params(params: MapParams, record: dict) -> MapParams:
+    """``params`` with the forward model a calibration learned (its record's ``final`` values,
+    the specular angle included) and calibration off: a map made with them learns nothing more."""
+    forward = dataclasses.replace(params.em.forward, **{k: float(v) for k, v in record["final"].items()})
+    return dataclasses.replace(params, em=dataclasses.replace(params.em, forward=forward),
+                               calibration=dataclasses.replace(params.calibration, enabled=False))
+
+
+def map_and_score_calibrated_once(job: CompareJob, path: str, world: str, identity: dict | None,
+                                  keep_map: bool) -> list[ModeResult]:
+    """The em and the adaptive map of one log with one calibration (``aogm compare`` when it
+    compares both with calibration on): the em map learns the forward model (``map_and_score``),
+    the adaptive map is made with what it learned (``calibrated_params``). The adaptive map
+    records the calibration as configured (on) and, in ``stats["calibration"]``, the em map's
+    record with ``"made_by": "em"``; the seconds it took are not in the adaptive map's runtime
+    but in ``stats["untimed_seconds"]["calibration"]``."""
+    em = map_and_score(job, path, world, "em", identity, True)
+    record = em.calibration
+    if record is None or "final" not in record:  # nothing learned (no reading to fit): calibrate as usual
+        adaptive = map_and_score(job, path, world, "adaptive", identity, True)
+    else:
+        m = map_one(dataclasses.replace(job, params=calibrated_params(job.params, record)), path, "adaptive")
+        m.params["calibration"] = job.params.calibration.as_dict()
+        m.stats["calibration"] = {**record, "made_by": "em"}
+        m.stats.setdefault("untimed_seconds", {})["calibration"] = em.map.stats["phase_seconds"].get("calibration", 0.0)
+        with LogReader(path) as reader:
+            truth = reader.truth()
+        adaptive = score_map(ScoredLog(path, world, truth), "adaptive", m, job, identity=identity)
+    if not keep_map:
+        em.map = adaptive.map = None
+    return [em, adaptive]
+
+
 def score_map(log: ScoredLog, mode: str, m: OccupancyMap, job: CompareJob, map_file: str | None = None,
               identity: dict | None = None, standard: OccupancyMap | None = None) -> ModeResult:
     """The ``ModeResult`` of map ``m`` of ``log`` in ``mode``: metrics against the truth; without
