@@ -129,7 +129,9 @@ def test_a_signal_during_em_sweeps_ends_the_map_within_seconds(data, tmp_path):
 @pytest.mark.parametrize("sig, group", [(signal.SIGTERM, False), (signal.SIGINT, True)])
 def test_compare_with_two_jobs_ends_its_workers(data, tmp_path, sig, group):
     os.symlink(data / "long.h5", tmp_path / "long.h5")
-    args = ["compare", "long.h5", "--modes", "em,adaptive", "--jobs", "2", "--maps-dir", "maps", "--json", "r.json"]
+    # --no-calibrate: em and adaptive are two tasks (calibrated, a log's two maps are one task)
+    args = ["compare", "long.h5", "--modes", "em,adaptive", "--no-calibrate", "--jobs", "2", "--maps-dir", "maps",
+            "--json", "r.json"]
     res = interrupt(args, tmp_path, sig, 3.0, group=group, processes=3)  # the parent and its two workers
     check_interrupted(res, sig, tmp_path, ["maps", "r.json"])
     assert "Traceback" not in res.stdout
@@ -137,7 +139,7 @@ def test_compare_with_two_jobs_ends_its_workers(data, tmp_path, sig, group):
 
 def test_compare_workers_die_with_a_killed_parent(data, tmp_path):
     os.symlink(data / "long.h5", tmp_path / "long.h5")
-    cmd = [sys.executable, "-m", "aogm_cli", "compare", "long.h5", "--modes", "em,adaptive", "--jobs", "2"]
+    cmd = [sys.executable, "-m", "aogm_cli", "compare", "long.h5", "--modes", "em,adaptive", "--no-calibrate", "--jobs", "2"]
     proc = subprocess.Popen(cmd, cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     time.sleep(3.0)
     assert wait_for_processes(tmp_path, 3) == 3  # the parent and its two workers
