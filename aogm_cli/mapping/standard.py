@@ -247,8 +247,10 @@ def thin_pass(log, grid: GridSpec, params: MapParams, log_odds: np.ndarray, obse
     """(the standard map ``log_odds`` thinned by the exact inverse model, ``exact.thinned``,
     seconds): one more pass over ``log`` with the exact model (``cuts`` stop deflected beams)
     when ``params.exact.thin``; else ``log_odds`` as it is. The em and adaptive modes thin the
-    map after the angle of incidence is learned from the map as Elfes' model makes it."""
-    if not params.exact.thin or params.inverse_model.model == "exact":
+    map after the angle of incidence is learned from the map as Elfes' model makes it. A narrow
+    beam's map (rays, which draw walls one cell thick) is not thinned: on the intel laser log the
+    thinned map's held-out AUC fell from 0.965 to 0.809."""
+    if not params.exact.thin or params.inverse_model.model == "exact" or is_narrow_beam(log.sensor, grid.resolution):
         return log_odds, 0.0
     exact_params = dataclasses.replace(params, inverse_model=dataclasses.replace(params.inverse_model, model="exact"))
     exact_log_odds, exact_observed, seconds = standard_pass(log, grid, exact_params, cuts=cuts)
