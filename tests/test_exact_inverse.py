@@ -120,3 +120,17 @@ def test_thinning_frees_what_the_exact_model_holds_free(corridor_door_log, tmp_p
     assert changed.any() and (thin.probability[changed] < plain.probability[changed]).all()
     walls = plain.probability > 0.5
     assert 0.2 < (thin.probability[walls] > 0.5).mean() < 0.95
+
+
+def test_map_takes_the_exact_model_by_option(corridor_door_log, tmp_path):
+    from click.testing import CliRunner
+
+    from aogm_cli.cli import main
+    from aogm_cli.io.mapfile import read_map_file
+
+    out = tmp_path / "m.h5"
+    result = CliRunner().invoke(main, ["map", str(corridor_door_log), "--mode", "standard", "--model", "exact",
+                                       "-o", str(out), "-q"])
+    assert result.exit_code == 0, result.output
+    m = read_map_file(out)
+    assert m.params["inverse_model"]["model"] == "exact" and m.observed.any()

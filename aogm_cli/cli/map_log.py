@@ -26,7 +26,7 @@ from aogm_cli.sensor_models.inverse_model import InverseModelConfig
 
 # (option, section, key, type, help); defaults are read from the config dataclasses
 PARAMETER_OPTIONS = (
-    ("--model", "inverse_model", "model", click.Choice(["elfes", "constant"]), "Inverse model."),
+    ("--model", "inverse_model", "model", click.Choice(["elfes", "constant", "exact"]), "Inverse model (exact: derived from the forward model)."),
     ("--l-occ", "inverse_model", "l_occ", float, "Log-odds of the occupied arc."),
     ("--l-free", "inverse_model", "l_free", float, "Log-odds of the free region."),
     ("--clamp-min", "inverse_model", "clamp_min", float, "Lower log-odds clamp."),
