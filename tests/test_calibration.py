@@ -248,3 +248,33 @@ def test_calibration_maps_the_whole_log_once_and_part_of_it_before(corridor_door
         assert np.array_equal(np.flatnonzero(subset.reshape(scans, -1)[:, 0]), np.arange(0, scans, 2))
         assert sweeps == config.fit_sweeps
     assert calls[-1][1] == EMConfig().max_sweeps and record["final_em"]["em_sweeps"] == 1
+
+
+def test_a_long_log_calibrates_on_runs_of_consecutive_scans(corridor_door_log):
+    """Beyond calibration.max_scans, the rounds map (and the fits take) CAL_BLOCKS runs of
+    consecutive scans spread over the log, every n-th scan of them; the final EM maps every scan."""
+    from aogm_cli.io.logfile import LogReader
+    from aogm_cli.mapping.params import EMConfig
+    from aogm_cli.mapping.pipeline import log_grid
+    from aogm_cli.sensor_models.readings import lay_out_readings
+
+    with LogReader(corridor_door_log) as reader:
+        log, grid = reader.read(), log_grid(reader, 0.05)
+    run_ = lay_out_readings(log.pose, log.ranges, log.sensor, grid)
+    scans, width = log.ranges.shape
+    calls = []
+
+    def em_step(config, occupied, subset):
+        calls.append(None if subset is None else subset.reshape(scans, width)[:, 0].copy())
+        return 1.0, 1, "result"
+
+    config = CalibrationConfig(rounds=2, max_scans=40, subsample=1)
+    _, _, record = C.calibrated_em(run_, np.zeros(grid.height * grid.width, dtype=bool), EMConfig(), config, em_step)
+    blocks = calls[1]  # the second round: every scan of the runs (subsample 1)
+    starts = np.flatnonzero(np.diff(np.concatenate([[0], blocks.astype(int)])) == 1)
+    assert blocks.sum() == 40 and len(starts) == C.CAL_BLOCKS and starts[0] == 0 and starts[-1] == scans - 10
+    assert np.array_equal(calls[0], blocks & (np.arange(scans) % config.start_subsample == 0))  # the broad map
+    assert calls[-1] is None and "4 runs of 10 consecutive scans" in record["fitted_at"]
+    assert record["readings_used"] <= 40 * width
+    # a log within max_scans is left whole
+    assert C._scan_blocks(run_, scans) is None

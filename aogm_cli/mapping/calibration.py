@@ -19,6 +19,7 @@ from aogm_cli.sensor_models.readings import LaidOutReadings
 from aogm_cli.sensor_models.surface import INCIDENCE_BINS, incidence_counts, specular_angle
 
 LEARNED = ("sigma", "p_rand", "p_hit", "p_max")  # the forward model's parameters calibration sets
+CAL_BLOCKS = 4  # a long log's calibration maps this many runs of consecutive scans (``_scan_blocks``)
 
 
 def sample_readings(run: LaidOutReadings, max_readings: int, select: np.ndarray | None = None) -> F.ExpectationReadings:
@@ -167,11 +168,16 @@ def calibrated_em(run: LaidOutReadings, occupied: np.ndarray, em: EMConfig, conf
     Returns (the EM config the final map was made with, the last EM result, the record: the
     starting values, per round the fitted values, the mean log-likelihood of the sample at the
     fit and EM's objective and sweeps, and the final map's EM objective and sweeps)."""
+    blocks = _scan_blocks(run, config.max_scans)
+    if blocks is not None:  # a long log: the rounds map (and fit on) blocks of its scans only
+        select = blocks if select is None else select & blocks
     readings = sample_readings(run, config.max_readings, select)
-    scans, first_scans = _every_nth_scan(run, config.subsample), _every_nth_scan(run, config.start_subsample)
+    scans, first_scans = (_and(_every_nth_scan(run, n), blocks) for n in (config.subsample, config.start_subsample))
     start = occupied.copy()
     record = {"initial": model_values(em.forward), "readings_used": int(readings.z.shape[0]),
-              "fitted_at": f"1 scan in {config.start_subsample}, then 1 in {config.subsample}", "rounds": []}
+              "fitted_at": f"1 scan in {config.start_subsample}, then 1 in {config.subsample}"
+              + ("" if blocks is None else f", of {CAL_BLOCKS} runs of {config.max_scans // CAL_BLOCKS} consecutive scans"),
+              "rounds": []}
     used = dataclasses.replace(em, forward=dataclasses.replace(em.forward, sigma=max(em.forward.sigma, config.start_sigma)))
     step = dataclasses.replace(used, max_sweeps=min(em.max_sweeps, config.start_sweeps))
     entry = {"round": 0, **model_values(used.forward)}
@@ -195,6 +201,27 @@ def calibrated_em(run: LaidOutReadings, occupied: np.ndarray, em: EMConfig, conf
     record["final"] = model_values(used.forward)
     record["final_em"] = {"em_objective": float(objective), "em_sweeps": int(sweeps)}
     return used, result, record
+
+
+def _scan_blocks(run: LaidOutReadings, max_scans: int) -> np.ndarray | None:
+    """A bool mask over ``run``'s readings marking ``max_scans`` of its scans in ``CAL_BLOCKS``
+    runs of consecutive scans spread evenly over the log (None: the log has no more scans than
+    that). Consecutive scans keep the readings' density where the blocks are, so that the fits
+    see the walls as every scan draws them (every n-th scan instead broadens sigma)."""
+    scans, width = run.ranges.shape
+    if scans <= max_scans:
+        return None
+    size = max_scans // CAL_BLOCKS
+    starts = np.linspace(0, scans - size, CAL_BLOCKS).astype(int)
+    keep = np.zeros(scans, dtype=bool)
+    for a in starts:
+        keep[a : a + size] = True
+    return np.repeat(keep, width)
+
+
+def _and(a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray | None:
+    """Both masks (None: all)."""
+    return b if a is None else a if b is None else a & b
 
 
 def _every_nth_scan(run: LaidOutReadings, n: int) -> np.ndarray | None:
