@@ -20,7 +20,8 @@ from aogm_cli.sensor_models.surface import SurfaceConfig
 def check_field_types(config) -> None:
     """Raise ``InputError(key=<field>)`` unless each field of the dataclass ``config`` has its
     declared type: float fields a finite number (not a bool), int fields a whole number (not a
-    bool, not 2.5 or 2.0), str fields a string. Nested dataclasses are left to their own check."""
+    bool, not 2.5 or 2.0), str fields a string, bool fields true or false. Nested dataclasses are
+    left to their own check."""
     for f in dataclasses.fields(config):
         kind = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", "")
         v = getattr(config, f.name)
@@ -30,6 +31,8 @@ def check_field_types(config) -> None:
             raise InputError(f"expected a whole number, got {v!r}", key=f.name)
         if kind == "str" and not isinstance(v, str):
             raise InputError(f"expected a string, got {v!r}", key=f.name)
+        if kind == "bool" and not isinstance(v, bool):
+            raise InputError(f"expected true or false, got {v!r}", key=f.name)
 
 
 @dataclass(frozen=True)
@@ -188,8 +191,6 @@ class CalibrationConfig:
 
     def validate(self) -> CalibrationConfig:
         check_field_types(self)
-        if not isinstance(self.enabled, bool):
-            raise InputError(f"expected true or false, got {self.enabled!r}", key="enabled")
         unknown = set(self.learned) - {"sigma", "p_rand", "p_hit", "p_max", "specular_deg"}
         if unknown or not self.learned:
             raise InputError("expected a comma-separated list of sigma, p_rand, p_hit, p_max, specular_deg, "
@@ -298,12 +299,15 @@ def resolve_params(params_file: str | None = None, overrides: dict[str, dict[str
         except (TypeError, ValueError) as exc:
             raise InputError(f"invalid value: {exc}", file=file, key=section) from None
 
-    def inverse_model(values):
-        config = InverseModelConfig(**values)
-        check_field_types(config)
-        return config.validate()
+    def checked(kind):
+        """A section's config of dataclass ``kind``: its fields' types, then its own checks."""
+        def make(values):
+            config = kind(**values)
+            check_field_types(config)
+            return config.validate()
+        return make
 
-    inverse = build("inverse_model", inverse_model)
+    inverse = build("inverse_model", checked(InverseModelConfig))
     em = build(
         "em",
         lambda v: EMConfig(
@@ -313,19 +317,8 @@ def resolve_params(params_file: str | None = None, overrides: dict[str, dict[str
     )
     adaptive = build("adaptive", lambda v: AdaptiveConfig(**v).validate())
     calibration = build("calibration", lambda v: CalibrationConfig(**v).validate())
-    def surface_config(values):
-        config = SurfaceConfig(**values)
-        check_field_types(config)
-        return config.validate()
-
-    surface = build("surface", surface_config)
-
-    def exact_config(values):
-        config = ExactModelConfig(**values)
-        check_field_types(config)
-        return config.validate()
-
-    exact = build("exact", exact_config)
+    surface = build("surface", checked(SurfaceConfig))
+    exact = build("exact", checked(ExactModelConfig))
     if (isinstance(resolution, bool) or not isinstance(resolution, (int, float)) or not math.isfinite(resolution)
             or not resolution > 0):
         raise InputError(f"expected a positive number (m per cell), got {resolution!r}", file=file, key="resolution")

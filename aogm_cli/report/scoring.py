@@ -82,13 +82,17 @@ def map_and_score(job: CompareJob, path: str, world: str, mode: str, identity: d
     a log without truth also gets its standard map made here for the planner's comparison).
     ``identity``: this run's detector (``io.detectorfile.detector_identity``). The map comes back
     only with ``keep_map``, so that a cluster's results are small records."""
-    m = map_one(job, path, mode)
-    with LogReader(path) as reader:
-        truth = reader.truth()
-    result = score_map(ScoredLog(path, world, truth), mode, m, job, identity=identity)
+    result = scored(job, path, world, mode, map_one(job, path, mode), identity)
     if not keep_map:
         result.map = None
     return result
+
+
+def scored(job: CompareJob, path: str, world: str, mode: str, m: OccupancyMap, identity: dict | None) -> ModeResult:
+    """``score_map`` of the map ``m`` made here of the log at ``path``, its truth read from the log."""
+    with LogReader(path) as reader:
+        truth = reader.truth()
+    return score_map(ScoredLog(path, world, truth), mode, m, job, identity=identity)
 
 
 def calibrated_params(params: MapParams, record: dict) -> MapParams:
@@ -127,12 +131,11 @@ def map_and_score_calibrated_once(job: CompareJob, path: str, world: str, identi
         seconds = first.map.stats["phase_seconds"].get("calibration", 0.0)
         m.stats["phase_seconds"]["calibration"] = m.stats["phase_seconds"].get("calibration", 0.0) + seconds
         m.runtime_s += seconds
-        with LogReader(path) as reader:
-            truth = reader.truth()
-        then = score_map(ScoredLog(path, world, truth), TAKES, m, job, identity=identity)
+        then = scored(job, path, world, TAKES, m, identity)
     if not keep_map:
         first.map = then.map = None
-    return [first, then] if CALIBRATES == "em" else [then, first]
+    made = {CALIBRATES: first, TAKES: then}
+    return [made["em"], made["adaptive"]]
 
 
 def score_map(log: ScoredLog, mode: str, m: OccupancyMap, job: CompareJob, map_file: str | None = None,

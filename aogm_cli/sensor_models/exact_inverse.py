@@ -42,9 +42,8 @@ class ExactModelConfig:
     margin: float = 0.5
 
     def validate(self) -> ExactModelConfig:
-        """Return self, or raise ``InputError(key=<field>)`` for an impossible value."""
-        if not isinstance(self.thin, bool):
-            raise InputError(f"expected true or false, got {self.thin!r}", key="thin")
+        """Return self, or raise ``InputError(key=<field>)`` for an impossible value (the fields'
+        types are checked where the parameters are read: ``mapping.params.check_field_types``)."""
         if not 0 < self.prior < 1:
             raise InputError(f"expected a probability in (0, 1), got {self.prior:g}", key="prior")
         if not self.bound > abs(self.l0):

@@ -46,8 +46,6 @@ class SurfaceConfig:
     def validate(self) -> SurfaceConfig:
         """Return self, or raise ``InputError(key=<field>)`` for an impossible value (the fields'
         types are checked where the parameters are read: ``mapping.params.check_field_types``)."""
-        if not isinstance(self.enabled, bool):
-            raise InputError(f"expected true or false, got {self.enabled!r}", key="enabled")
         if self.min_echoes < 1:
             raise InputError(f"expected a whole number >= 1, got {self.min_echoes!r}", key="min_echoes")
         for key in ("min_coherence", "max_pass_share", "core"):
