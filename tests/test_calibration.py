@@ -168,7 +168,10 @@ def test_calibrated_map_records_the_learned_model_and_its_rounds(corridor_door_l
     assert result.exit_code == 0, result.output
     m = read_map_file(out)
     record = m.stats["calibration"]
-    assert record["initial"] == {"sigma": 0.03, "p_rand": 0.05, "p_hit": 0.7, "p_max": 0.1, "specular_deg": 90.0}
+    # the specular angle is learned before the rounds; the beam's opening is not learned by default
+    # (0: the log's cone)
+    assert record["initial"] == {"sigma": 0.03, "p_rand": 0.05, "p_hit": 0.7, "p_max": 0.1, "specular_deg": 90.0,
+                                 "opening_deg": 0.0}
     assert record["rounds"][0]["sigma"] == 0.1  # round 0 maps with the broad start
     assert {k: m.params["em"][k] for k in record["final"]} == record["final"]
     assert m.params["calibration"]["enabled"] is True

@@ -88,7 +88,7 @@ def test_json_follows_the_contract_and_matches_the_map_files(logs, compared):
         assert r["truth"] is True
         if r["mode"] == "em":  # the forward model learned from the log, as the map's parameters record it
             assert r["calibration"]["final"] == {k: r["params"]["em"][k]
-                                                 for k in ("sigma", "p_rand", "p_hit", "p_max", "specular_deg")}
+                                                 for k in ("sigma", "p_rand", "p_hit", "p_max", "specular_deg", "opening_deg")}
         else:
             assert r["calibration"] is None
         assert r["params"]["mode"] == r["mode"] and r["detector"] is None  # no adaptive map here

@@ -52,7 +52,10 @@ def calibrate(log_file, mode, output, detector, params_file, resolution, quiet, 
     of incidence, and the angle where that share falls to half its head-on value (90: the walls
     echo at any angle). Beams whose core meets a surface beyond it before their echo are taken
     as deflected there. `aogm map` and `aogm compare` do all this by default in em and adaptive
-    modes.
+    modes. With opening_deg in calibration.learn, the beam's opening is learned first: the
+    share of echoes the thinned standard map explains when the beam detects out to 2, 4, ...
+    degrees, and the opening where that share tops out (the cone unless it explains 4% fewer);
+    em and adaptive then leave the cone's cells beyond it out (em.opening_deg).
 
     \b
     Example:

@@ -122,7 +122,7 @@ def compare(inputs, modes_text, detector, params_file, json_out, csv_out, figure
     occupied_precision, occupied_recall, occupied_f1, brier, ece, checks_passed, leak, block,
     surface_recall (truth), walls_kept, leak_vs_standard (no truth), consistency_* (logs
     without truth), holdout_* (--holdout), learned_sigma, learned_p_rand,
-    learned_p_hit, learned_p_max, learned_specular_deg, learned_from_readings (the forward
+    learned_p_hit, learned_p_max, learned_specular_deg, learned_opening_deg, learned_from_readings (the forward
     model an em or adaptive map's calibration learned); then one check:NAME column
     (true/false) per world check.
 

@@ -20,20 +20,19 @@ from aogm_cli.mapping.cluster import grown, label_clusters, near_occupied, readi
 from aogm_cli.mapping.em import (
     EMOutcome,
     EMProblem,
-    deflected,
     em_problem,
     em_readings,
     em_stats,
     em_view,
     em_with_phases,
     find_root,
-    prepared_templates,
+    prepared,
 )
 from aogm_cli.mapping.params import EMConfig, MapParams
-from aogm_cli.mapping.pipeline import Progress, log_grid, params_json
-from aogm_cli.mapping.standard import standard_pass, thin_pass
+from aogm_cli.mapping.pipeline import Progress, params_json
+from aogm_cli.mapping.standard import standard_pass
 from aogm_cli.sensor_models.ray import axis_counts, is_narrow_beam
-from aogm_cli.sensor_models.readings import LaidOutReadings, cone_bands, lay_out_readings
+from aogm_cli.sensor_models.readings import LaidOutReadings, cone_bands
 
 
 def cluster_problem(run: LaidOutReadings, clusters: np.ndarray, occupied: np.ndarray, config: EMConfig,
@@ -97,7 +96,7 @@ def find_clusters(run: LaidOutReadings, flags: np.ndarray, log_odds: np.ndarray,
 
 def em_in_clusters(run: LaidOutReadings, clusters: np.ndarray, n_clusters: int, occupied: np.ndarray,
                    params: MapParams, progress: Progress | None = None,
-                   incidence: dict | None = None) -> tuple[EMOutcome, int]:
+                   learned_once: dict | None = None) -> tuple[EMOutcome, int]:
     """EM over every cluster cell at once, every other cell held at ``occupied`` (flat, updated
     in place): (its outcome, how many groups of coupled clusters it solved). Clusters that share
     no reading are independent (as the paper has them): one run gives each its own result."""
@@ -114,7 +113,8 @@ def em_in_clusters(run: LaidOutReadings, clusters: np.ndarray, n_clusters: int, 
     near = np.zeros(run.z.size, dtype=bool)
     near[readings_near_clusters(clusters, run.rows, run.cols, run.z, run.grid, run.sensor.max_range,
                                 params.em.forward)] = True
-    outcome = em_with_phases(run, occupied, params, problem_for, select=near, progress=progress, incidence=incidence)
+    outcome = em_with_phases(run, occupied, params, problem_for, select=near, progress=progress,
+                             learned_once=learned_once)
     return outcome, coupled_groups(outcome.problem, n_clusters)
 
 
@@ -122,19 +122,9 @@ def map_adaptive(log, params: MapParams, detector, detector_name: str = "package
                  progress: Progress | None = None) -> OccupancyMap:
     """The adaptive mode on a log source (``pipeline``) with ``detector`` (anything with
     ``flag(ranges, max_range)``: a trained ``Detector`` or a ``ConstantDetector``)."""
-    grid = log_grid(log, params.resolution)
-    sensor = log.sensor
-    whole = log.read()  # EM needs every reading in memory: read the scans once
-    log_odds, observed, t_standard = standard_pass(whole, grid, params)
-    prepared_templates(grid, sensor)  # outside the clock
-    t0 = time.perf_counter()
-    run = lay_out_readings(whole.pose, whole.ranges, sensor, grid)
-    t_readings = time.perf_counter() - t0
-    angle = deflected(whole, run, params, log_odds, observed)
-    run, params, log_odds, observed = angle.run, angle.params, angle.log_odds, angle.observed
-    log_odds, t_thin = thin_pass(whole, grid, params, log_odds, observed,
-                                 None if run.shadow is None else run.shadow.reshape(np.shape(whole.ranges)))
-
+    p = prepared(log, params)
+    grid, whole, run, params, log_odds, observed = p.grid, p.whole, p.run, p.params, p.log_odds, p.observed
+    sensor = run.sensor
     t0 = time.perf_counter()
     flags = detector.flag(whole.ranges, sensor.max_range).reshape(-1)
     t_detect = time.perf_counter() - t0
@@ -146,14 +136,12 @@ def map_adaptive(log, params: MapParams, detector, detector_name: str = "package
     t_cluster = time.perf_counter() - t0
 
     occupied = np.ascontiguousarray((log_odds > 0).reshape(-1))  # the thresholded standard map
-    outcome, groups = (em_in_clusters(run, clusters, n_clusters, occupied, params, progress, angle.incidence)
+    outcome, groups = (em_in_clusters(run, clusters, n_clusters, occupied, params, progress, p.learned_once)
                        if n_clusters else (None, 0))
     t0 = time.perf_counter()
     probability, observed = joined_view(log_odds, observed, outcome, clusters, whole, grid, params)
     seconds = outcome.seconds if outcome else {"index": 0.0, "calibration": 0.0, "sweeps": 0.0}
-    phases = {"standard": t_standard, "readings": t_readings, "deflections": angle.seconds,
-              **({"thinning": t_thin} if t_thin else {}), "detector": t_detect, "clusters": t_cluster,
-              **seconds, "view": time.perf_counter() - t0}
+    phases = {**p.phases, "detector": t_detect, "clusters": t_cluster, **seconds, "view": time.perf_counter() - t0}
     stats = {
         "clusters": n_clusters,
         "cells_in_clusters": int((clusters > 0).sum()),

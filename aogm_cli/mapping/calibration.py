@@ -15,10 +15,12 @@ import numpy as np
 from aogm_cli.mapping.params import CalibrationConfig, EMConfig, MapParams
 from aogm_cli.sensor_models import forward_model as F
 from aogm_cli.sensor_models.cone import flat_offsets
+from aogm_cli.sensor_models.lobe import LOBE_BIN_DEG, learned_opening, lobe_bins, opening_matches
 from aogm_cli.sensor_models.readings import LaidOutReadings
 from aogm_cli.sensor_models.surface import INCIDENCE_BINS, incidence_counts, specular_angle
 
 LEARNED = ("sigma", "p_rand", "p_hit", "p_max")  # the forward model's parameters calibration sets
+ONCE = ("specular_deg", "opening_deg")  # and those it learns once, before EM (``incidence_at``, ``opening_at``)
 CAL_BLOCKS = 4  # a long log's calibration maps this many runs of consecutive scans (``_scan_blocks``)
 
 
@@ -132,9 +134,30 @@ def incidence_at(run: LaidOutReadings, readings: F.ExpectationReadings, occupied
             "specular_deg": specular_angle(counts, config.specular_rate)}
 
 
+def opening_at(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: np.ndarray,
+               forward: F.ForwardModelConfig) -> dict:
+    """The beam's effective opening learned from ``readings`` at the flat binary map ``occupied``
+    (the thinned standard map: Elfes' map smears each echo over the whole cone, and its smear
+    would make every opening wider than the axis look wrong): how many echoes the map explains
+    (the nearest occupied cell within the opening lies within the Gaussian window of the range)
+    for each opening, per degree off the axis (``lobe.opening_matches``), and the opening
+    learned from that curve (``lobe.learned_opening``)."""
+    templates = run.templates
+    matches = np.zeros(lobe_bins(run.sensor.beam_width))
+    z_max = float(run.sensor.max_range)
+    opening_matches(templates.kernel_arrays, flat_offsets(templates, run.grid.width), templates.bearings,
+                    run.grid.shape, (readings.rows, readings.cols, readings.bins, readings.z),
+                    np.ascontiguousarray(occupied, dtype=np.bool_),
+                    (float(forward.window * forward.sigma), z_max, math.radians(LOBE_BIN_DEG)), matches)
+    echoes = int(np.sum(readings.z < z_max))
+    return {"echoes": echoes, "explained": matches.astype(int).tolist(), "bin_deg": LOBE_BIN_DEG,
+            "cone_deg": math.degrees(run.sensor.beam_width),
+            "opening_deg": learned_opening(matches, echoes, run.sensor.beam_width)}
+
+
 def model_values(forward: F.ForwardModelConfig) -> dict:
-    """The learned parameters' values (LEARNED, and the specular angle, learned once)."""
-    return {k: float(getattr(forward, k)) for k in (*LEARNED, "specular_deg")}
+    """The learned parameters' values (LEARNED, and those learned once, ONCE)."""
+    return {k: float(getattr(forward, k)) for k in (*LEARNED, *ONCE)}
 
 
 # (config, flat occupied updated in place, a bool mask of the readings to map or None for all) ->
@@ -252,13 +275,19 @@ def calibration_table(record: dict) -> str:
                      + " ".join(f"{e / (e + p):.2f}" if e + p else "-" for e, p in zip(inc["echoes"], inc["passes"],
                                                                                       strict=True))
                      + f" -> specular_deg {inc['specular_deg']:.1f}")
+    if "opening" in record:
+        op = record["opening"]
+        lines.append(f"echoes the thinned standard map explains by the beam's opening ({op['echoes']} echoes; "
+                     f"{2 * op['bin_deg']:g}, {4 * op['bin_deg']:g}, ... {op['cone_deg']:.0f} degrees): "
+                     + " ".join(f"{e / max(op['echoes'], 1):.2f}" for e in op["explained"])
+                     + f" -> opening_deg {op['opening_deg']:.1f}")
     lines.append(f"learned from {record['readings_used']} readings: "
-                 + ", ".join(f"{k} {final[k]:.4g}" for k in (*LEARNED, "specular_deg") if k in final))
+                 + ", ".join(f"{k} {final[k]:.4g}" for k in (*LEARNED, *ONCE) if k in final))
     return "\n".join(lines)
 
 
 def learned_params_yaml(record: dict, source: str) -> str:
     """A ``--params`` file holding the learned model (calibration off, so it is used as it is)."""
     final = record["final"]
-    body = "\n".join(f"  {k}: {final[k]!r}" for k in (*LEARNED, "specular_deg") if k in final)
+    body = "\n".join(f"  {k}: {final[k]!r}" for k in (*LEARNED, *ONCE) if k in final)
     return f"# forward model learned by aogm calibrate from {source}\nem:\n{body}\ncalibration:\n  enabled: false\n"

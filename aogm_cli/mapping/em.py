@@ -12,6 +12,7 @@ set of cells with every other cell held fixed: the adaptive mapper calls it on t
 from __future__ import annotations
 
 import dataclasses
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -20,7 +21,7 @@ import numpy as np
 
 from aogm_cli.core.occupancy_map import OccupancyMap
 from aogm_cli.mapping import em_kernels as K
-from aogm_cli.mapping.calibration import em_with_model, incidence_at, sample_readings
+from aogm_cli.mapping.calibration import em_with_model, incidence_at, opening_at, sample_readings
 from aogm_cli.mapping.params import EMConfig, MapParams
 from aogm_cli.mapping.pipeline import Progress, log_grid, params_json
 from aogm_cli.mapping.standard import probability_from_log_odds, standard_pass, thin_pass
@@ -340,11 +341,12 @@ ProblemFor = Callable[[EMConfig, np.ndarray, "np.ndarray | None"], tuple[EMProbl
 
 def em_with_phases(run, occupied: np.ndarray, params: MapParams, problem_for: ProblemFor,
                    select: np.ndarray | None = None, progress: Progress | None = None,
-                   incidence: dict | None = None) -> EMOutcome:
+                   learned_once: dict | None = None) -> EMOutcome:
     """The EM of the em and adaptive modes: EM over the problems ``problem_for`` sets up, with
     the forward model calibrated on the readings ``select`` marks when calibration is on
     (``calibration.em_with_model``); ``occupied`` (flat) is updated in place, and timed. The
-    calibration's record gets ``incidence`` (how the specular angle was learned, ``deflected``)."""
+    calibration's record gets ``learned_once`` (how the beam's opening and the specular angle
+    were learned: ``Prepared.learned_once``)."""
     last = {}
 
     def on_sweep(sweep, flips, objective):
@@ -362,8 +364,8 @@ def em_with_phases(run, occupied: np.ndarray, params: MapParams, problem_for: Pr
     t0 = time.perf_counter()
     config, result, calibration = em_with_model(run, occupied, params, em_step, select)
     total = time.perf_counter() - t0
-    if calibration is not None and incidence is not None:
-        calibration["incidence"] = incidence
+    if calibration is not None and learned_once:
+        calibration.update(learned_once)
     seconds = {"index": last["index"], "calibration": total - last["index"] - last["sweeps"], "sweeps": last["sweeps"]}
     return EMOutcome(config, result, last["problem"], calibration, seconds)
 
@@ -440,6 +442,74 @@ def deflected(whole, run: LaidOutReadings, params: MapParams, log_odds: np.ndarr
     return Deflected(run, params, log_odds, observed, incidence, time.perf_counter() - t0)
 
 
+def opened(whole, run: LaidOutReadings, params: MapParams, log_odds: np.ndarray, observed: np.ndarray):
+    """The beam's effective opening for the em and adaptive modes: learned when calibration learns
+    ``opening_deg`` (``calibration.opening_at``, at the standard map thinned by the exact inverse
+    model), else as configured (0: the log's beam width); when narrower than the log's beam, the
+    log's sensor with that opening, the readings laid out on its cones and the standard map made
+    again with them. A narrow beam (a laser) is left as it is. Returns (whole, run, params,
+    log_odds, observed, the learning's record or None)."""
+    grid = run.grid
+    if is_narrow_beam(run.sensor, grid.resolution):
+        return whole, run, params, log_odds, observed, None
+    record = None
+    if params.calibration.enabled and "opening_deg" in params.calibration.learned:
+        thin = dataclasses.replace(params, exact=dataclasses.replace(params.exact, thin=True))
+        thinned, _ = thin_pass(whole, grid, thin, log_odds, observed)
+        record = opening_at(run, sample_readings(run, params.calibration.max_readings), (thinned > 0).reshape(-1),
+                            params.em.forward)
+        forward = dataclasses.replace(params.em.forward, opening_deg=record["opening_deg"])
+        params = dataclasses.replace(params, em=dataclasses.replace(params.em, forward=forward))
+    opening = params.em.forward.opening_deg
+    if 0 < math.radians(opening) < run.sensor.beam_width - 1e-9:  # not the cone itself, rounded
+        sensor = dataclasses.replace(run.sensor, beam_width=math.radians(opening))
+        whole = dataclasses.replace(whole, sensor=sensor)
+        run = lay_out_readings(whole.pose, whole.ranges, sensor, grid)
+        log_odds, observed, _ = standard_pass(whole, grid, params)
+    return whole, run, params, log_odds, observed, record
+
+
+@dataclass
+class Prepared:
+    """What the em and adaptive modes share before their EM (``prepared``): the log's grid and
+    scans (with the sensor as the beam's opening has it), the readings laid out, the parameters
+    with what was learned once, the standard map (deflected beams stopped, thinned when
+    configured), the records of the learning, and the seconds of each phase."""
+
+    grid: object
+    whole: object
+    run: LaidOutReadings
+    params: MapParams
+    log_odds: np.ndarray
+    observed: np.ndarray
+    learned_once: dict  # "opening", "incidence": the records of what was learned before EM
+    phases: dict
+
+
+def prepared(log, params: MapParams) -> Prepared:
+    """The standard map of a log source (``pipeline``) and its readings laid out, the beam's
+    opening (``opened``), the angle of incidence (``deflected``) and the thinning (``thin_pass``):
+    the em and adaptive modes' first phases, timed."""
+    grid = log_grid(log, params.resolution)
+    whole = log.read()  # EM needs every reading in memory: read the scans once
+    log_odds, observed, t_standard = standard_pass(whole, grid, params)
+    prepared_templates(grid, log.sensor)  # outside the clock
+    t0 = time.perf_counter()
+    run = lay_out_readings(whole.pose, whole.ranges, log.sensor, grid)
+    t_readings = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    whole, run, params, log_odds, observed, opening = opened(whole, run, params, log_odds, observed)
+    t_opening = time.perf_counter() - t0
+    angle = deflected(whole, run, params, log_odds, observed)
+    run, params, log_odds, observed = angle.run, angle.params, angle.log_odds, angle.observed
+    log_odds, t_thin = thin_pass(whole, grid, params, log_odds, observed,
+                                 None if run.shadow is None else run.shadow.reshape(np.shape(whole.ranges)))
+    learned_once = {k: v for k, v in (("opening", opening), ("incidence", angle.incidence)) if v is not None}
+    phases = {"standard": t_standard, "readings": t_readings, **({"opening": t_opening} if opening else {}),
+              "deflections": angle.seconds, **({"thinning": t_thin} if t_thin else {})}
+    return Prepared(grid, whole, run, params, log_odds, observed, learned_once, phases)
+
+
 def whole_log_problems(run, templates, grid, z_max: float) -> ProblemFor:
     """The em mode's problems: every valid reading of ``run`` (of a subset, if given), every cell
     some cone holds a candidate."""
@@ -465,26 +535,15 @@ def prepared_templates(grid, sensor):
 def map_em(log, params: MapParams, progress: Progress | None = None) -> OccupancyMap:
     """The em mode: Thrun's EM map of a log source (``pipeline``); every cell some cone holds is
     a candidate, started from the thresholded standard map (or empty, ``em.start``)."""
-    grid = log_grid(log, params.resolution)
-    whole = log.read()  # EM needs every reading in memory: read the scans once
-    log_odds, observed, t_standard = standard_pass(whole, grid, params)
-    templates = prepared_templates(grid, log.sensor)  # outside the clock
-    t0 = time.perf_counter()
-    run = lay_out_readings(whole.pose, whole.ranges, log.sensor, grid)
-    t_readings = time.perf_counter() - t0
-    angle = deflected(whole, run, params, log_odds, observed)
-    run, params, log_odds, observed = angle.run, angle.params, angle.log_odds, angle.observed
-    log_odds, t_thin = thin_pass(whole, grid, params, log_odds, observed,
-                                 None if run.shadow is None else run.shadow.reshape(np.shape(whole.ranges)))
-    start = (log_odds > 0).reshape(-1) if params.em.start == "standard" else np.zeros(grid.height * grid.width, bool)
+    p = prepared(log, params)
+    grid, run, params = p.grid, p.run, p.params
+    start = (p.log_odds > 0).reshape(-1) if params.em.start == "standard" else np.zeros(grid.height * grid.width, bool)
     occupied = np.ascontiguousarray(start)
-    problems = whole_log_problems(run, templates, grid, log.sensor.max_range)
-    outcome = em_with_phases(run, occupied, params, problems, progress=progress, incidence=angle.incidence)
+    problems = whole_log_problems(run, run.templates, grid, run.sensor.max_range)
+    outcome = em_with_phases(run, occupied, params, problems, progress=progress, learned_once=p.learned_once)
     t0 = time.perf_counter()
-    probability, observed = em_view(log_odds, observed, outcome, grid, whole.pose, log.sensor, params)
-    phases = {"standard": t_standard, "readings": t_readings, "deflections": angle.seconds,
-              **({"thinning": t_thin} if t_thin else {}), **outcome.seconds,
-              "view": time.perf_counter() - t0}
+    probability, observed = em_view(p.log_odds, p.observed, outcome, grid, p.whole.pose, run.sensor, params)
+    phases = {**p.phases, **outcome.seconds, "view": time.perf_counter() - t0}
     return OccupancyMap(
         grid=grid,
         probability=probability,

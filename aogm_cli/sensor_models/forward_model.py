@@ -46,6 +46,12 @@ class ForwardModelConfig:
     # evidence against the surface). 90: every cell counts at any angle (Thrun's model). A 40 kHz
     # sonar sees a painted wall within 15-30 deg of its normal; calibration learns it from the log
     specular_deg: float = 90.0
+    # the opening (degrees, full angle) of the part of the cone that detects: a transducer's main
+    # lobe is strongest on its axis, and a surface near the cone's edge returns an echo too weak
+    # to register, so the cells beyond this angle are left out of every cone of the em and adaptive
+    # modes (their standard passes too); 0: the log's beam width, which also bounds it. Calibration
+    # learns it from the log (``sensor_models.lobe``)
+    opening_deg: float = 0.0
 
     def validate(self) -> ForwardModelConfig:
         def bad(key, msg):
@@ -63,6 +69,9 @@ class ForwardModelConfig:
             raise bad("window", f"expected a positive number, got {self.window:g}")
         if not 0 < self.specular_deg <= 90:
             raise bad("specular_deg", f"expected an angle in (0, 90] degrees, got {self.specular_deg:g}")
+        if not 0 <= self.opening_deg < 180:
+            raise bad("opening_deg", f"expected an angle in [0, 180) degrees (0: the log's beam width), "
+                                     f"got {self.opening_deg:g}")
         return self
 
     def as_dict(self) -> dict:

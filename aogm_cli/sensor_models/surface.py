@@ -101,7 +101,7 @@ def _offset(cell, row0, col0, width):
 
 
 @numba.njit(cache=True, inline="always")
-def _cone(tpl, flat, shape, row0, col0, k, end, right, ib):
+def cone_walk(tpl, flat, shape, row0, col0, k, end, right, ib):
     """The cells of heading bin k's cone from (row0, col0) up to template range ``end`` (``right``:
     ranges <= end, else < end) into ``ib`` (``cone.cone_flat_cells``): (their count, the bin's
     ranges); none when the cone cannot touch the grid or ``end`` <= 0."""
@@ -127,7 +127,7 @@ def head_on_passes(tpl, flat, shape, readings, normal, cos2, margin, z_max, out)
     for t in range(z.shape[0]):
         if not z[t] == z[t]:
             continue
-        m, _ = _cone(tpl, flat, shape, rows[t], cols[t], bins[t], z_max if not z[t] < z_max else z[t] - margin,
+        m, _ = cone_walk(tpl, flat, shape, rows[t], cols[t], bins[t], z_max if not z[t] < z_max else z[t] - margin,
                      False, ib)
         for j in range(m):
             c = np.int64(ib[j])
@@ -147,7 +147,7 @@ def echo_direction_sums(tpl, flat, shape, readings, half_band, z_max, out):
     for t in range(z.shape[0]):
         if not z[t] < z_max:  # no echo (or NaN)
             continue
-        m, r = _cone(tpl, flat, shape, rows[t], cols[t], bins[t], z[t] + half_band, True, ib)
+        m, r = cone_walk(tpl, flat, shape, rows[t], cols[t], bins[t], z[t] + half_band, True, ib)
         for j in range(np.searchsorted(r[:m], z[t] - half_band, side="left"), m):
             c = np.int64(ib[j])
             if c >= n_cells:
@@ -205,7 +205,7 @@ def incidence_counts(tpl, flat, shape, readings, occupied, normal, model, out):
         if not z == z:  # NaN
             continue
         at_max = not z < z_max
-        m, r = _cone(tpl, flat, shape, rows[t], cols[t], bins[t], z_max if at_max else min(z + window * sigma, z_max),
+        m, r = cone_walk(tpl, flat, shape, rows[t], cols[t], bins[t], z_max if at_max else min(z + window * sigma, z_max),
                      True, ib)
         passed[:] = False
         for j in range(m):
@@ -269,7 +269,7 @@ def shadow_ranges(tpl, flat, shape, readings, normal, cos2, model, out):
         if not z == z:
             continue
         k = bins[t]
-        m, r = _cone(tpl, flat, shape, rows[t], cols[t], k, z_max if not z < z_max else z - window * sigma, False, ib)
+        m, r = cone_walk(tpl, flat, shape, rows[t], cols[t], k, z_max if not z < z_max else z - window * sigma, False, ib)
         a_c = math.cos(2.0 * math.pi * k / n_bins)
         a_r = math.sin(2.0 * math.pi * k / n_bins)
         for j in range(m):

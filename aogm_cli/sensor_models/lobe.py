@@ -1,0 +1,80 @@
+"""The sonar's beam as it detects: how many readings a map explains when the beam detects out to each
+angle off its axis (``opening_matches``), and the effective opening learned from that curve
+(``learned_opening``)."""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from aogm_cli.sensor_models.surface import cone_walk
+
+LOBE_BIN_DEG = 1.0  # the width of a bin of the angle off the axis (degrees)
+# A log keeps its cone unless the cone explains this share fewer echoes than the best opening: on
+# the 13 bundled worlds without a Pioneer, whose sonars detect across the whole cone, the thinned
+# map's own smear leaves the cone up to 3.0% short (glass_corridor; docs/algorithms.md), and a cone
+# narrowed by 2 degrees there costs EM 0.01-0.03 of accuracy
+CONE_TOLERANCE = 0.04
+# then the opening is the widest that explains at least this share fewer than the best one does
+OPENING_TOLERANCE = 0.01
+MIN_ECHOES = 100  # a log with fewer echoes keeps its cone
+
+
+def lobe_bins(beam_width: float) -> int:
+    """How many ``LOBE_BIN_DEG`` bins of |angle off the axis| a cone ``beam_width`` (rad) wide has."""
+    return max(1, int(math.ceil(math.degrees(0.5 * beam_width) / LOBE_BIN_DEG - 1e-9)))
+
+
+@numba.njit(cache=True)
+def opening_matches(tpl, flat, bearings, shape, readings, occupied, model, out):
+    """out[a] += 1 for every echo whose range the map ``occupied`` (flat bool) explains when the
+    beam detects up to (a + 1) bins of ``bin`` rad off its axis: the nearest occupied cell within
+    that angle lies within ``band`` of the reading's range. A reading without echo is left out
+    (a specular wall met at a grazing angle is silent at every angle off the axis: the specular
+    angle's part, ``surface.incidence_counts``).
+
+    An opening narrower than the beam's puts the nearest surface too far for readings that met
+    it off the axis, a wider one too near: the curve peaks at the beam's. ``bearings`` are the
+    templates' (``ConeTemplates.bearings``); ``readings`` = (rows, cols, bins, z) (template
+    ranges; >= z_max: no echo); ``model`` = (band, z_max, bin); ``out`` (bins,)."""
+    band, z_max, width = model
+    rows, cols, bins, z_all = readings
+    n_bins = out.shape[0]
+    n_cells = shape[0] * shape[1]
+    ib = np.empty(int(np.max(np.diff(tpl.offsets))), dtype=np.int32)
+    first = np.empty(n_bins)
+    for t in range(z_all.shape[0]):
+        z = z_all[t]
+        if not z < z_max:  # no echo (or NaN)
+            continue
+        m, r = cone_walk(tpl, flat, shape, rows[t], cols[t], bins[t], min(z + band, z_max), True, ib)
+        s = tpl.offsets[tpl.base_bin[bins[t]]]
+        first[:] = np.inf
+        for j in range(m):
+            c = np.int64(ib[j])
+            if c >= n_cells or not occupied[c]:
+                continue
+            b = min(int(abs(bearings[s + j]) / width), n_bins - 1)
+            if r[j] < first[b]:
+                first[b] = r[j]
+        nearest = np.inf
+        for a in range(n_bins):
+            nearest = min(nearest, first[a])
+            if abs(nearest - z) <= band:
+                out[a] += 1.0
+
+
+def learned_opening(matches: np.ndarray, echoes: int, beam_width: float) -> float:
+    """The effective opening (degrees, full angle) from ``opening_matches``' curve over ``echoes``
+    echoes: the cone (``beam_width`` rad) unless it explains ``CONE_TOLERANCE`` fewer echoes than
+    the best opening (or there are fewer than ``MIN_ECHOES`` echoes), else the widest opening
+    within ``OPENING_TOLERANCE`` of the best."""
+    cone = round(math.degrees(beam_width), 9)
+    if echoes < MIN_ECHOES or matches.size == 0 or matches[-1] >= (1.0 - CONE_TOLERANCE) * matches.max():
+        return cone
+    a = int(np.flatnonzero(matches >= (1.0 - OPENING_TOLERANCE) * matches.max())[-1])
+    if a == matches.size - 1:
+        return cone
+    return 2.0 * LOBE_BIN_DEG * (a + 1)
