@@ -103,3 +103,66 @@ def test_a_simulated_beam_pattern_is_learned(beam_deg, expect, tmp_path):
         assert abs(0.5 * record["opening_deg"] - beam_deg) <= 3.0
     assert m.params["em"]["opening_deg"] == record["opening_deg"]
     assert record["cone_deg"] == pytest.approx(30.0) and len(record["explained"]) == 15
+
+
+LEARN = "sigma,p_rand,p_hit,p_max,specular_deg,opening_deg"
+
+
+def run(*args):
+    from click.testing import CliRunner
+
+    from aogm_cli.cli import main
+
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+def import_udacity(require, tmp_path, beam_deg):
+    u = require.shared("data/sonar/udacity_8sonar")
+    out = tmp_path / f"u{beam_deg}.h5"
+    result = run("import", "text", "--ranges", u / "measurement.txt", "--poses", u / "poses.txt",
+                 "--range-time-column", "1", "--range-columns", "2-9", "--pose-time-column", "1", "--pose-columns",
+                 "2,3,4", "--time-unit", "ms", "--range-unit", "mm", "--position-unit", "mm", "--angle-unit", "ddeg",
+                 "--no-echo", "5110", "--bearings=-90,-37.5,-22.5,-7.5,7.5,22.5,37.5,90", "--max-range", "5.0",
+                 "--beam-width", str(beam_deg), "-o", out, "-q")
+    assert result.exit_code == 0, result.output
+    return out
+
+
+def test_the_real_ring_learns_one_opening_whatever_width_it_was_imported_at(require, tmp_path):
+    """The real 8-sonar log imported at 20 and at 30 degrees: calibration learns the same opening
+    (14 degrees), so em maps both logs alike; `aogm calibrate` prints the curve and writes the
+    opening, and a map given that opening (`em.opening_deg`) is the map that learned it."""
+    import aogm_cli
+
+    params = tmp_path / "learn.yaml"
+    params.write_text(f"resolution: 0.1\ncalibration: {{learn: '{LEARN}'}}\n")
+    maps = {}
+    for beam in (20, 30):
+        log = import_udacity(require, tmp_path, beam)
+        out = tmp_path / f"em{beam}.h5"
+        assert run("map", log, "--mode", "em", "--params", params, "-o", out, "-q").exit_code == 0
+        maps[beam] = aogm_cli.load_map(out)
+        assert maps[beam].params["em"]["opening_deg"] == 14.0
+        assert maps[beam].stats["calibration"]["opening"]["cone_deg"] == pytest.approx(beam)
+    assert np.array_equal(maps[20].probability, maps[30].probability)
+    model = tmp_path / "model.yaml"
+    result = run("calibrate", tmp_path / "u30.h5", "--params", params, "-o", model, "-q")
+    assert result.exit_code == 0, result.output
+    assert "by the beam's opening" in result.output and "-> opening_deg 14.0" in result.output
+    assert "  opening_deg: 14.0" in model.read_text()
+    given = tmp_path / "given.yaml"
+    given.write_text(f"resolution: 0.1\nem: {{opening_deg: 14}}\ncalibration: {{learn: '{LEARN.replace(',opening_deg', '')}'}}\n")
+    out = tmp_path / "given.h5"
+    assert run("map", tmp_path / "u30.h5", "--mode", "em", "--params", given, "-o", out, "-q").exit_code == 0
+    m = aogm_cli.load_map(out)
+    assert "opening" not in m.stats["calibration"]
+    assert np.array_equal(m.probability, maps[30].probability)
+
+
+@pytest.mark.parametrize("value", ["200", "-1", "wide"])
+def test_a_bad_opening_exits_2_naming_the_key(corridor_door_log, tmp_path, value):
+    params = tmp_path / "p.yaml"
+    params.write_text(f"em: {{opening_deg: {value}}}\n")
+    result = run("map", corridor_door_log, "--mode", "em", "--params", params, "-o", tmp_path / "m.h5", "-q")
+    assert result.exit_code == 2 and "opening_deg" in result.output and "Traceback" not in result.output
+    assert not (tmp_path / "m.h5").exists()
