@@ -15,7 +15,7 @@ import numpy as np
 from aogm_cli.mapping.params import CalibrationConfig, EMConfig, MapParams
 from aogm_cli.sensor_models import forward_model as F
 from aogm_cli.sensor_models.cone import flat_offsets
-from aogm_cli.sensor_models.lobe import LOBE_BIN_DEG, learned_opening, lobe_bins, opening_matches
+from aogm_cli.sensor_models.lobe import LOBE_BIN_DEG, cone_deg, learned_opening, lobe_bins, opening_matches
 from aogm_cli.sensor_models.readings import LaidOutReadings
 from aogm_cli.sensor_models.surface import INCIDENCE_BINS, incidence_counts, specular_angle
 
@@ -151,7 +151,7 @@ def opening_at(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: 
                     (float(forward.window * forward.sigma), z_max, math.radians(LOBE_BIN_DEG)), matches)
     echoes = int(np.sum(readings.z < z_max))
     return {"echoes": echoes, "explained": matches.astype(int).tolist(), "bin_deg": LOBE_BIN_DEG,
-            "cone_deg": math.degrees(run.sensor.beam_width),
+            "cone_deg": cone_deg(run.sensor.beam_width),
             "opening_deg": learned_opening(matches, echoes, run.sensor.beam_width)}
 
 

@@ -19,6 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from aogm_cli.core.grid import GridSpec
+from aogm_cli.core.log import Log
 from aogm_cli.core.occupancy_map import OccupancyMap
 from aogm_cli.mapping import em_kernels as K
 from aogm_cli.mapping.calibration import em_with_model, incidence_at, opening_at, sample_readings
@@ -442,29 +444,40 @@ def deflected(whole, run: LaidOutReadings, params: MapParams, log_odds: np.ndarr
     return Deflected(run, params, log_odds, observed, incidence, time.perf_counter() - t0)
 
 
+def with_opening(whole: Log, grid: GridSpec, opening_deg: float) -> Log:
+    """``whole`` (a log in memory) with its sensor's beam narrowed to ``opening_deg`` (degrees,
+    ``em.opening_deg``), or ``whole`` itself when that is 0, not narrower than the beam, or the
+    beam is narrow already (a laser)."""
+    sensor = whole.sensor
+    if not 0 < math.radians(opening_deg) < sensor.beam_width - 1e-9 or is_narrow_beam(sensor, grid.resolution):
+        return whole
+    return dataclasses.replace(whole, sensor=dataclasses.replace(sensor, beam_width=math.radians(opening_deg)))
+
+
+def learns_opening(sensor, grid: GridSpec, params: MapParams) -> bool:
+    """Whether calibration learns the beam's opening (``opening_deg`` in ``calibration.learn``) of
+    a log of ``sensor`` (a cone, not a laser's narrow beam) on ``grid``."""
+    return (params.calibration.enabled and "opening_deg" in params.calibration.learned
+            and not is_narrow_beam(sensor, grid.resolution))
+
+
 def opened(whole, run: LaidOutReadings, params: MapParams, log_odds: np.ndarray, observed: np.ndarray):
-    """The beam's effective opening for the em and adaptive modes: learned when calibration learns
-    ``opening_deg`` (``calibration.opening_at``, at the standard map thinned by the exact inverse
-    model), else as configured (0: the log's beam width); when narrower than the log's beam, the
-    log's sensor with that opening, the readings laid out on its cones and the standard map made
-    again with them. A narrow beam (a laser) is left as it is. Returns (whole, run, params,
-    log_odds, observed, the learning's record or None)."""
+    """The beam's effective opening learned from the log (``calibration.opening_at``, at the
+    standard map ``log_odds`` thinned by the exact inverse model) and written into the parameters;
+    when it is narrower than the log's beam, the log's sensor with that opening (``with_opening``),
+    the readings laid out on its cones and the standard map made again with them. Returns (whole,
+    run, params, log_odds, observed, the learning's record)."""
     grid = run.grid
-    if is_narrow_beam(run.sensor, grid.resolution):
-        return whole, run, params, log_odds, observed, None
-    record = None
-    if params.calibration.enabled and "opening_deg" in params.calibration.learned:
-        thin = dataclasses.replace(params, exact=dataclasses.replace(params.exact, thin=True))
-        thinned, _ = thin_pass(whole, grid, thin, log_odds, observed)
-        record = opening_at(run, sample_readings(run, params.calibration.max_readings), (thinned > 0).reshape(-1),
-                            params.em.forward)
-        forward = dataclasses.replace(params.em.forward, opening_deg=record["opening_deg"])
-        params = dataclasses.replace(params, em=dataclasses.replace(params.em, forward=forward))
-    opening = params.em.forward.opening_deg
-    if 0 < math.radians(opening) < run.sensor.beam_width - 1e-9:  # not the cone itself, rounded
-        sensor = dataclasses.replace(run.sensor, beam_width=math.radians(opening))
-        whole = dataclasses.replace(whole, sensor=sensor)
-        run = lay_out_readings(whole.pose, whole.ranges, sensor, grid)
+    thin = dataclasses.replace(params, exact=dataclasses.replace(params.exact, thin=True))
+    thinned, _ = thin_pass(whole, grid, thin, log_odds, observed)
+    record = opening_at(run, sample_readings(run, params.calibration.max_readings), (thinned > 0).reshape(-1),
+                        params.em.forward)
+    forward = dataclasses.replace(params.em.forward, opening_deg=record["opening_deg"])
+    params = dataclasses.replace(params, em=dataclasses.replace(params.em, forward=forward))
+    narrowed = with_opening(whole, grid, record["opening_deg"])
+    if narrowed is not whole:
+        whole = narrowed
+        run = lay_out_readings(whole.pose, whole.ranges, whole.sensor, grid)
         log_odds, observed, _ = standard_pass(whole, grid, params)
     return whole, run, params, log_odds, observed, record
 
@@ -476,8 +489,8 @@ class Prepared:
     with what was learned once, the standard map (deflected beams stopped, thinned when
     configured), the records of the learning, and the seconds of each phase."""
 
-    grid: object
-    whole: object
+    grid: GridSpec
+    whole: Log  # the scans in memory, the sensor with the beam's opening
     run: LaidOutReadings
     params: MapParams
     log_odds: np.ndarray
@@ -488,25 +501,31 @@ class Prepared:
 
 def prepared(log, params: MapParams) -> Prepared:
     """The standard map of a log source (``pipeline``) and its readings laid out, the beam's
-    opening (``opened``), the angle of incidence (``deflected``) and the thinning (``thin_pass``):
-    the em and adaptive modes' first phases, timed."""
+    opening (configured: the log's sensor narrowed before anything is mapped; learned:
+    ``opened``), the angle of incidence (``deflected``) and the thinning (``thin_pass``): the em
+    and adaptive modes' first phases, timed."""
     grid = log_grid(log, params.resolution)
     whole = log.read()  # EM needs every reading in memory: read the scans once
+    learn = learns_opening(whole.sensor, grid, params)
+    if not learn:
+        whole = with_opening(whole, grid, params.em.forward.opening_deg)
     log_odds, observed, t_standard = standard_pass(whole, grid, params)
-    prepared_templates(grid, log.sensor)  # outside the clock
+    prepared_templates(grid, whole.sensor)  # outside the clock
     t0 = time.perf_counter()
-    run = lay_out_readings(whole.pose, whole.ranges, log.sensor, grid)
+    run = lay_out_readings(whole.pose, whole.ranges, whole.sensor, grid)
     t_readings = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    whole, run, params, log_odds, observed, opening = opened(whole, run, params, log_odds, observed)
-    t_opening = time.perf_counter() - t0
+    learned_once, phases = {}, {"standard": t_standard, "readings": t_readings}
+    if learn:
+        t0 = time.perf_counter()
+        whole, run, params, log_odds, observed, learned_once["opening"] = opened(whole, run, params, log_odds, observed)
+        phases["opening"] = time.perf_counter() - t0
     angle = deflected(whole, run, params, log_odds, observed)
     run, params, log_odds, observed = angle.run, angle.params, angle.log_odds, angle.observed
     log_odds, t_thin = thin_pass(whole, grid, params, log_odds, observed,
                                  None if run.shadow is None else run.shadow.reshape(np.shape(whole.ranges)))
-    learned_once = {k: v for k, v in (("opening", opening), ("incidence", angle.incidence)) if v is not None}
-    phases = {"standard": t_standard, "readings": t_readings, **({"opening": t_opening} if opening else {}),
-              "deflections": angle.seconds, **({"thinning": t_thin} if t_thin else {})}
+    if angle.incidence is not None:
+        learned_once["incidence"] = angle.incidence
+    phases |= {"deflections": angle.seconds, **({"thinning": t_thin} if t_thin else {})}
     return Prepared(grid, whole, run, params, log_odds, observed, learned_once, phases)
 
 

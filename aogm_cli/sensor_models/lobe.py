@@ -12,10 +12,9 @@ import numpy as np
 from aogm_cli.sensor_models.surface import cone_walk
 
 LOBE_BIN_DEG = 1.0  # the width of a bin of the angle off the axis (degrees)
-# A log keeps its cone unless the cone explains this share fewer echoes than the best opening: on
-# the 13 bundled worlds without a Pioneer, whose sonars detect across the whole cone, the thinned
-# map's own smear leaves the cone up to 3.0% short (glass_corridor; docs/algorithms.md), and a cone
-# narrowed by 2 degrees there costs EM 0.01-0.03 of accuracy
+# A log keeps its cone unless the cone explains this share fewer echoes than the best opening: the
+# thinned map's own smear leaves the cone a little short on logs whose beam detects across it, and
+# a cone narrowed below such a beam costs EM accuracy (docs/algorithms.md, "The beam's opening")
 CONE_TOLERANCE = 0.04
 # then the opening is the widest that explains at least this share fewer than the best one does
 OPENING_TOLERANCE = 0.01
@@ -66,15 +65,18 @@ def opening_matches(tpl, flat, bearings, shape, readings, occupied, model, out):
                 out[a] += 1.0
 
 
+def cone_deg(beam_width: float) -> float:
+    """A cone's opening ``beam_width`` (rad) in degrees, rounded to 1e-9 (30, not 29.999999999999996)."""
+    return round(math.degrees(beam_width), 9)
+
+
 def learned_opening(matches: np.ndarray, echoes: int, beam_width: float) -> float:
     """The effective opening (degrees, full angle) from ``opening_matches``' curve over ``echoes``
     echoes: the cone (``beam_width`` rad) unless it explains ``CONE_TOLERANCE`` fewer echoes than
     the best opening (or there are fewer than ``MIN_ECHOES`` echoes), else the widest opening
     within ``OPENING_TOLERANCE`` of the best."""
-    cone = round(math.degrees(beam_width), 9)
     if echoes < MIN_ECHOES or matches.size == 0 or matches[-1] >= (1.0 - CONE_TOLERANCE) * matches.max():
-        return cone
+        return cone_deg(beam_width)
+    # the cone is more than CONE_TOLERANCE short here, so the widest within OPENING_TOLERANCE is narrower
     a = int(np.flatnonzero(matches >= (1.0 - OPENING_TOLERANCE) * matches.max())[-1])
-    if a == matches.size - 1:
-        return cone
     return 2.0 * LOBE_BIN_DEG * (a + 1)
