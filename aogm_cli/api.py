@@ -150,7 +150,7 @@ def simulate(world_path: str | Path, seed: int = 0) -> Log:
 def map_params(**params: Any):
     """``mapping.params.MapParams`` from keyword arguments: ``resolution=0.1`` and the sections of
     a ``--params`` file as dicts, ``inverse_model={...}``, ``em={...}``, ``adaptive={...}``,
-    ``calibration={...}`` (``mapping.params.resolve_params``' overrides; what is not given keeps
+    ``calibration={...}`` (``mapping.params.params_from``' overrides; what is not given keeps
     its default). An unknown section is a TypeError, an unknown key or bad value an InputError.
 
     Examples:
@@ -159,7 +159,8 @@ def map_params(**params: Any):
     >>> p.resolution, p.em.forward.sigma, p.calibration.enabled
     (0.1, 0.05, False)
     """
-    from aogm_cli.mapping.params import SECTIONS, resolve_params
+    from aogm_cli.mapping.params import SECTIONS
+    from aogm_cli.report.map_run import resolve_params
 
     for name, value in params.items():
         if name != "resolution" and name not in SECTIONS:
@@ -188,12 +189,12 @@ def map_log(log_or_path: Log | str | Path, mode: str = "standard", detector: str
     >>> adaptive.mode, adaptive.clusters.shape == adaptive.grid.shape
     ('adaptive', True)
     """
-    from aogm_cli.mapping.modes import map_file, map_source
+    from aogm_cli.report.map_run import map_file
 
     resolved = map_params(**params)
     if isinstance(log_or_path, str | Path):
         return map_file(log_or_path, mode, resolved, detector)
-    return map_source(log_or_path, mode, resolved, detector)
+    return map_file(log_or_path.path or "(in memory)", mode, resolved, detector, source=log_or_path)
 
 
 def _log(log_or_path: Log | str | Path) -> Log:

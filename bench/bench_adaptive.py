@@ -14,10 +14,9 @@ from pathlib import Path
 from seed_logs import for_each_seed_log
 
 from aogm_cli.io.logfile import LogReader
-from aogm_cli.mapping.modes import map_file
-from aogm_cli.mapping.params import resolve_params
 from aogm_cli.mapping.pipeline import log_grid
 from aogm_cli.mapping.standard import standard_pass
+from aogm_cli.report.map_run import map_file, resolve_params
 
 
 def bench(world_name: str, log_path: Path) -> None:

@@ -34,7 +34,7 @@ def for_each_seed_log(bench: Callable[[str, Path], None]) -> None:
 
 @dataclass
 class EMInputs:
-    """What EM and adaptive mapping hold before their own work starts (as ``mapping.em.map_em``)."""
+    """What EM and adaptive mapping hold before their own work starts (as the em mode's first stages, ``mapping.modes``)."""
 
     params: MapParams  # as ``modes.map_file`` resolves them for the log
     readings: LaidOutReadings
@@ -45,15 +45,14 @@ class EMInputs:
 
 def em_inputs(log_path: Path, params: MapParams) -> EMInputs:
     """Compile every kernel of the em mode, run its (timed) standard pass over the whole log held
-    in memory and lay out every reading (``readings.lay_out_readings``), as ``map_em`` does."""
+    in memory and lay out every reading (``readings.lay_out_readings``), as the em mode does."""
     with LogReader(log_path) as reader:
         params = resolved_params(reader, params)
         sensor = reader.sensor
         warm_up(sensor, params, "em")
         grid = log_grid(reader, params.resolution)
         whole = reader.read()
-        log_odds, observed, t_standard = standard_pass(reader, grid, params,
-                                                       chunks=[(0, whole.time, whole.pose, whole.ranges)])
+        log_odds, observed, t_standard = standard_pass(whole, grid, params)
     forward_templates(grid, sensor)  # one-time set-up, cached
     readings = lay_out_readings(whole.pose, whole.ranges, sensor, grid)
     return EMInputs(params, readings, log_odds, observed, t_standard)

@@ -18,8 +18,7 @@ from aogm_cli.mapping import cluster
 from aogm_cli.mapping.adaptive import coupled_groups, hit_rate_curve, one_scale, pool_adjacent_violators
 from aogm_cli.mapping.cluster import label_clusters
 from aogm_cli.mapping.em import em_problem, em_readings, find_root, footprint
-from aogm_cli.mapping.modes import map_file
-from aogm_cli.mapping.params import resolve_params
+from aogm_cli.report.map_run import map_file, resolve_params
 from aogm_cli.sensor_models.cone import build_cone_templates
 
 

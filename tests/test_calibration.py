@@ -2,13 +2,12 @@
 the closed-form M-step and its bounds, recovery of a simulator's noise and random-reading rate,
 and `aogm calibrate` / `--calibrate` as users run them."""
 
-import json
 import math
 from pathlib import Path
 
-import h5py
 import numpy as np
 import pytest
+import yaml
 from click.testing import CliRunner
 
 from aogm_cli.cli import main
@@ -131,16 +130,16 @@ def test_m_step_is_the_closed_form_clipped_to_its_bounds():
     sums = np.zeros(F.E_SIZE)
     sums[[F.E_READINGS, F.E_RANDOM, F.E_DROPOUT, F.E_DETECTED, F.E_EXAMINED, F.E_SQUARED]] = [100, 8, 12, 60, 80, 60 * 0.07**2]
     start = F.ForwardModelConfig()
-    new = C.m_step(sums, start, CalibrationConfig())
+    new = C.m_step(sums, start, CalibrationConfig().learned)
     assert (new.p_rand, new.p_max, new.p_hit) == pytest.approx((0.08, 0.12, 0.75))
     assert new.sigma == pytest.approx(0.07)
     assert new.window == start.window
-    clipped = C.m_step(sums, start, CalibrationConfig(sigma_max=0.05, p_hit_max=0.7, p_rand_max=0.05))
+    clipped = C.m_step(sums, start, CalibrationConfig().learned, C.Tuning(sigma_max=0.05, p_hit_max=0.7, p_rand_max=0.05))
     assert (clipped.sigma, clipped.p_hit, clipped.p_rand) == (0.05, 0.7, 0.05)
-    only_sigma = C.m_step(sums, start, CalibrationConfig(learn="sigma"))
+    only_sigma = C.m_step(sums, start, ("sigma",))
     assert only_sigma == F.ForwardModelConfig(sigma=pytest.approx(0.07))
     # a dropout mass switched off stays off
-    assert C.m_step(sums, F.ForwardModelConfig(p_max=0.0), CalibrationConfig()).p_max == 0.0
+    assert C.m_step(sums, F.ForwardModelConfig(p_max=0.0), CalibrationConfig().learned).p_max == 0.0
 
 
 @pytest.mark.parametrize("noise, rate", [(0.06, 0.10), (0.10, 0.03)])
@@ -173,8 +172,11 @@ def test_calibrated_map_records_the_learned_model_and_its_rounds(corridor_door_l
     assert record["initial"] == {"sigma": 0.03, "p_rand": 0.05, "p_hit": 0.7, "p_max": 0.1, "specular_deg": 90.0,
                                  "opening_deg": 0.0}
     assert record["rounds"][0]["sigma"] == 0.1  # round 0 maps with the broad start
-    assert {k: m.params["em"][k] for k in record["final"]} == record["final"]
-    assert m.params["calibration"]["enabled"] is True
+    # the map records what it learned apart from its params, which stay as configured
+    assert {k: m.learned["sensor"][k] for k in ("sigma", "p_rand", "p_hit", "p_max")} == {
+        k: record["final"][k] for k in ("sigma", "p_rand", "p_hit", "p_max")}
+    assert m.learned["origin"] == "learned from this log" and m.learned["specular_deg"] == record["final"]["specular_deg"]
+    assert m.params["em"]["sigma"] == 0.03 and m.params["calibration"]["enabled"] is True
     # corridor_door's walls are rough: they echo at every angle, so nothing is deflected
     assert record["incidence"]["specular_deg"] == 90.0
     # the learned noise is the simulator's 0.02 m and the grid's quantisation (0.05 / sqrt 12)
@@ -186,28 +188,92 @@ def test_calibrated_map_records_the_learned_model_and_its_rounds(corridor_door_l
     assert run("map", corridor_door_log, "--mode", "em", "-o", off, "--no-calibrate", "-q").exit_code == 0
     m = read_map_file(off)
     assert "calibration" not in m.stats and m.params["em"]["sigma"] == 0.03
+    assert m.learned == {"sensor": None, "origin": "configured", "specular_deg": None, "opening_deg": None}
 
 
-def test_calibrate_prints_the_model_and_writes_params_that_map_takes(corridor_door_log, tmp_path):
+def test_calibrate_writes_the_sensors_model_that_map_and_compare_take(corridor_door_log, tmp_path):
+    # aogm calibrate LOG -o MODEL, then another log of the same robot maps with it: no calibration
+    # runs (its phases show none), and the map records where its model came from
     model = tmp_path / "model.yaml"
     result = run("calibrate", corridor_door_log, "-o", model, "-q")
     assert result.exit_code == 0, result.output
     assert "sigma" in result.output and "learned from" in result.output
     assert not list(tmp_path.glob("*.h5"))  # no map written
+    written = yaml.safe_load(model.read_text())
+    assert written["format"] == "aogm-sensor-model" and written["format_version"] == 1
+    assert written["sensor"]["count"] == 24 and written["sensor"]["beam_width_deg"] == pytest.approx(30)
+    other = tmp_path / "other.h5"  # another log of the same robot: the same world, another seed
+    assert run("simulate", WORLDS / "corridor_door.yaml", "-o", other, "--seed", 5, "-q").exit_code == 0
     out = tmp_path / "m.h5"
-    assert run("map", corridor_door_log, "--mode", "em", "--params", model, "-o", out, "-q").exit_code == 0
-    with h5py.File(out) as f:
-        params = json.loads(f.attrs["params"])
-        assert "calibration" not in f["stats"].attrs
-    learned = dict(line.strip().split(": ") for line in model.read_text().splitlines() if line.startswith("  ") and "enabled" not in line)
-    assert params["em"]["sigma"] == float(learned["sigma"]) and params["calibration"]["enabled"] is False
+    result = run("map", other, "--mode", "em", "--forward-model", model, "-o", out, "-q")
+    assert result.exit_code == 0, result.output
+    m = read_map_file(out)
+    assert "calibration" not in m.stats["phase_seconds"] and "calibration" not in m.stats
+    assert m.learned["origin"] == f"file {model}"
+    assert m.learned["sensor"] == written["model"]
+    assert m.params["em"]["sigma"] == 0.03 and m.params["calibration"]["enabled"] is True  # as configured
+    # the same model as --params (the old way) makes the same map
+    old = tmp_path / "old.yaml"
+    old.write_text("em: {" + ", ".join(f"{k}: {v!r}" for k, v in written["model"].items())
+                   + f", specular_deg: {m.learned['specular_deg']!r}" + "}\ncalibration: {enabled: false}\n")
+    result = run("map", other, "--mode", "em", "--params", old, "-o", tmp_path / "old.h5", "-q")
+    assert result.exit_code == 0, result.output
+    assert np.array_equal(read_map_file(tmp_path / "old.h5").probability, m.probability)
+    # compare takes it too, for em and adaptive
+    result = run("compare", other, "--modes", "standard,em,adaptive", "--forward-model", model, "--maps-dir",
+                 tmp_path / "maps", "-q")
+    assert result.exit_code == 0, result.output
+    for mode in ("em", "adaptive"):
+        compared = read_map_file(tmp_path / "maps" / f"other_{mode}.h5")
+        assert compared.learned["origin"] == f"file {model}" and "calibration" not in compared.stats["phase_seconds"]
+
+
+def _model_file(tmp_path, corridor_door_log):
+    model = tmp_path / "model.yaml"
+    assert run("calibrate", corridor_door_log, "-o", model, "-q", "--max-sweeps", 2).exit_code == 0
+    return model, yaml.safe_load(model.read_text())
+
+
+@pytest.mark.parametrize("change, key, word", [
+    (lambda d: d["sensor"].update(count=8, mounts=d["sensor"]["mounts"][:8]), "sensor.count", "8 sensors"),
+    (lambda d: d["sensor"]["mounts"][0].__setitem__(2, 45.0), "sensor.mounts", "mounts"),
+    (lambda d: d["sensor"].update(beam_width_deg=20.0), "sensor.beam_width_deg", "beam of 20 deg"),
+    (lambda d: d["sensor"].update(max_range=8.0), "sensor.max_range", "max range 8 m"),
+    (lambda d: d.update(format_version=2), "format_version", "newer"),
+    (lambda d: d.update(format="aogm-map"), "format", "aogm calibrate -o"),
+    (lambda d: d["model"].update(sigma=-1.0), "model.sigma", "expected a number in"),
+    (lambda d: d["model"].pop("p_hit"), "model.p_hit", "expected a number"),
+    (lambda d: d.update(sensor=[1, 2]), "sensor", "expected a mapping"),
+])
+@pytest.mark.parametrize("command", ["map", "compare"])
+def test_a_model_file_of_another_sensor_or_damaged_is_refused(corridor_door_log, tmp_path, change, key, word, command):
+    model, written = _model_file(tmp_path, corridor_door_log)
+    change(written)
+    model.write_text(yaml.safe_dump(written))
+    before = model.read_bytes()
+    out = tmp_path / "out"
+    args = (["map", corridor_door_log, "--mode", "em", "-o", out] if command == "map"
+            else ["compare", corridor_door_log, "--modes", "standard,em", "--json", out])
+    result = run(*args, "--forward-model", model, "-q")
+    assert result.exit_code == 2, result.output
+    assert str(model) in result.output and key in result.output and word in result.output, result.output
+    assert "Traceback" not in result.output and not out.exists() and model.read_bytes() == before
+
+
+def test_a_model_file_that_is_not_yaml_is_refused(corridor_door_log, tmp_path):
+    model = tmp_path / "model.yaml"
+    model.write_text("format: [unclosed\n")
+    result = run("map", corridor_door_log, "--mode", "adaptive", "-o", tmp_path / "m.h5", "--forward-model", model, "-q")
+    assert result.exit_code == 2 and str(model) in result.output and "not valid YAML" in result.output
+    assert not (tmp_path / "m.h5").exists()
 
 
 @pytest.mark.parametrize("text, key", [
     ("calibration: {rounds: 0}\n", "calibration.rounds"),
     ("calibration: {learn: 'sigma,p_foo'}\n", "calibration.learn"),
     ("calibration: {enabled: 3}\n", "calibration.enabled"),
-    ("calibration: {sigma_min: 0.2, sigma_max: 0.1}\n", "calibration.sigma_min"),
+    ("calibration: {tolerance: 2}\n", "calibration.tolerance"),
+    ("calibration: {sigma_min: 0.2}\n", "calibration.sigma_min"),  # calibration's constants are no settings
     ("calibration: {speed: 1}\n", "calibration.speed"),
 ])
 def test_bad_calibration_params_exit_2_naming_the_key(corridor_door_log, tmp_path, text, key):
@@ -238,19 +304,19 @@ def test_calibration_maps_the_whole_log_once_and_part_of_it_before(corridor_door
 
     truth = log.truth.occupancy.reshape(-1).astype(bool)
     occupied = np.zeros(grid.height * grid.width, dtype=bool)
-    config = CalibrationConfig(rounds=3)
-    used, result, record = C.calibrated_em(run_, occupied, EMConfig(), config, em_step)
-    assert result == "result" and record["final"] == C.model_values(used.forward)
-    assert len(calls) == 3  # the broad map, a map for the second fit (at which the model settles), the final
-    assert [c[2] is None for c in calls] == [False] * (len(calls) - 1) + [True]  # one run over every scan, the last
+    config, tuning = CalibrationConfig(rounds=3), C.TUNING
+    used, record = C.calibration_rounds(run_, occupied, EMConfig(), config, em_step)
+    assert record["final"] == C.model_values(used.forward)
+    assert len(calls) == 2  # the broad map, a map for the second fit (at which the model settles)
+    assert [c[2] is None for c in calls] == [False] * len(calls)  # the final run over every scan is the caller's
     scans = log.ranges.shape[0]
     first = calls[0][2].reshape(scans, -1)[:, 0]
     assert np.array_equal(np.flatnonzero(first), np.arange(0, scans, 4))  # the broad map: every 4th scan
-    assert calls[0][0] == config.start_sigma and calls[0][1] == config.start_sweeps
-    for _sigma, sweeps, subset in calls[1:-1]:  # maps made for a fit: every 2nd scan, few sweeps
+    assert calls[0][0] == tuning.start_sigma and calls[0][1] == tuning.start_sweeps
+    for _sigma, sweeps, subset in calls[1:]:  # maps made for a fit: every 2nd scan, few sweeps
         assert np.array_equal(np.flatnonzero(subset.reshape(scans, -1)[:, 0]), np.arange(0, scans, 2))
-        assert sweeps == config.fit_sweeps
-    assert calls[-1][1] == EMConfig().max_sweeps and record["final_em"]["em_sweeps"] == 1
+        assert sweeps == tuning.fit_sweeps
+    assert not occupied.any()  # left as it was: the final map starts where the rounds did
 
 
 def test_a_long_log_calibrates_on_runs_of_consecutive_scans(corridor_door_log):
@@ -271,13 +337,14 @@ def test_a_long_log_calibrates_on_runs_of_consecutive_scans(corridor_door_log):
         calls.append(None if subset is None else subset.reshape(scans, width)[:, 0].copy())
         return 1.0, 1, "result"
 
-    config = CalibrationConfig(rounds=2, max_scans=40, subsample=1)
-    _, _, record = C.calibrated_em(run_, np.zeros(grid.height * grid.width, dtype=bool), EMConfig(), config, em_step)
+    tuning = C.Tuning(max_scans=40, subsample=1)
+    _, record = C.calibration_rounds(run_, np.zeros(grid.height * grid.width, dtype=bool), EMConfig(),
+                                     CalibrationConfig(rounds=2), em_step, tuning=tuning)
     blocks = calls[1]  # the second round: every scan of the runs (subsample 1)
     starts = np.flatnonzero(np.diff(np.concatenate([[0], blocks.astype(int)])) == 1)
     assert blocks.sum() == 40 and len(starts) == C.CAL_BLOCKS and starts[0] == 0 and starts[-1] == scans - 10
-    assert np.array_equal(calls[0], blocks & (np.arange(scans) % config.start_subsample == 0))  # the broad map
-    assert calls[-1] is None and "4 runs of 10 consecutive scans" in record["fitted_at"]
+    assert np.array_equal(calls[0], blocks & (np.arange(scans) % tuning.start_subsample == 0))  # the broad map
+    assert "4 runs of 10 consecutive scans" in record["fitted_at"]
     assert record["readings_used"] <= 40 * width
     # a log within max_scans is left whole
     assert C._scan_blocks(run_, scans) is None

@@ -18,7 +18,7 @@ from aogm_cli.evaluation.metrics import map_metrics, run_checks
 from aogm_cli.evaluation.planner import planner_metrics
 from aogm_cli.io.logfile import read_log, write_log
 from aogm_cli.io.mapfile import read_map_file
-from aogm_cli.mapping import modes
+from aogm_cli.report import map_run
 from aogm_cli.simulation.sonar import simulate
 from aogm_cli.world.loader import parse_world
 
@@ -86,9 +86,9 @@ def test_json_follows_the_contract_and_matches_the_map_files(logs, compared):
     for r in data["results"]:
         assert set(r) == {"log", "world", "mode", "truth", "runtime_s", "metrics", "params", "detector", "calibration"}
         assert r["truth"] is True
-        if r["mode"] == "em":  # the forward model learned from the log, as the map's parameters record it
-            assert r["calibration"]["final"] == {k: r["params"]["em"][k]
-                                                 for k in ("sigma", "p_rand", "p_hit", "p_max", "specular_deg", "opening_deg")}
+        if r["mode"] == "em":  # the forward model learned from the log; the map's parameters stay as configured
+            assert set(r["calibration"]["final"]) == {"sigma", "p_rand", "p_hit", "p_max", "specular_deg", "opening_deg"}
+            assert r["params"]["em"]["sigma"] == 0.03
         else:
             assert r["calibration"] is None
         assert r["params"]["mode"] == r["mode"] and r["detector"] is None  # no adaptive map here
@@ -136,7 +136,7 @@ def test_map_files_give_the_same_numbers_without_mapping(logs, compared, monkeyp
     def no_mapping(*args, **kwargs):
         raise AssertionError("a map was computed again")
 
-    monkeypatch.setattr(modes, "map_file", no_mapping)
+    monkeypatch.setattr(map_run, "map_file", no_mapping)
     maps = sorted((out / "maps").glob("*.h5"))
     assert len(maps) == 4
     result = run("compare", *maps, "--json", tmp_path / "again.json", "-q")  # modes from the map files
@@ -199,7 +199,7 @@ def test_malformed_gates_exit_2_before_mapping(logs, tmp_path, monkeypatch, args
     def no_mapping(*a, **k):
         raise AssertionError("mapping started")
 
-    monkeypatch.setattr(modes, "map_file", no_mapping)
+    monkeypatch.setattr(map_run, "map_file", no_mapping)
     result = run("compare", logs[0], *args, "--json", tmp_path / "r.json", "-q")
     assert result.exit_code == 2, result.output
     assert words in result.output and "Traceback" not in result.output
@@ -267,8 +267,8 @@ def test_adaptive_mode_takes_the_detector_and_draws_clusters(logs, tmp_path):
 
 def test_results_are_small_records_unless_a_figure_or_maps_dir_needs_the_maps(logs, tmp_path):
     """Each task maps and evaluates where it runs; its map comes back only when asked for."""
-    from aogm_cli.mapping.params import resolve_params
     from aogm_cli.report import compare as lib
+    from aogm_cli.report.map_run import resolve_params
     from aogm_cli.report.scoring import CompareJob
 
     entries = lib.collect_inputs([str(logs[0])])
@@ -303,9 +303,8 @@ def test_em_and_adaptive_share_one_calibration_per_log(logs, tmp_path):
     em, adaptive = (read_map_file(maps / f"door_1_{mode}.h5") for mode in ("em", "adaptive"))
     assert "made_by" not in adaptive.stats["calibration"] and em.stats["calibration"]["made_by"] == "adaptive"
     assert adaptive.stats["calibration"]["final"] == em.stats["calibration"]["final"]
-    for key, value in adaptive.stats["calibration"]["final"].items():
-        assert em.params["em"][key] == value
-    assert em.params["calibration"]["enabled"] is True
+    assert em.learned == {**adaptive.learned, "origin": "the adaptive map of this log"}  # the em map took it all
+    assert em.params["em"] == adaptive.params["em"] and em.params["calibration"]["enabled"] is True  # as configured
     # its runtime counts the calibration it took, as the adaptive map timed it
     assert em.stats["phase_seconds"]["calibration"] >= adaptive.stats["phase_seconds"]["calibration"] > 0
     assert em.runtime_s == pytest.approx(sum(em.stats["phase_seconds"].values()), rel=1e-9)

@@ -101,7 +101,7 @@ def test_a_simulated_beam_pattern_is_learned(beam_deg, expect, tmp_path):
     assert low <= record["opening_deg"] <= high
     if beam_deg < 15.0:
         assert abs(0.5 * record["opening_deg"] - beam_deg) <= 3.0
-    assert m.params["em"]["opening_deg"] == record["opening_deg"]
+    assert m.learned["opening_deg"] == record["opening_deg"] and m.params["em"]["opening_deg"] == 0.0
     assert record["cone_deg"] == pytest.approx(30.0) and len(record["explained"]) == 15
 
 
@@ -142,7 +142,7 @@ def test_the_real_ring_learns_one_opening_whatever_width_it_was_imported_at(requ
         out = tmp_path / f"em{beam}.h5"
         assert run("map", log, "--mode", "em", "--params", params, "-o", out, "-q").exit_code == 0
         maps[beam] = aogm_cli.load_map(out)
-        assert maps[beam].params["em"]["opening_deg"] == 14.0
+        assert maps[beam].learned["opening_deg"] == 14.0
         assert maps[beam].stats["calibration"]["opening"]["cone_deg"] == pytest.approx(beam)
     assert np.array_equal(maps[20].probability, maps[30].probability)
     model = tmp_path / "model.yaml"

@@ -15,8 +15,8 @@ from click.testing import CliRunner
 from aogm_cli.cli import main
 from aogm_cli.io import outputs
 from aogm_cli.io.detectorfile import default_detector_path
-from aogm_cli.mapping import modes
 from aogm_cli.mapping.params import MapParams
+from aogm_cli.report import map_run
 
 WORLD = """
 name: tiny_room
@@ -141,7 +141,7 @@ def no_mapping(monkeypatch):
     def fail(*args, **kwargs):
         raise AssertionError("mapping started")
 
-    monkeypatch.setattr(modes, "map_file", fail)
+    monkeypatch.setattr(map_run, "map_file", fail)
 
 
 @pytest.mark.parametrize("case", list(REFUSALS))

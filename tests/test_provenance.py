@@ -11,6 +11,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+import yaml
 from click.testing import CliRunner
 from numpy.testing import assert_array_equal
 
@@ -178,12 +179,12 @@ def test_info_on_a_file_that_is_not_aogms_exits_2(tmp_path):
     assert "'something-else'" in run("info", other).output
 
 
-def test_calibrate_params_file_records_provenance(files, tmp_path):
+def test_calibrate_model_file_records_provenance(files, tmp_path):
     _, log, _ = files
     out = tmp_path / "model.yaml"
     result = run("calibrate", log, "-o", out, "--max-sweeps", 2, "-q")
     assert result.exit_code == 0, result.output
-    first = out.read_text().splitlines()[0]
-    assert first.startswith("# provenance: ")
-    assert json.loads(first.removeprefix("# provenance: "))["inputs"][0] == {"path": str(log), "sha256": sha256(log)}
-    assert run("map", log, "--mode", "em", "--params", out, "--max-sweeps", 1, "-o", tmp_path / "m.h5", "-q").exit_code == 0
+    made = yaml.safe_load(out.read_text())["provenance"]
+    assert made["inputs"][0] == {"path": str(log), "sha256": sha256(log)}
+    result = run("map", log, "--mode", "em", "--forward-model", out, "--max-sweeps", 1, "-o", tmp_path / "m.h5", "-q")
+    assert result.exit_code == 0, result.output

@@ -23,7 +23,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def warm_em() -> None:
     from aogm_cli.core.log import SensorSpec
     from aogm_cli.mapping.modes import warm_up
-    from aogm_cli.mapping.params import resolve_params
+    from aogm_cli.report.map_run import resolve_params
 
     sonar = SensorSpec(mount=np.array([[0.1, 0.0, 0.0], [0.0, 0.1, math.pi / 2]]))
     warm_up(sonar, resolve_params(), "adaptive")
@@ -35,7 +35,7 @@ def warm_rest() -> None:
     from aogm_cli.evaluation.holdout import HoldoutSplit, holdout_scores, split_log
     from aogm_cli.io.logfile import LogReader, write_log
     from aogm_cli.mapping.modes import map_in_mode, map_source, tiny_log
-    from aogm_cli.mapping.params import resolve_params
+    from aogm_cli.report.map_run import resolve_params
     from aogm_cli.simulation.sonar import simulate
     from aogm_cli.world.loader import load_world
 

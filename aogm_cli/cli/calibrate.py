@@ -1,9 +1,8 @@
 """``aogm calibrate``: learn EM's forward model from a log and print it (no map written), or
-write it as a ``--params`` file for other logs of the same robot."""
+write the sensor's model as a file (``-o MODEL``) that maps other logs of the same robot
+(``--forward-model MODEL``)."""
 
 from __future__ import annotations
-
-import json
 
 import click
 
@@ -27,7 +26,8 @@ from aogm_cli.io.outputs import resolve_outputs
 @click.option("--mode", type=click.Choice(["em", "adaptive"]), default="em", show_default=True,
               help="Whose maps the model is fitted at.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False),
-              help="Also write the learned model as a --params YAML (calibration off, the learned em: values).")
+              help="Also write the sensor's learned model (sigma, p_rand, p_hit, p_max, the beam's opening, the "
+                   "sensor it fits) as a model file for `aogm map/compare --forward-model`.")
 @detector_option
 @params_option
 @resolution_option
@@ -60,14 +60,15 @@ def calibrate(log_file, mode, output, detector, params_file, resolution, quiet, 
     \b
     Example:
       aogm calibrate door.h5
-      aogm calibrate robot.h5 -o robot_model.yaml && aogm map other.h5 --mode em --params robot_model.yaml -o m.h5
+      aogm calibrate robot.h5 -o robot_model.yaml && aogm map other.h5 --mode em --forward-model robot_model.yaml -o m.h5
     """
     inputs = (log_file, params_file, detector_file(detector, (mode,)))
     resolve_outputs(inputs, [("-o", output)] if output else [])
+    from aogm_cli.io.logfile import LogReader
+    from aogm_cli.io.modelfile import model_bytes
     from aogm_cli.io.provenance import provenance
-    from aogm_cli.mapping.calibration import calibration_table, learned_params_yaml
-    from aogm_cli.mapping.modes import map_file
-    from aogm_cli.mapping.params import resolve_params
+    from aogm_cli.mapping.calibration import calibration_table
+    from aogm_cli.report.map_run import map_file, resolve_params
 
     made = provenance(inputs) if output else None  # the inputs as read, the time the run starts
     params = resolve_params(params_file, parameter_overrides(resolution, True, options))
@@ -83,7 +84,8 @@ def calibrate(log_file, mode, output, detector, params_file, resolution, quiet, 
     if output:
         from aogm_cli.io.atomic import write_files_atomically
 
-        text = f"# provenance: {json.dumps(made, sort_keys=True)}\n" + learned_params_yaml(record, log_file)
-        write_files_atomically([(output, text.encode())])
+        with LogReader(log_file) as reader:
+            sensor = reader.sensor
+        write_files_atomically([(output, model_bytes(result.learned["sensor"], sensor, str(log_file), made))])
         if not quiet:
-            click.echo(f"{output}: the learned model as --params", err=True)
+            click.echo(f"{output}: the sensor's model, for --forward-model", err=True)

@@ -14,6 +14,7 @@ from aogm_cli.cli.options import (
     check_executor,
     detector_file,
     detector_option,
+    forward_model_option,
     jobs_option,
     limits_of,
     mode_choice,
@@ -36,6 +37,7 @@ from aogm_cli.io.outputs import resolve_outputs
 @modes_option
 @detector_option
 @params_option
+@forward_model_option
 @click.option("--json", "json_out", type=click.Path(dir_okay=False),
               help="Write the results as JSON (CONTRACT.md shape), to read back with --from-json.")
 @click.option("--csv", "csv_out", type=click.Path(dir_okay=False),
@@ -65,13 +67,13 @@ from aogm_cli.io.outputs import resolve_outputs
 @seed_option
 @quiet_option
 @budget_options
-def compare(inputs, modes_text, detector, params_file, json_out, csv_out, figure_out, maps_dir, from_json, requires,
+def compare(inputs, modes_text, detector, params_file, forward_model, json_out, csv_out, figure_out, maps_dir, from_json, requires,
             require_checks, jobs, scheduler, resume, holdout, robot_radius, calibrate, seed, quiet, max_memory=16e9,
             max_work=None):
     """Map every log in every mode, evaluate each map against the log's truth, and print a table
     (accuracy, occupied F1, Brier, checks passed, leak, block, surface recall, runtime, runtime
     relative to the standard map of the same log). em and adaptive learn their forward model from each log (--calibrate,
-    the default; `aogm calibrate --help`).
+    the default; `aogm calibrate --help`), or take a robot's from --forward-model MODEL.
 
     A log without truth (an imported real log) is scored by re-casting its in-range readings
     against each map instead: the share whose endpoint (a sonar's occupied arc) lies on a cell
@@ -173,8 +175,8 @@ def compare(inputs, modes_text, detector, params_file, json_out, csv_out, figure
 
     from aogm_cli.evaluation.holdout import HoldoutSplit
     from aogm_cli.io.provenance import provenance
-    from aogm_cli.mapping.params import resolve_params
     from aogm_cli.report import compare as lib
+    from aogm_cli.report.map_run import resolve_params
     from aogm_cli.report.scoring import CompareJob
     from aogm_cli.report.table import log_labels, print_table
 
@@ -182,13 +184,14 @@ def compare(inputs, modes_text, detector, params_file, json_out, csv_out, figure
     radius = _robot_radius(robot_radius)
     check_executor(jobs, scheduler)
     params = resolve_params(params_file, {"calibration": {"enabled": calibrate}})
-    job = CompareJob(params, detector, split, limits_of(max_memory, max_work), radius)
+    job = CompareJob(params, detector, split, limits_of(max_memory, max_work), radius, forward_model)
     entries = lib.collect_inputs(list(inputs))
     modes = lib.parse_modes(modes_text) if modes_text else lib.default_modes(entries)
     _check_gates(gates, require_checks, modes, split is not None)
     resumed = _resume(entries, modes, maps_dir, job, resume, quiet)
     outputs = [("--json", json_out), ("--csv", csv_out), ("--figure", figure_out)]
-    read = _check_outputs(inputs, entries, modes, (params_file, detector_file(detector, modes)), outputs, maps_dir)
+    read = _check_outputs(inputs, entries, modes, (params_file, detector_file(detector, modes), forward_model), outputs,
+                          maps_dir)
     record = provenance(read)  # the inputs as read, the time the run starts
     _check_budget(entries, modes, job, params_file)
     n_tasks = sum(mode not in e.maps for e in entries for mode in modes)
@@ -255,17 +258,22 @@ def _check_outputs(inputs, entries, modes, files, outputs, maps_dir) -> list[str
 
 def _check_budget(entries, modes, job, params_file: str | None) -> None:
     """Refuse (exit 2) before any work a map to make whose grid or estimate exceeds ``job.limits``."""
-    from aogm_cli.mapping.map_cost import check_logs
+    from aogm_cli.report.map_run import check_logs
 
     to_map = [(e.path, mode) for e in entries for mode in modes if mode not in e.maps]
     refuse_huge_grids(list(dict.fromkeys(path for path, _ in to_map)), job.params, params_file, False,
                       job.limits.max_memory)
     check_logs(to_map, job.params, job.limits)
+    if job.forward_model:  # a model of another sensor than a log's is refused before any map is made
+        from aogm_cli.report.map_run import given_model
+
+        for path in dict.fromkeys(path for path, mode in to_map if mode != "standard"):
+            given_model(job.forward_model, path)
 
 
 # options that only mapping uses: refused with --from-json (parameter name -> option)
 MAPPING_OPTIONS = {"figure_out": "--figure", "maps_dir": "--maps-dir", "modes_text": "--modes", "detector": "--detector",
-                   "params_file": "--params", "jobs": "--jobs", "scheduler": "--scheduler", "resume": "--resume", "holdout": "--holdout", "robot_radius": "--robot-radius", "calibrate": "--calibrate/--no-calibrate",
+                   "params_file": "--params", "forward_model": "--forward-model", "jobs": "--jobs", "scheduler": "--scheduler", "resume": "--resume", "holdout": "--holdout", "robot_radius": "--robot-radius", "calibrate": "--calibrate/--no-calibrate",
                    "seed": "--seed", "max_memory": "--max-memory", "max_work": "--max-work"}
 
 

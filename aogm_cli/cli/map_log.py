@@ -9,6 +9,7 @@ from aogm_cli.cli.options import (
     calibrate_option,
     detector_file,
     detector_option,
+    forward_model_option,
     limits_of,
     mode_option,
     output_option,
@@ -73,13 +74,14 @@ def parameter_overrides(resolution: float | None, calibrate: bool | None, option
 @png_option("Also render the map into this PNG.")
 @detector_option
 @params_option
+@forward_model_option
 @resolution_option
 @parameter_options
 @calibrate_option
 @quiet_option
 @budget_options
-def map_log(log_file, mode, output, png, detector, params_file, resolution, calibrate, quiet, max_memory=16e9,
-            max_work=None, **options) -> None:
+def map_log(log_file, mode, output, png, detector, params_file, forward_model, resolution, calibrate, quiet,
+            max_memory=16e9, max_work=None, **options) -> None:
     """Build an occupancy-grid map from LOG.h5.
 
     \b
@@ -97,7 +99,9 @@ def map_log(log_file, mode, output, png, detector, params_file, resolution, cali
     residual probability, all others keep the standard map's.
 
     em and adaptive learn their forward model from the log itself (--calibrate, the default;
-    `aogm calibrate --help`): the map's params hold the learned values, /stats the rounds.
+    `aogm calibrate --help`), or take a robot's from --forward-model MODEL: the map's params hold
+    the values configured, its `learned` attribute what was learned and where the model came
+    from, /stats the calibration's rounds.
 
     Maps of a simulated log use its truth grid; other logs get the poses' bounds plus the
     sensor's max range at --resolution. Every parameter used is written into the map file.
@@ -106,22 +110,22 @@ def map_log(log_file, mode, output, png, detector, params_file, resolution, cali
     Example:
       aogm map door.h5 --mode standard -o door_map.h5 --png door_map.png
     """
-    inputs = (log_file, params_file, detector_file(detector, (mode,)))
+    inputs = (log_file, params_file, detector_file(detector, (mode,)), forward_model)
     resolve_outputs(inputs, [("-o", output), ("--png", png)])  # before loading the mappers
     from aogm_cli.io.atomic import write_files_atomically
     from aogm_cli.io.mapfile import map_bytes
     from aogm_cli.io.provenance import provenance
-    from aogm_cli.mapping.modes import map_file
-    from aogm_cli.mapping.params import resolve_params
+    from aogm_cli.report.map_run import given_model, map_file, resolve_params
 
     record = provenance(inputs)  # the inputs as read, the time the run starts
     params = resolve_params(params_file, parameter_overrides(resolution, calibrate, options))
+    given = given_model(forward_model, log_file) if forward_model and mode != "standard" else None
     refuse_huge_grids([log_file], params, params_file, resolution is not None, max_memory)
     with progress_bar(params.em.max_sweeps, f"map ({mode})", quiet, unit="sweep") as advance:
         def progress(phase, done, total):
             advance(1)
 
-        result = map_file(log_file, mode, params, detector, progress, limits=limits_of(max_memory, max_work))
+        result = map_file(log_file, mode, params, detector, progress, limits=limits_of(max_memory, max_work), given=given)
     outputs = [(output, map_bytes(result, record))]
     if png:
         from aogm_cli.report.picture import map_png

@@ -98,6 +98,12 @@ params_option = click.option(
     "--params", "params_file", type=click.Path(dir_okay=False),
     help="YAML with sections inverse_model:, em:, adaptive: and key resolution:, used by every map made.",
 )
+forward_model_option = click.option(
+    "--forward-model", "forward_model", type=click.Path(dir_okay=False),
+    help="A sensor model file written by `aogm calibrate -o`: em and adaptive map with its sigma, p_rand, p_hit, "
+         "p_max and beam opening instead of calibrating (the specular angle is still learned from each log). "
+         "Refused when learned for another sensor.",
+)
 resolution_option = click.option(
     "--resolution", type=FiniteFloat(min=MIN_RESOLUTION),
     help=f"Cell size (m) for logs without truth.  [default: {MapParams().resolution}]"

@@ -27,3 +27,4 @@ class OccupancyMap:
     occupied: np.ndarray | None = None  # em, adaptive
     clusters: np.ndarray | None = None  # adaptive
     stats: dict = field(default_factory=dict)
+    learned: dict | None = None  # what the map learned from its log, apart from params (``mapping.learned``)

@@ -60,6 +60,8 @@ def map_bytes(m: OccupancyMap, provenance: dict | None = None) -> bytes:
         f.attrs["source_log"] = m.source_log
         f.attrs["runtime_s"] = float(m.runtime_s)
         f.attrs["params"] = json.dumps(m.params, sort_keys=True)
+        if m.learned is not None:
+            f.attrs["learned"] = json.dumps(m.learned, sort_keys=True)
         write_provenance(f, provenance)
         g = f.create_group("map")
         for k, v in m.grid.attrs().items():
@@ -160,6 +162,7 @@ def read_map_file(path: str | Path) -> OccupancyMap:
             runtime_s=header.runtime_s,
             source_log=header.source_log,
             stats=stats,
+            learned=json_attr(f, "learned", path, "learned", dict, required=False),
             **grids,
         )
 

@@ -1,4 +1,4 @@
-"""The paper's adaptive mode: standard log-odds everywhere, then EM inside each cluster.
+"""The paper's adaptive mode's own parts: standard log-odds everywhere, then EM inside each cluster.
 
 The detector flags readings (``detector.network``), the bands their cones sweep near their
 ranges become clusters (``mapping.cluster``), and EM (``mapping.em.run_em``) runs over the
@@ -9,28 +9,15 @@ get EM's residual probability, and the other cells the same scale (``joined_view
 from __future__ import annotations
 
 import dataclasses
-import time
 from typing import NamedTuple
 
 import numpy as np
 
 from aogm_cli.core.log import Log
-from aogm_cli.core.occupancy_map import OccupancyMap
 from aogm_cli.mapping.cluster import grown, label_clusters, near_occupied, readings_near_clusters
-from aogm_cli.mapping.em import (
-    EMOutcome,
-    EMProblem,
-    em_problem,
-    em_readings,
-    em_stats,
-    em_view,
-    em_with_phases,
-    find_root,
-    prepared,
-)
+from aogm_cli.mapping.em import EMOutcome, EMProblem, ProblemFor, em_problem, em_readings, em_view, find_root
 from aogm_cli.mapping.params import EMConfig, MapParams
-from aogm_cli.mapping.pipeline import Progress, params_json
-from aogm_cli.mapping.standard import standard_pass
+from aogm_cli.mapping.standard import standard_log_odds
 from aogm_cli.sensor_models.ray import axis_counts, is_narrow_beam
 from aogm_cli.sensor_models.readings import LaidOutReadings, cone_bands
 
@@ -57,9 +44,9 @@ def coupled_groups(problem: EMProblem, n_clusters: int) -> int:
 
 
 def contested_cells(log: Log, grid, params: MapParams, log_odds: np.ndarray,
-                    shadow: np.ndarray | None = None) -> tuple[np.ndarray, float]:
-    """(cells (H, W) whose occupied evidence alone reaches ``adaptive.contested`` log-odds but
-    which the standard map holds free, seconds): where the readings disagree and the standard
+                    shadow: np.ndarray | None = None) -> np.ndarray:
+    """Cells (H, W) whose occupied evidence alone reaches ``adaptive.contested`` log-odds but
+    which the standard map holds free: where the readings disagree and the standard
     map cannot explain them (walls that specular or multipath readings, too long, cleared).
     One more standard pass, with the inverse model's free evidence set to nothing (and the
     deflected beams, ``shadow``, stopped: they hit nothing)."""
@@ -67,8 +54,8 @@ def contested_cells(log: Log, grid, params: MapParams, log_odds: np.ndarray,
     inverse = dataclasses.replace(params.inverse_model, l_free=params.inverse_model.l0,
                                   model="elfes" if params.inverse_model.model == "exact" else params.inverse_model.model)
     cuts = None if shadow is None else shadow.reshape(np.shape(log.ranges))
-    hits, _, seconds = standard_pass(log, grid, dataclasses.replace(params, inverse_model=inverse), cuts=cuts)
-    return (hits - params.inverse_model.l0 >= params.adaptive.contested) & (log_odds <= 0), seconds
+    hits, _ = standard_log_odds(log, grid, dataclasses.replace(params, inverse_model=inverse), cuts=cuts)
+    return (hits - params.inverse_model.l0 >= params.adaptive.contested) & (log_odds <= 0)
 
 
 def find_clusters(run: LaidOutReadings, flags: np.ndarray, log_odds: np.ndarray, observed: np.ndarray,
@@ -94,12 +81,11 @@ def find_clusters(run: LaidOutReadings, flags: np.ndarray, log_odds: np.ndarray,
     return label_clusters(observed & grown(region, grow))
 
 
-def em_in_clusters(run: LaidOutReadings, clusters: np.ndarray, n_clusters: int, occupied: np.ndarray,
-                   params: MapParams, progress: Progress | None = None,
-                   learned_once: dict | None = None) -> tuple[EMOutcome, int]:
-    """EM over every cluster cell at once, every other cell held at ``occupied`` (flat, updated
-    in place): (its outcome, how many groups of coupled clusters it solved). Clusters that share
-    no reading are independent (as the paper has them): one run gives each its own result."""
+def cluster_problems(run: LaidOutReadings, clusters: np.ndarray) -> ProblemFor:
+    """The adaptive mode's problems: EM over every cluster cell at once (``cluster_problem``),
+    every other cell held at the map it is given; with ``em.start`` "empty", the cluster cells
+    start free. Clusters that share no reading are independent (as the paper has them): one run
+    gives each its own result."""
     cells = np.flatnonzero(clusters.reshape(-1) > 0)
 
     def problem_for(config: EMConfig, occ: np.ndarray, subset: np.ndarray | None):
@@ -107,66 +93,16 @@ def em_in_clusters(run: LaidOutReadings, clusters: np.ndarray, n_clusters: int, 
             occ[cells] = False
         return cluster_problem(run, clusters, occ, config, subset), cells
 
-    # the model is fitted on the readings EM explains: those whose cones reach a cluster
-    # (outside the clusters the thresholded standard map stands, and readings crossing its
-    # thick walls looked random: p_rand 0.29 on the intel log when fitted on every reading)
+    return problem_for
+
+
+def near_clusters(run: LaidOutReadings, clusters: np.ndarray, forward) -> np.ndarray:
+    """Bool mask of the readings whose cones reach a cluster: those the model is fitted on, the
+    ones EM explains (outside the clusters the thresholded standard map stands, and readings
+    crossing its thick walls look random)."""
     near = np.zeros(run.z.size, dtype=bool)
-    near[readings_near_clusters(clusters, run.rows, run.cols, run.z, run.grid, run.sensor.max_range,
-                                params.em.forward)] = True
-    outcome = em_with_phases(run, occupied, params, problem_for, select=near, progress=progress,
-                             learned_once=learned_once)
-    return outcome, coupled_groups(outcome.problem, n_clusters)
-
-
-def map_adaptive(log, params: MapParams, detector, detector_name: str = "packaged",
-                 progress: Progress | None = None) -> OccupancyMap:
-    """The adaptive mode on a log source (``pipeline``) with ``detector`` (anything with
-    ``flag(ranges, max_range)``: a trained ``Detector`` or a ``ConstantDetector``)."""
-    p = prepared(log, params)
-    grid, whole, run, params, log_odds, observed = p.grid, p.whole, p.run, p.params, p.log_odds, p.observed
-    sensor = run.sensor
-    t0 = time.perf_counter()
-    flags = detector.flag(whole.ranges, sensor.max_range).reshape(-1)
-    t_detect = time.perf_counter() - t0
-
-    t0 = time.perf_counter()
-    contested, t_hits = (contested_cells(whole, grid, params, log_odds, run.shadow) if params.adaptive.contested > 0
-                         else (None, 0.0))
-    clusters, n_clusters = find_clusters(run, flags, log_odds, observed, params, contested)
-    t_cluster = time.perf_counter() - t0
-
-    occupied = np.ascontiguousarray((log_odds > 0).reshape(-1))  # the thresholded standard map
-    outcome, groups = (em_in_clusters(run, clusters, n_clusters, occupied, params, progress, p.learned_once)
-                       if n_clusters else (None, 0))
-    t0 = time.perf_counter()
-    probability, observed = joined_view(log_odds, observed, outcome, clusters, whole, grid, params)
-    seconds = outcome.seconds if outcome else {"index": 0.0, "calibration": 0.0, "sweeps": 0.0}
-    phases = {**p.phases, "detector": t_detect, "clusters": t_cluster, **seconds, "view": time.perf_counter() - t0}
-    stats = {
-        "clusters": n_clusters,
-        "cells_in_clusters": int((clusters > 0).sum()),
-        "cluster_groups": groups,
-        "observed_cells": int(observed.sum()),
-        "flagged_readings": int(flags.sum()),
-        "readings": int(flags.size),
-        **em_stats(outcome),
-        "phase_seconds": phases,
-        "detector": detector_name,
-    }
-    return OccupancyMap(
-        grid=grid,
-        probability=probability,
-        observed=observed,
-        mode="adaptive",
-        params=params_json(dataclasses.replace(params, em=outcome.config if outcome else params.em), "adaptive", grid)
-        | {"detector": detector_name},
-        runtime_s=sum(phases.values()),
-        source_log=log.path,
-        log_odds=log_odds,
-        occupied=occupied.reshape(grid.shape) & observed,
-        clusters=clusters,
-        stats=stats,
-    )
+    near[readings_near_clusters(clusters, run.rows, run.cols, run.z, run.grid, run.sensor.max_range, forward)] = True
+    return near
 
 
 # --- one scale (issue 28) --------------------------------------------------------------------------

@@ -1,6 +1,6 @@
 """The forward model learned from the log it maps (Thrun 2003's "learning"): closed-form updates
 of p_rand, p_max, p_hit and sigma from the expectations of every reading's cause at a binary map,
-alternated with EM's map until the parameters settle (``calibrated_em``), bounded and recorded.
+alternated with EM's map until the parameters settle (``calibration_rounds``), bounded and recorded.
 """
 
 from __future__ import annotations
@@ -12,16 +12,49 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aogm_cli.mapping.params import CalibrationConfig, EMConfig, MapParams
+from aogm_cli.mapping.learned import ONCE, SENSOR_KEYS
+from aogm_cli.mapping.params import CalibrationConfig, EMConfig
 from aogm_cli.sensor_models import forward_model as F
 from aogm_cli.sensor_models.cone import flat_offsets
 from aogm_cli.sensor_models.lobe import LOBE_BIN_DEG, cone_deg, learned_opening, lobe_bins, opening_matches
 from aogm_cli.sensor_models.readings import LaidOutReadings
 from aogm_cli.sensor_models.surface import INCIDENCE_BINS, incidence_counts, specular_angle
 
-LEARNED = ("sigma", "p_rand", "p_hit", "p_max")  # the forward model's parameters calibration sets
-ONCE = ("specular_deg", "opening_deg")  # and those it learns once, before EM (``incidence_at``, ``opening_at``)
+LEARNED = SENSOR_KEYS  # the forward model's parameters calibration sets
 CAL_BLOCKS = 4  # a long log's calibration maps this many runs of consecutive scans (``_scan_blocks``)
+
+
+@dataclass(frozen=True)
+class Tuning:
+    """How calibration works inside, fixed by measurement (docs/algorithms.md, "Calibration's
+    constants", says why each value): not a user's setting. ``TUNING`` is what every map uses;
+    tests make their own."""
+
+    fit_iterations: int = 30  # updates of the parameters at one map (``fit_at_map``)
+    max_readings: int = 200_000  # the readings fitted on (every n-th beyond: ``sample_readings``)
+    start_sigma: float = 0.1  # the first EM map's sigma is at least this broad (m)
+    start_sweeps: int = 3  # the first (broad) EM run's sweep limit: its map only serves the first fit
+    fit_sweeps: int = 4  # the sweep limit of the later maps made for a fit (the final map: em.max_sweeps)
+    subsample: int = 2  # the rounds' maps are made from every n-th scan
+    start_subsample: int = 4  # and the broad first map from every n-th
+    max_scans: int = 2000  # a longer log calibrates on this many scans, in CAL_BLOCKS runs
+    pass_margin: float = 0.3  # m: a reading passed a surface cell when its echo lies this far beyond
+    specular_rate: float = 0.5  # the specular angle: where the echo rate falls below this share of head-on
+    # bounds of the learned values: sigma from a tenth of a typical 5 cm cell to half a metre; p_rand,
+    # p_max below one half each (a model that calls most readings random or dropped explains
+    # nothing); p_hit away from 0 and 1 (EM needs q = 1 - p_hit > 0, and a wall missed by every
+    # reading is no wall)
+    sigma_min: float = 0.005
+    sigma_max: float = 0.5
+    p_rand_min: float = 0.001
+    p_rand_max: float = 0.5
+    p_max_max: float = 0.4
+    p_hit_min: float = 0.05
+    p_hit_max: float = 0.95
+
+
+TUNING = Tuning()
+MAX_READINGS = TUNING.max_readings
 
 
 def sample_readings(run: LaidOutReadings, max_readings: int, select: np.ndarray | None = None) -> F.ExpectationReadings:
@@ -53,26 +86,27 @@ def expectations(run: LaidOutReadings, readings: F.ExpectationReadings, occupied
     return out, obstacles
 
 
-def m_step(sums: np.ndarray, forward: F.ForwardModelConfig, config: CalibrationConfig) -> F.ForwardModelConfig:
-    """The parameters that maximise the expected log-likelihood given the summed expectations,
-    each clipped to its bounds (``CalibrationConfig``). A component that got no weight (p_max
+def m_step(sums: np.ndarray, forward: F.ForwardModelConfig, keys: tuple[str, ...],
+           bounds: Tuning = TUNING) -> F.ForwardModelConfig:
+    """The parameters ``keys`` (of sigma, p_rand, p_hit, p_max) that maximise the expected log-likelihood given the summed
+    expectations, each clipped to its ``bounds``. A component that got no weight (p_max
     0 from the start, no detection, no obstacle examined) keeps its value."""
     n = sums[F.E_READINGS]
     if n <= 0:
         return forward
-    p_rand = float(np.clip(sums[F.E_RANDOM] / n, config.p_rand_min, config.p_rand_max))
-    p_max = float(np.clip(sums[F.E_DROPOUT] / n, 0.0, config.p_max_max)) if forward.p_max > 0 else 0.0
-    if p_rand + p_max > config.p_rand_max + config.p_max_max:
-        scale = (config.p_rand_max + config.p_max_max) / (p_rand + p_max)
+    p_rand = float(np.clip(sums[F.E_RANDOM] / n, bounds.p_rand_min, bounds.p_rand_max))
+    p_max = float(np.clip(sums[F.E_DROPOUT] / n, 0.0, bounds.p_max_max)) if forward.p_max > 0 else 0.0
+    if p_rand + p_max > bounds.p_rand_max + bounds.p_max_max:
+        scale = (bounds.p_rand_max + bounds.p_max_max) / (p_rand + p_max)
         p_rand, p_max = p_rand * scale, p_max * scale
     p_hit = forward.p_hit
     if sums[F.E_EXAMINED] > 0 and sums[F.E_DETECTED] > 0:
-        p_hit = float(np.clip(sums[F.E_DETECTED] / sums[F.E_EXAMINED], config.p_hit_min, config.p_hit_max))
+        p_hit = float(np.clip(sums[F.E_DETECTED] / sums[F.E_EXAMINED], bounds.p_hit_min, bounds.p_hit_max))
     sigma = forward.sigma
     if sums[F.E_DETECTED] > 0:
-        sigma = float(np.clip(math.sqrt(sums[F.E_SQUARED] / sums[F.E_DETECTED]), config.sigma_min, config.sigma_max))
+        sigma = float(np.clip(math.sqrt(sums[F.E_SQUARED] / sums[F.E_DETECTED]), bounds.sigma_min, bounds.sigma_max))
     learned = {"sigma": sigma, "p_rand": p_rand, "p_hit": p_hit, "p_max": p_max}
-    return dataclasses.replace(forward, **{k: v for k, v in learned.items() if k in config.learned})
+    return dataclasses.replace(forward, **{k: v for k, v in learned.items() if k in keys})
 
 
 def settled(a: F.ForwardModelConfig, b: F.ForwardModelConfig, tolerance: float) -> bool:
@@ -93,21 +127,21 @@ class Fit:
 
 
 def fit_at_map(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: np.ndarray, forward: F.ForwardModelConfig,
-               config: CalibrationConfig) -> Fit:
+               config: CalibrationConfig, tuning: Tuning = TUNING) -> Fit:
     """EM over the parameters alone at a fixed map: expectations, then ``m_step``, until the
-    parameters settle (``config.tolerance`` / 10) or ``config.fit_iterations``."""
+    parameters settle (``config.tolerance`` / 10) or ``tuning.fit_iterations``."""
     iterations = 0
     # the cones' obstacles found once, at twice the starting sigma, serve every iteration whose
     # sigma stays below (found again if it grows beyond): the same sums, one cone walk
     templates = run.templates
     obstacles = F.find_obstacles(templates.kernel_arrays, flat_offsets(templates, run.grid.width), run.grid.shape,
                                  readings, np.ascontiguousarray(occupied, dtype=np.bool_),
-                                 min(2.0 * forward.sigma, config.sigma_max), float(forward.window),
+                                 min(2.0 * forward.sigma, tuning.sigma_max), float(forward.window),
                                  float(run.sensor.max_range))
-    while iterations < config.fit_iterations:
+    while iterations < tuning.fit_iterations:
         iterations += 1
         sums, obstacles = expectations(run, readings, occupied, forward, obstacles)
-        new = m_step(sums, forward, config)
+        new = m_step(sums, forward, config.learned, tuning)
         done = settled(new, forward, config.tolerance / 10)
         forward = new
         if done:
@@ -118,7 +152,7 @@ def fit_at_map(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: 
 
 
 def incidence_at(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: np.ndarray,
-                 forward: F.ForwardModelConfig, config: CalibrationConfig, normals: np.ndarray) -> dict:
+                 forward: F.ForwardModelConfig, normals: np.ndarray, tuning: Tuning = TUNING) -> dict:
     """The specular angle learned from ``readings`` at the flat binary map ``occupied`` (the
     standard map's, which keeps the walls that grazing passes would make EM erase): per 10-degree
     bin of incidence the readings that echoed from a surface cell and those that passed one
@@ -129,9 +163,9 @@ def incidence_at(run: LaidOutReadings, readings: F.ExpectationReadings, occupied
     incidence_counts(templates.kernel_arrays, flat_offsets(templates, run.grid.width), run.grid.shape,
                      (readings.rows, readings.cols, readings.bins, readings.z),
                      np.ascontiguousarray(occupied, dtype=np.bool_), normals,
-                     (float(forward.sigma), float(forward.window), float(run.sensor.max_range), config.pass_margin), counts)
+                     (float(forward.sigma), float(forward.window), float(run.sensor.max_range), tuning.pass_margin), counts)
     return {"echoes": counts[0].astype(int).tolist(), "passes": counts[1].astype(int).tolist(),
-            "specular_deg": specular_angle(counts, config.specular_rate)}
+            "specular_deg": specular_angle(counts, tuning.specular_rate)}
 
 
 def opening_at(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: np.ndarray,
@@ -165,65 +199,53 @@ def model_values(forward: F.ForwardModelConfig) -> dict:
 EMStep = Callable[[EMConfig, np.ndarray, np.ndarray | None], tuple[float, int, object]]
 
 
-def em_with_model(run: LaidOutReadings, occupied: np.ndarray, params: MapParams, em_step: EMStep,
-                  select: np.ndarray | None = None) -> tuple[EMConfig, object, dict | None]:
-    """EM with the configured forward model, or calibrated (``calibrated_em``, fitted on the
-    readings ``select`` marks, default all) when ``params.calibration.enabled``: (the EM config
-    used, ``em_step``'s last result, the record or None)."""
-    if not params.calibration.enabled:
-        return params.em, em_step(params.em, occupied, None)[2], None
-    return calibrated_em(run, occupied, params.em, params.calibration, em_step, select)
-
-
-def calibrated_em(run: LaidOutReadings, occupied: np.ndarray, em: EMConfig, config: CalibrationConfig,
-                  em_step: EMStep, select: np.ndarray | None = None) -> tuple[EMConfig, object, dict]:
+def calibration_rounds(run: LaidOutReadings, occupied: np.ndarray, em: EMConfig, config: CalibrationConfig,
+                       em_step: EMStep, select: np.ndarray | None = None,
+                       tuning: Tuning = TUNING) -> tuple[EMConfig, dict]:
     """Alternate EM maps of part of the log with fits of the forward model at them
-    (``fit_at_map``, on every reading), then map every scan once with the last fit. Round 0
-    maps every ``config.start_subsample``-th scan with the configured model made at least
-    ``config.start_sigma`` broad, in at most ``config.start_sweeps`` sweeps (its map only serves
-    the first fit: a broad model puts each wall at the readings' mean); each later round fits
-    the parameters at the last map and, until they settle (``config.tolerance``) or
-    ``config.rounds``, maps every ``config.subsample``-th scan with them (at most ``fit_sweeps``
-    sweeps). Every EM run starts from the flat binary map ``occupied`` as given (updated in place
-    to the final map): a warm start from a broad or half-made map keeps walls thick
-    (corridor_door 0.970 against 0.974 on a development version that started warm).
+    (``fit_at_map``, on every reading ``select`` marks, default all); the final map of every
+    scan with the last fit is the caller's. Round 0 maps every ``tuning.start_subsample``-th
+    scan with the model ``em`` made at least ``tuning.start_sigma`` broad, in at most
+    ``tuning.start_sweeps`` sweeps (its map only serves the first fit: a broad model puts each
+    wall at the readings' mean); each later round fits the parameters at the last map and, until
+    they settle (``config.tolerance``) or ``config.rounds``, maps every ``tuning.subsample``-th
+    scan with them (at most ``tuning.fit_sweeps`` sweeps). Every EM run starts from the flat
+    binary map ``occupied`` as given, which is left as it was: a warm start from a broad or
+    half-made map keeps walls thick (docs/algorithms.md, "Calibration's constants").
 
-    Returns (the EM config the final map was made with, the last EM result, the record: the
-    starting values, per round the fitted values, the mean log-likelihood of the sample at the
-    fit and EM's objective and sweeps, and the final map's EM objective and sweeps)."""
-    blocks = _scan_blocks(run, config.max_scans)
+    Returns (the EM config of the last fit, the record: the starting values, per round the
+    fitted values, the mean log-likelihood of the sample at the fit and EM's objective and
+    sweeps, and the final values)."""
+    blocks = _scan_blocks(run, tuning.max_scans)
     if blocks is not None:  # a long log: the rounds map (and fit on) blocks of its scans only
         select = blocks if select is None else select & blocks
-    readings = sample_readings(run, config.max_readings, select)
-    scans, first_scans = (_and(_every_nth_scan(run, n), blocks) for n in (config.subsample, config.start_subsample))
+    readings = sample_readings(run, tuning.max_readings, select)
+    scans, first_scans = (_and(_every_nth_scan(run, n), blocks) for n in (tuning.subsample, tuning.start_subsample))
     start = occupied.copy()
     record = {"initial": model_values(em.forward), "readings_used": int(readings.z.shape[0]),
-              "fitted_at": f"1 scan in {config.start_subsample}, then 1 in {config.subsample}"
-              + ("" if blocks is None else f", of {CAL_BLOCKS} runs of {config.max_scans // CAL_BLOCKS} consecutive scans"),
+              "fitted_at": f"1 scan in {tuning.start_subsample}, then 1 in {tuning.subsample}"
+              + ("" if blocks is None else f", of {CAL_BLOCKS} runs of {tuning.max_scans // CAL_BLOCKS} consecutive scans"),
               "rounds": []}
-    used = dataclasses.replace(em, forward=dataclasses.replace(em.forward, sigma=max(em.forward.sigma, config.start_sigma)))
-    step = dataclasses.replace(used, max_sweeps=min(em.max_sweeps, config.start_sweeps))
+    used = dataclasses.replace(em, forward=dataclasses.replace(em.forward, sigma=max(em.forward.sigma, tuning.start_sigma)))
+    step = dataclasses.replace(used, max_sweeps=min(em.max_sweeps, tuning.start_sweeps))
     entry = {"round": 0, **model_values(used.forward)}
     record["rounds"].append(entry)
     for round_no in range(1, config.rounds + 1):
         objective, sweeps, _ = em_step(step, occupied, first_scans if round_no == 1 else scans)
         entry.update(em_objective=float(objective), em_sweeps=int(sweeps))
-        # fitted on every reading (not only those the map was made from, which it explains too
-        # well: sigma 0.046 against 0.058 at the simulator's 0.05, 0.088 against 0.118 at 0.12)
-        fit = fit_at_map(run, readings, occupied, used.forward, config)
+        # fitted on every reading, not only those the map was made from, which it explains too well
+        fit = fit_at_map(run, readings, occupied, used.forward, config, tuning)
         occupied[:] = start
         entry = {"round": round_no, **model_values(fit.forward), "fit_iterations": fit.iterations,
                  "loglik_per_reading": fit.loglik_per_reading}
         record["rounds"].append(entry)
         settled_now = settled(fit.forward, used.forward, config.tolerance)
         used = dataclasses.replace(em, forward=fit.forward)
-        step = dataclasses.replace(used, max_sweeps=min(em.max_sweeps, config.fit_sweeps))
+        step = dataclasses.replace(used, max_sweeps=min(em.max_sweeps, tuning.fit_sweeps))
         if settled_now:
             break
-    objective, sweeps, result = em_step(used, occupied, None)
     record["final"] = model_values(used.forward)
-    record["final_em"] = {"em_objective": float(objective), "em_sweeps": int(sweeps)}
-    return used, result, record
+    return used, record
 
 
 def _scan_blocks(run: LaidOutReadings, max_scans: int) -> np.ndarray | None:
@@ -256,7 +278,7 @@ def _every_nth_scan(run: LaidOutReadings, n: int) -> np.ndarray | None:
 
 
 def calibration_table(record: dict) -> str:
-    """The record of ``calibrated_em`` as a plain-text table, one line per round, then the model."""
+    """The record of ``calibration_rounds`` (and the final map) as a plain-text table, one line per round, then the model."""
     lines = [f"{'round':>5} {'sigma':>8} {'p_rand':>8} {'p_hit':>8} {'p_max':>8} {'loglik/rd':>10} {'EM objective':>14}"
              f" {'sweeps':>6}"]
     for r in record["rounds"]:
@@ -284,10 +306,3 @@ def calibration_table(record: dict) -> str:
     lines.append(f"learned from {record['readings_used']} readings: "
                  + ", ".join(f"{k} {final[k]:.4g}" for k in (*LEARNED, *ONCE) if k in final))
     return "\n".join(lines)
-
-
-def learned_params_yaml(record: dict, source: str) -> str:
-    """A ``--params`` file holding the learned model (calibration off, so it is used as it is)."""
-    final = record["final"]
-    body = "\n".join(f"  {k}: {final[k]!r}" for k in (*LEARNED, *ONCE) if k in final)
-    return f"# forward model learned by aogm calibrate from {source}\nem:\n{body}\ncalibration:\n  enabled: false\n"

@@ -5,15 +5,14 @@ whose cones hold the cell, plus the occupancy prior: the E-step redone for those
 after every accepted flip (generalised EM), so the objective never decreases and EM can
 create obstacles from an empty start. Memory is bounded: each reading keeps a few scalars
 and the cone cells are regenerated tile by tile (``em_kernels``). ``run_em`` works on any
-set of cells with every other cell held fixed: the adaptive mapper calls it on the clusters.
-``map_em`` is the em mode: every cell some cone holds is a candidate.
+set of cells with every other cell held fixed: the adaptive mapper calls it on the clusters, the
+em mode on every cell some cone holds (``whole_log_problems``); ``mapping.stages`` runs the modes.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -21,16 +20,14 @@ import numpy as np
 
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import Log
-from aogm_cli.core.occupancy_map import OccupancyMap
 from aogm_cli.mapping import em_kernels as K
-from aogm_cli.mapping.calibration import em_with_model, incidence_at, opening_at, sample_readings
+from aogm_cli.mapping.calibration import MAX_READINGS, incidence_at, opening_at, sample_readings
 from aogm_cli.mapping.params import EMConfig, MapParams
-from aogm_cli.mapping.pipeline import Progress, log_grid, params_json
-from aogm_cli.mapping.standard import probability_from_log_odds, standard_pass, thin_pass
+from aogm_cli.mapping.standard import probability_from_log_odds, thin_pass
 from aogm_cli.sensor_models.cone import flat_offsets
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig, cone_limits, reading_constants
 from aogm_cli.sensor_models.ray import is_narrow_beam
-from aogm_cli.sensor_models.readings import LaidOutReadings, forward_templates, lay_out_readings, reading_spans
+from aogm_cli.sensor_models.readings import LaidOutReadings, forward_templates, reading_spans
 from aogm_cli.sensor_models.surface import reading_shadows, surface_normals
 
 
@@ -326,14 +323,11 @@ def run_em(problem: EMProblem, occupied: np.ndarray, candidates: np.ndarray, con
 
 @dataclass
 class EMOutcome:
-    """What ``em_with_phases`` leaves: the model the final map was made with, its EM result and
-    problem, the calibration's record (None without), and the seconds of its phases."""
+    """What EM's final run leaves: the model the map was made with, its result and problem."""
 
     config: EMConfig
     result: EMResult
     problem: EMProblem
-    calibration: dict | None
-    seconds: dict  # index and sweeps: the final run's set-up and sweeps; calibration: all before it
 
 
 # (EM config, flat occupied map, bool mask of the readings to use or None for all) -> (EM's
@@ -341,50 +335,29 @@ class EMOutcome:
 ProblemFor = Callable[[EMConfig, np.ndarray, "np.ndarray | None"], tuple[EMProblem, np.ndarray]]
 
 
-def em_with_phases(run, occupied: np.ndarray, params: MapParams, problem_for: ProblemFor,
-                   select: np.ndarray | None = None, progress: Progress | None = None,
-                   learned_once: dict | None = None) -> EMOutcome:
-    """The EM of the em and adaptive modes: EM over the problems ``problem_for`` sets up, with
-    the forward model calibrated on the readings ``select`` marks when calibration is on
-    (``calibration.em_with_model``); ``occupied`` (flat) is updated in place, and timed. The
-    calibration's record gets ``learned_once`` (how the beam's opening and the specular angle
-    were learned: ``Prepared.learned_once``)."""
-    last = {}
+def em_step(problem_for: ProblemFor, on_sweep=None):
+    """One EM run as calibration's rounds take it (``calibration.EMStep``): the problem under the
+    flat map ``occ`` (updated in place), its sweeps; a run on a subset of the readings is not
+    scored once more when stopped by the sweep limit (``run_em``'s ``final``)."""
 
-    def on_sweep(sweep, flips, objective):
-        if progress:
-            progress("em sweep", sweep, params.em.max_sweeps)
-
-    def em_step(config: EMConfig, occ: np.ndarray, subset: np.ndarray | None):
-        t0 = time.perf_counter()
+    def step(config: EMConfig, occ: np.ndarray, subset: np.ndarray | None):
         problem, candidates = problem_for(config, occ, subset)
-        t1 = time.perf_counter()
         result = run_em(problem, occ, candidates, config, on_sweep, final=subset is None)
-        last.update(index=t1 - t0, sweeps=time.perf_counter() - t1, problem=problem)
         return result.objective[-1], result.sweeps, result
 
-    t0 = time.perf_counter()
-    config, result, calibration = em_with_model(run, occupied, params, em_step, select)
-    total = time.perf_counter() - t0
-    if calibration is not None and learned_once:
-        calibration.update(learned_once)
-    seconds = {"index": last["index"], "calibration": total - last["index"] - last["sweeps"], "sweeps": last["sweeps"]}
-    return EMOutcome(config, result, last["problem"], calibration, seconds)
+    return step
 
 
 def em_stats(outcome: EMOutcome | None) -> dict:
-    """The map's statistics of EM's final run (zeros without one), and calibration's record."""
+    """The map's statistics of EM's final run (zeros without one)."""
     if outcome is None:
         return {"sweeps": 0, "flips_per_sweep": [], "objective_per_sweep": [], "scored_per_sweep": [],
                 "pairs_per_sweep": [], "candidate_cells": 0, "em_readings": 0, "index_entries": 0, "scratch_bytes": 0}
     r = outcome.result
-    stats = {"sweeps": r.sweeps, "flips_per_sweep": r.flips, "objective_per_sweep": r.objective,
-             "scored_per_sweep": r.scored, "pairs_per_sweep": r.pairs, "candidate_cells": int(r.candidates.size),
-             "em_readings": int(outcome.problem.readings.z.size), "index_entries": r.peak_pairs,
-             "scratch_bytes": r.scratch_bytes}
-    if outcome.calibration is not None:
-        stats["calibration"] = outcome.calibration
-    return stats
+    return {"sweeps": r.sweeps, "flips_per_sweep": r.flips, "objective_per_sweep": r.objective,
+            "scored_per_sweep": r.scored, "pairs_per_sweep": r.pairs, "candidate_cells": int(r.candidates.size),
+            "em_readings": int(outcome.problem.readings.z.size), "index_entries": r.peak_pairs,
+            "scratch_bytes": r.scratch_bytes}
 
 
 def em_view(log_odds: np.ndarray, observed: np.ndarray, outcome: EMOutcome | None, grid, poses: np.ndarray, sensor,
@@ -402,46 +375,32 @@ def em_view(log_odds: np.ndarray, observed: np.ndarray, outcome: EMOutcome | Non
     return probability, observed
 
 
-@dataclass
-class Deflected:
-    """What the angle of incidence leaves for a mode (``deflected``): the readings with where
-    their beams were deflected, the parameters with the learned specular angle, the standard map
-    those readings make, and what learning the angle found (None: not learned)."""
-
-    run: LaidOutReadings
-    params: MapParams
-    log_odds: np.ndarray
-    observed: np.ndarray
-    incidence: dict | None
-    seconds: float
-
-
-def deflected(whole, run: LaidOutReadings, params: MapParams, log_odds: np.ndarray, observed: np.ndarray) -> Deflected:
-    """The angle of incidence for the em and adaptive modes: the surfaces the echoes came from
-    (``surface.surface_normals``, among the cells the standard map ``log_odds`` holds occupied),
-    the specular angle learned at that map when calibration learns it (``calibration.incidence_at``),
-    the readings whose beams met a surface beyond it before their windows (``surface.reading_shadows``)
-    and the standard map made again with those beams stopped there (``standard.standard_pass``).
-    A narrow beam (a laser, which echoes off a wall at any angle but the most grazing), a
-    specular angle of 90 deg or ``surface.enabled`` false leave everything as it is."""
-    t0 = time.perf_counter()
+def surfaces(run: LaidOutReadings, params: MapParams, log_odds: np.ndarray) -> np.ndarray | None:
+    """The surfaces the echoes came from (``surface.surface_normals``), among the cells the
+    standard map ``log_odds`` holds occupied; None where the angle of incidence plays no part: a
+    narrow beam (a laser, which echoes off a wall at any angle but the most grazing) or
+    ``surface.enabled`` false."""
     if not params.surface.enabled or is_narrow_beam(run.sensor, run.grid.resolution):
-        return Deflected(run, params, log_odds, observed, None, 0.0)
+        return None
     grid = run.grid
     believed = np.asarray(log_odds).reshape(grid.shape) > 0
-    normals = surface_normals(run.templates.kernel_arrays, flat_offsets(run.templates, grid.width), grid.shape,
-                              run.cones, run.sensor.max_range, grid.resolution, params.surface, believed)
-    incidence = None
-    if params.calibration.enabled and "specular_deg" in params.calibration.learned:
-        incidence = incidence_at(run, sample_readings(run, params.calibration.max_readings), believed.reshape(-1),
-                                 params.em.forward, params.calibration, normals)
-        forward = dataclasses.replace(params.em.forward, specular_deg=incidence["specular_deg"])
-        params = dataclasses.replace(params, em=dataclasses.replace(params.em, forward=forward))
+    return surface_normals(run.templates.kernel_arrays, flat_offsets(run.templates, grid.width), grid.shape,
+                           run.cones, run.sensor.max_range, grid.resolution, params.surface, believed)
+
+
+def specular_record(run: LaidOutReadings, params: MapParams, log_odds: np.ndarray, normals: np.ndarray) -> dict:
+    """The specular angle learned at the standard map ``log_odds`` (``calibration.incidence_at``)."""
+    believed = (np.asarray(log_odds) > 0).reshape(-1)
+    return incidence_at(run, sample_readings(run, MAX_READINGS), believed, params.em.forward, normals)
+
+
+def deflected_run(run: LaidOutReadings, normals: np.ndarray, params: MapParams) -> LaidOutReadings | None:
+    """``run`` with the readings whose beams met a surface beyond the specular angle before their
+    windows stopped there (``surface.reading_shadows``), or None when no beam was."""
     shadow = reading_shadows(run, normals, params.em.forward, params.surface.core)
-    if shadow is not None and np.isfinite(shadow).any():
-        run = dataclasses.replace(run, shadow=shadow)
-        log_odds, observed, _ = standard_pass(whole, grid, params, cuts=shadow.reshape(np.shape(whole.ranges)))
-    return Deflected(run, params, log_odds, observed, incidence, time.perf_counter() - t0)
+    if shadow is None or not np.isfinite(shadow).any():
+        return None
+    return dataclasses.replace(run, shadow=shadow)
 
 
 def with_opening(whole: Log, grid: GridSpec, opening_deg: float) -> Log:
@@ -454,90 +413,24 @@ def with_opening(whole: Log, grid: GridSpec, opening_deg: float) -> Log:
     return dataclasses.replace(whole, sensor=dataclasses.replace(sensor, beam_width=math.radians(opening_deg)))
 
 
-def learns_opening(sensor, grid: GridSpec, params: MapParams) -> bool:
-    """Whether calibration learns the beam's opening (``opening_deg`` in ``calibration.learn``) of
-    a log of ``sensor`` (a cone, not a laser's narrow beam) on ``grid``."""
-    return (params.calibration.enabled and "opening_deg" in params.calibration.learned
-            and not is_narrow_beam(sensor, grid.resolution))
-
-
-def opened(whole, run: LaidOutReadings, params: MapParams, log_odds: np.ndarray, observed: np.ndarray):
-    """The beam's effective opening learned from the log (``calibration.opening_at``, at the
-    standard map ``log_odds`` thinned by the exact inverse model) and written into the parameters;
-    when it is narrower than the log's beam, the log's sensor with that opening (``with_opening``),
-    the readings laid out on its cones and the standard map made again with them. Returns (whole,
-    run, params, log_odds, observed, the learning's record)."""
-    grid = run.grid
+def opening_record(whole: Log, run: LaidOutReadings, params: MapParams, log_odds: np.ndarray,
+                   observed: np.ndarray) -> dict:
+    """The beam's effective opening learned from the log (``calibration.opening_at``) at the
+    standard map ``log_odds`` thinned by the exact inverse model (``standard.thin_pass``)."""
     thin = dataclasses.replace(params, exact=dataclasses.replace(params.exact, thin=True))
-    thinned, _ = thin_pass(whole, grid, thin, log_odds, observed)
-    record = opening_at(run, sample_readings(run, params.calibration.max_readings), (thinned > 0).reshape(-1),
-                        params.em.forward)
-    forward = dataclasses.replace(params.em.forward, opening_deg=record["opening_deg"])
-    params = dataclasses.replace(params, em=dataclasses.replace(params.em, forward=forward))
-    narrowed = with_opening(whole, grid, record["opening_deg"])
-    if narrowed is not whole:
-        whole = narrowed
-        run = lay_out_readings(whole.pose, whole.ranges, whole.sensor, grid)
-        log_odds, observed, _ = standard_pass(whole, grid, params)
-    return whole, run, params, log_odds, observed, record
+    thinned = thin_pass(whole, run.grid, thin, log_odds, observed)
+    return opening_at(run, sample_readings(run, MAX_READINGS), (thinned > 0).reshape(-1), params.em.forward)
 
 
-@dataclass
-class Prepared:
-    """What the em and adaptive modes share before their EM (``prepared``): the log's grid and
-    scans (with the sensor as the beam's opening has it), the readings laid out, the parameters
-    with what was learned once, the standard map (deflected beams stopped, thinned when
-    configured), the records of the learning, and the seconds of each phase."""
-
-    grid: GridSpec
-    whole: Log  # the scans in memory, the sensor with the beam's opening
-    run: LaidOutReadings
-    params: MapParams
-    log_odds: np.ndarray
-    observed: np.ndarray
-    learned_once: dict  # "opening", "incidence": the records of what was learned before EM
-    phases: dict
-
-
-def prepared(log, params: MapParams) -> Prepared:
-    """The standard map of a log source (``pipeline``) and its readings laid out, the beam's
-    opening (configured: the log's sensor narrowed before anything is mapped; learned:
-    ``opened``), the angle of incidence (``deflected``) and the thinning (``thin_pass``): the em
-    and adaptive modes' first phases, timed."""
-    grid = log_grid(log, params.resolution)
-    whole = log.read()  # EM needs every reading in memory: read the scans once
-    learn = learns_opening(whole.sensor, grid, params)
-    if not learn:
-        whole = with_opening(whole, grid, params.em.forward.opening_deg)
-    log_odds, observed, t_standard = standard_pass(whole, grid, params)
-    prepared_templates(grid, whole.sensor)  # outside the clock
-    t0 = time.perf_counter()
-    run = lay_out_readings(whole.pose, whole.ranges, whole.sensor, grid)
-    t_readings = time.perf_counter() - t0
-    learned_once, phases = {}, {"standard": t_standard, "readings": t_readings}
-    if learn:
-        t0 = time.perf_counter()
-        whole, run, params, log_odds, observed, learned_once["opening"] = opened(whole, run, params, log_odds, observed)
-        phases["opening"] = time.perf_counter() - t0
-    angle = deflected(whole, run, params, log_odds, observed)
-    run, params, log_odds, observed = angle.run, angle.params, angle.log_odds, angle.observed
-    log_odds, t_thin = thin_pass(whole, grid, params, log_odds, observed,
-                                 None if run.shadow is None else run.shadow.reshape(np.shape(whole.ranges)))
-    if angle.incidence is not None:
-        learned_once["incidence"] = angle.incidence
-    phases |= {"deflections": angle.seconds, **({"thinning": t_thin} if t_thin else {})}
-    return Prepared(grid, whole, run, params, log_odds, observed, learned_once, phases)
-
-
-def whole_log_problems(run, templates, grid, z_max: float) -> ProblemFor:
+def whole_log_problems(run: LaidOutReadings) -> ProblemFor:
     """The em mode's problems: every valid reading of ``run`` (of a subset, if given), every cell
     some cone holds a candidate."""
     keep = ~np.isnan(run.z)
 
     def problem_for(config: EMConfig, occ: np.ndarray, subset: np.ndarray | None):
-        rd = em_readings(run.cones, templates, grid, z_max, config.forward,
+        rd = em_readings(run.cones, run.templates, run.grid, run.sensor.max_range, config.forward,
                          select=keep if subset is None else keep & subset, shadow=run.shadow)
-        problem = em_problem(rd, templates, grid.shape, occ, config)
+        problem = em_problem(rd, run.templates, run.grid.shape, occ, config)
         return problem, np.flatnonzero(problem.seen)
 
     return problem_for
@@ -549,28 +442,3 @@ def prepared_templates(grid, sensor):
     templates = forward_templates(grid, sensor)
     K.row_groups(templates)
     return templates
-
-
-def map_em(log, params: MapParams, progress: Progress | None = None) -> OccupancyMap:
-    """The em mode: Thrun's EM map of a log source (``pipeline``); every cell some cone holds is
-    a candidate, started from the thresholded standard map (or empty, ``em.start``)."""
-    p = prepared(log, params)
-    grid, run, params = p.grid, p.run, p.params
-    start = (p.log_odds > 0).reshape(-1) if params.em.start == "standard" else np.zeros(grid.height * grid.width, bool)
-    occupied = np.ascontiguousarray(start)
-    problems = whole_log_problems(run, run.templates, grid, run.sensor.max_range)
-    outcome = em_with_phases(run, occupied, params, problems, progress=progress, learned_once=p.learned_once)
-    t0 = time.perf_counter()
-    probability, observed = em_view(p.log_odds, p.observed, outcome, grid, p.whole.pose, run.sensor, params)
-    phases = {**p.phases, **outcome.seconds, "view": time.perf_counter() - t0}
-    return OccupancyMap(
-        grid=grid,
-        probability=probability,
-        observed=observed,
-        mode="em",
-        params=params_json(dataclasses.replace(params, em=outcome.config), "em", grid),
-        runtime_s=sum(phases.values()),
-        source_log=log.path,
-        occupied=occupied.reshape(grid.shape) & observed,
-        stats={**em_stats(outcome), "phase_seconds": phases},
-    )

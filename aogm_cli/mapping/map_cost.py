@@ -1,6 +1,6 @@
 """What mapping a log in a mode would cost (``map_estimate``): grid cells with the standard mapper's
 padding, cone templates and readings (EM keeps a few scalars per reading, not its cones' cells), from
-the header, the poses and a sample of ranges; ``check_logs`` refuses a run over the budget."""
+the header, the poses and a sample of ranges; ``report.map_run.check_logs`` refuses a run over the budget."""
 
 from __future__ import annotations
 
@@ -82,13 +82,3 @@ def map_estimate(reader, mode: str, params: MapParams) -> Estimate:
         advice += (f"; the readings' share ({format_bytes(reading_bytes)}) no resolution changes: map part of the "
                    f"log at a time, or in the standard mode")
     return Estimate(f"the {mode} map of this log", memory, work, "cell updates", detail, advice)
-
-
-def check_logs(tasks, params: MapParams, limits=None) -> None:
-    """Refuse (``InputError``) the first (log path, mode) of ``tasks`` whose map would exceed ``limits``."""
-    from aogm_cli.core.budget import check
-    from aogm_cli.io.logfile import LogReader
-
-    for path, mode in tasks:
-        with LogReader(path) as reader:
-            check(map_estimate(reader, mode, params), limits, file=str(path))

@@ -1,12 +1,12 @@
-"""The three modes behind one call: ``map_file(path, mode, params, detector)`` opens a log, resolves
-the parameters it derives (the grid's resolution), compiles every kernel the mode runs by mapping a
-tiny synthetic log with the same sensor, and maps the log (``map_in_mode``)."""
+"""The three modes, each a list of stages (``MODE_STAGES``), behind one call: ``map_source(log, mode,
+params, detector)`` resolves the parameters the log derives (the grid's resolution), compiles every
+kernel the mode runs by mapping a tiny synthetic log with the same sensor, and maps the log."""
 
 from __future__ import annotations
 
 import dataclasses
 import time
-from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -15,44 +15,71 @@ from aogm_cli.core.budget import Limits, check
 from aogm_cli.core.log import Log, SensorSpec
 from aogm_cli.core.occupancy_map import MODES, OccupancyMap
 from aogm_cli.detector.network import ConstantDetector
-from aogm_cli.io.detectorfile import BASELINE_DETECTORS, file_sha256, load_detector
-from aogm_cli.io.logfile import LogReader
+from aogm_cli.mapping import stages as S
+from aogm_cli.mapping.learned import Learned
 from aogm_cli.mapping.map_cost import map_estimate
 from aogm_cli.mapping.params import MapParams
-from aogm_cli.mapping.pipeline import Progress, log_grid
-from aogm_cli.mapping.standard import map_standard
+from aogm_cli.mapping.pipeline import Progress, TimedSource, log_grid
+from aogm_cli.mapping.stages import Stage
 
-__all__ = ["BASELINE_DETECTORS", "map_file", "map_in_mode", "map_source", "resolve_detector", "warm_up"]
+__all__ = ["ALL", "MODE_STAGES", "Flagger", "map_in_mode", "map_source", "warm_up"]
+
+# Each mode as the list of its stages (``mapping.stages``): the standard map; em over every cell some
+# cone holds; adaptive over the clusters of the readings the detector flags.
+STANDARD = (
+    Stage("set_up", S.templates, timed=False),
+    Stage("standard", S.standard),
+    Stage("thinning", S.thinning, when=S.thinned),
+    Stage("view", S.standard_view, timed=False),
+)
+PREPARE = (  # the em and adaptive modes' first stages
+    Stage("read", S.read, timed=False),
+    Stage("standard", S.standard),
+    Stage("set_up", S.templates, timed=False),
+    Stage("readings", S.readings),
+    Stage("opening", S.opening, when=S.learns_opening),
+    Stage("deflections", S.deflections),
+    Stage("thinning", S.thinning, when=S.thinned),
+)
+EM_STAGES = (  # and their last
+    Stage("start", S.start, timed=False),
+    Stage("calibration", S.calibration, when=S.calibrates),
+    Stage("index", S.index, when=S.runs_em),
+    Stage("sweeps", S.sweeps, when=S.runs_em),
+    Stage("view", S.em_view),
+)
+MODE_STAGES = {
+    "standard": STANDARD,
+    "em": PREPARE + EM_STAGES,
+    "adaptive": PREPARE + (Stage("detector", S.detect), Stage("clusters", S.clusters)) + EM_STAGES,
+}
 
 
-def resolve_detector(spec: str | None):
-    """(detector, name): the packaged detector for None, a baseline for "all" / "none", else
-    the detector file at ``spec`` (checked by ``io.detectorfile.load_detector``)."""
-    if spec in BASELINE_DETECTORS:
-        return ConstantDetector(spec == "all"), spec
-    detector = load_detector(spec)
-    return detector, "packaged" if spec is None else str(spec)
+class Flagger(NamedTuple):
+    """The adaptive mode's detector (anything with ``flag(ranges, max_range)``) and what the map's
+    params record of it (``{"detector": name}``, and a file's sha256)."""
+
+    detector: object
+    record: dict
 
 
-def map_in_mode(log, mode: str, params: MapParams, detector=None, detector_name: str = "packaged",
-            progress: Progress | None = None) -> OccupancyMap:
-    """Map a log source (an open ``LogReader`` or a ``Log``) in ``mode``; adaptive needs ``detector``.
-    EM's and adaptive's modules are imported here, when used (a standard map's start-up is most of its time)."""
-    if mode == "standard":
-        m = map_standard(log, params, progress)
-    elif mode == "em":
-        from aogm_cli.mapping.em import map_em
+ALL = Flagger(ConstantDetector(True), {"detector": "all"})  # the baseline that flags every reading
 
-        m = map_em(log, params, progress)
-    elif mode == "adaptive":
-        from aogm_cli.mapping.adaptive import map_adaptive
 
-        m = map_adaptive(log, params, detector, detector_name, progress)
-    else:
+def map_in_mode(log, mode: str, params: MapParams, flagger: Flagger = ALL, progress: Progress | None = None,
+                given: Learned | None = None) -> OccupancyMap:
+    """Map a log source (an open ``LogReader`` or a ``Log``) in ``mode`` (its stages,
+    ``MODE_STAGES``); adaptive flags readings with ``flagger``. ``given``: the forward model to
+    use instead of learning one (``mapping.learned``)."""
+    if mode not in MODE_STAGES:
         raise ValueError(f"unknown mode {mode!r}; expected one of {', '.join(MODES)}")
-    if mode == "adaptive" and getattr(detector, "path", None):  # the detector file's identity, as it was used
-        m.params["detector_sha256"] = file_sha256(detector.path)
-    return m
+    source = TimedSource(log)
+    state = S.State(params, source, log_grid(log, params.resolution), given, *flagger, progress,
+                    learned=given or Learned())
+    state, phases = S.run_stages(MODE_STAGES[mode], state)
+    if given is not None and given.seconds:  # learned by another map of this log: its cost counts here too
+        phases["calibration"] = phases.get("calibration", 0.0) + given.seconds
+    return S.finished(mode, state, phases)
 
 
 def resolved_params(log, params: MapParams) -> MapParams:
@@ -61,31 +88,22 @@ def resolved_params(log, params: MapParams) -> MapParams:
     return dataclasses.replace(params, resolution=log_grid(log, params.resolution).resolution)
 
 
-def map_file(path: str | Path, mode: str, params: MapParams, detector: str | None = None,
-             progress: Progress | None = None, limits: Limits | None = None) -> OccupancyMap:
-    """Map the log at ``path`` in ``mode`` (``detector``: see ``resolve_detector``); refused
-    (``InputError``) before any work when its estimate exceeds ``limits`` (default: the
-    limits in force, ``core.budget.active_limits``).
+def map_source(log, mode: str, params: MapParams, flagger: Flagger = ALL, progress: Progress | None = None,
+               limits: Limits | None = None, file: str | None = None, given: Learned | None = None) -> OccupancyMap:
+    """Map a log source (an open ``LogReader`` or an in-memory ``Log``) in ``mode``, with
+    ``flagger`` and ``given`` (``map_in_mode``); refused (``InputError``, naming ``file``) before any work when its estimate
+    exceeds ``limits`` (default: the limits in force, ``core.budget.active_limits``).
 
     The map's ``runtime_s`` is its mapping work; ``stats["untimed_seconds"]`` says what was
     left out: ``compile`` (the warm-up) and ``read_and_set_up`` (reading the log, cached
     one-time templates)."""
-    with LogReader(path) as reader:
-        return map_source(reader, mode, params, detector, progress, limits, file=str(path))
-
-
-def map_source(log, mode: str, params: MapParams, detector: str | None = None, progress: Progress | None = None,
-               limits: Limits | None = None, file: str | None = None) -> OccupancyMap:
-    """``map_file`` on a log source (an open ``LogReader`` or an in-memory ``Log``, such as the
-    scans a held-out split keeps); ``file`` names it in a refusal."""
-    flagger, name = resolve_detector(detector) if mode == "adaptive" else (None, "")
     params = resolved_params(log, params)
     check(map_estimate(log, mode, params), limits, file=file)
     t0 = time.perf_counter()
     warm_up(log.sensor, params, mode)
     t_compile = time.perf_counter() - t0
     t0 = time.perf_counter()
-    m = map_in_mode(log, mode, params, flagger, name, progress)
+    m = map_in_mode(log, mode, params, flagger, progress, given)
     t_total = time.perf_counter() - t0
     m.stats["untimed_seconds"] = {"compile": t_compile, "read_and_set_up": max(0.0, t_total - m.runtime_s)}
     return m
@@ -108,7 +126,7 @@ def warm_up(sensor: SensorSpec, params: MapParams, mode: str) -> None:
     Cached kernels are loaded without numba's full start-up (``core.jit_cache``)."""
     jit_cache.load_lean()
     log = tiny_log(sensor)
-    map_in_mode(log, mode, params, ConstantDetector(True), "all")
+    map_in_mode(log, mode, params)
     if mode != "standard":
         # stopped by the sweep limit, and with a specular angle given (the tiny log learns none: too
         # few readings), so that the deflected beams' kernel runs too
@@ -116,4 +134,4 @@ def warm_up(sensor: SensorSpec, params: MapParams, mode: str) -> None:
         learn = ",".join(k for k in params.calibration.learned if k != "specular_deg") or "sigma"
         one_sweep = dataclasses.replace(params, em=dataclasses.replace(params.em, forward=forward, max_sweeps=1),
                                         calibration=dataclasses.replace(params.calibration, learn=learn))
-        map_in_mode(log, mode, one_sweep, ConstantDetector(True), "all")
+        map_in_mode(log, mode, one_sweep)

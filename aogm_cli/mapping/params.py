@@ -10,7 +10,6 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from aogm_cli.core.errors import InputError
-from aogm_cli.io.yamlfile import read_yaml
 from aogm_cli.sensor_models.exact_inverse import ExactModelConfig
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig
 from aogm_cli.sensor_models.inverse_model import InverseModelConfig
@@ -132,64 +131,16 @@ class AdaptiveConfig:
 
 @dataclass(frozen=True)
 class CalibrationConfig:
-    """How EM learns its forward model from the log it maps (``mapping.calibration``): on or off,
-    at most ``rounds`` EM runs alternated with closed-form fits of sigma, p_rand, p_hit and
-    p_max (each at most ``fit_iterations`` updates at one map, on at most ``max_readings``
-    readings), ended when no parameter moves by more than ``tolerance`` (sigma relative, the
-    probabilities absolute); each learned value is clipped to its bounds."""
+    """Whether em and adaptive learn the forward model from the log they map (``mapping.calibration``),
+    which of its parameters (``learn``: sigma, p_rand, p_hit, p_max in rounds with EM; specular_deg
+    and opening_deg once, before them), in at most ``rounds`` EM runs alternated with closed-form
+    fits, ended when no parameter moves by more than ``tolerance`` (sigma relative, the
+    probabilities absolute). How the rounds work inside is ``calibration.TUNING``."""
 
     enabled: bool = True
-    # which of the forward model's parameters are learned (specular_deg once, from the echo rate by
-    # angle of incidence at the standard map's surfaces; the others in rounds with EM). opening_deg
-    # (once, from how wide a beam explains the echoes at the thinned standard map) only when listed:
-    # on the real 8-sonar log the learned 14 degrees lowered EM's walls_kept (docs/algorithms.md)
     learn: str = "sigma,p_rand,p_hit,p_max,specular_deg"
     rounds: int = 4
-    fit_iterations: int = 30
-    max_readings: int = 200_000
     tolerance: float = 0.02
-    # the first EM map is made with sigma at least this broad: a broad model puts each wall at
-    # the readings' mean, and the sigma fitted there comes down to the data's; a narrow start
-    # lets EM's map follow the noise and the fitted sigma stays narrow (corridor_door at noise
-    # 0.12 m: start 0.03 -> sigma 0.064, 0.1 -> 0.101; python bench/calibration_recovery.py
-    # [--params with calibration: {start_sigma: 0.03}])
-    start_sigma: float = 0.1
-    start_sweeps: int = 3  # the first (broad) EM run's sweep limit: its map only serves the first fit
-    # specular_deg's passes: a reading passed a surface cell when its echo lies at least this far
-    # beyond it (nearer, the cell may be the same wall, which the standard map draws thick;
-    # `aogm calibrate corridor_door.h5` with pass_margin 0.15: its rough walls echo 0.18 -> 0.14 of
-    # the time from 0 to 90 deg, with 0.3: 0.28 -> 0.50; both learn 90: rough walls echo at any
-    # angle, as simulated)
-    pass_margin: float = 0.3
-    # the specular angle is where the echo rate falls below this share of its head-on value
-    # (measured, EM at seed 1 with surface.core 0.25: 0.25 and 0.1 learn wider angles that deflect fewer beams, and give up
-    # the gains of 0.5 on the *_real worlds and corridor_specular; corridor_specular_pioneer without
-    # drift loses its corridor check at all three)
-    specular_rate: float = 0.5
-    fit_sweeps: int = 4  # the sweep limit of the later maps made for a fit (the final map: em.max_sweeps)
-    # the maps the parameters are fitted at are made from every n-th scan (the broad first map
-    # from every start_subsample-th), the final map from every scan: the fits need the walls'
-    # places, not every reading's detail (every 3rd scan: sigma +51% at noise 0.05, every 2nd
-    # +17%; bench/calibration_recovery.py)
-    subsample: int = 2
-    start_subsample: int = 4
-    # a log of more scans calibrates on this many, in 4 runs of consecutive scans spread over it
-    # (the rounds' maps and fits; the final map takes every scan), so that calibration's cost stops
-    # growing with the log. Measured on the generated office at 5,000 scans (seed 1, em): 2,000
-    # scans: calibration 19.3 -> 7.4 s, learned sigma 0.028 -> 0.029, the map 38.1 -> 27.0 s,
-    # accuracy 0.9414 -> 0.9408 (adaptive 47.9 -> 38.1 s, 0.9404 -> 0.9392); 1,000: 5.0 s but sigma
-    # 0.031 and the final EM slower (30.2 s). Every 10th scan instead of runs: sigma 0.048, 37.2 s
-    max_scans: int = 2000
-    # bounds: sigma from a tenth of a typical 5 cm cell to half a metre; p_rand, p_max below one
-    # half each (a model that calls most readings random or dropped explains nothing); p_hit
-    # away from 0 and 1 (EM needs q = 1 - p_hit > 0, and a wall missed by every reading is no wall)
-    sigma_min: float = 0.005
-    sigma_max: float = 0.5
-    p_rand_min: float = 0.001
-    p_rand_max: float = 0.5
-    p_max_max: float = 0.4
-    p_hit_min: float = 0.05
-    p_hit_max: float = 0.95
 
     def validate(self) -> CalibrationConfig:
         check_field_types(self)
@@ -197,30 +148,10 @@ class CalibrationConfig:
         if unknown or not self.learned:
             raise InputError("expected a comma-separated list of sigma, p_rand, p_hit, p_max, specular_deg, opening_deg, "
                              f"got {self.learn!r}", key="learn")
-        for key in ("rounds", "fit_iterations", "max_readings", "start_sweeps", "fit_sweeps", "subsample", "start_subsample",
-                    "max_scans"):
-            if getattr(self, key) < 1:
-                raise InputError(f"expected a whole number >= 1, got {getattr(self, key)}", key=key)
+        if self.rounds < 1:
+            raise InputError(f"expected a whole number >= 1, got {self.rounds}", key="rounds")
         if not 0 < self.tolerance < 1:
             raise InputError(f"expected a number in (0, 1), got {self.tolerance:g}", key="tolerance")
-        if not 0 < self.specular_rate < 1:
-            raise InputError(f"expected a number in (0, 1), got {self.specular_rate:g}", key="specular_rate")
-        if not self.pass_margin >= 0:
-            raise InputError(f"expected a number >= 0 (m), got {self.pass_margin:g}", key="pass_margin")
-        if not self.start_sigma > 0:
-            raise InputError(f"expected a positive number (m), got {self.start_sigma:g}", key="start_sigma")
-        if not 0 < self.sigma_min <= self.sigma_max:
-            raise InputError(f"expected 0 < sigma_min <= sigma_max, got {self.sigma_min:g}, {self.sigma_max:g}",
-                             key="sigma_min")
-        if not 0 < self.p_rand_min <= self.p_rand_max < 1:
-            raise InputError(f"expected 0 < p_rand_min <= p_rand_max < 1, got {self.p_rand_min:g}, {self.p_rand_max:g}",
-                             key="p_rand_min")
-        if not 0 <= self.p_max_max < 1 or self.p_rand_max + self.p_max_max >= 1:
-            raise InputError(f"expected p_max_max in [0, 1) with p_rand_max + p_max_max < 1, got {self.p_max_max:g}",
-                             key="p_max_max")
-        if not 0 < self.p_hit_min <= self.p_hit_max < 1:
-            raise InputError(f"expected 0 < p_hit_min <= p_hit_max < 1, got {self.p_hit_min:g}, {self.p_hit_max:g}",
-                             key="p_hit_min")
         return self
 
     @property
@@ -260,16 +191,11 @@ SECTIONS = {
 }
 
 
-def resolve_params(params_file: str | None = None, overrides: dict[str, dict[str, Any]] | None = None) -> MapParams:
-    """Defaults, then the YAML file's values, then ``overrides`` ({section: {key: value}}; None
-    values ignored). Raises InputError naming the file and ``section.key``."""
-    raw: dict[str, Any] = {}
-    file = params_file
-    if params_file:
-        raw = read_yaml(params_file)[1] or {}
-        if not isinstance(raw, dict):
-            raise InputError("expected a mapping with sections inverse_model, em, adaptive, calibration, surface, exact and key resolution",
-                             file=file)
+def _merged(raw: dict, file: str | None, overrides: dict) -> tuple[dict[str, dict[str, Any]], Any, str | None]:
+    """(per section the values of ``raw`` and ``overrides``, the resolution, the file a bad value
+    came from: None once --resolution overrides it). Unknown keys raise InputError."""
+    if not isinstance(raw, dict):
+        raise InputError(f"expected a mapping with sections {', '.join(SECTIONS)} and key resolution", file=file)
     for key in raw:
         if key not in SECTIONS and key != "resolution":
             raise InputError(f"unknown key; expected resolution, {', '.join(SECTIONS)}", file=file, key=str(key))
@@ -283,45 +209,50 @@ def resolve_params(params_file: str | None = None, overrides: dict[str, dict[str
                 raise InputError(f"unknown key; expected one of {', '.join(sorted(allowed))}", file=file, key=f"{section}.{key}")
         merged[section] = dict(values)
     resolution = raw.get("resolution", 0.05)
-    for section, values in (overrides or {}).items():
+    for section, values in overrides.items():
         if section == "resolution":
             if values is not None:
                 resolution, file = values, None
             continue
-        for key, value in values.items():
-            if value is not None:
-                merged[section][key] = value
-    forward_keys = {f.name for f in dataclasses.fields(ForwardModelConfig)}
+        merged[section].update({k: v for k, v in values.items() if v is not None})
+    return merged, resolution, file
 
-    def build(section: str, make):
+
+def _checked(kind):
+    """A section's config of dataclass ``kind`` from its values: its fields' types, then its own checks."""
+    def make(values):
+        config = kind(**values)
+        check_field_types(config)
+        return config.validate()
+    return make
+
+
+def _em(values: dict) -> EMConfig:
+    forward_keys = {f.name for f in dataclasses.fields(ForwardModelConfig)}
+    return EMConfig(forward=ForwardModelConfig(**{k: x for k, x in values.items() if k in forward_keys}),
+                    **{k: x for k, x in values.items() if k not in forward_keys}).validate()
+
+
+SECTION_CONFIGS = {"inverse_model": _checked(InverseModelConfig), "em": _em, "adaptive": _checked(AdaptiveConfig),
+                   "calibration": _checked(CalibrationConfig), "surface": _checked(SurfaceConfig),
+                   "exact": _checked(ExactModelConfig)}
+
+
+def params_from(raw: dict | None = None, file: str | None = None,
+                overrides: dict[str, dict[str, Any]] | None = None) -> MapParams:
+    """Defaults, then ``raw`` (a ``--params`` file's values, read at the edge; ``file`` names it in
+    errors), then ``overrides`` ({section: {key: value}}; None values ignored). Raises InputError
+    naming the file and ``section.key``."""
+    merged, resolution, file = _merged({} if raw is None else raw, file, overrides or {})
+    sections = {}
+    for section, make in SECTION_CONFIGS.items():
         try:
-            return make(merged[section])
+            sections[section] = make(merged[section])
         except InputError as exc:
             raise InputError(exc.message, file=file, key=f"{section}.{exc.key}") from None
         except (TypeError, ValueError) as exc:
             raise InputError(f"invalid value: {exc}", file=file, key=section) from None
-
-    def checked(kind):
-        """A section's config of dataclass ``kind``: its fields' types, then its own checks."""
-        def make(values):
-            config = kind(**values)
-            check_field_types(config)
-            return config.validate()
-        return make
-
-    inverse = build("inverse_model", checked(InverseModelConfig))
-    em = build(
-        "em",
-        lambda v: EMConfig(
-            forward=ForwardModelConfig(**{k: x for k, x in v.items() if k in forward_keys}),
-            **{k: x for k, x in v.items() if k not in forward_keys},
-        ).validate(),
-    )
-    adaptive = build("adaptive", lambda v: AdaptiveConfig(**v).validate())
-    calibration = build("calibration", lambda v: CalibrationConfig(**v).validate())
-    surface = build("surface", checked(SurfaceConfig))
-    exact = build("exact", checked(ExactModelConfig))
     if (isinstance(resolution, bool) or not isinstance(resolution, (int, float)) or not math.isfinite(resolution)
             or not resolution > 0):
         raise InputError(f"expected a positive number (m per cell), got {resolution!r}", file=file, key="resolution")
-    return MapParams(float(resolution), inverse, em, adaptive, calibration, surface, exact)
+    return MapParams(float(resolution), **sections)

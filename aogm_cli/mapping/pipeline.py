@@ -34,22 +34,32 @@ def log_grid(log, resolution: float) -> GridSpec:
     return GridSpec.covering(lo[0], lo[1], hi[0], hi[1], resolution)
 
 
-class Timed:
-    """Wraps a chunk iterator and adds up the time spent reading (to subtract it)."""
+class TimedSource:
+    """A log source that adds up the seconds spent reading it (``chunks()``'s iterators and
+    ``read()``), so that the time of mapping work can leave them out."""
 
-    def __init__(self, chunks):
-        self._chunks = iter(chunks)
+    def __init__(self, source):
+        self.source = source
         self.io_seconds = 0.0
 
-    def __iter__(self):
-        return self
+    def __getattr__(self, name):  # sensor, n_scans, path, truth_grid(), poses(), ...
+        return getattr(self.source, name)
 
-    def __next__(self):
-        t0 = time.perf_counter()
-        try:
-            return next(self._chunks)
-        finally:
+    def chunks(self, size: int):
+        chunks = iter(self.source.chunks(size))
+        while True:
+            t0 = time.perf_counter()
+            chunk = next(chunks, None)
             self.io_seconds += time.perf_counter() - t0
+            if chunk is None:
+                return
+            yield chunk
+
+    def read(self):
+        t0 = time.perf_counter()
+        whole = self.source.read()
+        self.io_seconds += time.perf_counter() - t0
+        return whole
 
 
 def params_json(params: MapParams, mode: str, grid: GridSpec) -> dict:

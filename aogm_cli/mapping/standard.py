@@ -15,11 +15,10 @@ import numpy as np
 
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import Log, SensorSpec
-from aogm_cli.core.occupancy_map import OccupancyMap
 from aogm_cli.mapping.beam import BeamMapper
 from aogm_cli.mapping.exact import ExactMapper, thinned
 from aogm_cli.mapping.params import MapParams
-from aogm_cli.mapping.pipeline import Progress, Timed, log_grid, params_json
+from aogm_cli.mapping.pipeline import TimedSource
 from aogm_cli.sensor_models.cone import (
     NO_CUT,
     SPARE_MASK,
@@ -223,39 +222,51 @@ def standard_map(
     return mapper.result()
 
 
-def standard_pass(log, grid: GridSpec, params: MapParams, chunk: int = 4096, chunks=None, cuts=None):
-    """(log_odds, observed, seconds of mapping work) for a whole log source, streamed in chunks
-    (``log.chunks(chunk)``, or ``chunks`` when the caller already holds the scans); ``cuts``
-    stops deflected beams (``standard_map``).
+def set_up(sensor: SensorSpec, grid: GridSpec, params: MapParams) -> ConeTemplates | None:
+    """The one-time set-up of ``standard_log_odds`` on ``grid``, done before any clock starts,
+    like compilation: the cone templates and their per-grid-width tables built (or found in
+    their caches) by mapping no scans. Returns the templates (None for a narrow beam)."""
+    narrow = is_narrow_beam(sensor, grid.resolution)
+    templates = None if narrow else cone_templates(grid, sensor, narrow=narrow)
+    standard_map([], sensor, grid, params.inverse_model, templates=templates, narrow=narrow,
+                 models=(params.em.forward, params.exact))
+    return templates
 
-    One-time set-up is done before the clock starts, like compilation: the cone templates
-    and their per-grid-width tables are built (or found in their caches) by mapping no scans.
-    """
-    narrow = is_narrow_beam(log.sensor, grid.resolution)  # decided once, for the templates and both calls
+
+def standard_log_odds(log, grid: GridSpec, params: MapParams, cuts=None, chunk: int = 4096):
+    """(log_odds, observed) of a whole log source, streamed in chunks (``log.chunks(chunk)``);
+    ``cuts`` stops deflected beams (``standard_map``)."""
+    narrow = is_narrow_beam(log.sensor, grid.resolution)  # decided once, for the templates and the map
     templates = None if narrow else cone_templates(grid, log.sensor, narrow=narrow)
-    models = (params.em.forward, params.exact)
-    standard_map([], log.sensor, grid, params.inverse_model, templates=templates, narrow=narrow, models=models)
-    timed = Timed(log.chunks(chunk) if chunks is None else chunks)
+    return standard_map(log.chunks(chunk), log.sensor, grid, params.inverse_model, templates=templates,
+                        narrow=narrow, cuts=cuts, models=(params.em.forward, params.exact))
+
+
+def standard_pass(log, grid: GridSpec, params: MapParams, cuts=None):
+    """(log_odds, observed, seconds of mapping work) of ``standard_log_odds``, its set-up
+    (``set_up``) and reading the log left out of the seconds: what the benchmarks time."""
+    set_up(log.sensor, grid, params)
+    timed = TimedSource(log)
     t0 = time.perf_counter()
-    log_odds, observed = standard_map(timed, log.sensor, grid, params.inverse_model, templates=templates,
-                                      narrow=narrow, cuts=cuts, models=models)
-    seconds = time.perf_counter() - t0 - timed.io_seconds
-    return log_odds, observed, seconds
+    log_odds, observed = standard_log_odds(timed, grid, params, cuts)
+    return log_odds, observed, time.perf_counter() - t0 - timed.io_seconds
+
+
+def thins(sensor: SensorSpec, grid: GridSpec, params: MapParams) -> bool:
+    """Whether the map is thinned by the exact inverse model (``thin_pass``): ``exact.thin`` on
+    a map not made by that model, of a cone. A narrow beam's map (rays, which draw walls one
+    cell thick) is not thinned (docs/algorithms.md, "The exact inverse model")."""
+    return params.exact.thin and params.inverse_model.model != "exact" and not is_narrow_beam(sensor, grid.resolution)
 
 
 def thin_pass(log, grid: GridSpec, params: MapParams, log_odds: np.ndarray, observed: np.ndarray, cuts=None):
-    """(the standard map ``log_odds`` thinned by the exact inverse model, ``exact.thinned``,
-    seconds): one more pass over ``log`` with the exact model (``cuts`` stop deflected beams)
-    when ``params.exact.thin``; else ``log_odds`` as it is. The em and adaptive modes thin the
-    map after the angle of incidence is learned from the map as Elfes' model makes it. A narrow
-    beam's map (rays, which draw walls one cell thick) is not thinned: on the intel laser log the
-    thinned map's held-out AUC fell from 0.965 to 0.809."""
-    if not params.exact.thin or params.inverse_model.model == "exact" or is_narrow_beam(log.sensor, grid.resolution):
-        return log_odds, 0.0
+    """The standard map ``log_odds`` thinned by the exact inverse model (``exact.thinned``): one
+    more pass over ``log`` with the exact model (``cuts`` stop deflected beams). The em and
+    adaptive modes thin the map after the angle of incidence is learned from the map as Elfes'
+    model makes it."""
     exact_params = dataclasses.replace(params, inverse_model=dataclasses.replace(params.inverse_model, model="exact"))
-    exact_log_odds, exact_observed, seconds = standard_pass(log, grid, exact_params, cuts=cuts)
-    return thinned(log_odds, observed, (exact_log_odds, exact_observed), params.exact,
-                   params.inverse_model.clamp_min), seconds
+    exact = standard_log_odds(log, grid, exact_params, cuts=cuts)
+    return thinned(log_odds, observed, exact, params.exact, params.inverse_model.clamp_min)
 
 
 def truth_grid_map(log: Log) -> tuple[np.ndarray, np.ndarray]:
@@ -266,24 +277,6 @@ def truth_grid_map(log: Log) -> tuple[np.ndarray, np.ndarray]:
     ranges = np.asarray(log.ranges, dtype=np.float32)
     log_odds, observed = standard_map([(0, log.time, log.pose, ranges)], log.sensor, grid, InverseModelConfig())
     return probability_from_log_odds(log_odds, observed), observed
-
-
-def map_standard(log, params: MapParams, progress: Progress | None = None) -> OccupancyMap:
-    """The standard mode: the log-odds map of a log source (``pipeline``), streamed."""
-    grid = log_grid(log, params.resolution)
-    log_odds, observed, seconds = standard_pass(log, grid, params)
-    log_odds, t_thin = thin_pass(log, grid, params, log_odds, observed)
-    return OccupancyMap(
-        grid=grid,
-        probability=probability_from_log_odds(log_odds, observed),
-        observed=observed,
-        mode="standard",
-        params=params_json(params, "standard", grid),
-        runtime_s=seconds + t_thin,
-        source_log=log.path,
-        log_odds=log_odds,
-        stats={"scans": log.n_scans, "phase_seconds": {"standard": seconds, **({"thinning": t_thin} if t_thin else {})}},
-    )
 
 
 # Speed (``bench/bench_standard.py`` compares the kernel with a plain compiled scatter-add over the

@@ -244,7 +244,8 @@ def compute_maps(entries: list[LogEntry], tasks: list[tuple[int, str]], job: Com
     identity = detector_identity(job.detector) if any(mode == "adaptive" for _, mode in tasks) else None
     # with calibration on, a log's em and adaptive maps are one task that calibrates once
     # (``map_and_score_calibrated_once``), keyed (log index, ("em", "adaptive"))
-    once = {i for i, mode in tasks if mode == "em" and (i, "adaptive") in tasks} if job.params.calibration.enabled else set()
+    calibrates = job.params.calibration.enabled and not job.forward_model
+    once = {i for i, mode in tasks if mode == "em" and (i, "adaptive") in tasks} if calibrates else set()
     work = []
     for i, mode in tasks:
         e = entries[i]
@@ -312,13 +313,18 @@ def resumable_map(path: str, entry: LogEntry, mode: str, job: CompareJob, log_sh
         return False
     if mode == "adaptive" and m.params.get("detector_sha256") != detector_sha256:
         return False
+    origin = (m.learned or {}).get("origin", "")
+    if mode != "standard" and (origin == f"file {job.forward_model}") != bool(job.forward_model):
+        return False  # made with another sensor model file, or with one where this run learns its own
     return not params_differences(configured_params(m), job.params, entry.truth is not None)
 
 
 def configured_params(m: OccupancyMap) -> dict:
-    """The parameters a map was made with as configured: for a map whose calibration learned its
-    forward model (``params["em"]`` holds the learned values), the values it started from
-    (``stats["calibration"]["initial"]``) in their place."""
+    """The parameters a map was made with as configured: its ``params`` (a map that records what
+    it learned apart); for a map written before that, whose ``params["em"]`` holds the learned
+    values, the values it started from (``stats["calibration"]["initial"]``) in their place."""
+    if m.learned is not None:
+        return m.params
     initial = (m.stats.get("calibration") or {}).get("initial")
     if not isinstance(initial, dict) or not isinstance(m.params.get("em"), dict):
         return m.params

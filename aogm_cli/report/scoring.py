@@ -20,7 +20,9 @@ from aogm_cli.evaluation.planner import ROBOT_RADIUS, STANDARD_ITSELF, TRUTH_KEY
 from aogm_cli.io.detectorfile import detector_identity
 from aogm_cli.io.logfile import LogReader
 from aogm_cli.io.results import ModeResult
+from aogm_cli.mapping.learned import Learned
 from aogm_cli.mapping.params import MapParams
+from aogm_cli.report import map_run
 
 
 @dataclass(frozen=True)
@@ -38,6 +40,7 @@ class CompareJob:
     holdout: HoldoutSplit | None = None
     limits: Limits = field(default_factory=Limits)
     robot_radius: float = ROBOT_RADIUS
+    forward_model: str | None = None
 
 
 @dataclass
@@ -50,26 +53,25 @@ class ScoredLog:
     truth: Truth | None
 
 
-def map_one(job: CompareJob, path: str, mode: str) -> OccupancyMap:
-    """Map the log at ``path`` in ``mode`` as ``job`` says: from the scans its holdout split keeps
-    when it has one, refused before any work beyond its limits. The mapper measures
-    ``runtime_s`` around the mapping work only, inside the process that maps."""
-    from aogm_cli.mapping.modes import map_file
-
+def map_one(job: CompareJob, path: str, mode: str, given: Learned | None = None) -> OccupancyMap:
+    """Map the log at ``path`` in ``mode`` as ``job`` says (``given``: a forward model to use
+    instead of learning one): from the scans its holdout split keeps when it has one, refused
+    before any work beyond its limits. The mapper measures ``runtime_s`` around the mapping work
+    only, inside the process that maps."""
+    if given is None and job.forward_model and mode != "standard":
+        given = map_run.given_model(job.forward_model, path)
     if job.holdout is not None:
-        return map_kept_scans(job, path, mode)
-    return map_file(path, mode, job.params, job.detector, limits=job.limits)
+        return map_kept_scans(job, path, mode, given)
+    return map_run.map_file(path, mode, job.params, job.detector, limits=job.limits, given=given)
 
 
-def map_kept_scans(job: CompareJob, path: str, mode: str) -> OccupancyMap:
+def map_kept_scans(job: CompareJob, path: str, mode: str, given: Learned | None = None) -> OccupancyMap:
     """Map the scans of the log at ``path`` that ``job.holdout`` keeps (``evaluation.holdout.split_log``)
     through ``mapping.modes.map_source``, as ``map_file`` maps a whole log (budget, warm-up,
     timing). The map names the log as its source and records the split in ``params["holdout"]``."""
-    from aogm_cli.mapping.modes import map_source
-
     with LogReader(path) as reader:
         kept, _held = split_log(reader, job.holdout)
-    m = map_source(kept, mode, job.params, job.detector, limits=job.limits, file=str(path))
+    m = map_run.map_file(path, mode, job.params, job.detector, limits=job.limits, given=given, source=kept)
     m.source_log = str(path)
     m.params["holdout"] = job.holdout.as_dict()
     return m
@@ -95,18 +97,9 @@ def scored(job: CompareJob, path: str, world: str, mode: str, m: OccupancyMap, i
     return score_map(ScoredLog(path, world, truth), mode, m, job, identity=identity)
 
 
-def calibrated_params(params: MapParams, record: dict) -> MapParams:
-    """``params`` with the forward model a calibration learned (its record's ``final`` values,
-    the specular angle included) and calibration off: a map made with them learns nothing more."""
-    forward = dataclasses.replace(params.em.forward, **{k: float(v) for k, v in record["final"].items()})
-    return dataclasses.replace(params, em=dataclasses.replace(params.em, forward=forward),
-                               calibration=dataclasses.replace(params.calibration, enabled=False))
-
-
 # the mode of a log whose map learns the forward model when ``aogm compare`` calibrates the log
 # once, and the mode that takes it: adaptive fits on the readings that reach its clusters, which
-# serves both (intel laser log, 0.1 m, --max-range 30, --holdout 0.1: EM's held-out AUC 0.958
-# with its own model, 0.973 with adaptive's; adaptive's 0.986 with its own, 0.974 with EM's)
+# serves both (docs/algorithms.md, "One calibration per log")
 CALIBRATES, TAKES = "adaptive", "em"
 
 
@@ -114,24 +107,16 @@ def map_and_score_calibrated_once(job: CompareJob, path: str, world: str, identi
                                   keep_map: bool) -> list[ModeResult]:
     """The em and the adaptive map of one log with one calibration (``aogm compare`` when it
     compares both with calibration on), [em, adaptive]: the ``CALIBRATES`` map learns the forward
-    model (``map_and_score``), the ``TAKES`` map is made with what it learned
-    (``calibrated_params``). That map records the calibration as configured (on) and, in
-    ``stats["calibration"]``, the other map's record with ``"made_by"`` its mode, and in its
-    runtime and ``phase_seconds["calibration"]`` the seconds that calibration took there."""
+    model (``map_and_score``), the ``TAKES`` map is made with what it learned, carried
+    (``Learned.carried``): it records the model as made by that map, and counts the seconds
+    learning it took there in its own runtime."""
     first = map_and_score(job, path, world, CALIBRATES, identity, True)
-    record = first.calibration
-    if record is None or "final" not in record:  # nothing learned (no reading to fit): calibrate as usual
+    learned = Learned.of_map(first.map.learned or {}, first.map.stats.get("calibration"))
+    if learned.calibration is None:  # nothing learned (no reading to fit): calibrate as usual
         then = map_and_score(job, path, world, TAKES, identity, True)
     else:
-        m = map_one(dataclasses.replace(job, params=calibrated_params(job.params, record)), path, TAKES)
-        m.params["calibration"] = job.params.calibration.as_dict()
-        m.stats["calibration"] = {**record, "made_by": CALIBRATES}
-        # its cost includes the calibration it took, as timed where it was made: each map's runtime
-        # stays what making that map costs (compare's wall time is what calibrating once saves)
-        seconds = first.map.stats["phase_seconds"].get("calibration", 0.0)
-        m.stats["phase_seconds"]["calibration"] = m.stats["phase_seconds"].get("calibration", 0.0) + seconds
-        m.runtime_s += seconds
-        then = scored(job, path, world, TAKES, m, identity)
+        carried = learned.carried(CALIBRATES, first.map.stats["phase_seconds"].get("calibration", 0.0))
+        then = scored(job, path, world, TAKES, map_one(job, path, TAKES, carried), identity)
     if not keep_map:
         first.map = then.map = None
     made = {CALIBRATES: first, TAKES: then}

@@ -1,0 +1,85 @@
+"""What a map learns from its log, kept apart from what was configured: the sensor's forward model
+(sigma, p_rand, p_hit, p_max and the beam's opening: once per robot) and the building's specular
+angle (per log), each with where it came from, and the model EM uses made of both."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+from aogm_cli.sensor_models.forward_model import ForwardModelConfig
+
+SENSOR_KEYS = ("sigma", "p_rand", "p_hit", "p_max")  # the forward model's parameters calibration sets
+ONCE = ("specular_deg", "opening_deg")  # and those learned once, before EM (``calibration.incidence_at``, ``opening_at``)
+
+# where a sensor model came from (``Learned.origin``)
+CONFIGURED = "configured"  # the values of --params / the defaults: nothing learned
+FROM_LOG = "learned from this log"
+
+
+@dataclass(frozen=True)
+class SensorModel:
+    """The forward model's parameters that belong to the sensor: learned once per robot and
+    carried to every log it records (``aogm calibrate -o MODEL``, ``--forward-model MODEL``).
+    ``opening_deg`` 0: the log's beam width (not learned)."""
+
+    sigma: float
+    p_rand: float
+    p_hit: float
+    p_max: float
+    opening_deg: float = 0.0
+
+    @classmethod
+    def of(cls, forward: ForwardModelConfig) -> SensorModel:
+        return cls(*(float(getattr(forward, k)) for k in (*SENSOR_KEYS, "opening_deg")))
+
+    def as_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True)
+class Learned:
+    """What a map learned from its log or was given: the sensor's model (None: the configured
+    values) and where it came from, the building's specular angle and the beam's opening (None:
+    as configured), the records of how each was learned, and the seconds learning the sensor's
+    model took where it was learned (a model carried from another map of the same log counts them
+    in its map's cost; one from a file, learned once per robot, does not)."""
+
+    sensor: SensorModel | None = None
+    origin: str = CONFIGURED
+    specular_deg: float | None = None
+    opening_deg: float | None = None
+    opening: dict | None = None  # ``calibration.opening_at``'s record
+    incidence: dict | None = None  # ``calibration.incidence_at``'s record
+    calibration: dict | None = None  # ``calibration.calibration_rounds``' record
+    seconds: float = 0.0
+    made_by: str | None = None  # the mode of the map of the same log that learned it (``carried``)
+
+    def model(self, configured: ForwardModelConfig) -> ForwardModelConfig:
+        """The forward model EM uses: ``configured`` with what was learned in its place."""
+        values = {} if self.sensor is None else {k: getattr(self.sensor, k) for k in SENSOR_KEYS}
+        if self.specular_deg is not None:
+            values["specular_deg"] = self.specular_deg
+        if self.opening_deg is not None:
+            values["opening_deg"] = self.opening_deg
+        return dataclasses.replace(configured, **values)
+
+    def carried(self, mode: str, seconds: float) -> Learned:
+        """What the ``mode`` map of a log learned, as another map of the same log takes it: all of
+        it, and the ``seconds`` learning it took there."""
+        return dataclasses.replace(self, origin=f"the {mode} map of this log", made_by=mode, seconds=seconds)
+
+    @classmethod
+    def of_map(cls, learned: dict, calibration: dict | None) -> Learned:
+        """What a finished map learned (its ``learned`` record and ``stats["calibration"]``)."""
+        sensor = learned.get("sensor")
+        records = {k: (calibration or {}).get(k) for k in ("opening", "incidence")}
+        rounds = None if calibration is None else {k: v for k, v in calibration.items()
+                                                    if k not in ("opening", "incidence", "final_em", "made_by")}
+        return cls(None if sensor is None else SensorModel(**sensor), learned.get("origin", CONFIGURED),
+                   learned.get("specular_deg"), learned.get("opening_deg"), calibration=rounds, **records)
+
+    def as_dict(self) -> dict:
+        """What the map file records beside its params (root attribute ``learned``)."""
+        return {"sensor": None if self.sensor is None else self.sensor.as_dict(), "origin": self.origin,
+                "specular_deg": self.specular_deg, "opening_deg": self.opening_deg}
