@@ -53,9 +53,13 @@ class ScoredLog:
 def map_one(job: CompareJob, path: str, mode: str) -> OccupancyMap:
     """Map the log at ``path`` in ``mode`` as ``job`` says: from the scans its holdout split keeps
     when it has one, refused before any work beyond its limits. The mapper measures
-    ``runtime_s`` around the mapping work only, inside the process that maps."""
+    ``runtime_s`` around the mapping work only, inside the process that maps (a Dask worker too:
+    there, as in the commands, cone templates are kept on disk, ``io.template_store``)."""
+    from aogm_cli.io import template_store
     from aogm_cli.mapping.modes import map_file
+    from aogm_cli.sensor_models import cone
 
+    cone.use_store(template_store.STORE)
     if job.holdout is not None:
         return map_kept_scans(job, path, mode)
     return map_file(path, mode, job.params, job.detector, limits=job.limits)
