@@ -16,6 +16,18 @@ __all__ = ["bundled_world", "check", "evaluate", "info", "load_log", "load_map",
            "save_map", "simulate"]
 
 
+def _keep_cone_templates() -> None:
+    """Cone templates that take a while to build are kept on disk for the next process, as the
+    commands keep them (``io.template_store``; the sensor models take the store, they write no file)."""
+    from aogm_cli.io import template_store
+    from aogm_cli.sensor_models import cone
+
+    cone.use_store(template_store.STORE)
+
+
+_keep_cone_templates()
+
+
 def bundled_world(name: str) -> Path:
     """The path of a bundled world file, e.g. ``"corridor_door"``: the repository's ``worlds/``
     folder, which the package links in as ``data/worlds`` and the wheel carries, so that it is

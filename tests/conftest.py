@@ -16,11 +16,13 @@ from typing import NoReturn
 import pytest
 from click.testing import CliRunner
 
-from aogm_cli.cli import main
+from aogm_cli.cli import keep_cone_templates, main
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = ROOT.parent / "shared"  # the third-party data dir beside the clone (README, .ci/run)
 TRUE = ("1", "true", "yes", "on")
+
+keep_cone_templates()  # tests that call the library build templates once, as the commands do (io.template_store)
 
 
 class Require:

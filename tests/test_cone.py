@@ -211,3 +211,59 @@ def test_a_narrow_beams_cone_holds_every_cell_its_ray_crosses():
         drow, dcol, _, _ = narrow.cells(k)
         missing_narrow += len(crossed - set(zip(drow.tolist(), dcol.tolist(), strict=True)))
     assert missing_narrow > 0
+
+
+def test_a_template_store_gives_back_the_templates_bit_identical(tmp_path):
+    """io.template_store keeps templates of 100,000 to 3 million entries beside the source's
+    ``__pycache__``, named by a digest of the arguments, the source and numpy's version; read back,
+    every array is the one built, dtype and bits. Smaller templates are not kept."""
+    from pathlib import Path
+
+    from aogm_cli.io.template_store import STORE, TemplateStore
+    from aogm_cli.sensor_models import cone
+
+    assert Path(cone.__file__).samefile(STORE.source)  # the digest is of cone.py, kept beside its numba cache
+    source = tmp_path / "cone.py"
+    source.write_bytes(Path(cone.__file__).read_bytes())
+    store = TemplateStore(source)
+    args = (0.05, BEAM, 5.0, 1264, False)  # a 5 m sonar at 0.05 m: 416,374 entries
+    built = cone._template_arrays(*args)
+    assert store.load(args, cone._TEMPLATE_ARRAYS) is None
+    store.save(args, built)
+    assert [p.name for p in (tmp_path / "__pycache__").iterdir()] == [store.paths(args)[0].name]
+    back = store.load(args, cone._TEMPLATE_ARRAYS)
+    assert back.keys() == built.keys()
+    for name, a in built.items():
+        assert back[name].dtype == a.dtype and back[name].tobytes() == a.tobytes(), name
+    source.write_bytes(source.read_bytes() + b"\n")  # another source: another name, built anew
+    assert store.load(args, cone._TEMPLATE_ARRAYS) is None
+    small = (0.1, BEAM, 1.0, 64, False)
+    store.save(small, cone._template_arrays(*small))
+    assert len(list((tmp_path / "__pycache__").iterdir())) == 1
+
+
+def test_the_cone_module_takes_its_store_and_builds_without_one(monkeypatch):
+    """sensor_models.cone reads and writes no file: a store installed with ``use_store`` is asked
+    first and given what is built; with none, templates are built (and kept in memory only)."""
+    from aogm_cli.sensor_models import cone
+
+    class Store:
+        def __init__(self):
+            self.calls = []
+
+        def load(self, args, dtypes):
+            self.calls.append(("load", args))
+            return None
+
+        def save(self, args, arrays):
+            self.calls.append(("save", args, arrays["ranges"].size))
+
+    store = Store()
+    monkeypatch.setattr(cone, "_STORE", store)
+    tpl = build_cone_templates(0.1, BEAM, 1.3, n_bins=72)  # arguments no other test uses: not cached yet
+    args = (0.1, BEAM, 1.3, 72, False)
+    assert store.calls == [("load", args), ("save", args, tpl.ranges.size)]
+    cone.use_store(None)
+    assert cone._STORE is None
+    again = build_cone_templates(0.1, BEAM, 1.4, n_bins=72)
+    assert again.ranges.size > tpl.ranges.size and len(store.calls) == 2

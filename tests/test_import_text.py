@@ -12,12 +12,12 @@ from numpy.testing import assert_allclose, assert_array_equal
 from aogm_cli.cli import main
 from aogm_cli.core.errors import InputError
 from aogm_cli.core.log import SensorSpec
+from aogm_cli.io.importers.table import parse_table
 from aogm_cli.io.importers.text import (
     TextOptions,
     build_text_log,
     import_text,
     parse_bearings,
-    parse_table,
     resolve_columns,
 )
 from aogm_cli.io.logfile import read_log

@@ -56,4 +56,7 @@ def warm_rest() -> None:
 
 
 if __name__ == "__main__":
+    from aogm_cli.cli import keep_cone_templates
+
+    keep_cone_templates()  # the templates built here are kept on disk for the test workers, as a command keeps them
     {"em": warm_em, "rest": warm_rest}[sys.argv[1]]()

@@ -105,6 +105,16 @@ def main(ctx: click.Context, debug: bool) -> None:
     """
     ctx.ensure_object(dict)
     ctx.obj["debug"] = debug
+    keep_cone_templates()
+
+
+def keep_cone_templates() -> None:
+    """Cone templates that take a while to build are kept on disk for the next run
+    (``io.template_store``; the sensor models take the store, they write no file)."""
+    from aogm_cli.io import template_store
+    from aogm_cli.sensor_models import cone
+
+    cone.use_store(template_store.STORE)
 
 
 # each subcommand's module and object, imported when the command runs (or --help lists them):

@@ -35,7 +35,8 @@ from aogm_cli.io.importers.carmen import (
     CarmenOptions,
 )
 from aogm_cli.io.importers.rosbag import RosbagOptions
-from aogm_cli.io.importers.text import ANGLE_UNITS, DELIMITERS, LENGTH_UNITS, TIME_UNITS, TextOptions
+from aogm_cli.io.importers.table import ANGLE_UNITS, DELIMITERS, LENGTH_UNITS, TIME_UNITS
+from aogm_cli.io.importers.text import TextOptions
 from aogm_cli.io.outputs import resolve_outputs
 
 

@@ -10,6 +10,7 @@ from typing import Any
 from aogm_cli.core.budget import Limits, check
 from aogm_cli.core.occupancy_map import OccupancyMap
 from aogm_cli.detector.network import ConstantDetector
+from aogm_cli.io import template_store
 from aogm_cli.io.detectorfile import BASELINE_DETECTORS, file_sha256, load_detector
 from aogm_cli.io.logfile import LogReader
 from aogm_cli.io.modelfile import check_sensor, read_model
@@ -18,6 +19,7 @@ from aogm_cli.mapping.learned import Learned, SensorModel
 from aogm_cli.mapping.map_cost import map_estimate
 from aogm_cli.mapping.params import MapParams, params_from
 from aogm_cli.mapping.pipeline import Progress
+from aogm_cli.sensor_models import cone
 
 __all__ = ["BASELINE_DETECTORS", "check_logs", "given_model", "map_file", "resolve_detector", "resolve_params"]
 
@@ -50,6 +52,7 @@ def map_file(path: str | Path, mode: str, params: MapParams, detector: str | Non
     estimate exceeds ``limits`` (``mapping.modes.map_source``)."""
     from aogm_cli.mapping.modes import ALL, Flagger, map_source
 
+    cone.use_store(template_store.STORE)  # cone templates kept on disk, in a Dask worker too
     flagger = Flagger(*resolve_detector(detector)) if mode == "adaptive" else ALL
     if source is not None:
         return map_source(source, mode, params, flagger, progress, limits, str(path), given)

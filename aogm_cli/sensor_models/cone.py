@@ -4,19 +4,14 @@ order; ``reading_geometry`` places readings, ``cone_cells`` lists a reading's ce
 
 from __future__ import annotations
 
-import contextlib
 import functools
-import hashlib
 import math
-import os
 from dataclasses import dataclass
-from pathlib import Path
-from typing import NamedTuple
+from typing import NamedTuple, Protocol
 
 import numba
 import numpy as np
 
-from aogm_cli.core import interrupts
 from aogm_cli.core.errors import InputError
 from aogm_cli.core.frames import sensor_poses
 from aogm_cli.core.grid import GridSpec
@@ -298,8 +293,8 @@ def build_cone_templates(
     multiple of 8. With ``ray``, a cone also holds every cell its axis crosses (the cells of a
     grid traversal of the ray: centre within resolution/2 (|cos a| + |sin a|) of the axis, a its
     angle to the grid), so that a beam narrower than a cell leaves no gap along its ray.
-    Cached: equal arguments return the same (read-only) object; templates that take a while to
-    build are also kept on disk for the next process (``_store``).
+    Cached: equal arguments return the same (read-only) object; with a store installed
+    (``use_store``), templates are also looked for there and kept there for the next process.
     """
     if not (math.isfinite(resolution) and resolution > 0):
         raise InputError(f"expected a positive resolution, got {resolution}", key="resolution")
@@ -318,71 +313,43 @@ def build_cone_templates(
 @functools.lru_cache(maxsize=4)
 def _build(resolution: float, beam_width: float, reach: float, n_bins: int, ray: bool = False) -> ConeTemplates:
     args = (resolution, beam_width, reach, n_bins, ray)
-    arrays = _stored(args)
+    store = _STORE
+    arrays = None if store is None else store.load(args, _TEMPLATE_ARRAYS)
     if arrays is None:
         arrays = _template_arrays(*args)
-        if STORE_ENTRIES[0] <= arrays["ranges"].size <= STORE_ENTRIES[1]:
-            _store(args, arrays)
+        if store is not None:
+            store.save(args, arrays)
     for a in arrays.values():
         a.setflags(write=False)
     extent = int(max(np.abs(arrays["dcol"]).max(), np.abs(arrays["drow"]).max()))
     return ConeTemplates(resolution, beam_width, reach, n_bins, extent=extent, **arrays)
 
 
-# templates of this many entries are kept on disk: a 5 m sonar's at 0.05 m (430,000 entries,
-# 10 MB) took 0.2 s to build and 0.01 s to load; smaller ones build fast, larger ones would fill
-# the disk; at most STORE_FILES are kept in a folder (the oldest go)
-STORE_ENTRIES = (100_000, 3_000_000)
-STORE_FILES = 8
 # the arrays of a ConeTemplates, and their dtypes
 _TEMPLATE_ARRAYS = {"offsets": np.int64, "dcol": np.int32, "drow": np.int32, "ranges": np.float64,
                     "bearings": np.float64, "base_bin": np.int64, "transform": np.int64, "range_index": np.int64}
 
 
-def _store_path(args: tuple) -> list[Path]:
-    """Where templates of ``args`` are kept: beside numba's cache of this module, else in the
-    user's cache folder; the name holds a digest of the arguments, this file's source and
-    numpy's version, so that a change of any of them builds anew."""
-    key = hashlib.sha256(Path(__file__).read_bytes() + repr((args, np.__version__)).encode()).hexdigest()[:24]
-    folders = [Path(__file__).parent / "__pycache__"]
-    with contextlib.suppress(RuntimeError):  # no home folder
-        folders.append(Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "aogm")
-    return [folder / f"cone_templates-{key}.npz" for folder in folders]
+class TemplateStore(Protocol):
+    """Where built templates are kept for the next process (``use_store``): aogm's keeps them
+    on disk (``aogm_cli.io.template_store.STORE``); this module reads and writes no file."""
+
+    def load(self, args: tuple, dtypes: dict) -> dict | None:
+        """The arrays kept for the arguments ``args`` of ``_build``, each of ``dtypes``'
+        names and dtype, or None."""
+
+    def save(self, args: tuple, arrays: dict) -> None:
+        """Keep the arrays built for ``args`` (or not: the store decides)."""
 
 
-def _stored(args: tuple) -> dict | None:
-    """The arrays kept by ``_store`` for ``args``, or None (none kept, or unreadable)."""
-    for path in _store_path(args):
-        try:
-            with np.load(path, allow_pickle=False) as data:
-                arrays = {name: data[name] for name in _TEMPLATE_ARRAYS}
-        except Exception:  # noqa: BLE001 - missing, unreadable or not ours: built anew
-            continue
-        if all(arrays[name].dtype == dtype for name, dtype in _TEMPLATE_ARRAYS.items()):
-            return arrays
-    return None
+_STORE: TemplateStore | None = None  # None: templates are built anew in each process
 
 
-def _store(args: tuple, arrays: dict) -> None:
-    """Keep ``arrays`` for the next process: the first folder of ``_store_path`` that can be
-    written, through a temporary renamed into place (a signal waits for the rename); nothing
-    when neither can."""
-    for path in _store_path(args):
-        temp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-        with interrupts.deferred():
-            try:
-                path.parent.mkdir(parents=True, exist_ok=True)
-                with open(temp, "wb") as f:
-                    np.savez(f, **arrays)
-                os.replace(temp, path)
-            except OSError:
-                temp.unlink(missing_ok=True)
-                continue
-        with contextlib.suppress(OSError):  # another process may prune at the same time
-            kept = sorted(path.parent.glob("cone_templates-*.npz"), key=lambda p: p.stat().st_mtime)
-            for old in kept[:-STORE_FILES]:
-                old.unlink(missing_ok=True)
-        return
+def use_store(store: TemplateStore | None) -> None:
+    """Keep the templates built from now on in ``store``, and look for them there first (None:
+    build them in every process). The commands and the Python API install aogm's disk store."""
+    global _STORE
+    _STORE = store
 
 
 def _template_arrays(resolution: float, beam_width: float, reach: float, n_bins: int, ray: bool) -> dict:

@@ -312,6 +312,16 @@ def cone_limits(z: np.ndarray, z_max: float, config: ForwardModelConfig,
     return z, np.minimum(limits, cut)
 
 
+class IndexMasks(NamedTuple):
+    """``build_forward_index``'s two optional flat bool masks over the grid (None: none)."""
+
+    mask: np.ndarray | None = None  # only the readings whose cones touch it get entries
+    held_free: np.ndarray | None = None  # cells free while the index is used: left out of every cone
+
+
+NO_MASKS = IndexMasks()
+
+
 def build_forward_index(
     cones: tuple,
     grid,
@@ -319,8 +329,7 @@ def build_forward_index(
     z_max: float,
     config: ForwardModelConfig,
     reading_ids: np.ndarray | None = None,
-    mask: np.ndarray | None = None,
-    held_free: np.ndarray | None = None,
+    masks: IndexMasks = NO_MASKS,
     shadow: np.ndarray | None = None,
 ) -> ForwardIndex:
     """The forward model's index for ``cones`` = (rows, cols, bins, z): readings z taken from
@@ -329,8 +338,8 @@ def build_forward_index(
 
     NaN readings are dropped; +inf is a max-range reading (cone up to z_max). Other cones end
     ``config.window`` sigmas beyond z. ``reading_ids`` name the readings (default 0..N-1).
-    With ``mask`` (flat bool over the grid), only the readings whose cones touch it get
-    entries; the others stay in the index with none. ``held_free`` (flat bool) marks cells
+    With ``masks.mask`` (flat bool over the grid), only the readings whose cones touch it get
+    entries; the others stay in the index with none. ``masks.held_free`` (flat bool) marks cells
     that are free and stay free while the index is used (neither candidates of EM nor
     occupied): a free cell adds nothing to any S_t, so leaving its entries out changes no
     likelihood, and the index of a small cluster holds little more than the cluster's cells.
@@ -356,7 +365,7 @@ def build_forward_index(
     counts = np.zeros(len(z), dtype=np.int64)
     scratch = np.empty(int(np.diff(templates.offsets).max()), dtype=np.int32)
     mask, held_free = (np.zeros(0, dtype=np.bool_) if a is None else np.ascontiguousarray(a, dtype=np.bool_).reshape(-1)
-                       for a in (mask, held_free))
+                       for a in masks)
     n = _fill_index(templates.kernel_arrays, flat_offsets(templates, grid.width),
                     IndexGrid(grid.height, grid.width, mask, held_free), ForwardReadings(rows, cols, bins, z_eff, limits),
                     float(config.sigma), float(config.window), IndexBuffers(out_cell, out_g, counts, scratch))

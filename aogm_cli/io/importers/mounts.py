@@ -10,6 +10,8 @@ from pathlib import Path
 import numpy as np
 
 from aogm_cli.core.errors import InputError
+from aogm_cli.io.importers import wrap_angle
+from aogm_cli.io.importers.table import ANGLE_UNITS, LENGTH_UNITS, read_table, unit_scale
 
 PRESETS_DIR = Path(__file__).resolve().parents[2] / "data" / "mounts"
 
@@ -30,12 +32,23 @@ def mounts_path(spec: str) -> tuple[str, bool]:
                      key="mounts")
 
 
+def read_mounts(
+    path: str | Path, position_unit: str = "m", bearing_unit: str = "deg", delimiter: str = "auto"
+) -> np.ndarray:
+    """(S, 3) sensor mounts from a table with columns x, y, yaw (one row per sensor) -> metres, radians."""
+    table = read_table(path, delimiter)
+    if table.width != 3:
+        raise InputError(f"expected 3 columns (x, y, yaw), got {table.width}", file=str(path), key="mounts")
+    m = np.column_stack([table.column(c) for c in range(3)])
+    m[:, :2] *= unit_scale(LENGTH_UNITS, position_unit, "position_unit")
+    m[:, 2] = wrap_angle(m[:, 2] * unit_scale(ANGLE_UNITS, bearing_unit, "bearing_unit"))
+    return m
+
+
 def load_mounts(spec: str, position_unit: str = "m", bearing_unit: str = "deg",
                 delimiter: str = "auto") -> tuple[np.ndarray, str]:
     """(mounts (S, 3) in m and rad, how the source names them) of ``--mounts SPEC``: a preset is
     in m and degrees whatever the units given for files."""
-    from aogm_cli.io.importers.text import read_mounts
-
     path, preset = mounts_path(spec)
     if preset:
         return read_mounts(path), f"--mounts {spec} (aogm's {spec} preset)"

@@ -1,15 +1,13 @@
 """Plain-text range logs (whitespace or CSV columns) -> an aogm log, e.g. a course or lab sonar log.
 
 One row per scan; chosen columns hold the readings, the pose (x, y, yaw) and optionally the time,
-in the units the user names. Parsing is pure functions on text lines (``parse_table``,
+in the units the user names. Parsing is pure functions on text lines (``table.parse_table``,
 ``build_text_log``); ``import_text`` only opens the files.
 """
 
 from __future__ import annotations
 
-import csv
 import math
-from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -17,61 +15,9 @@ import numpy as np
 
 from aogm_cli.core.errors import InputError
 from aogm_cli.core.log import Log, SensorSpec
-from aogm_cli.io.importers import Progress, clean_ranges, interpolate_poses, read_lines, wrap_angle
+from aogm_cli.io.importers import Progress, clean_ranges, interpolate_poses, wrap_angle
 from aogm_cli.io.importers.mounts import load_mounts
-
-LENGTH_UNITS = {"mm": 0.001, "cm": 0.01, "m": 1.0}
-ANGLE_UNITS = {"rad": 1.0, "deg": math.pi / 180, "ddeg": math.pi / 1800}  # ddeg: tenths of a degree
-TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
-DELIMITERS = {"auto": None, "comma": ",", "semicolon": ";", "whitespace": ""}
-COMMENT_PREFIXES = ("#", "%", "//")
-
-
-@dataclass(frozen=True)
-class Table:
-    """A text table: ``rows`` of cells (strings), each with its 1-based ``line_numbers``;
-    ``header`` holds the column names when the first row has no number."""
-
-    file: str | None
-    header: tuple[str, ...] | None
-    rows: list[list[str]]
-    line_numbers: list[int]
-
-    @property
-    def width(self) -> int:
-        if self.header is not None:
-            return len(self.header)
-        return len(self.rows[0]) if self.rows else 0
-
-    def column_name(self, col: int) -> str:
-        """How errors name column ``col`` (0-based): its header name, or "column k" (1-based)."""
-        if self.header is not None and self.header[col]:
-            return self.header[col]
-        return f"column {col + 1}"
-
-    def error(self, message: str, key: str | None = None, line: int | None = None) -> InputError:
-        text = f"line {line}: {message}" if line is not None else message
-        return InputError(text, file=self.file, key=key)
-
-    def column(self, col: int, *, missing_ok: bool = False) -> np.ndarray:
-        """Column ``col`` (0-based) as float64. With ``missing_ok`` an empty cell is NaN and NaN or
-        inf are allowed; without, every cell must be a finite number."""
-        cells = [row[col] if row[col] or not missing_ok else "nan" for row in self.rows]
-        try:
-            values = np.array(cells, dtype=np.float64)
-        except ValueError:
-            values = None
-        if values is not None and (missing_ok or np.isfinite(values).all()):
-            return values
-        for cell, line in zip(cells, self.line_numbers, strict=True):  # find the first bad cell
-            try:
-                v = float(cell)
-            except ValueError:
-                got = repr(cell) if cell else "an empty cell"
-                raise self.error(f"expected a number, got {got}", self.column_name(col), line) from None
-            if not math.isfinite(v):
-                raise self.error(f"expected a finite number, got {cell!r}", self.column_name(col), line)
-        raise AssertionError("unreachable")  # pragma: no cover
+from aogm_cli.io.importers.table import ANGLE_UNITS, LENGTH_UNITS, TIME_UNITS, Table, read_table, unit_scale
 
 
 @dataclass(frozen=True)
@@ -116,61 +62,6 @@ class TextImport:
     notes: tuple[str, ...] = ()
 
 
-def _is_comment(line: str) -> bool:
-    s = line.strip()
-    return not s or s.startswith(COMMENT_PREFIXES)
-
-
-def _split(line: str, delimiter: str) -> list[str]:
-    if delimiter == "":
-        return line.split()
-    return [cell.strip() for cell in next(csv.reader([line], delimiter=delimiter))]
-
-
-def _is_number(cell: str) -> bool:
-    try:
-        float(cell)
-    except ValueError:
-        return False
-    return True
-
-
-def parse_table(lines: Iterable[str], file: str | None = None, delimiter: str = "auto") -> Table:
-    """Split text lines into a table. Blank lines and lines starting with #, % or // are skipped.
-
-    ``delimiter``: "auto" (comma or semicolon when the first row holds one, else whitespace),
-    "comma", "semicolon" or "whitespace". A first row without any number is the header.
-    Every row must have as many cells as the first.
-    """
-    if delimiter not in DELIMITERS:
-        raise InputError(f"expected one of {', '.join(DELIMITERS)}, got {delimiter!r}", key="delimiter")
-    sep = DELIMITERS[delimiter]
-    header: tuple[str, ...] | None = None
-    rows: list[list[str]] = []
-    numbers: list[int] = []
-    width = first_line = None
-    for n, line in enumerate(lines, start=1):
-        if _is_comment(line):
-            continue
-        if sep is None:
-            sep = "," if "," in line else ";" if ";" in line else ""
-        cells = _split(line, sep)
-        if width is None:
-            width, first_line = len(cells), n
-            if not any(_is_number(c) for c in cells):
-                header = tuple(cells)
-                continue
-        if len(cells) != width:
-            raise InputError(
-                f"line {n}: expected {width} columns (as on line {first_line}), got {len(cells)}", file=file
-            )
-        rows.append(cells)
-        numbers.append(n)
-    if not rows:
-        raise InputError("no data rows", file=file)
-    return Table(file, header, rows, numbers)
-
-
 def resolve_columns(spec: str, table: Table, key: str) -> list[int]:
     """0-based column indices of a spec such as "3", "4-19", "4-", "x,y,theta" (header names)."""
     names = {name: i for i, name in enumerate(table.header or ()) if name}
@@ -200,7 +91,7 @@ def resolve_columns(spec: str, table: Table, key: str) -> list[int]:
 
 def parse_bearings(spec: str, count: int, unit: str = "deg") -> np.ndarray:
     """(count,) sensor bearings (rad) from "ring", "ring:N[:START[:STEP]]" or a list "90,50,30,..."."""
-    scale = _unit(ANGLE_UNITS, unit, "bearing_unit")
+    scale = unit_scale(ANGLE_UNITS, unit, "bearing_unit")
     spec = spec.strip()
     if spec == "ring" or spec.startswith("ring:"):
         parts = spec.split(":")[1:]
@@ -233,12 +124,6 @@ def parse_bearings(spec: str, count: int, unit: str = "deg") -> np.ndarray:
     return wrap_angle(bearings)
 
 
-def _unit(table: dict[str, float], unit: str, key: str) -> float:
-    if unit not in table:
-        raise InputError(f"expected one of {', '.join(table)}, got {unit!r}", key=key)
-    return table[unit]
-
-
 def _one_column(spec: str | None, table: Table, key: str) -> int | None:
     if spec is None:
         return None
@@ -262,10 +147,10 @@ def build_text_log(
     ``options.bearings`` and ``options.sensor_radius``.
     """
     o = options
-    length = _unit(LENGTH_UNITS, o.range_unit, "range_unit")
-    position = _unit(LENGTH_UNITS, o.position_unit, "position_unit")
-    angle = _unit(ANGLE_UNITS, o.angle_unit, "angle_unit")
-    time_scale = _unit(TIME_UNITS, o.time_unit, "time_unit")
+    length = unit_scale(LENGTH_UNITS, o.range_unit, "range_unit")
+    position = unit_scale(LENGTH_UNITS, o.position_unit, "position_unit")
+    angle = unit_scale(ANGLE_UNITS, o.angle_unit, "angle_unit")
+    time_scale = unit_scale(TIME_UNITS, o.time_unit, "time_unit")
     _check_sensor(o)
     poses_from = range_table if pose_table is None else pose_table
     cols = _columns(range_table, pose_table, o)
@@ -410,27 +295,6 @@ def _mounts(mounts: np.ndarray | None, count: int, o: TextOptions) -> np.ndarray
     return np.column_stack([o.sensor_radius * np.cos(bearings), o.sensor_radius * np.sin(bearings), bearings])
 
 
-def read_table(path: str | Path, delimiter: str = "auto", progress: Progress | None = None) -> Table:
-    """``parse_table`` of the (plain or gzipped) file at ``path``."""
-    try:
-        return parse_table(read_lines(path, progress), file=str(path), delimiter=delimiter)
-    except InputError as exc:
-        raise exc.in_file(str(path)) from None
-
-
-def read_mounts(
-    path: str | Path, position_unit: str = "m", bearing_unit: str = "deg", delimiter: str = "auto"
-) -> np.ndarray:
-    """(S, 3) sensor mounts from a table with columns x, y, yaw (one row per sensor) -> metres, radians."""
-    table = read_table(path, delimiter)
-    if table.width != 3:
-        raise InputError(f"expected 3 columns (x, y, yaw), got {table.width}", file=str(path), key="mounts")
-    m = np.column_stack([table.column(c) for c in range(3)])
-    m[:, :2] *= _unit(LENGTH_UNITS, position_unit, "position_unit")
-    m[:, 2] = wrap_angle(m[:, 2] * _unit(ANGLE_UNITS, bearing_unit, "bearing_unit"))
-    return m
-
-
 def import_text(
     ranges_path: str | Path,
     poses_path: str | Path | None = None,
@@ -439,7 +303,7 @@ def import_text(
     progress: Progress | None = None,
 ) -> TextImport:
     """Read readings (and poses, from the same file when ``poses_path`` is None) into a ``Log``;
-    ``mounts_path``: a mounts table (``read_mounts``) or a preset's name (``importers.mounts``).
+    ``mounts_path``: a mounts table (``mounts.read_mounts``) or a preset's name (``importers.mounts``).
 
     The log's ``source`` reads ``aogm import text <ranges file> [<poses file>]``.
     """
