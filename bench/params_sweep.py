@@ -31,8 +31,10 @@ EM_GRID = [{"em": {"sigma": s, "p_hit": h, "p_max": m}}
            for s, h, m in itertools.product([0.03, 0.05], [0.3, 0.5, 0.7], [0.0, 0.1, 0.2])]
 
 
-ADAPTIVE_GRID = [({"adaptive": {"band_below": b, "near_occupied": n}}, threshold)
-                 for b, n, threshold in itertools.product([0.2, 0.1, 0.05], [1, 0], [None, 0.54, 0.8, 0.9, 0.97])]
+# the band and near_occupied are constants now (adaptive.BAND_BELOW, NEAR_OCCUPIED): the sweep
+# varies the settings left, and the detector's threshold
+ADAPTIVE_GRID = [({"adaptive": {"grow": g, "weak": w}}, threshold)
+                 for g, w, threshold in itertools.product([2, 1, 0], [0.45, 0.0], [None, 0.54, 0.8, 0.9, 0.97])]
 
 
 def best_of_three(make, *args):

@@ -269,7 +269,7 @@ def test_a_bad_detector_is_refused(good, tmp_path, edit, key):
         ("em: {sigma: .nan}", "em.sigma"),
         ("em: {p_hit: high}", "em.p_hit"),
         ("inverse_model: {l_occ: .inf}", "inverse_model.l_occ"),
-        ("adaptive: {near_occupied: 1.5}", "adaptive.near_occupied"),
+        ("adaptive: {near_occupied: 1}", "adaptive.near_occupied"),  # a constant, no setting
         ("adaptive: {contested: -1}", "adaptive.contested"),
         ("adaptive: {weak: .nan}", "adaptive.weak"),
         ("adaptive: {grow: 1.5}", "adaptive.grow"),

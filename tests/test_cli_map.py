@@ -66,7 +66,7 @@ def test_parameters_from_options_and_file_are_recorded(corridor_door_log, tmp_pa
 @pytest.mark.parametrize(
     "text, key", [("inverse_model: {l_ocq: 1}\n", "inverse_model.l_ocq"), ("em: {p_hit: 2}\n", "em.p_hit"), ("[1, 2\n", "p.yaml"),
                   ("exact: {prior: 1.5}\n", "exact.prior"), ("exact: {thin: 1}\n", "exact.thin"),
-                  ("exact: {prior: 0.5, bound: -1}\n", "exact.bound")]
+                  ("exact: {prior: 0.9999}\n", "exact.prior"), ("exact: {bound: 7}\n", "exact.bound")]
 )
 def test_bad_params_exit_2_without_output(corridor_door_log, tmp_path, text, key):
     params = tmp_path / "p.yaml"

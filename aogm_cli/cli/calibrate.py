@@ -43,10 +43,10 @@ def calibrate(log_file, mode, output, detector, params_file, resolution, quiet, 
     detected) give the parameters in closed form (p_rand the mean random expectation, p_max
     the mean dropout expectation, p_hit the expected detections over the expected obstacles
     examined, sigma^2 the expected squared range error of the detections), iterated at that
-    map until they settle. Round 0 maps with the configured model made at least
-    calibration.start_sigma (0.1 m) broad; each round fits at the last map and maps again,
-    until no parameter moves by more than calibration.tolerance, or calibration.rounds.
-    Every value is clipped to bounds (section calibration: of --params). Before the rounds,
+    map until they settle. Round 0 maps with the configured model made at least 0.1 m
+    broad; each round fits at the last map and maps again, until no parameter moves by more
+    than calibration.tolerance, or calibration.rounds. Every value is clipped to bounds
+    (docs/algorithms.md, "Calibration's constants"). Before the rounds,
     a sonar log's specular angle is learned once at the standard map: the share of readings
     that echo from a surface cell (one heard from one direction) rather than pass it, by angle
     of incidence, and the angle where that share falls to half its head-on value (90: the walls

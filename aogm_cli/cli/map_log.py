@@ -91,10 +91,10 @@ def map_log(log_file, mode, output, png, detector, params_file, forward_model, r
 
     Adaptive mode: the detector (--detector, or the one packaged with aogm; see
     `aogm train --help` for its inputs and labels) flags readings from neighbouring
-    sonar ranges; each flagged reading's band (its cone from adaptive band_below, 0.2 m,
-    before its range to alpha beyond it) marks the cells there that the standard map holds
-    occupied (within adaptive near_occupied cells of one, default 0) and not at its free
-    clamp; they form clusters (8-connected). EM runs over each group of clusters that share a reading, with every
+    sonar ranges; each flagged reading's band (its cone from 0.2 m before its range to alpha
+    beyond it) marks the cells there that the standard map holds occupied and not at its free
+    clamp; with the contested and weak cells (section adaptive: of --params) they form
+    clusters (8-connected). EM runs over each group of clusters that share a reading, with every
     other cell held at the standard map thresholded at p = 0.5; cluster cells get EM's
     residual probability, all others keep the standard map's.
 

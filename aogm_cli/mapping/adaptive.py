@@ -21,6 +21,9 @@ from aogm_cli.mapping.standard import standard_log_odds
 from aogm_cli.sensor_models.ray import axis_counts, is_narrow_beam
 from aogm_cli.sensor_models.readings import LaidOutReadings, cone_bands
 
+BAND_BELOW = 0.2  # m: a flagged reading's band starts this far before its range
+NEAR_OCCUPIED = 0  # cells (8-connected) from a cell the standard map holds occupied that a band may mark
+
 
 def cluster_problem(run: LaidOutReadings, clusters: np.ndarray, occupied: np.ndarray, config: EMConfig,
                     subset: np.ndarray | None = None) -> EMProblem:
@@ -60,7 +63,7 @@ def contested_cells(log: Log, grid, params: MapParams, log_odds: np.ndarray,
 
 def find_clusters(run: LaidOutReadings, flags: np.ndarray, log_odds: np.ndarray, observed: np.ndarray,
                   params: MapParams, contested: np.ndarray | None = None) -> tuple[np.ndarray, int]:
-    """(cluster ids (H, W), count): a flagged cone's band near its range, z - band_below ..
+    """(cluster ids (H, W), count): a flagged cone's band near its range, z - BAND_BELOW ..
     z + alpha (where the standard map thickens walls towards the robot), next to cells the
     standard map holds occupied, minus cells it holds at its free clamp; the ``contested``
     cells (``contested_cells``) when given; and the cells whose log-odds lie within
@@ -70,9 +73,9 @@ def find_clusters(run: LaidOutReadings, flags: np.ndarray, log_odds: np.ndarray,
     standard map holds free where too-long readings crossed them, are EM's to decide too (for
     cones only: on the intel laser log growing cost adaptive's held-out AUC 0.9863 -> 0.9737)."""
     region, _ = cone_bands(run.grid, run.templates, tuple(a[flags] for a in run.cones),
-                           params.adaptive.band_below, params.inverse_model.alpha)
+                           BAND_BELOW, params.inverse_model.alpha)
     region &= observed & (log_odds > params.inverse_model.clamp_min)
-    region &= near_occupied(log_odds, params.adaptive.near_occupied)
+    region &= near_occupied(log_odds, NEAR_OCCUPIED)
     if contested is not None:
         region |= contested & observed
     if params.adaptive.weak > 0:
@@ -108,8 +111,8 @@ def near_clusters(run: LaidOutReadings, clusters: np.ndarray, forward) -> np.nda
 # --- one scale (issue 28) --------------------------------------------------------------------------
 # Inside the clusters a cell's probability is EM's residual, outside the standard map's: two scales
 # that rank cells unlike each other (the standard map's free cells sit at its clamp, 0.12, above EM's
-# free cells at a wall's edge, where readings end: on the intel log the adaptive map's held-out AUC
-# was 0.73 against EM's 0.96). The log's own readings say what each scale means: of the echoes whose
+# free cells at a wall's edge, where readings end; docs/algorithms.md, "Where the defaults come
+# from", has what that cost on the intel log). The log's own readings say what each scale means: of the echoes whose
 # axis reaches a cell, the share that end in it (its hit rate, ``ray.axis_counts``). Each observed cell
 # outside the clusters takes the EM probability of the cluster cells whose hit rate its probability
 # has: one increasing map per log, learned from the readings that made the map (no truth, no

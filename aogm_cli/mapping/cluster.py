@@ -9,8 +9,8 @@ from aogm_cli.core.grid import GridSpec
 
 # A flagged reading's cluster cells are the band of its cone near its range (z - 0.2 m to z + alpha,
 # ``readings.cone_bands``; none for a max-range reading), kept where the standard map is observed,
-# not at its free clamp, and holds the cell occupied (or, with ``near_occupied`` = n, within n cells
-# of one it holds occupied); the components of their union are the clusters (``label_clusters``).
+# not at its free clamp, and holds the cell occupied (or, with ``adaptive.NEAR_OCCUPIED`` = n, within n
+# cells of one it holds occupied); the components of their union are the clusters (``label_clusters``).
 
 
 def grown(mask: np.ndarray, cells: int) -> np.ndarray:

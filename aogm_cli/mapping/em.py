@@ -46,15 +46,20 @@ class EMResult:
     scratch_bytes: int  # the tiles' scratch at its largest
 
 
+# a candidate EM leaves free is decided by the data when occupancy would lower the data
+# log-likelihood by more than this (log-odds); the others are the hidden cells of ``em.hidden``
+HIDDEN_GAIN = 0.05
+
+
 def decided(result: EMResult, config: EMConfig) -> np.ndarray:
     """Which of ``result``'s candidates the data decides: those believed occupied, and those
     believed free whose occupancy would lower the data log-likelihood by more than
-    ``config.hidden_gain``. The others are cells EM leaves free although no reading objects to
+    ``HIDDEN_GAIN``. The others are cells EM leaves free although no reading objects to
     an obstacle there: hidden behind the obstacles the readings detect (a wall's far layers,
     beyond every cone's window or barely inside it), where the prior alone decides."""
     with np.errstate(divide="ignore"):
         evidence = np.log(result.residual) - np.log1p(-result.residual) - config.l_prior  # log p(Z|occ) - log p(Z|free)
-    return (result.residual > 0.5) | (evidence < -config.hidden_gain)
+    return (result.residual > 0.5) | (evidence < -HIDDEN_GAIN)
 
 
 def residual_into(probability: np.ndarray, result: EMResult, config: EMConfig) -> np.ndarray:

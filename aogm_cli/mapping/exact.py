@@ -11,7 +11,7 @@ import numpy as np
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import SensorSpec
 from aogm_cli.sensor_models.cone import ConeTemplates, flat_offsets, reading_geometry
-from aogm_cli.sensor_models.exact_inverse import ExactModelConfig, cone_scratch, exact_inverse_updates
+from aogm_cli.sensor_models.exact_inverse import BOUND, MARGIN, ExactModelConfig, cone_scratch, exact_inverse_updates
 from aogm_cli.sensor_models.forward_model import ExpectationReadings, ForwardModelConfig, deflect
 from aogm_cli.sensor_models.readings import forward_templates, reading_spans
 
@@ -20,7 +20,7 @@ class ExactMapper:
     """``update`` with chunks of scans (ranges as ``readings.echo_ranges`` gives them), then
     ``result``, as ``standard.StandardMapper``; the cones are the forward model's (EM's), and
     ``forward`` its parameters. The state is one flat float32 grid of probabilities, -1 until
-    observed; the prior and the bounds are ``config``'s."""
+    observed; the prior is ``config``'s, the bounds +-``BOUND``."""
 
     def __init__(self, sensor: SensorSpec, grid: GridSpec, config: ExactModelConfig, forward: ForwardModelConfig,
                  templates: ConeTemplates | None = None):
@@ -31,7 +31,7 @@ class ExactMapper:
         self.flat = flat_offsets(self.templates, grid.width)
         self.model = (float(forward.p_rand), float(forward.p_max), float(forward.p_hit), float(forward.sigma),
                       float(forward.window), float(sensor.max_range))
-        self.bounds = (_sigmoid(-config.bound), _sigmoid(config.bound), float(config.prior))
+        self.bounds = (_sigmoid(-BOUND), _sigmoid(BOUND), float(config.prior))
         self.scratch = cone_scratch(self.templates)
         self.state = np.full(grid.height * grid.width, -1.0, dtype=np.float32)
 
@@ -63,9 +63,9 @@ def _sigmoid(x: float) -> float:
 def thinned(log_odds: np.ndarray, observed: np.ndarray, exact: tuple[np.ndarray, np.ndarray], config: ExactModelConfig,
             free: float) -> np.ndarray:
     """The standard map ``log_odds`` (H, W) with the observed cells that the exact model's map
-    ``exact`` (its log-odds and observed) holds free, more than ``config.margin`` below its
+    ``exact`` (its log-odds and observed) holds free, more than ``MARGIN`` below its
     prior, set to ``free`` (the standard map's free clamp)."""
     exact_log_odds, exact_observed = exact
     out = log_odds.copy()
-    out[observed & exact_observed & (exact_log_odds < config.l0 - config.margin)] = np.float32(free)
+    out[observed & exact_observed & (exact_log_odds < config.l0 - MARGIN)] = np.float32(free)
     return out

@@ -17,7 +17,7 @@ BYTES_PER_CELL = 40  # log-odds, probability, observed, EM state, the map file i
 BYTES_PER_PADDED_CELL = 4  # the standard mapper's padded float32 state
 # EM / adaptive: the readings laid out (rows, cols, bins, z: 32), EM's two tables of them with
 # their cones' extents, likelihood state and tile slot (int32 68 + float64 72), their orders
-# (12), the set-up's temporaries and the log's ranges (measured: 337 per reading at 200k scans)
+# (12), the set-up's temporaries and the log's ranges (docs/benchmarks.md: `make bench-scale`'s peak RSS)
 BYTES_PER_READING = 300
 # EM / adaptive on a sonar log: where beams were deflected (float64 a reading), and a cell's surface
 # normal (float32 x 2) beside its echo sums (float32 x 3) and head-on passes (float32) while they

@@ -43,15 +43,13 @@ class EMConfig:
     max_sweeps: int = 20
     start: str = "standard"  # "standard": the thresholded standard map; "empty": all free
     # What EM reports at the cells it leaves free although no reading objects to an obstacle
-    # there (occupancy would lower the data log-likelihood by at most hidden_gain: a wall's far
+    # there (occupancy would lower the data log-likelihood by at most em.HIDDEN_GAIN: a wall's far
     # layers, the space behind a wall, a gap in a wall that the prior alone keeps open): "prior"
     # (Thrun's residual, the prior 0.3, which a planner reads as free), "standard" (the standard
     # map's estimate) or "unobserved" (the standard map's estimate where it is above 0.5, else
-    # unobserved: p 0.5, /map/observed false). Measured on the 13 bundled worlds (README, "What
-    # EM reports where the data say nothing"): "unobserved" cuts EM's planner leak from
-    # 0.04-0.34 to 0.00-0.07 and lifts its wall-surface recall to the standard map's or above
+    # unobserved: p 0.5, /map/observed false); docs/algorithms.md, "What EM reports where the
+    # data say nothing", measures them
     hidden: str = "unobserved"
-    hidden_gain: float = 0.05
 
     def validate(self) -> EMConfig:
         check_field_types(self.forward)
@@ -65,8 +63,6 @@ class EMConfig:
             raise InputError(f"expected a whole number >= 1, got {self.max_sweeps}", key="max_sweeps")
         if self.hidden not in ("unobserved", "standard", "prior"):
             raise InputError(f"expected 'unobserved', 'standard' or 'prior', got {self.hidden!r}", key="hidden")
-        if not self.hidden_gain >= 0:
-            raise InputError(f"expected a number >= 0, got {self.hidden_gain!r}", key="hidden_gain")
         if self.start not in ("standard", "empty"):
             raise InputError(f"expected 'standard' or 'empty', got {self.start!r}", key="start")
         return self
@@ -83,31 +79,19 @@ class EMConfig:
 
 @dataclass(frozen=True)
 class AdaptiveConfig:
-    """Where a flagged reading's cluster cells lie: its cone from ``band_below`` metres before
-    its range to alpha beyond it (a max-range reading has no band), within ``near_occupied``
-    cells (8-connected) of a cell the standard map holds occupied."""
+    """Where the adaptive mode's clusters lie besides the flagged readings' bands
+    (``adaptive.find_clusters``; docs/algorithms.md, "The adaptive mapper", measures each): the
+    ``contested`` cells, whose occupied evidence alone reaches this many log-odds but which the
+    standard map holds free (walls that too-long specular or multipath readings cleared; 0: none);
+    the ``weak`` cells, whose standard log-odds lie within this of the prior (0: none); every
+    cluster grown by ``grow`` cells (8-connected; sonar cones only: the wall's back layers); and
+    the ``scale`` of the probabilities outside the clusters: "em", the EM probability of the
+    cluster cells that the log's readings end in as often (``adaptive.one_scale``), or "mixed",
+    the standard map's own."""
 
-    band_below: float = 0.2
-    # 0: only cells the standard map holds occupied (where it draws walls too thick, closes
-    # openings); measured against 1 on the nine bundled worlds (bench/params_sweep.py
-    # adaptive): as accurate or more on each, clusters 35-45% smaller, 10-20% faster
-    near_occupied: int = 0
-    # also cluster the cells whose occupied evidence alone (the inverse model's arcs) reaches
-    # this many log-odds but which the standard map holds free: walls that too-long specular or
-    # multipath readings cleared, which no flagged band reaches (0: none). README, "What EM
-    # reports where the data say nothing"
     contested: float = 0.5
-    # also cluster the cells whose standard log-odds lie within this of the prior (0: none):
-    # about one free reading's worth (l_free -0.41) or less, where EM decides free or unknown
     weak: float = 0.45
-    # every cluster grown by this many cells (8-connected): the wall's back layers, which the
-    # standard map holds free where too-long readings crossed them (corridor_specular adaptive
-    # accuracy 0.9598 -> 0.9716 at 2; 1 gave 0.9725 but lower surface recall elsewhere); sonar
-    # cones only (narrow beams: 0), as it cost the intel laser log's held-out AUC 0.9863 -> 0.9737
     grow: int = 2
-    # the scale of the probabilities outside the clusters (issue 28): "em", the EM probability of
-    # the cluster cells that the log's readings end in as often (``adaptive.one_scale``); "mixed",
-    # the standard map's own (before: two scales that rank cells unlike each other)
     scale: str = "em"
 
     def validate(self) -> AdaptiveConfig:
@@ -119,10 +103,6 @@ class AdaptiveConfig:
         for key in ("contested", "weak"):
             if not getattr(self, key) >= 0:
                 raise InputError(f"expected a number >= 0 (log-odds), got {getattr(self, key)!r}", key=key)
-        if not self.band_below >= 0:
-            raise InputError(f"expected a number >= 0 (m), got {self.band_below!r}", key="band_below")
-        if isinstance(self.near_occupied, bool) or not isinstance(self.near_occupied, int) or self.near_occupied < 0:
-            raise InputError(f"expected a whole number >= 0, got {self.near_occupied!r}", key="near_occupied")
         return self
 
     def as_dict(self) -> dict:
@@ -183,7 +163,7 @@ class MapParams:
 SECTIONS = {
     "inverse_model": {f.name for f in dataclasses.fields(InverseModelConfig)},
     "em": {f.name for f in dataclasses.fields(EMConfig) if f.name != "forward"}
-    | {f.name for f in dataclasses.fields(ForwardModelConfig)},
+    | {f.name for f in dataclasses.fields(ForwardModelConfig)} - {"window"},  # the window is the model's own
     "adaptive": {f.name for f in dataclasses.fields(AdaptiveConfig)},
     "calibration": {f.name for f in dataclasses.fields(CalibrationConfig)},
     "surface": {f.name for f in dataclasses.fields(SurfaceConfig)},

@@ -53,12 +53,9 @@ class Problem:
     config: EMConfig
 
 
-@dataclass(frozen=True)
-class View:
-    """What the map file holds: probability and observed cells, (H, W) each."""
-
+class View(NamedTuple):
     probability: np.ndarray
-    observed: np.ndarray
+    observed: np.ndarray  # the map file's layers, (H, W)
 
 
 @dataclass(frozen=True)

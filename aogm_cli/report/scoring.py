@@ -99,7 +99,7 @@ def scored(job: CompareJob, path: str, world: str, mode: str, m: OccupancyMap, i
 
 # the mode of a log whose map learns the forward model when ``aogm compare`` calibrates the log
 # once, and the mode that takes it: adaptive fits on the readings that reach its clusters, which
-# serves both (docs/algorithms.md, "One calibration per log")
+# serves both (docs/algorithms.md, "Where the defaults come from")
 CALIBRATES, TAKES = "adaptive", "em"
 
 

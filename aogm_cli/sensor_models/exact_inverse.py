@@ -15,6 +15,9 @@ from aogm_cli.core.errors import InputError
 from aogm_cli.sensor_models.cone import cone_flat_cells
 from aogm_cli.sensor_models.forward_model import cone_entries, cone_reach, gaussian_at
 
+BOUND = 7.0  # the exact model's log-odds stay within +-BOUND (the standard map's clamps starve it)
+MARGIN = 0.5  # log-odds below the prior at which the thinning frees a cell
+
 
 @dataclass(frozen=True)
 class ExactModelConfig:
@@ -32,25 +35,18 @@ class ExactModelConfig:
     """
 
     prior: float = 0.1  # the occupancy each cell starts at
-    bound: float = 7.0  # its log-odds stay within +-bound (the standard map's clamps starve it too)
-    # thin: the standard map's cells that the exact model holds free, more than ``margin`` (log-odds)
+    # thin: the standard map's cells that the exact model holds free, more than MARGIN (log-odds)
     # below its prior, are set free (to inverse_model.clamp_min): the thickness of walls towards the
-    # robot, the arcs that smear a doorway, go; walls stay where Elfes' model keeps them. Measured
-    # (13 worlds, seed 1, margin 0.5; 1.0 and 2.0 a little less of each): accuracy +0.04 to +0.08,
-    # block 0.13-0.42 -> 0.03-0.32, leak within +0.014, every truth check passed (Elfes: 5 failed)
+    # robot, the arcs that smear a doorway, go; walls stay where Elfes' model keeps them
     thin: bool = False
-    margin: float = 0.5
 
     def validate(self) -> ExactModelConfig:
         """Return self, or raise ``InputError(key=<field>)`` for an impossible value (the fields'
         types are checked where the parameters are read: ``mapping.params.check_field_types``)."""
         if not 0 < self.prior < 1:
             raise InputError(f"expected a probability in (0, 1), got {self.prior:g}", key="prior")
-        if not self.bound > abs(self.l0):
-            raise InputError(f"expected a number above |logit(prior)| = {abs(self.l0):.3g}, got {self.bound:g}",
-                             key="bound")
-        if not self.margin >= 0:
-            raise InputError(f"expected a number >= 0 (log-odds), got {self.margin:g}", key="margin")
+        if not BOUND > abs(self.l0):
+            raise InputError(f"expected a prior whose log-odds lie within +-{BOUND:g}, got {self.prior:g}", key="prior")
         return self
 
     @property

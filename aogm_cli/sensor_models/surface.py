@@ -13,46 +13,37 @@ import numpy as np
 from aogm_cli.core.errors import InputError
 from aogm_cli.sensor_models.cone import cone_flat_cells, flat_offsets
 
+# What makes a cell a surface with a direction (``surface_normals``): heard by at least MIN_ECHOES
+# readings whose directions (as axes) have a doubled-angle mean resultant length of at least
+# MIN_COHERENCE (directions spread evenly over +-30 deg give 0.83, +-45 deg 0.64, +-60 deg 0.41; a
+# corner heard from all around 0), and passed by at most MAX_PASS_SHARE of the readings that meet it
+# head-on (within HEAD_ON_DEG of its normal), which a surface there would have echoed: a doorway,
+# which the echoes of the wall beside it smear over, is passed head-on; a wall is not.
+MIN_ECHOES = 2
+MIN_COHERENCE = 0.5
+MAX_PASS_SHARE = 0.5
+HEAD_ON_DEG = 20.0
+
 
 @dataclass(frozen=True)
 class SurfaceConfig:
-    """Which cells are surfaces with a direction, from the directions they echoed in (sonar logs only).
-
-    A smooth surface echoes only near its normal, so the directions from which a cell was heard
-    (each echo's arc, within one cell of its range) gather around its normal: a cell heard by at
-    least ``min_echoes`` readings whose directions (as axes: the two sides of a wall alike) have a
-    mean resultant length of at least ``min_coherence`` is a surface with that mean direction as
-    its normal. Corners, pillars and clutter, heard from every side, keep Thrun's model (visible
-    at any angle)."""
+    """Whether the angle of incidence plays a part (sonar logs only): which cells are surfaces with
+    a direction, from the directions they echoed in. A smooth surface echoes only near its normal,
+    so the directions from which a cell was heard (each echo's arc, within one cell of its range)
+    gather around its normal (``MIN_ECHOES``, ``MIN_COHERENCE``, ``MAX_PASS_SHARE``). Corners,
+    pillars and clutter, heard from every side, keep Thrun's model (visible at any angle). A beam
+    is deflected where the ``core`` of its cone (this share of its opening about the axis) meets a
+    surface at a grazing angle: a cone whose edge clips a door frame mostly passes the door
+    (docs/algorithms.md, "The angle of incidence", measures the share)."""
 
     enabled: bool = True
-    min_echoes: int = 2
-    # the doubled-angle resultant length: directions spread evenly over +-30 deg give 0.83, +-45
-    # deg 0.64, +-60 deg 0.41; a corner heard from all around 0
-    min_coherence: float = 0.5
-    # and is passed by few readings that meet it head-on (within head_on_deg of its normal), which a
-    # surface there would have echoed: at most this share of those readings passed it. A doorway,
-    # which the echoes of the wall beside it smear over, is passed head-on; a wall is not
-    max_pass_share: float = 0.5
-    head_on_deg: float = 20.0
-    # a beam is deflected where the core of its cone (this share of its opening about the axis,
-    # about the axis itself at 0.1) meets a surface at a grazing angle: a cone whose edge clips a
-    # door frame mostly passes the door. Measured (EM, seed 1, `aogm map --params` with
-    # `surface: {core: C}`): l_corridor's block 0.046 at 1.0 (the whole cone), 0.040 at 0.5,
-    # 0.037 at 0.25, 0.034 at 0.1; on the real 8-sonar log at 0.1 m (`aogm compare`) walls_kept
-    # 0.937 at 0.25 and 0.955 at 0.1
     core: float = 0.1
 
     def validate(self) -> SurfaceConfig:
         """Return self, or raise ``InputError(key=<field>)`` for an impossible value (the fields'
         types are checked where the parameters are read: ``mapping.params.check_field_types``)."""
-        if self.min_echoes < 1:
-            raise InputError(f"expected a whole number >= 1, got {self.min_echoes!r}", key="min_echoes")
-        for key in ("min_coherence", "max_pass_share", "core"):
-            if not 0 <= getattr(self, key) <= 1:
-                raise InputError(f"expected a number in [0, 1], got {getattr(self, key)!r}", key=key)
-        if not 0 < self.head_on_deg < 90:
-            raise InputError(f"expected an angle in (0, 90) degrees, got {self.head_on_deg!r}", key="head_on_deg")
+        if not 0 <= self.core <= 1:
+            raise InputError(f"expected a number in [0, 1], got {self.core!r}", key="core")
         return self
 
     def as_dict(self) -> dict:
@@ -73,11 +64,11 @@ def surface_normals(tpl, flat, shape: tuple[int, int], cones: tuple, z_max: floa
     sums = np.zeros((3, shape[0] * shape[1]), dtype=np.float32)
     echo_direction_sums(tpl, flat, shape, readings, float(resolution), float(z_max), sums)
     count = sums[2]
-    surface = count >= config.min_echoes
+    surface = count >= MIN_ECHOES
     if believed is not None:
         surface &= np.asarray(believed, dtype=bool).reshape(-1)
     cells = np.flatnonzero(surface)
-    coherent = np.hypot(sums[0, cells], sums[1, cells]) >= config.min_coherence * count[cells]
+    coherent = np.hypot(sums[0, cells], sums[1, cells]) >= MIN_COHERENCE * count[cells]
     cells = cells[coherent]
     angle = 0.5 * np.arctan2(sums[1, cells], sums[0, cells])  # the mean axis, from the doubled angles
     echoes = count[cells]
@@ -86,9 +77,9 @@ def surface_normals(tpl, flat, shape: tuple[int, int], cones: tuple, z_max: floa
     normal[0, cells] = np.cos(angle)
     normal[1, cells] = np.sin(angle)
     passes = np.zeros(normal.shape[1], dtype=np.float32)
-    head_on_passes(tpl, flat, shape, readings, normal, math.cos(math.radians(config.head_on_deg)) ** 2,
+    head_on_passes(tpl, flat, shape, readings, normal, math.cos(math.radians(HEAD_ON_DEG)) ** 2,
                    float(resolution), float(z_max), passes)
-    passed = cells[passes[cells] > config.max_pass_share * (passes[cells] + echoes)]
+    passed = cells[passes[cells] > MAX_PASS_SHARE * (passes[cells] + echoes)]
     normal[:, passed] = np.nan
     return normal
 

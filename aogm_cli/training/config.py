@@ -19,9 +19,7 @@ class TrainingConfig:
     max_iter: int = 1000  # adam epochs at most
     # the threshold maximises F_beta on the training data (beta < 1 favours precision): a false
     # flag costs EM time inside a needless cluster, a missed one is mostly covered by the bands
-    # of its flagged neighbours. Measured on the nine bundled worlds (bench/params_sweep.py
-    # adaptive and the README): beta 0.25 (threshold 0.88) against 1 (0.54) made the adaptive
-    # map at least as accurate on every world with clusters a third smaller.
+    # of its flagged neighbours (docs/algorithms.md, "Where the defaults come from")
     beta: float = 0.25
 
     def __post_init__(self):
