@@ -228,10 +228,12 @@ def test_calibrate_writes_the_sensors_model_that_map_and_compare_take(corridor_d
         assert compared.learned["origin"] == f"file {model}" and "calibration" not in compared.stats["phase_seconds"]
 
 
-def _model_file(tmp_path, corridor_door_log):
-    model = tmp_path / "model.yaml"
+@pytest.fixture(scope="module")
+def model_text(corridor_door_log, tmp_path_factory):
+    """A model file of corridor_door's sonar ring (``aogm calibrate -o``), written once."""
+    model = tmp_path_factory.mktemp("model") / "model.yaml"
     assert run("calibrate", corridor_door_log, "-o", model, "-q", "--max-sweeps", 2).exit_code == 0
-    return model, yaml.safe_load(model.read_text())
+    return model.read_text()
 
 
 @pytest.mark.parametrize("change, key, word", [
@@ -246,8 +248,9 @@ def _model_file(tmp_path, corridor_door_log):
     (lambda d: d.update(sensor=[1, 2]), "sensor", "expected a mapping"),
 ])
 @pytest.mark.parametrize("command", ["map", "compare"])
-def test_a_model_file_of_another_sensor_or_damaged_is_refused(corridor_door_log, tmp_path, change, key, word, command):
-    model, written = _model_file(tmp_path, corridor_door_log)
+def test_a_model_file_of_another_sensor_or_damaged_is_refused(corridor_door_log, model_text, tmp_path, change, key, word,
+                                                              command):
+    model, written = tmp_path / "model.yaml", yaml.safe_load(model_text)
     change(written)
     model.write_text(yaml.safe_dump(written))
     before = model.read_bytes()
