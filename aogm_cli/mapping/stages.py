@@ -310,7 +310,8 @@ def finished(mode: str, s: State, phases: dict) -> OccupancyMap:
     grid, view = s.grid, s.view
     em = mode != "standard"
     occupied = None if s.occupied is None else s.occupied.reshape(grid.shape) & view.observed
-    params = params_json(s.params, mode, grid) | (s.detector_record if s.clusters is not None else {})
+    params = (params_json(s.params, mode, grid) | (s.detector_record if s.clusters is not None else {})
+              | getattr(s.source, "recorded", {}))  # what the log source says of itself: a held-out split
     return OccupancyMap(grid=grid, probability=view.probability, observed=view.observed, mode=mode, params=params,
                         runtime_s=sum(phases.values()), source_log=s.source.path,
                         log_odds=None if mode == "em" else s.standard.log_odds, occupied=occupied if em else None,

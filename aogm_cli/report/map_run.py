@@ -21,7 +21,8 @@ from aogm_cli.mapping.params import MapParams, params_from
 from aogm_cli.mapping.pipeline import Progress
 from aogm_cli.sensor_models import cone
 
-__all__ = ["BASELINE_DETECTORS", "check_logs", "given_model", "map_file", "resolve_detector", "resolve_params"]
+__all__ = ["BASELINE_DETECTORS", "NamedSource", "check_logs", "given_model", "map_file", "resolve_detector",
+           "resolve_params"]
 
 
 def resolve_params(params_file: str | Path | None = None, overrides: dict[str, dict[str, Any]] | None = None) -> MapParams:
@@ -68,6 +69,17 @@ def given_model(path: str | Path, log: str | Path) -> Learned:
     with LogReader(log) as reader:
         check_sensor(record, reader.sensor, str(path), str(log))
     return Learned(sensor=SensorModel(**values), origin=f"file {path}", opening_deg=values["opening_deg"])
+
+
+class NamedSource:
+    """A log source in memory (the scans a held-out split keeps) named as the file it came from,
+    with what its map's params record of it (``recorded``, e.g. the split)."""
+
+    def __init__(self, log, path: str, recorded: dict):
+        self.log, self.path, self.recorded = log, path, recorded
+
+    def __getattr__(self, name):  # sensor, n_scans, truth_grid(), poses(), chunks(), read()
+        return getattr(self.log, name)
 
 
 def check_logs(tasks, params: MapParams, limits=None) -> None:

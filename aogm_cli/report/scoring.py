@@ -71,10 +71,8 @@ def map_kept_scans(job: CompareJob, path: str, mode: str, given: Learned | None 
     timing). The map names the log as its source and records the split in ``params["holdout"]``."""
     with LogReader(path) as reader:
         kept, _held = split_log(reader, job.holdout)
-    m = map_run.map_file(path, mode, job.params, job.detector, limits=job.limits, given=given, source=kept)
-    m.source_log = str(path)
-    m.params["holdout"] = job.holdout.as_dict()
-    return m
+    source = map_run.NamedSource(kept, str(path), {"holdout": job.holdout.as_dict()})
+    return map_run.map_file(path, mode, job.params, job.detector, limits=job.limits, given=given, source=source)
 
 
 def map_and_score(job: CompareJob, path: str, world: str, mode: str, identity: dict | None,
