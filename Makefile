@@ -7,7 +7,7 @@ OUT    := out
 SEED   := 1
 WORLDS := $(wildcard worlds/*.yaml)
 
-.PHONY: demo test bench lint install clean figure
+.PHONY: demo test kernels bench lint install clean figure
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -31,8 +31,10 @@ demo: $(STAMP)
 # processes compile two halves of the kernels into numba's cache (tests/warm_kernels.py), which
 # both workers would otherwise compile each: on a clean clone the suite took 232 s instead of 256 s
 # (3 s when the cache is warm)
-test: $(STAMP)
+kernels: $(STAMP)
 	$(BIN)/python tests/warm_kernels.py em & p=$$!; $(BIN)/python tests/warm_kernels.py rest && wait $$p
+
+test: kernels
 	$(BIN)/python -m pytest -n auto
 
 # Property-based fuzzing (hypothesis, fixed seed) of world files and of damaged logs, maps and
@@ -50,17 +52,18 @@ bench: $(STAMP)
 	$(BIN)/python bench/bench_adaptive.py
 
 # Benchmarks at building scale (not part of test or bench; README "Benchmarks at scale"): adaptive
-# mapping on the two seed worlds (best of 5, one process), then the generated office floor at
+# mapping on the two seed worlds (best of BENCH_RUNS, one process), then the generated office floor at
 # SCALE_SIZES scans in every mode of SCALE_MODES, each map in its own process under SCALE_MEMORY of
 # address space (a run that does not fit is a failed row). Worlds, logs, maps and JSON: out/bench-scale/.
 SCALE_SIZES  ?= 2000,10000,50000,200000
 SCALE_MODES  ?= standard,em,adaptive,adaptive:all,adaptive:none
 SCALE_MEMORY ?= 12G
 SCALE_ARGS   ?=
+BENCH_RUNS   ?= 5
 .PHONY: bench-scale
 bench-scale: $(STAMP)
 	@mkdir -p $(OUT)/bench-scale
-	$(BIN)/python bench/bench_seed_adaptive.py --json $(OUT)/bench-scale/seed_worlds.json
+	$(BIN)/python bench/bench_seed_adaptive.py --runs $(BENCH_RUNS) --json $(OUT)/bench-scale/seed_worlds.json
 	$(BIN)/python bench/bench_scale.py --sizes $(SCALE_SIZES) --modes $(SCALE_MODES) --max-memory $(SCALE_MEMORY) \
 	  --workdir $(OUT)/bench-scale --json $(OUT)/bench-scale/scale.json $(SCALE_ARGS)
 

@@ -55,4 +55,4 @@ def test_a_missing_module_fails_under_ci_and_skips_outside(require, monkeypatch)
 
 def test_ci_runs_make_test_with_ci_true():
     script = (ROOT / ".ci" / "run").read_text()
-    assert re.search(r"^CI=true make test\b", script, re.MULTILINE), "make test runs without CI=true in .ci/run"
+    assert re.search(r"^phase tests env CI=true make test\b", script, re.MULTILINE), "make test runs without CI=true in .ci/run"
