@@ -60,10 +60,11 @@ SCALE_MODES  ?= standard,em,adaptive,adaptive:all,adaptive:none
 SCALE_MEMORY ?= 12G
 SCALE_ARGS   ?=
 BENCH_RUNS   ?= 5
+SEED_ARGS    ?=
 .PHONY: bench-scale
 bench-scale: $(STAMP)
 	@mkdir -p $(OUT)/bench-scale
-	$(BIN)/python bench/bench_seed_adaptive.py --runs $(BENCH_RUNS) --json $(OUT)/bench-scale/seed_worlds.json
+	$(BIN)/python bench/bench_seed_adaptive.py --runs $(BENCH_RUNS) $(SEED_ARGS) --json $(OUT)/bench-scale/seed_worlds.json
 	$(BIN)/python bench/bench_scale.py --sizes $(SCALE_SIZES) --modes $(SCALE_MODES) --max-memory $(SCALE_MEMORY) \
 	  --workdir $(OUT)/bench-scale --json $(OUT)/bench-scale/scale.json $(SCALE_ARGS)
 

@@ -128,11 +128,12 @@ def main() -> None:
     parser.add_argument("--runs", type=int, default=5, help="maps per mode; the best runtime_s is kept (default 5)")
     parser.add_argument("--json", type=Path, help="write the numbers as JSON")
     parser.add_argument("--params", help="a --params YAML every mode is mapped with")
+    parser.add_argument("--worlds", default=",".join(WORLDS), help="bundled worlds, comma-separated (default: the seed worlds)")
     args = parser.parse_args()
     print(f"Seed worlds (seed 1), every map in this process, best of {args.runs} runtime_s")
     doc = {}
     with tempfile.TemporaryDirectory() as folder:
-        for world in WORLDS:
+        for world in args.worlds.split(","):
             log_path = Path(folder) / f"{world}.h5"
             write_log(log_path, simulate(load_world(ROOT / "worlds" / f"{world}.yaml"), seed=1))
             rows = measure(log_path, args.runs, args.params)
