@@ -2,19 +2,27 @@
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
-STAMP  := $(VENV)/.installed-stamp
+STAMP  := $(VENV)/.installed-stamp  # aogm and what it imports: all that demo, bench and figure need
+DEV    := $(VENV)/.dev-stamp        # and the dev extra (pytest, ruff, import-linter, hypothesis, Dask): test, lint
+PIP    := $(BIN)/python -m pip install --quiet --disable-pip-version-check
 OUT    := out
 SEED   := 1
 WORLDS := $(wildcard worlds/*.yaml)
 
 .PHONY: demo test kernels bench lint install clean figure
 
+# a fresh clone's make demo installs no dev extra; make test installs both in one pip run
 $(STAMP): pyproject.toml
-	$(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --disable-pip-version-check -e '.[dev]'
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(PIP) -e .
 	touch $(STAMP)
 
-install: $(STAMP)
+$(DEV): pyproject.toml
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(PIP) -e '.[dev]'
+	touch $(STAMP) $(DEV)
+
+install: $(DEV)
 
 demo: $(STAMP)
 	@mkdir -p $(OUT)/maps
@@ -31,7 +39,7 @@ demo: $(STAMP)
 # processes compile two halves of the kernels into numba's cache (tests/warm_kernels.py), which
 # both workers would otherwise compile each: on a clean clone the suite took 232 s instead of 256 s
 # (3 s when the cache is warm)
-kernels: $(STAMP)
+kernels: $(DEV)
 	$(BIN)/python tests/warm_kernels.py em & p=$$!; $(BIN)/python tests/warm_kernels.py rest && wait $$p
 
 test: kernels
@@ -42,7 +50,7 @@ test: kernels
 # crashes, hangs, other exits, partial outputs and the time taken.
 FUZZ_EXAMPLES ?= 2000
 .PHONY: fuzz
-fuzz: $(STAMP)
+fuzz: $(DEV)
 	AOGM_FUZZ_EXAMPLES=$(FUZZ_EXAMPLES) $(BIN)/python -m pytest -q -s -p no:cacheprovider tests/test_fuzz.py
 
 bench: $(STAMP)
@@ -69,7 +77,7 @@ bench-scale: $(STAMP)
 	  --workdir $(OUT)/bench-scale --json $(OUT)/bench-scale/scale.json $(SCALE_ARGS)
 
 # ruff, and the layers of pyproject.toml's [tool.importlinter] (an import against the flow fails)
-lint: $(STAMP)
+lint: $(DEV)
 	@status=0; $(BIN)/ruff check . || status=1; $(BIN)/lint-imports --no-cache || status=1; exit $$status
 
 # The packaged detector: simulate every bundled world, clean and realistic (*_real: an errors:
