@@ -2,8 +2,10 @@
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
-STAMP  := $(VENV)/.installed-stamp  # aogm and what it imports: all that demo, bench and figure need
-DEV    := $(VENV)/.dev-stamp        # and the dev extra (pytest, ruff, import-linter, hypothesis, Dask): test, lint
+# STAMP: aogm and what it imports, all that demo, bench and figure need; DEV: and the dev extra
+# (pytest, ruff, import-linter, hypothesis, Dask) that test and lint need
+STAMP  := $(VENV)/.installed-stamp
+DEV    := $(VENV)/.dev-stamp
 PIP    := $(BIN)/python -m pip install --quiet --disable-pip-version-check
 OUT    := out
 SEED   := 1
