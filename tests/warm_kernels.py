@@ -21,23 +21,44 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def warm_em() -> None:
-    from aogm_cli.core.log import SensorSpec
-    from aogm_cli.mapping.modes import warm_up
+    from aogm_cli.core.log import Log, SensorSpec
+    from aogm_cli.mapping.modes import map_in_mode, warm_up
     from aogm_cli.report.map_run import resolve_params
 
     sonar = SensorSpec(mount=np.array([[0.1, 0.0, 0.0], [0.0, 0.1, math.pi / 2]]))
     warm_up(sonar, resolve_params(), "adaptive")
+    # one reading: numpy calls a one-element column contiguous, and numba compiles EM's kernels again
+    # for contiguous arrays (a cluster that one reading reaches, the tests' one-reading cones)
+    one = Log(np.zeros(1), np.zeros((1, 3)), np.full((1, 1), 1.0, dtype=np.float32),
+              SensorSpec(mount=np.array([[0.1, 0.0, 0.0]])), "warm-up")
+    map_in_mode(one, "em", resolve_params(None, {"calibration": {"enabled": False}}))
+    # learning the beam's opening and the specular angle on a simulated log of walls
+    with tempfile.TemporaryDirectory() as folder:
+        path = simulated(folder, "corridor_door")
+        learn = {"calibration": {"learn": "sigma,p_rand,p_hit,p_max,specular_deg,opening_deg", "rounds": 1}}
+        from aogm_cli.io.logfile import LogReader
+
+        with LogReader(path) as reader:
+            map_in_mode(reader, "em", resolve_params(None, learn))
+
+
+def simulated(folder: str, world: str) -> Path:
+    from aogm_cli.io.logfile import write_log
+    from aogm_cli.simulation.sonar import simulate
+    from aogm_cli.world.loader import load_world
+
+    path = Path(folder) / f"{world}.h5"
+    write_log(path, simulate(load_world(ROOT / "worlds" / f"{world}.yaml"), seed=1))
+    return path
 
 
 def warm_rest() -> None:
     from aogm_cli.core.log import SensorSpec
     from aogm_cli.evaluation.consistency import map_consistency
     from aogm_cli.evaluation.holdout import HoldoutSplit, holdout_scores, split_log
-    from aogm_cli.io.logfile import LogReader, write_log
+    from aogm_cli.io.logfile import LogReader
     from aogm_cli.mapping.modes import map_in_mode, map_source, tiny_log
     from aogm_cli.report.map_run import resolve_params
-    from aogm_cli.simulation.sonar import simulate
-    from aogm_cli.world.loader import load_world
 
     params = resolve_params()
     thin = dataclasses.replace(params, exact=dataclasses.replace(params.exact, thin=True))
@@ -45,8 +66,10 @@ def warm_rest() -> None:
                        max_range=8.0, noise_sigma=0.01)
     map_in_mode(tiny_log(laser), "standard", params)
     with tempfile.TemporaryDirectory() as folder:
-        path = Path(folder) / "door.h5"
-        write_log(path, simulate(load_world(ROOT / "worlds" / "corridor_door.yaml"), seed=1))
+        path = simulated(folder, "corridor_door")
+        for world in ("corridor_door_real", "corridor_specular_real", "cluttered_lab_real", "office_doors_real",
+                      "corridor_door_pioneer", "glass_corridor"):  # the simulator's kernel with each kind of error
+            simulated(folder, world)
         with LogReader(path) as reader:
             m = map_source(reader, "standard", thin)
             split = HoldoutSplit(0.1, 1)
