@@ -16,12 +16,12 @@ WORLDS := $(wildcard worlds/*.yaml)
 # a fresh clone's make demo installs no dev extra; make test installs both in one pip run
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(PIP) -e .
+	$(PIP) --no-compile -e .
 	touch $(STAMP)
 
 $(DEV): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(PIP) -e '.[dev]'
+	$(PIP) --no-compile -e '.[dev]'
 	touch $(STAMP) $(DEV)
 
 install: $(DEV)
