@@ -92,8 +92,9 @@ class State:
         return dataclasses.replace(self.params, em=dataclasses.replace(self.params.em, forward=forward))
 
     @property
-    def runs_em(self) -> bool:
-        return self.clusters is None or self.clusters.count > 0
+    def log(self):
+        """The scans in memory once read (the sensor with the beam's opening), else the source."""
+        return self.whole if self.whole is not None else self.source
 
 
 class Stage(NamedTuple):
@@ -145,7 +146,7 @@ def read(s: State) -> State:
 
 def templates(s: State) -> State:
     """Set-up: the cone and forward templates of the grid, built or found in their caches."""
-    log = s.whole if s.whole is not None else s.source
+    log = s.log
     set_up(log.sensor, s.grid, s.in_use)
     if s.whole is not None:
         E.prepared_templates(s.grid, s.whole.sensor)
@@ -154,7 +155,7 @@ def templates(s: State) -> State:
 
 def standard(s: State) -> State:
     """The standard map (Elfes, Moravec) of the scans, streamed from the source when not in memory."""
-    log = s.whole if s.whole is not None else s.source
+    log = s.log
     return s.but(standard=StandardMap(*standard_log_odds(log, s.grid, s.in_use)))
 
 
@@ -197,7 +198,7 @@ def _cuts(run: LaidOutReadings) -> np.ndarray | None:
 
 def thinning(s: State) -> State:
     """The standard map thinned by the exact inverse model (``standard.thin_pass``)."""
-    log = s.whole if s.whole is not None else s.source
+    log = s.log
     cuts = None if s.readings is None else _cuts(s.readings)
     log_odds = thin_pass(log, s.grid, s.in_use, s.standard.log_odds, s.standard.observed, cuts)
     return s.but(standard=StandardMap(log_odds, s.standard.observed))
@@ -289,16 +290,16 @@ def learns_opening(s: State) -> bool:
 
 
 def thinned(s: State) -> bool:
-    log = s.whole if s.whole is not None else s.source
+    log = s.log
     return thins(log.sensor, s.grid, s.params)
 
 
-def calibrates(s: State) -> bool:
-    return s.runs_em and s.params.calibration.enabled and s.given is None
-
-
 def runs_em(s: State) -> bool:
-    return s.runs_em
+    return s.clusters is None or s.clusters.count > 0
+
+
+def calibrates(s: State) -> bool:
+    return runs_em(s) and s.params.calibration.enabled and s.given is None
 
 
 # --- the map -------------------------------------------------------------------------------------
