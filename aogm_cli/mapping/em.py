@@ -23,7 +23,7 @@ from aogm_cli.core.log import Log
 from aogm_cli.mapping import em_kernels as K
 from aogm_cli.mapping.calibration import MAX_READINGS, incidence_at, opening_at, sample_readings
 from aogm_cli.mapping.params import EMConfig, MapParams
-from aogm_cli.mapping.standard import probability_from_log_odds, thin_pass
+from aogm_cli.mapping.standard import HIDDEN_GAIN, probability_from_log_odds, thin_pass
 from aogm_cli.sensor_models.cone import flat_offsets
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig, cone_limits, reading_constants
 from aogm_cli.sensor_models.ray import is_narrow_beam
@@ -47,8 +47,8 @@ class EMResult:
 
 
 # a candidate EM leaves free is decided by the data when occupancy would lower the data
-# log-likelihood by more than this (log-odds); the others are the hidden cells of ``em.hidden``
-HIDDEN_GAIN = 0.05
+# log-likelihood by more than ``standard.HIDDEN_GAIN`` (log-odds); the others are the hidden cells
+# of ``em.hidden``
 
 
 def decided(result: EMResult, config: EMConfig) -> np.ndarray:
@@ -423,7 +423,7 @@ def opening_record(whole: Log, run: LaidOutReadings, params: MapParams, log_odds
     """The beam's effective opening learned from the log (``calibration.opening_at``) at the
     standard map ``log_odds`` thinned by the exact inverse model (``standard.thin_pass``)."""
     thin = dataclasses.replace(params, exact=dataclasses.replace(params.exact, thin=True))
-    thinned = thin_pass(whole, run.grid, thin, log_odds, observed)
+    thinned = thin_pass(whole, run.grid, thin, log_odds, observed).log_odds
     return opening_at(run, sample_readings(run, MAX_READINGS), (thinned > 0).reshape(-1), params.em.forward)
 
 

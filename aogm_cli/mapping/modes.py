@@ -39,7 +39,7 @@ PREPARE = (  # the em and adaptive modes' first stages
     Stage("readings", S.readings),
     Stage("opening", S.opening, when=S.learns_opening),
     Stage("deflections", S.deflections),
-    Stage("thinning", S.thinning, when=S.thinned),
+    Stage("thinning", S.thinning, when=S.thins_cones),
 )
 EM_STAGES = (  # and their last
     Stage("start", S.start, timed=False),

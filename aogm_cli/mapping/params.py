@@ -79,19 +79,17 @@ class EMConfig:
 
 @dataclass(frozen=True)
 class AdaptiveConfig:
-    """Where the adaptive mode's clusters lie besides the flagged readings' bands
+    """Where the adaptive mode's clusters lie besides the flagged readings' walls
     (``adaptive.find_clusters``; docs/algorithms.md, "The adaptive mapper", measures each): the
-    ``contested`` cells, whose occupied evidence alone reaches this many log-odds but which the
-    standard map holds free (walls that too-long specular or multipath readings cleared; 0: none);
-    the ``weak`` cells, whose standard log-odds lie within this of the prior (0: none); every
-    cluster grown by ``grow`` cells (8-connected; sonar cones only: the wall's back layers); and
-    the ``scale`` of the probabilities outside the clusters: "em", the EM probability of the
-    cluster cells that the log's readings end in as often (``adaptive.one_scale``), or "mixed",
-    the standard map's own."""
+    ``contested`` cells, which the thinned map holds free but the exact inverse model holds
+    occupied by this many log-odds (walls that too-long specular or multipath readings cleared;
+    0: none); every cluster grown by ``grow`` cells (8-connected; sonar cones only); and the
+    ``scale`` of the probabilities outside the clusters: "em", the EM probability of the cluster
+    cells that the log's readings end in as often (``adaptive.one_scale``), or "mixed", the
+    thinned map's own."""
 
     contested: float = 0.5
-    weak: float = 0.45
-    grow: int = 2
+    grow: int = 0
     scale: str = "em"
 
     def validate(self) -> AdaptiveConfig:
@@ -100,9 +98,8 @@ class AdaptiveConfig:
             raise InputError(f"expected 'em' or 'mixed', got {self.scale!r}", key="scale")
         if isinstance(self.grow, bool) or not isinstance(self.grow, int) or self.grow < 0:
             raise InputError(f"expected a whole number >= 0, got {self.grow!r}", key="grow")
-        for key in ("contested", "weak"):
-            if not getattr(self, key) >= 0:
-                raise InputError(f"expected a number >= 0 (log-odds), got {getattr(self, key)!r}", key=key)
+        if not self.contested >= 0:
+            raise InputError(f"expected a number >= 0 (log-odds), got {self.contested!r}", key="contested")
         return self
 
     def as_dict(self) -> dict:

@@ -21,17 +21,34 @@ from aogm_cli.mapping.calibration import calibration_rounds
 from aogm_cli.mapping.learned import FROM_LOG, Learned, SensorModel
 from aogm_cli.mapping.params import EMConfig, MapParams
 from aogm_cli.mapping.pipeline import Progress, TimedSource, params_json
-from aogm_cli.mapping.standard import probability_from_log_odds, set_up, standard_log_odds, thin_pass, thins
+from aogm_cli.mapping.standard import (
+    probability_from_log_odds,
+    set_up,
+    standard_log_odds,
+    thin_pass,
+    thins,
+    undecided,
+)
 from aogm_cli.sensor_models.ray import is_narrow_beam
 from aogm_cli.sensor_models.readings import LaidOutReadings, lay_out_readings
 
 
 @dataclass(frozen=True)
 class StandardMap:
-    """A log-odds map and its observed cells, (H, W) each (``standard.standard_map``)."""
+    """A log-odds map and its observed cells, (H, W) each (``standard.standard_map``); once
+    thinned (``standard.thin_pass``), Elfes' log-odds before and the exact model's ``evidence``."""
 
     log_odds: np.ndarray
     observed: np.ndarray
+    elfes: np.ndarray | None = None
+    evidence: np.ndarray | None = None
+
+    def undecided(self, inverse) -> np.ndarray:
+        """The cells a planner sees unknown: none, or once thinned those no reading decided
+        (``standard.undecided``; ``inverse`` the inverse model's settings)."""
+        if self.evidence is None:
+            return np.zeros_like(self.observed)
+        return undecided(self.log_odds, self.observed, self.elfes, self.evidence, inverse)
 
 
 @dataclass(frozen=True)
@@ -200,8 +217,8 @@ def thinning(s: State) -> State:
     """The standard map thinned by the exact inverse model (``standard.thin_pass``)."""
     log = s.log
     cuts = None if s.readings is None else _cuts(s.readings)
-    log_odds = thin_pass(log, s.grid, s.in_use, s.standard.log_odds, s.standard.observed, cuts)
-    return s.but(standard=StandardMap(log_odds, s.standard.observed))
+    log_odds, evidence = thin_pass(log, s.grid, s.in_use, s.standard.log_odds, s.standard.observed, cuts)
+    return s.but(standard=StandardMap(log_odds, s.standard.observed, s.standard.log_odds, evidence))
 
 
 def detect(s: State) -> State:
@@ -211,11 +228,8 @@ def detect(s: State) -> State:
 
 
 def clusters(s: State) -> State:
-    """The clusters of the flagged readings (``adaptive.find_clusters``), with the contested cells."""
-    params, standard_map, run = s.in_use, s.standard, s.readings
-    contested = (A.contested_cells(s.whole, s.grid, params, standard_map.log_odds, run.shadow)
-                 if params.adaptive.contested > 0 else None)
-    ids, count = A.find_clusters(run, s.clusters.flags, standard_map.log_odds, standard_map.observed, params, contested)
+    """The clusters of the flagged readings and the contested cells (``adaptive.find_clusters``)."""
+    ids, count = A.find_clusters(s.readings, s.clusters.flags, s.standard, s.in_use)
     return s.but(clusters=Clusters(ids, count, s.clusters.flags))
 
 
@@ -269,8 +283,8 @@ def sweeps(s: State) -> State:
 
 
 def standard_view(s: State) -> State:
-    """The standard map's probabilities."""
-    log_odds, observed = s.standard.log_odds, s.standard.observed
+    """The standard map's probabilities; a thinned map's undecided cells unknown."""
+    log_odds, observed = s.standard.log_odds, s.standard.observed & ~s.standard.undecided(s.params.inverse_model)
     return s.but(view=View(probability_from_log_odds(log_odds, observed), observed))
 
 
@@ -280,8 +294,10 @@ def em_view(s: State) -> State:
     if s.clusters is None:
         return s.but(view=View(*E.em_view(s.standard.log_odds, s.standard.observed, s.em, s.grid, whole.pose,
                                          whole.sensor, params)))
-    return s.but(view=View(*A.joined_view(s.standard.log_odds, s.standard.observed, s.em, s.clusters.ids, whole,
-                                          s.grid, params)))
+    # outside the clusters the thinned map, its undecided cells unknown
+    observed = s.standard.observed & ~(s.standard.undecided(params.inverse_model) & (s.clusters.ids == 0))
+    return s.but(view=View(*A.joined_view(s.standard.log_odds, observed, s.em, s.clusters.ids, whole, s.grid,
+                                          params)))
 
 
 # when a stage runs
@@ -292,6 +308,12 @@ def learns_opening(s: State) -> bool:
 def thinned(s: State) -> bool:
     log = s.log
     return thins(log.sensor, s.grid, s.params)
+
+
+def thins_cones(s: State) -> bool:
+    """EM and adaptive thin every map of a cone: EM starts from it, adaptive keeps it outside
+    the clusters."""
+    return thins(s.log.sensor, s.grid, s.params, always=True)
 
 
 def runs_em(s: State) -> bool:

@@ -252,21 +252,48 @@ def standard_pass(log, grid: GridSpec, params: MapParams, cuts=None):
     return log_odds, observed, time.perf_counter() - t0 - timed.io_seconds
 
 
-def thins(sensor: SensorSpec, grid: GridSpec, params: MapParams) -> bool:
+def thins(sensor: SensorSpec, grid: GridSpec, params: MapParams, always: bool = False) -> bool:
     """Whether the map is thinned by the exact inverse model (``thin_pass``): ``exact.thin`` on
-    a map not made by that model, of a cone. A narrow beam's map (rays, which draw walls one
-    cell thick) is not thinned (docs/algorithms.md, "The exact inverse model")."""
-    return params.exact.thin and params.inverse_model.model != "exact" and not is_narrow_beam(sensor, grid.resolution)
+    (or ``always``: the em and adaptive modes) for a map not made by that model, of a cone. A
+    narrow beam's map (rays, which draw walls one cell thick) is not thinned (docs/algorithms.md,
+    "The exact inverse model")."""
+    return ((always or params.exact.thin) and params.inverse_model.model != "exact"
+            and not is_narrow_beam(sensor, grid.resolution))
 
 
-def thin_pass(log, grid: GridSpec, params: MapParams, log_odds: np.ndarray, observed: np.ndarray, cuts=None):
+UNDECIDED = 0.45  # log-odds: Elfes' free evidence a cell needs to be decided (``undecided``)
+HIDDEN_GAIN = 0.05  # log-odds: and the exact model's (EM's ``em.HIDDEN_GAIN``)
+
+
+class Thinned(NamedTuple):
+    """``thin_pass``: the thinned map's log-odds and the exact model's evidence, its log-odds less
+    its prior (0 where no reading reached), (H, W) each."""
+
+    log_odds: np.ndarray
+    evidence: np.ndarray
+
+
+def thin_pass(log, grid: GridSpec, params: MapParams, log_odds: np.ndarray, observed: np.ndarray,
+              cuts=None) -> Thinned:
     """The standard map ``log_odds`` thinned by the exact inverse model (``exact.thinned``): one
     more pass over ``log`` with the exact model (``cuts`` stop deflected beams). The em and
     adaptive modes thin the map after the angle of incidence is learned from the map as Elfes'
     model makes it."""
     exact_params = dataclasses.replace(params, inverse_model=dataclasses.replace(params.inverse_model, model="exact"))
     exact = standard_log_odds(log, grid, exact_params, cuts=cuts)
-    return thinned(log_odds, observed, exact, params.exact, params.inverse_model.clamp_min)
+    evidence = np.where(exact[1], exact[0] - np.float32(params.exact.l0), np.float32(0.0))
+    return Thinned(thinned(log_odds, observed, exact, params.exact, params.inverse_model.clamp_min), evidence)
+
+
+def undecided(log_odds: np.ndarray, observed: np.ndarray, elfes: np.ndarray, evidence: np.ndarray,
+              inverse: InverseModelConfig) -> np.ndarray:
+    """(H, W) bool: the observed cells the thinned map ``log_odds`` holds free though no reading
+    decided them: Elfes' map (``elfes``) holds them within ``UNDECIDED`` log-odds of its prior
+    and the exact model's ``evidence`` against occupancy is less than ``HIDDEN_GAIN`` (as EM's
+    hidden cells, ``em.decided``): behind walls that a stray reading crossed. A planner sees
+    them unknown (``em.residual_into``)."""
+    return (observed & (log_odds <= 0) & (elfes - np.float32(inverse.l0) > -UNDECIDED)
+            & (evidence > -HIDDEN_GAIN))
 
 
 def truth_grid_map(log: Log) -> tuple[np.ndarray, np.ndarray]:
