@@ -76,7 +76,7 @@ def calibrate(log_file, mode, output, detector, params_file, resolution, quiet, 
     with progress_bar(params.em.max_sweeps * (params.calibration.rounds + 1), f"calibrate ({mode})", quiet,
                       unit="sweep") as advance:
         result = map_file(log_file, mode, params, detector, lambda phase, done, total: advance(1),
-                          limits=limits_of(max_memory, max_work))
+                          limits=limits_of(max_memory, max_work), carry=False)
     record = result.stats.get("calibration")
     if record is None:  # adaptive without clusters: EM never ran
         raise click.UsageError(f"{log_file}: the detector flagged no cluster; nothing to calibrate in adaptive mode")

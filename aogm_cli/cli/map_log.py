@@ -115,7 +115,7 @@ def map_log(log_file, mode, output, png, detector, params_file, forward_model, r
     from aogm_cli.io.atomic import write_files_atomically
     from aogm_cli.io.mapfile import map_bytes
     from aogm_cli.io.provenance import provenance
-    from aogm_cli.report.map_run import given_model, map_file, resolve_params
+    from aogm_cli.report.map_run import calibration_notice, given_model, map_file, resolve_params
 
     record = provenance(inputs)  # the inputs as read, the time the run starts
     params = resolve_params(params_file, parameter_overrides(resolution, calibrate, options))
@@ -133,5 +133,8 @@ def map_log(log_file, mode, output, png, detector, params_file, forward_model, r
         outputs.append((png, map_png(result.grid, result.probability, result.observed, result.clusters,
                                      title=f"{mode} map of {log_file} ({result.runtime_s:.2f} s)")))
     write_files_atomically(outputs)  # the map and the PNG, all or nothing
+    notice = calibration_notice(log_file, result)
+    if notice:
+        click.echo(notice, err=True)
     if not quiet:
         click.echo(f"{output}: {mode} map {result.grid.height}x{result.grid.width} in {result.runtime_s:.3f} s", err=True)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import click
@@ -86,6 +87,7 @@ def train(log_files, output, seed, validation_logs, hidden, activation, beta, ri
     from aogm_cli.io.logfile import read_log
     from aogm_cli.io.provenance import provenance
     from aogm_cli.mapping.standard import truth_grid_map
+    from aogm_cli.report.map_run import learn_sensor_models, resolve_params
     from aogm_cli.training.fit import split_by_world, train_detector
     from aogm_cli.training.labels import LabelDefinition
 
@@ -93,7 +95,7 @@ def train(log_files, output, seed, validation_logs, hidden, activation, beta, ri
     config = TrainingConfig(hidden=hidden, activation=activation, seed=seed, beta=beta)
     train_paths, validation_paths = split_by_world(log_files, validation_logs)
     record = provenance([*train_paths, *validation_paths])  # the inputs as read, the time the run starts
-    with progress_bar(len(train_paths) + len(validation_paths) + 1, "train", quiet, unit="step") as advance:
+    with progress_bar(2 * len(train_paths) + len(validation_paths) + 1, "train", quiet, unit="step") as advance:
         train_logs = [(p, read_log(p)) for p in train_paths]
         validation_logs_read = [(p, read_log(p)) for p in validation_paths]
         for p, log in train_logs + validation_logs_read:
@@ -102,6 +104,9 @@ def train(log_files, output, seed, validation_logs, hidden, activation, beta, ri
                                  key="/scans")
         detector = train_detector(train_logs, validation_logs_read, spec, LabelDefinition(arc_wrong_min=arc_wrong_min), config,
                                   advance, standard_map_of=truth_grid_map)
+        # the sensor models it carries: each training log's sensor calibrated (em), the median per sensor
+        models = learn_sensor_models(train_paths, resolve_params(), advance)
+    detector = dataclasses.replace(detector, sensor_models=models)
     save_detector(output, detector, record)
     click.echo(format_metrics(detector.metrics))
     if not quiet:

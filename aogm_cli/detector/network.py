@@ -56,6 +56,9 @@ class Detector:
     metrics: dict = field(default_factory=dict)  # training and validation precision/recall/F1
     training: dict = field(default_factory=dict)  # how it was trained (network, seed, logs)
     path: str | None = None
+    # the sensor models it carries, learned on its training logs: per sensor its record and model
+    # (``io.modelfile``'s ``sensor`` and ``model``) and the logs it was learned from
+    sensor_models: tuple = ()
 
     def predict_proba(self, x: np.ndarray) -> np.ndarray:
         """(N,) float64 p(y = 1) for (N, F) features (the second column of sklearn's predict_proba)."""

@@ -24,6 +24,7 @@ from aogm_cli.io.h5file import (
     reading,
     text_attr,
 )
+from aogm_cli.io.modelfile import carried_models
 from aogm_cli.io.provenance import file_sha256, write_header, write_provenance
 
 FORMAT = "aogm-detector"
@@ -33,6 +34,10 @@ BASELINE_DETECTORS = ("all", "none")  # --detector all|none: flag every reading,
 # file, world, realistic flag, seed and scans (training.provenance); in memory it is the
 # ``training`` dict's entry of the same name. Files written before it existed have none.
 TRAINING_LOGS = "training_logs"
+# Root attribute (JSON): the sensor models the detector carries (``io.modelfile.carried_models``),
+# learned by ``aogm train`` on its training logs, one per sensor; a map of a log of that sensor
+# takes its model instead of calibrating. Files written before it existed carry none.
+SENSOR_MODELS = "sensor_models"
 
 
 def default_detector_path() -> Path:
@@ -55,6 +60,8 @@ def detector_bytes(detector: Detector, provenance: dict | None = None) -> bytes:
         f.attrs["training"] = json.dumps(training)
         if logs is not None:
             f.attrs[TRAINING_LOGS] = json.dumps(logs)
+        if detector.sensor_models:
+            f.attrs[SENSOR_MODELS] = json.dumps(list(detector.sensor_models))
         write_provenance(f, provenance)
         group = f.create_group("layers")
         group.attrs["layout"] = LAYOUT
@@ -87,6 +94,8 @@ def _read(f: h5py.File, path: str) -> Detector:
     logs = json_attr(f, TRAINING_LOGS, path, TRAINING_LOGS, dict, required=False)
     if logs is not None:
         training[TRAINING_LOGS] = logs
+    carried = json_attr(f, SENSOR_MODELS, path, SENSOR_MODELS, list, required=False)
+    models = () if carried is None else carried_models(carried, path, SENSOR_MODELS)
     threshold = number_attr(f, "threshold", path, "threshold")
     if not 0.0 <= threshold <= 1.0:
         raise InputError(f"expected a probability in [0, 1], got {threshold}", file=path, key="threshold")
@@ -109,7 +118,7 @@ def _read(f: h5py.File, path: str) -> Detector:
             file=path,
             key=f"/layers/{names[-1]}",
         )
-    return Detector(tuple(layers), spec, threshold, labels, metrics, training, path)
+    return Detector(tuple(layers), spec, threshold, labels, metrics, training, path, models)
 
 
 def _layer(f: h5py.File, name: str, inputs: int, path: str) -> Layer:

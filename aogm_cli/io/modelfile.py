@@ -69,14 +69,34 @@ def read_model(path: str | Path) -> tuple[dict, dict]:
     if version > FORMAT_VERSION:
         raise InputError(f"format version {version} is newer than this aogm reads ({FORMAT_VERSION}): "
                          "update aogm, or calibrate again", file=file, key="format_version")
-    values = _mapping(body.get("model"), file, "model")
+    model = model_values(_mapping(body.get("model"), file, "model"), file, "model")
+    return model, _sensor(_mapping(body.get("sensor"), file, "sensor"), file)
+
+
+def model_values(values: dict, file: str, key: str) -> dict:
+    """``MODEL_KEYS``' values of a model (the mapping at ``key`` of ``file``), checked."""
     bounds = {"sigma": (1e-6, 10.0), "p_rand": (1e-9, 1.0), "p_hit": (1e-9, 1.0), "p_max": (0.0, 1.0),
               "opening_deg": (0.0, 180.0)}
-    model = {k: _number(values.get(k), file, f"model.{k}", *bounds[k]) for k in MODEL_KEYS}
+    model = {k: _number(values.get(k), file, f"{key}.{k}", *bounds[k]) for k in MODEL_KEYS}
     if model["p_rand"] + model["p_max"] >= 1:
         raise InputError(f"expected p_rand + p_max < 1, got {model['p_rand'] + model['p_max']:g}", file=file,
-                         key="model.p_max")
-    return model, _sensor(_mapping(body.get("sensor"), file, "sensor"), file)
+                         key=f"{key}.p_max")
+    return model
+
+
+def carried_models(body, file: str, key: str) -> tuple[dict, ...]:
+    """The sensor models a detector file carries (a list of ``{"sensor", "model", "learned_from"}``
+    at ``key``), checked; InputError naming ``file`` and the key."""
+    if not isinstance(body, list):
+        raise InputError("expected a list of sensor models", file=file, key=key)
+    out = []
+    for i, entry in enumerate(body):
+        entry = _mapping(entry, file, f"{key}[{i}]")
+        out.append({"sensor": _sensor(_mapping(entry.get("sensor"), file, f"{key}[{i}].sensor"), file),
+                    "model": model_values(_mapping(entry.get("model"), file, f"{key}[{i}].model"), file,
+                                          f"{key}[{i}].model"),
+                    "learned_from": entry.get("learned_from", [])})
+    return tuple(out)
 
 
 def _sensor(record: dict, file: str) -> dict:
@@ -95,9 +115,9 @@ def _sensor(record: dict, file: str) -> dict:
     return record
 
 
-def check_sensor(record: dict, sensor: SensorSpec, file: str, log: str) -> None:
-    """InputError naming the model ``file`` unless the sensor it was learned for is the log's:
-    the same count, mounts, beam width and range."""
+def sensor_differences(record: dict, sensor: SensorSpec) -> list[tuple[str, str]]:
+    """(key, what differs) between the sensor a model was learned for (``record``) and ``sensor``:
+    count, mounts, beam width and range; empty when it is the same sensor."""
     ours = sensor_record(sensor)
     differs = []
     if record["count"] != ours["count"]:
@@ -110,7 +130,22 @@ def check_sensor(record: dict, sensor: SensorSpec, file: str, log: str) -> None:
                                                  f"{ours['beam_width_deg']:g}"))
     if abs(record["max_range"] - ours["max_range"]) > MOUNT_TOLERANCE:
         differs.append(("sensor.max_range", f"max range {record['max_range']:g} m, the log's {ours['max_range']:g}"))
+    return differs
+
+
+def check_sensor(record: dict, sensor: SensorSpec, file: str, log: str) -> None:
+    """InputError naming the model ``file`` unless the sensor it was learned for is the log's
+    (``sensor_differences``)."""
+    differs = sensor_differences(record, sensor)
     if differs:
         key, what = differs[0]
         raise InputError(f"learned for another sensor than that of {log}: {'; '.join(w for _, w in differs)}",
                          file=file, key=key)
+
+
+def model_for(models, sensor: SensorSpec, simulated: bool) -> dict | None:
+    """The first of ``models`` (``carried_models``) learned for ``sensor``, or None. A model
+    learned on simulated logs (its sensor record's ``simulated``) is for simulated logs only: a
+    real ring with the same mounts is not the simulator's sensor."""
+    return next((m for m in models if bool(m["sensor"].get("simulated")) == simulated
+                 and not sensor_differences(m["sensor"], sensor)), None)

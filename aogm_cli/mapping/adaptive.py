@@ -8,6 +8,7 @@ get EM's residual probability, and the other cells the same scale (``joined_view
 
 from __future__ import annotations
 
+import dataclasses
 from typing import NamedTuple
 
 import numpy as np
@@ -16,6 +17,7 @@ from aogm_cli.core.log import Log
 from aogm_cli.mapping.cluster import grown, label_clusters, near_occupied, readings_near_clusters
 from aogm_cli.mapping.em import EMOutcome, EMProblem, ProblemFor, em_problem, em_readings, em_view, find_root
 from aogm_cli.mapping.params import EMConfig, MapParams
+from aogm_cli.mapping.standard import standard_log_odds
 from aogm_cli.sensor_models.ray import axis_counts, is_narrow_beam
 from aogm_cli.sensor_models.readings import LaidOutReadings, cone_bands
 
@@ -44,26 +46,51 @@ def coupled_groups(problem: EMProblem, n_clusters: int) -> int:
     return len(roots)
 
 
-def find_clusters(run: LaidOutReadings, flags: np.ndarray, standard, params: MapParams) -> tuple[np.ndarray, int]:
-    """(cluster ids (H, W), count) where EM would change the thinned map ``standard``
-    (``stages.StandardMap``: its log-odds, observed cells and the exact model's evidence):
+def contested_cells(log: Log, grid, params: MapParams, log_odds: np.ndarray,
+                    shadow: np.ndarray | None = None) -> np.ndarray:
+    """Cells (H, W) whose occupied evidence alone reaches ``adaptive.contested`` log-odds but
+    which the standard map holds free: where the readings disagree and the standard
+    map cannot explain them (walls that specular or multipath readings, too long, cleared).
+    One more standard pass, with the inverse model's free evidence set to nothing (and the
+    deflected beams, ``shadow``, stopped: they hit nothing)."""
+    # Elfes' occupied arcs, whatever model the map uses (the exact model has no evidence of its own)
+    inverse = dataclasses.replace(params.inverse_model, l_free=params.inverse_model.l0,
+                                  model="elfes" if params.inverse_model.model == "exact" else params.inverse_model.model)
+    cuts = None if shadow is None else shadow.reshape(np.shape(log.ranges))
+    hits, _ = standard_log_odds(log, grid, dataclasses.replace(params, inverse_model=inverse), cuts=cuts)
+    return (hits - params.inverse_model.l0 >= params.adaptive.contested) & (log_odds <= 0)
 
-    * the walls a flagged reading's band reaches (z - BAND_BELOW .. z + alpha): the cells the
-      thinned map still holds occupied there, which EM may thin further or open (a doorway);
-    * the *contested* cells: those the thinned map holds free but the exact inverse model holds
-      occupied by ``adaptive.contested`` log-odds or more (walls that too-long specular or
-      multipath readings cleared in Elfes' map; none without the exact model's evidence, as for
-      a narrow beam's map, which is not thinned);
 
-    grown by ``adaptive.grow`` cells (8-connected; cones only)."""
-    log_odds, observed = standard.log_odds, standard.observed
+def find_clusters(run: LaidOutReadings, flags: np.ndarray, standard, params: MapParams,
+                  log: Log | None = None) -> tuple[np.ndarray, int]:
+    """(cluster ids (H, W), count): a flagged cone's band near its range, z - BAND_BELOW ..
+    z + alpha, where the map ``standard`` (``stages.StandardMap``) holds cells occupied (the
+    walls EM may thin or open, a doorway), and as ``adaptive.outside`` says:
+
+    * "elfes" (Elfes' map outside the clusters): the ``contested`` cells (``contested_cells``,
+      one more standard pass over ``log``) and the ``weak`` ones, whose log-odds lie within
+      ``adaptive.weak`` of the prior (space behind a wall that one random reading crossed);
+    * "thinned" (the thinned map outside, its undecided cells unknown): the cells the thinned
+      map holds free but the exact inverse model holds occupied by ``adaptive.contested``
+      log-odds or more (walls that too-long specular or multipath readings cleared), from the
+      exact model's evidence the thinning computed;
+
+    all grown by ``adaptive.grow`` cells (8-connected; sonar cones only: on the intel laser log
+    growing cost adaptive's held-out AUC 0.9863 -> 0.9737)."""
+    log_odds, observed, config = standard.log_odds, standard.observed, params.adaptive
     region, _ = cone_bands(run.grid, run.templates, tuple(a[flags] for a in run.cones),
                            BAND_BELOW, params.inverse_model.alpha)
     region &= observed & (log_odds > params.inverse_model.clamp_min)
     region &= near_occupied(log_odds, NEAR_OCCUPIED)
-    if params.adaptive.contested > 0 and standard.evidence is not None:
-        region |= observed & (log_odds <= 0) & (standard.evidence >= params.adaptive.contested)
-    grow = 0 if is_narrow_beam(run.sensor, run.grid.resolution) else params.adaptive.grow
+    if config.outside == "thinned":
+        if config.contested > 0 and standard.evidence is not None:
+            region |= observed & (log_odds <= 0) & (standard.evidence >= config.contested)
+    else:
+        if config.contested > 0:
+            region |= contested_cells(log, run.grid, params, log_odds, run.shadow) & observed
+        if config.weak > 0:
+            region |= observed & (np.abs(log_odds - params.inverse_model.l0) < config.weak)
+    grow = 0 if is_narrow_beam(run.sensor, run.grid.resolution) else config.grow
     return label_clusters(observed & grown(region, grow))
 
 

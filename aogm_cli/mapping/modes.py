@@ -39,7 +39,7 @@ PREPARE = (  # the em and adaptive modes' first stages
     Stage("readings", S.readings),
     Stage("opening", S.opening, when=S.learns_opening),
     Stage("deflections", S.deflections),
-    Stage("thinning", S.thinning, when=S.thins_cones),
+    Stage("thinning", S.thinning, when=S.thinned),
 )
 EM_STAGES = (  # and their last
     Stage("start", S.start, timed=False),
@@ -51,7 +51,8 @@ EM_STAGES = (  # and their last
 MODE_STAGES = {
     "standard": STANDARD,
     "em": PREPARE + EM_STAGES,
-    "adaptive": PREPARE + (Stage("detector", S.detect), Stage("clusters", S.clusters)) + EM_STAGES,
+    "adaptive": PREPARE[:-1] + (Stage("thinning", S.thinning, when=S.thins_outside), Stage("detector", S.detect),
+                                Stage("clusters", S.clusters)) + EM_STAGES,
 }
 
 

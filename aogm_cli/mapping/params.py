@@ -79,27 +79,34 @@ class EMConfig:
 
 @dataclass(frozen=True)
 class AdaptiveConfig:
-    """Where the adaptive mode's clusters lie besides the flagged readings' walls
-    (``adaptive.find_clusters``; docs/algorithms.md, "The adaptive mapper", measures each): the
-    ``contested`` cells, which the thinned map holds free but the exact inverse model holds
-    occupied by this many log-odds (walls that too-long specular or multipath readings cleared;
-    0: none); every cluster grown by ``grow`` cells (8-connected; sonar cones only); and the
-    ``scale`` of the probabilities outside the clusters: "em", the EM probability of the cluster
-    cells that the log's readings end in as often (``adaptive.one_scale``), or "mixed", the
-    thinned map's own."""
+    """What the adaptive map is outside its clusters and where they lie (``adaptive.find_clusters``;
+    docs/algorithms.md, "The adaptive mapper", measures each): ``outside`` "elfes" (Elfes' map;
+    besides the flagged readings' walls the ``contested`` cells, whose occupied evidence alone
+    reaches this many log-odds but which the standard map holds free, and the ``weak`` cells,
+    whose log-odds lie within this of the prior; 0: none) or "thinned" (the map thinned by the
+    exact inverse model, its undecided cells unknown to a planner; besides the walls the cells it
+    holds free but the exact model holds occupied by ``contested`` log-odds); every cluster grown
+    by ``grow`` cells (8-connected; sonar cones only); and the ``scale`` of the probabilities
+    outside the clusters: "em", the EM probability of the cluster cells that the log's readings
+    end in as often (``adaptive.one_scale``), or "mixed", the map's own."""
 
+    outside: str = "elfes"
     contested: float = 0.5
-    grow: int = 0
+    weak: float = 0.45
+    grow: int = 2
     scale: str = "em"
 
     def validate(self) -> AdaptiveConfig:
         check_field_types(self)
+        if self.outside not in ("elfes", "thinned"):
+            raise InputError(f"expected 'elfes' or 'thinned', got {self.outside!r}", key="outside")
         if self.scale not in ("em", "mixed"):
             raise InputError(f"expected 'em' or 'mixed', got {self.scale!r}", key="scale")
         if isinstance(self.grow, bool) or not isinstance(self.grow, int) or self.grow < 0:
             raise InputError(f"expected a whole number >= 0, got {self.grow!r}", key="grow")
-        if not self.contested >= 0:
-            raise InputError(f"expected a number >= 0 (log-odds), got {self.contested!r}", key="contested")
+        for key in ("contested", "weak"):
+            if not getattr(self, key) >= 0:
+                raise InputError(f"expected a number >= 0 (log-odds), got {getattr(self, key)!r}", key=key)
         return self
 
     def as_dict(self) -> dict:
@@ -112,9 +119,13 @@ class CalibrationConfig:
     which of its parameters (``learn``: sigma, p_rand, p_hit, p_max in rounds with EM; specular_deg
     and opening_deg once, before them), in at most ``rounds`` EM runs alternated with closed-form
     fits, ended when no parameter moves by more than ``tolerance`` (sigma relative, the
-    probabilities absolute). How the rounds work inside is ``calibration.TUNING``."""
+    probabilities absolute); or, with ``carried``, take the model the detector carries for the
+    log's sensor (``report.map_run.carried_model``; off by default: the training worlds' median
+    misses a specular building's share of long readings, docs/algorithms.md). How the rounds work
+    inside is ``calibration.TUNING``."""
 
     enabled: bool = True
+    carried: bool = False
     learn: str = "sigma,p_rand,p_hit,p_max,specular_deg"
     rounds: int = 4
     tolerance: float = 0.02

@@ -228,8 +228,8 @@ def detect(s: State) -> State:
 
 
 def clusters(s: State) -> State:
-    """The clusters of the flagged readings and the contested cells (``adaptive.find_clusters``)."""
-    ids, count = A.find_clusters(s.readings, s.clusters.flags, s.standard, s.in_use)
+    """The clusters of the flagged readings, with the contested and weak cells (``adaptive.find_clusters``)."""
+    ids, count = A.find_clusters(s.readings, s.clusters.flags, s.standard, s.in_use, s.whole)
     return s.but(clusters=Clusters(ids, count, s.clusters.flags))
 
 
@@ -283,8 +283,8 @@ def sweeps(s: State) -> State:
 
 
 def standard_view(s: State) -> State:
-    """The standard map's probabilities; a thinned map's undecided cells unknown."""
-    log_odds, observed = s.standard.log_odds, s.standard.observed & ~s.standard.undecided(s.params.inverse_model)
+    """The standard map's probabilities."""
+    log_odds, observed = s.standard.log_odds, s.standard.observed
     return s.but(view=View(probability_from_log_odds(log_odds, observed), observed))
 
 
@@ -294,8 +294,9 @@ def em_view(s: State) -> State:
     if s.clusters is None:
         return s.but(view=View(*E.em_view(s.standard.log_odds, s.standard.observed, s.em, s.grid, whole.pose,
                                          whole.sensor, params)))
-    # outside the clusters the thinned map, its undecided cells unknown
-    observed = s.standard.observed & ~(s.standard.undecided(params.inverse_model) & (s.clusters.ids == 0))
+    observed = s.standard.observed
+    if params.adaptive.outside == "thinned":  # outside the clusters the thinned map, its undecided cells unknown
+        observed = observed & ~(s.standard.undecided(params.inverse_model) & (s.clusters.ids == 0))
     return s.but(view=View(*A.joined_view(s.standard.log_odds, observed, s.em, s.clusters.ids, whole, s.grid,
                                           params)))
 
@@ -310,10 +311,10 @@ def thinned(s: State) -> bool:
     return thins(log.sensor, s.grid, s.params)
 
 
-def thins_cones(s: State) -> bool:
-    """EM and adaptive thin every map of a cone: EM starts from it, adaptive keeps it outside
-    the clusters."""
-    return thins(s.log.sensor, s.grid, s.params, always=True)
+def thins_outside(s: State) -> bool:
+    """Adaptive with ``adaptive.outside`` "thinned" thins a cone's map: it keeps it outside the
+    clusters (and ``exact.thin`` thins it in any mode)."""
+    return thins(s.log.sensor, s.grid, s.params, always=s.params.adaptive.outside == "thinned")
 
 
 def runs_em(s: State) -> bool:

@@ -4,8 +4,11 @@ the sensor model file and the log itself are read here and handed to the mappers
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from aogm_cli.core.budget import Limits, check
 from aogm_cli.core.occupancy_map import OccupancyMap
@@ -13,16 +16,16 @@ from aogm_cli.detector.network import ConstantDetector
 from aogm_cli.io import template_store
 from aogm_cli.io.detectorfile import BASELINE_DETECTORS, file_sha256, load_detector
 from aogm_cli.io.logfile import LogReader
-from aogm_cli.io.modelfile import check_sensor, read_model
+from aogm_cli.io.modelfile import MODEL_KEYS, check_sensor, model_for, read_model, sensor_record
 from aogm_cli.io.yamlfile import read_yaml
-from aogm_cli.mapping.learned import Learned, SensorModel
+from aogm_cli.mapping.learned import FROM_LOG, Learned, SensorModel
 from aogm_cli.mapping.map_cost import map_estimate
 from aogm_cli.mapping.params import MapParams, params_from
 from aogm_cli.mapping.pipeline import Progress
 from aogm_cli.sensor_models import cone
 
-__all__ = ["BASELINE_DETECTORS", "NamedSource", "check_logs", "given_model", "map_file", "resolve_detector",
-           "resolve_params"]
+__all__ = ["BASELINE_DETECTORS", "NamedSource", "calibration_notice", "carried_model", "check_logs", "given_model",
+           "learn_sensor_models", "map_file", "resolve_detector", "resolve_params"]
 
 
 def resolve_params(params_file: str | Path | None = None, overrides: dict[str, dict[str, Any]] | None = None) -> MapParams:
@@ -46,19 +49,69 @@ def resolve_detector(spec: str | None):
 
 def map_file(path: str | Path, mode: str, params: MapParams, detector: str | None = None,
              progress: Progress | None = None, limits: Limits | None = None, given: Learned | None = None,
-             source=None) -> OccupancyMap:
+             source=None, carry: bool = True) -> OccupancyMap:
     """Map the log at ``path`` in ``mode`` (``detector``: see ``resolve_detector``; ``given``: a
-    forward model to use instead of learning one), or the log source ``source`` (the scans a
+    forward model to use instead of learning one; else, with ``carry`` and ``calibration.carried``,
+    the one the detector carries for the log's sensor, ``carried_model``), or the log source ``source`` (the scans a
     held-out split keeps) named by ``path``; refused (``InputError``) before any work when its
     estimate exceeds ``limits`` (``mapping.modes.map_source``)."""
     from aogm_cli.mapping.modes import ALL, Flagger, map_source
 
     cone.use_store(template_store.STORE)  # cone templates kept on disk, in a Dask worker too
     flagger = Flagger(*resolve_detector(detector)) if mode == "adaptive" else ALL
+
+    def run(log):
+        model = given
+        if model is None and carry and mode != "standard" and params.calibration.enabled and params.calibration.carried:
+            model = carried_model(detector, log.sensor, log.truth_grid() is not None)
+        return map_source(log, mode, params, flagger, progress, limits, str(path), model)
+
     if source is not None:
-        return map_source(source, mode, params, flagger, progress, limits, str(path), given)
+        return run(source)
     with LogReader(path) as reader:
-        return map_source(reader, mode, params, flagger, progress, limits, str(path), given)
+        return run(reader)
+
+
+def carried_model(detector: str | None, sensor, simulated: bool) -> Learned | None:
+    """The sensor model that the detector ``detector`` (a file; the packaged one for None or a
+    baseline) carries for ``sensor`` of a ``simulated`` log or not (``io.modelfile.model_for``), as a map takes it: learned once
+    for the robot, so only the building's specular angle is learned from the log; None when it
+    carries none for that sensor (the map calibrates on its log)."""
+    spec = None if detector in BASELINE_DETECTORS else detector
+    model = model_for(load_detector(spec).sensor_models, sensor, simulated)
+    if model is None:
+        return None
+    values = model["model"]
+    return Learned(sensor=SensorModel(**values), origin=f"carried by the {'packaged' if spec is None else spec} detector",
+                   opening_deg=values["opening_deg"])
+
+
+def calibration_notice(path, m: OccupancyMap) -> str | None:
+    """The line that says a map calibrated its sensor's model on its own log (no model given, none
+    carried by the detector for that sensor), or None."""
+    if m.mode == "standard" or (m.learned or {}).get("origin") != FROM_LOG:
+        return None
+    return (f"{path}: calibrated the sensor's model on this log (the detector carries none for its sensor; "
+            "aogm calibrate LOG -o MODEL learns one, --forward-model MODEL carries it)")
+
+
+def learn_sensor_models(paths, params: MapParams, advance=None) -> tuple[dict, ...]:
+    """The sensor models a detector trained on the logs at ``paths`` carries: one per sensor among
+    them, each value the median over its logs' calibrations (an em map each, as ``aogm
+    calibrate``), with the logs' names."""
+    groups: dict[str, tuple[dict, list, list]] = {}
+    for path in paths:
+        m = map_file(path, "em", params, carry=False)
+        with LogReader(path) as reader:
+            record = sensor_record(reader.sensor) | {"simulated": reader.has_truth()}
+        key = json.dumps(record, sort_keys=True)
+        groups.setdefault(key, (record, [], []))
+        groups[key][1].append(m.learned["sensor"])
+        groups[key][2].append(Path(path).name)
+        if advance is not None:
+            advance(1)
+    return tuple({"sensor": record, "model": {k: float(np.median([v[k] for v in values])) for k in MODEL_KEYS},
+                  "learned_from": names} for record, values, names in groups.values())
 
 
 def given_model(path: str | Path, log: str | Path) -> Learned:
