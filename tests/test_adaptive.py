@@ -15,7 +15,7 @@ from aogm_cli.io.detectorfile import load_detector, save_detector
 from aogm_cli.io.logfile import LogReader
 from aogm_cli.io.mapfile import read_map_file
 from aogm_cli.mapping import cluster
-from aogm_cli.mapping.adaptive import coupled_groups, hit_rate_curve, one_scale, pool_adjacent_violators
+from aogm_cli.mapping.adaptive import coupled_groups, find_clusters, hit_rate_curve, one_scale, pool_adjacent_violators
 from aogm_cli.mapping.cluster import label_clusters
 from aogm_cli.mapping.em import em_problem, em_readings, find_root, footprint
 from aogm_cli.report.map_run import map_file, resolve_params
@@ -247,3 +247,65 @@ def test_readings_near_clusters_uses_the_cone_reach():
     forward = resolve_params().em.forward
     near = cluster.readings_near_clusters(clusters, rows, cols, z, grid, 5.0, forward)
     assert near.tolist() == [1, 2]  # a 1 m reading from (5, 5) cannot reach row 40; 5 m can
+
+
+# --- adaptive.outside: thinned (issue 36) -------------------------------------------------------
+
+
+def test_undecided_cells_by_hand():
+    """A free cell is undecided when Elfes' map holds it within UNDECIDED of its prior and the
+    exact model's evidence against occupancy is below HIDDEN_GAIN; occupied and unobserved cells
+    never are."""
+    from aogm_cli.mapping.standard import HIDDEN_GAIN, UNDECIDED, undecided
+    from aogm_cli.sensor_models.inverse_model import InverseModelConfig
+
+    inverse = InverseModelConfig()
+    l0 = inverse.l0
+    thinned = np.array([[-1.0, -1.0, -1.0, 2.0, -1.0]], dtype=np.float32)
+    elfes = np.array([[l0 - UNDECIDED / 2, l0 - 2 * UNDECIDED, l0 - UNDECIDED / 2, 2.0, l0]], dtype=np.float32)
+    evidence = np.array([[0.0, 0.0, -2 * HIDDEN_GAIN, 0.0, 0.0]], dtype=np.float32)
+    observed = np.array([[True, True, True, True, False]])
+    assert undecided(thinned, observed, elfes, evidence, inverse).tolist() == [[True, False, False, False, False]]
+
+
+THINNED = {"adaptive": {"outside": "thinned", "contested": 0.1, "weak": 0.0, "grow": 0}}
+
+
+def test_thinned_outside_keeps_clusters_small_and_reports_undecided_cells_unknown(corridor_door_log):
+    """With ``adaptive.outside: thinned`` the clusters hold a small share of the observed cells
+    (the default blanket holds more cells than are observed), the map outside them is the thinned
+    map's, and the cells no reading decided are unknown there, as EM's hidden cells are."""
+    params = resolve_params(overrides=THINNED)
+    adaptive = map_file(corridor_door_log, "adaptive", params)
+    thinned = map_file(corridor_door_log, "standard", resolve_params(overrides={"exact": {"thin": True}}))
+    assert 0 < adaptive.stats["cells_in_clusters"] < 0.2 * adaptive.stats["observed_cells"]
+    assert "thinning" in adaptive.stats["phase_seconds"]
+    with LogReader(corridor_door_log) as r:
+        body = footprint(thinned.grid, r.poses(), r.sensor)
+    outside = (adaptive.clusters == 0) & ~body
+    # outside the clusters EM's binary map is the thinned map's
+    assert np.array_equal(adaptive.occupied[outside], ((thinned.log_odds > 0) & adaptive.observed)[outside])
+    unknown = thinned.observed & ~adaptive.observed & outside
+    assert unknown.any() and np.all(thinned.probability[unknown] <= 0.5)
+    default = map_file(corridor_door_log, "adaptive", resolve_params())
+    assert default.stats["cells_in_clusters"] > 0.5 * default.stats["observed_cells"]
+
+
+def test_thinned_outside_clusters_the_contested_cells(corridor_door_log):
+    """With no flagged reading, the thinned design's clusters are exactly the cells the thinned
+    map holds free and the exact model holds occupied by ``adaptive.contested`` or more."""
+    from aogm_cli.mapping import stages as S
+    from aogm_cli.mapping.modes import MODE_STAGES, resolved_params
+    from aogm_cli.mapping.pipeline import TimedSource, log_grid
+
+    with LogReader(corridor_door_log) as r:
+        log = r.read()
+    params = resolved_params(log, resolve_params(overrides=THINNED))
+    state = S.State(params, TimedSource(log), log_grid(log, params.resolution))
+    names = [stage.name for stage in MODE_STAGES["adaptive"]]
+    state, _ = S.run_stages(MODE_STAGES["adaptive"][:names.index("detector")], state)
+    none = np.zeros(log.ranges.size, dtype=bool)
+    ids, count = find_clusters(state.readings, none, state.standard, params, log)
+    sm = state.standard
+    contested = sm.observed & (sm.log_odds <= 0) & (sm.evidence >= 0.1)
+    assert count > 0 and np.array_equal(ids > 0, contested)

@@ -351,3 +351,21 @@ def test_a_long_log_calibrates_on_runs_of_consecutive_scans(corridor_door_log):
     assert record["readings_used"] <= 40 * width
     # a log within max_scans is left whole
     assert C._scan_blocks(run_, scans) is None
+
+
+# --- the sensor model a detector carries (issue 36) --------------------------------------------
+
+
+def test_carried_model_maps_without_calibrating(corridor_door_log, tmp_path):
+    """With ``calibration.carried`` a simulated log of the packaged detector's ring maps with the
+    model it carries (no calibration phase); aogm map says in one line when a map calibrated on
+    its own log instead."""
+    from aogm_cli.report.map_run import map_file, resolve_params
+
+    carried = map_file(corridor_door_log, "em", resolve_params(overrides={"calibration": {"carried": True}}))
+    assert carried.learned["origin"] == "carried by the packaged detector"
+    assert "calibration" not in carried.stats["phase_seconds"]
+    result = CliRunner().invoke(main, ["map", str(corridor_door_log), "--mode", "em", "-o", str(tmp_path / "m.h5"),
+                                       "--quiet"])
+    assert result.exit_code == 0, result.output
+    assert "calibrated the sensor's model on this log" in result.output

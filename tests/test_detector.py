@@ -19,7 +19,7 @@ from aogm_cli.core.log import Log, SensorSpec, Truth
 from aogm_cli.detector.features import FeatureSpec, features, neighbour_ranges
 from aogm_cli.detector.network import Detector, Layer
 from aogm_cli.io.detectorfile import TRAINING_LOGS, default_detector_path, load_detector, save_detector
-from aogm_cli.io.logfile import read_log, write_log
+from aogm_cli.io.logfile import LogReader, read_log, write_log
 from aogm_cli.mapping.cluster import near_occupied
 from aogm_cli.mapping.standard import truth_grid_map
 from aogm_cli.sensor_models.readings import cone_bands, readings_of
@@ -464,3 +464,21 @@ def test_flags_made_in_chunks_equal_the_whole_log_at_once():
     for chunk in (1, 2, 7, 100, 300):
         assert np.array_equal(detector.flag(ranges, 5.0, chunk=chunk), whole)
     assert 0 < whole.sum() < whole.size
+
+
+def test_train_learns_the_sensor_model_each_sensor_carries(tiny_logs, tmp_path):
+    """``aogm train`` writes the sensor model of its training logs' sensor into the detector: one
+    per sensor, each value the median of the logs' calibrations, for simulated logs."""
+    from aogm_cli.io.detectorfile import load_detector
+    from aogm_cli.io.modelfile import model_for
+
+    out = tmp_path / "det.h5"
+    result = CliRunner().invoke(main, ["train", *map(str, tiny_logs), "-o", str(out), "--seed", "3", "--quiet"])
+    assert result.exit_code == 0, result.output
+    models = load_detector(out).sensor_models
+    assert len(models) == 1 and models[0]["sensor"]["simulated"] is True
+    with LogReader(tiny_logs[0]) as r:
+        sensor = r.sensor
+    assert model_for(models, sensor, simulated=True) is models[0]
+    assert model_for(models, sensor, simulated=False) is None  # a real ring with the same mounts is not the simulator's
+    assert 0 < models[0]["model"]["sigma"] < 1 and models[0]["learned_from"]

@@ -4,6 +4,8 @@ write the sensor's model as a file (``-o MODEL``) that maps other logs of the sa
 
 from __future__ import annotations
 
+import dataclasses
+
 import click
 
 from aogm_cli.cli.map_log import parameter_options, parameter_overrides
@@ -72,11 +74,12 @@ def calibrate(log_file, mode, output, detector, params_file, resolution, quiet, 
 
     made = provenance(inputs) if output else None  # the inputs as read, the time the run starts
     params = resolve_params(params_file, parameter_overrides(resolution, True, options))
+    params = dataclasses.replace(params, calibration=dataclasses.replace(params.calibration, carried=False))
     refuse_huge_grids([log_file], params, params_file, resolution is not None, max_memory)
     with progress_bar(params.em.max_sweeps * (params.calibration.rounds + 1), f"calibrate ({mode})", quiet,
                       unit="sweep") as advance:
         result = map_file(log_file, mode, params, detector, lambda phase, done, total: advance(1),
-                          limits=limits_of(max_memory, max_work), carry=False)
+                          limits=limits_of(max_memory, max_work))
     record = result.stats.get("calibration")
     if record is None:  # adaptive without clusters: EM never ran
         raise click.UsageError(f"{log_file}: the detector flagged no cluster; nothing to calibrate in adaptive mode")

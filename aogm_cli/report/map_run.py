@@ -4,6 +4,7 @@ the sensor model file and the log itself are read here and handed to the mappers
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 from typing import Any
@@ -49,10 +50,10 @@ def resolve_detector(spec: str | None):
 
 def map_file(path: str | Path, mode: str, params: MapParams, detector: str | None = None,
              progress: Progress | None = None, limits: Limits | None = None, given: Learned | None = None,
-             source=None, carry: bool = True) -> OccupancyMap:
+             source=None) -> OccupancyMap:
     """Map the log at ``path`` in ``mode`` (``detector``: see ``resolve_detector``; ``given``: a
-    forward model to use instead of learning one; else, with ``carry`` and ``calibration.carried``,
-    the one the detector carries for the log's sensor, ``carried_model``), or the log source ``source`` (the scans a
+    forward model to use instead of learning one; else, with ``calibration.carried``, the one the
+    detector carries for the log's sensor, ``carried_model``), or the log source ``source`` (the scans a
     held-out split keeps) named by ``path``; refused (``InputError``) before any work when its
     estimate exceeds ``limits`` (``mapping.modes.map_source``)."""
     from aogm_cli.mapping.modes import ALL, Flagger, map_source
@@ -62,7 +63,7 @@ def map_file(path: str | Path, mode: str, params: MapParams, detector: str | Non
 
     def run(log):
         model = given
-        if model is None and carry and mode != "standard" and params.calibration.enabled and params.calibration.carried:
+        if model is None and mode != "standard" and params.calibration.enabled and params.calibration.carried:
             model = carried_model(detector, log.sensor, log.truth_grid() is not None)
         return map_source(log, mode, params, flagger, progress, limits, str(path), model)
 
@@ -101,9 +102,10 @@ def learn_sensor_models(paths, params: MapParams, advance=None) -> tuple[dict, .
     calibrate``), with the logs' names."""
     groups: dict[str, tuple[dict, list, list]] = {}
     for path in paths:
-        m = map_file(path, "em", params, carry=False)
+        m = map_file(path, "em", dataclasses.replace(params, calibration=dataclasses.replace(params.calibration,
+                                                                                            carried=False)))
         with LogReader(path) as reader:
-            record = sensor_record(reader.sensor) | {"simulated": reader.has_truth()}
+            record = sensor_record(reader.sensor) | {"simulated": reader.has_truth}
         key = json.dumps(record, sort_keys=True)
         groups.setdefault(key, (record, [], []))
         groups[key][1].append(m.learned["sensor"])
