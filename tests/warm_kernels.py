@@ -65,7 +65,7 @@ def warm_rest() -> None:
     map_in_mode(tiny_log(laser), "standard", params)
     with tempfile.TemporaryDirectory() as folder:
         path = simulated(folder, "corridor_door")
-        for world in ("corridor_door_real", "cluttered_lab_real"):  # the simulator with errors
+        for world in ("corridor_door_real", "cluttered_lab_real", "cluttered_lab_pioneer"):  # the simulator with errors, side lobes and sequential firing
             simulated(folder, world)
         with LogReader(path) as reader:
             m = map_source(reader, "standard", thin)

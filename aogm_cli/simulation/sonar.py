@@ -47,8 +47,7 @@ def sub_ray_offsets(beam_width: float, sub_rays: int) -> np.ndarray:
 
 @numba.njit(cache=True, _nrt=False)
 def echo_block(pose, mount, cos_off, sin_off, max_range, max_bounces, geo, echo, ideal, multipath,
-               min_strength=0.0, beam=1.0, incidence_exponent=2.0, reading_pose=None, cos_side=None,
-               sin_side=None, side_range=0.0):
+               min_strength, beam, incidence_exponent, reading_pose, cos_side, sin_side, side_range):
     """Noise-free readings of a block of scans (every sensor, every sub-ray), in one call.
 
     pose (B, 3) robot poses; mount (S, 3) sensor mounts; cos_off, sin_off (R,) sub-ray
@@ -58,17 +57,18 @@ def echo_block(pose, mount, cos_off, sin_off, max_range, max_bounces, geo, echo,
     With ``min_strength`` > 0 a sub-ray's echo is detected only when its strength
     ``exp(-2 theta^2 / beam^2) cos(incidence)^incidence_exponent / path^2`` (theta the sub-ray's
     angle off the axis) is at least ``min_strength``; 0 detects every echo. ``reading_pose``
-    (B, S, 3), when given, is each reading's own robot pose (then ``pose`` is unused). The
-    side-lobe sub-rays ``cos_side``, ``sin_side`` (R2,), when given, add echoes detected when
+    (B, S, 3), unless empty, is each reading's own robot pose (then ``pose`` is unused). The
+    side-lobe sub-rays ``cos_side``, ``sin_side`` (R2,; empty: none) add echoes detected when
     ``cos(incidence)^incidence_exponent / path^2 >= 1 / side_range^2``; they change ``echo``
-    only (``ideal`` is the cone's).
+    only (``ideal`` is the cone's). Every argument has one type whichever errors are on: one
+    compiled signature (each took 18 s to compile).
     """
     n_sub = cos_off.shape[0]
     for i in range(pose.shape[0]):
         c = math.cos(pose[i, 2])
         s = math.sin(pose[i, 2])
         for j in range(mount.shape[0]):
-            if reading_pose is None:
+            if reading_pose.shape[0] == 0:
                 px, py, pyaw, cj, sj = pose[i, 0], pose[i, 1], pose[i, 2], c, s
             else:
                 px, py, pyaw = reading_pose[i, j, 0], reading_pose[i, j, 1], reading_pose[i, j, 2]
@@ -95,16 +95,15 @@ def echo_block(pose, mount, cos_off, sin_off, max_range, max_bounces, geo, echo,
                 if path < best or (path == best and bounces < best_bounces):
                     best = path
                     best_bounces = bounces
-            if cos_side is not None:
-                for r in range(cos_side.shape[0]):
-                    dx = ca * cos_side[r] - sa * sin_side[r]
-                    dy = sa * cos_side[r] + ca * sin_side[r]
-                    # a side-lobe echo beyond side_range is never detected
-                    _, path, bounces, cos_inc = trace_sub_ray(sx, sy, dx, dy, min(max_range, best, side_range),
-                                                              max_bounces, geo)
-                    if path < best and cos_inc**incidence_exponent * side_range * side_range >= path * path:
-                        best = path
-                        best_bounces = bounces
+            for r in range(cos_side.shape[0]):
+                dx = ca * cos_side[r] - sa * sin_side[r]
+                dy = sa * cos_side[r] + ca * sin_side[r]
+                # a side-lobe echo beyond side_range is never detected
+                _, path, bounces, cos_inc = trace_sub_ray(sx, sy, dx, dy, min(max_range, best, side_range),
+                                                          max_bounces, geo)
+                if path < best and cos_inc**incidence_exponent * side_range * side_range >= path * path:
+                    best = path
+                    best_bounces = bounces
             echo[i, j] = best
             ideal[i, j] = nearest
             multipath[i, j] = best_bounces > 0
@@ -193,13 +192,13 @@ def _echoes(world: World, time: np.ndarray, pose: np.ndarray, mount: np.ndarray,
     # the central sub-rays first: their echoes bound the search of the others
     offsets = offsets[np.argsort(np.abs(offsets), kind="stable")]
     cos_off, sin_off = np.cos(offsets), np.sin(offsets)
-    reading_pose, source = None, None
+    reading_pose, source = np.zeros((0, 0, 3)), None  # empty: every reading from its scan's pose
     if errors.firing.on:
         ages, source = firing.schedule(errors.firing, time, n_sensors)
         reading_pose = poses_before(world, ages)
     lobes = errors.side_lobes
     side = side_lobe_offsets(lobes) if lobes.range > 0 else None
-    cos_side, sin_side = (None, None) if side is None else (np.cos(side), np.sin(side))
+    cos_side, sin_side = (np.zeros(0), np.zeros(0)) if side is None else (np.cos(side), np.sin(side))
     echo = np.empty((n_scans, n_sensors))
     ideal = np.empty((n_scans, n_sensors))
     multipath = np.empty((n_scans, n_sensors), dtype=np.bool_)
@@ -209,7 +208,7 @@ def _echoes(world: World, time: np.ndarray, pose: np.ndarray, mount: np.ndarray,
             pose[start:stop], mount, cos_off, sin_off, float(sonar.max_range), int(sonar.max_bounces), geo,
             echo[start:stop], ideal[start:stop], multipath[start:stop],
             float(strength.min_strength), float(strength.beam), float(strength.incidence_exponent),
-            None if reading_pose is None else reading_pose[start:stop], cos_side, sin_side, float(lobes.range),
+            reading_pose[start:stop], cos_side, sin_side, float(lobes.range),
         )
         if progress is not None:
             progress(stop)
