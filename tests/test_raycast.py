@@ -13,7 +13,7 @@ import pytest
 
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.simulation.raycast import geometry
-from aogm_cli.simulation.sonar import echo_block
+from aogm_cli.simulation.sonar import NO_ERRORS, echo_block
 from aogm_cli.world.loader import parse_world
 from aogm_cli.world.scene import build_scene
 
@@ -33,7 +33,7 @@ def trace(geo, ox, oy, dx, dy, limit, max_bounces=0):
     most ``max_bounces`` mirror bounces) and whether that echo came after a bounce."""
     echo, first, bounced = np.empty((1, 1)), np.empty((1, 1)), np.empty((1, 1), dtype=np.bool_)
     echo_block(np.array([[ox, oy, 0.0]]), np.zeros((1, 3)), np.array([dx]), np.array([dy]), float(limit),
-               int(max_bounces), geo, echo, first, bounced)
+               int(max_bounces), geo, echo, first, bounced, *NO_ERRORS)
     return float(first[0, 0]), float(echo[0, 0]), bool(bounced[0, 0])
 
 
@@ -42,7 +42,7 @@ def first_hits(geo, pose, limit):
     n = pose.shape[0]
     echo, first, bounced = np.empty((n, 1)), np.empty((n, 1)), np.empty((n, 1), dtype=np.bool_)
     echo_block(np.ascontiguousarray(pose, dtype=np.float64), np.zeros((1, 3)), np.ones(1), np.zeros(1), float(limit),
-               0, geo, echo, first, bounced)
+               0, geo, echo, first, bounced, *NO_ERRORS)
     return first[:, 0]
 
 

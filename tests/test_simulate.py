@@ -256,7 +256,7 @@ def test_echo_block_matches_unpruned_sub_ray_tracing():
     """The kernel bounds each sub-ray's search by the best echo so far; that must not change results:
     the same kernel given one sub-ray at a time traces each up to max_range."""
     from aogm_cli.simulation.raycast import geometry
-    from aogm_cli.simulation.sonar import echo_block
+    from aogm_cli.simulation.sonar import NO_ERRORS, echo_block
     from aogm_cli.world.scene import build_scene
 
     rng = np.random.default_rng(12)
@@ -282,12 +282,12 @@ def test_echo_block_matches_unpruned_sub_ray_tracing():
     off = sub_ray_offsets(w.sonar.beam_width, w.sonar.sub_rays)
     co, so = np.cos(off), np.sin(off)
     echo, ideal, multi = np.empty((300, 24)), np.empty((300, 24)), np.empty((300, 24), dtype=bool)
-    echo_block(pose, mount, co, so, 5.0, 2, geo, echo, ideal, multi)
+    echo_block(pose, mount, co, so, 5.0, 2, geo, echo, ideal, multi, *NO_ERRORS)
     # per sub-ray r, unpruned: (first hit, echo path, echo after a bounce) of every reading
     traced = np.empty((len(co), 3, 300, 24))
     for r in range(len(co)):
         one = np.empty((300, 24)), np.empty((300, 24)), np.empty((300, 24), dtype=bool)
-        echo_block(pose, mount, co[r : r + 1], so[r : r + 1], 5.0, 2, geo, *one)
+        echo_block(pose, mount, co[r : r + 1], so[r : r + 1], 5.0, 2, geo, *one, *NO_ERRORS)
         traced[r] = one[1], one[0], one[2]
     assert_array_equal(ideal, traced[:, 0].min(axis=0))
     assert_array_equal(echo, traced[:, 1].min(axis=0))

@@ -45,6 +45,11 @@ def sub_ray_offsets(beam_width: float, sub_rays: int) -> np.ndarray:
     return np.linspace(-beam_width / 2, beam_width / 2, sub_rays)
 
 
+# echo_block's last arguments for a sonar without echo-strength, firing or side-lobe errors (the
+# types the simulator passes: one compiled signature)
+NO_ERRORS = (0.0, 1.0, 2.0, np.zeros((0, 0, 3)), np.zeros(0), np.zeros(0), 0.0)
+
+
 @numba.njit(cache=True, _nrt=False)
 def echo_block(pose, mount, cos_off, sin_off, max_range, max_bounces, geo, echo, ideal, multipath,
                min_strength, beam, incidence_exponent, reading_pose, cos_side, sin_side, side_range):
