@@ -84,12 +84,12 @@ lint: $(DEV)
 
 # The packaged detector: simulate every bundled world, clean and realistic (*_real: an errors:
 # section), except the two test worlds of the paper's figures and their realistic variants
-# (*_real, *_pioneer), hold
+# (*_real) and the Pioneer worlds (another sensor: 8 sonars), hold
 # out two (a specular corridor and a furnished room) for validation, train (seeded). The file's
 # training_logs attribute records each log's world, realistic flag, seed and scans.
 # DETECTOR_OUT=FILE writes the detector there instead of into the package.
 DETECTOR_TEST_WORLDS := corridor_door corridor_specular
-DETECTOR_WORLDS     := $(filter-out $(foreach n,$(DETECTOR_TEST_WORLDS),worlds/$(n).yaml worlds/$(n)_real.yaml worlds/$(n)_pioneer.yaml),$(WORLDS))
+DETECTOR_WORLDS     := $(filter-out $(foreach n,$(DETECTOR_TEST_WORLDS),worlds/$(n).yaml worlds/$(n)_real.yaml) worlds/%_pioneer.yaml,$(WORLDS))
 DETECTOR_VALIDATION := l_corridor furnished_room
 DETECTOR_OUT        ?= aogm_cli/data/detector.h5
 .PHONY: detector
@@ -100,7 +100,7 @@ detector: $(STAMP)
 	done
 	$(BIN)/aogm train $(patsubst worlds/%.yaml,$(OUT)/detector/%.h5,$(DETECTOR_WORLDS)) \
 	  $(foreach n,$(DETECTOR_VALIDATION),--validation-logs $(OUT)/detector/$(n).h5) \
-	  -o $(DETECTOR_OUT) --seed $(SEED) --quiet
+	  -o $(DETECTOR_OUT) --seed $(SEED) --sensor-models --quiet
 
 # The README's picture: corridor_door at seed 1, its truth and the three modes (docs/modes.png)
 figure: $(STAMP)

@@ -467,13 +467,14 @@ def test_flags_made_in_chunks_equal_the_whole_log_at_once():
 
 
 def test_train_learns_the_sensor_model_each_sensor_carries(tiny_logs, tmp_path):
-    """``aogm train`` writes the sensor model of its training logs' sensor into the detector: one
+    """``aogm train --sensor-models`` writes the sensor model of its training logs' sensor into the detector: one
     per sensor, each value the median of the logs' calibrations, for simulated logs."""
     from aogm_cli.io.detectorfile import load_detector
     from aogm_cli.io.modelfile import model_for
 
     out = tmp_path / "det.h5"
-    result = CliRunner().invoke(main, ["train", *map(str, tiny_logs), "-o", str(out), "--seed", "3", "--quiet"])
+    result = CliRunner().invoke(main, ["train", *map(str, tiny_logs), "-o", str(out), "--seed", "3", "--sensor-models",
+                                       "--quiet"])
     assert result.exit_code == 0, result.output
     models = load_detector(out).sensor_models
     assert len(models) == 1 and models[0]["sensor"]["simulated"] is True

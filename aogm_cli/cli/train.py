@@ -39,9 +39,12 @@ from aogm_cli.training.config import TrainingConfig
 @click.option("--arc-wrong-min", type=click.IntRange(min=0), cls=LazyDefault, default=lambda: _labels().arc_wrong_min,
               show_default=True,
               help="Label rule (c): wrong standard-map cells on a reading's occupied arc that make y = 1 (0 = rule off).")
+@click.option("--sensor-models/--no-sensor-models", default=False, show_default=True,
+              help="Also calibrate each training log (em) and carry the median model of each sensor in the detector, "
+                   "for maps with calibration.carried.")
 @quiet_option
 def train(log_files, output, seed, validation_logs, hidden, activation, beta, ring_neighbours, time_neighbours,
-          arc_wrong_min, quiet) -> None:
+          arc_wrong_min, sensor_models, quiet) -> None:
     """Train the cluster detector on simulated logs and write it to a detector file.
 
     \b
@@ -95,7 +98,8 @@ def train(log_files, output, seed, validation_logs, hidden, activation, beta, ri
     config = TrainingConfig(hidden=hidden, activation=activation, seed=seed, beta=beta)
     train_paths, validation_paths = split_by_world(log_files, validation_logs)
     record = provenance([*train_paths, *validation_paths])  # the inputs as read, the time the run starts
-    with progress_bar(2 * len(train_paths) + len(validation_paths) + 1, "train", quiet, unit="step") as advance:
+    steps = (2 if sensor_models else 1) * len(train_paths) + len(validation_paths) + 1
+    with progress_bar(steps, "train", quiet, unit="step") as advance:
         train_logs = [(p, read_log(p)) for p in train_paths]
         validation_logs_read = [(p, read_log(p)) for p in validation_paths]
         for p, log in train_logs + validation_logs_read:
@@ -104,9 +108,9 @@ def train(log_files, output, seed, validation_logs, hidden, activation, beta, ri
                                  key="/scans")
         detector = train_detector(train_logs, validation_logs_read, spec, LabelDefinition(arc_wrong_min=arc_wrong_min), config,
                                   advance, standard_map_of=truth_grid_map)
-        # the sensor models it carries: each training log's sensor calibrated (em), the median per sensor
-        models = learn_sensor_models(train_paths, resolve_params(), advance)
-    detector = dataclasses.replace(detector, sensor_models=models)
+        if sensor_models:  # each training log's sensor calibrated (em), the median per sensor
+            detector = dataclasses.replace(detector, sensor_models=learn_sensor_models(train_paths, resolve_params(),
+                                                                                      advance))
     save_detector(output, detector, record)
     click.echo(format_metrics(detector.metrics))
     if not quiet:
