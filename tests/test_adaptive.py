@@ -178,13 +178,14 @@ def test_adaptive_cli_writes_clusters_and_stats(corridor_door_log, tmp_path):
     assert m.stats["clusters"] == int(m.clusters.max())
     # the runtime is the sum of the phases, each recorded, named as the em mode names its own
     phases = m.stats["phase_seconds"]
-    assert set(phases) == {"standard", "readings", "deflections", "detector", "clusters", "index", "calibration", "sweeps",
+    # the sensor's model carried by the detector: the building's p_max fitted (rates), no calibration
+    assert set(phases) == {"standard", "readings", "deflections", "detector", "clusters", "index", "rates", "sweeps",
                            "view"}
     assert m.runtime_s == pytest.approx(sum(phases.values()), rel=1e-12)
     em = read_map_file(_em_map(corridor_door_log, tmp_path))
     assert set(em.stats["phase_seconds"]) == set(phases) - {"detector", "clusters"}
     shared = {"sweeps", "flips_per_sweep", "objective_per_sweep", "scored_per_sweep", "pairs_per_sweep",
-              "candidate_cells", "em_readings", "index_entries", "scratch_bytes", "calibration"}
+              "candidate_cells", "em_readings", "index_entries", "scratch_bytes"}
     assert shared <= set(m.stats) and shared <= set(em.stats)  # one stats format for both modes
     assert m.stats["sweeps"] == len(m.stats["flips_per_sweep"]) >= 1
 
@@ -268,7 +269,10 @@ def test_undecided_cells_by_hand():
     assert undecided(thinned, observed, elfes, evidence, inverse).tolist() == [[True, False, False, False, False]]
 
 
-THINNED = {"adaptive": {"outside": "thinned", "contested": 0.1, "weak": 0.0, "grow": 0}}
+# calibrated on the log (not carried): thinning then uses the configured forward model, as the
+# standard mode's exact.thin does
+THINNED = {"adaptive": {"outside": "thinned", "contested": 0.1, "weak": 0.0, "grow": 0},
+           "calibration": {"carried": False}}
 
 
 def test_thinned_outside_keeps_clusters_small_and_reports_undecided_cells_unknown(corridor_door_log):

@@ -163,7 +163,9 @@ def test_the_fit_at_the_true_map_recovers_the_simulators_noise_and_random_rate(t
 
 def test_calibrated_map_records_the_learned_model_and_its_rounds(corridor_door_log, tmp_path):
     out = tmp_path / "em.h5"
-    result = run("map", corridor_door_log, "--mode", "em", "-o", out, "-q")
+    own = tmp_path / "own.yaml"  # calibrated on the log, not the model the detector carries for its sensor
+    own.write_text("calibration: {carried: false}\n")
+    result = run("map", corridor_door_log, "--mode", "em", "--params", own, "-o", out, "-q")
     assert result.exit_code == 0, result.output
     m = read_map_file(out)
     record = m.stats["calibration"]
@@ -188,7 +190,8 @@ def test_calibrated_map_records_the_learned_model_and_its_rounds(corridor_door_l
     assert run("map", corridor_door_log, "--mode", "em", "-o", off, "--no-calibrate", "-q").exit_code == 0
     m = read_map_file(off)
     assert "calibration" not in m.stats and m.params["em"]["sigma"] == 0.03
-    assert m.learned == {"sensor": None, "origin": "configured", "specular_deg": None, "opening_deg": None}
+    assert m.learned == {"sensor": None, "origin": "configured", "specular_deg": None, "opening_deg": None,
+                         "rates": None}
 
 
 def test_calibrate_writes_the_sensors_model_that_map_and_compare_take(corridor_door_log, tmp_path):
@@ -210,11 +213,12 @@ def test_calibrate_writes_the_sensors_model_that_map_and_compare_take(corridor_d
     m = read_map_file(out)
     assert "calibration" not in m.stats["phase_seconds"] and "calibration" not in m.stats
     assert m.learned["origin"] == f"file {model}"
-    assert m.learned["sensor"] == written["model"]
+    # the sensor's part as the file has it; the building's share of lost readings fitted on this log
+    assert m.learned["sensor"] == written["model"] | m.learned["rates"] and set(m.learned["rates"]) == {"p_max"}
     assert m.params["em"]["sigma"] == 0.03 and m.params["calibration"]["enabled"] is True  # as configured
     # the same model as --params (the old way) makes the same map
     old = tmp_path / "old.yaml"
-    old.write_text("em: {" + ", ".join(f"{k}: {v!r}" for k, v in written["model"].items())
+    old.write_text("em: {" + ", ".join(f"{k}: {v!r}" for k, v in m.learned["sensor"].items())
                    + f", specular_deg: {m.learned['specular_deg']!r}" + "}\ncalibration: {enabled: false}\n")
     result = run("map", other, "--mode", "em", "--params", old, "-o", tmp_path / "old.h5", "-q")
     assert result.exit_code == 0, result.output
@@ -357,15 +361,23 @@ def test_a_long_log_calibrates_on_runs_of_consecutive_scans(corridor_door_log):
 
 
 def test_carried_model_maps_without_calibrating(corridor_door_log, tmp_path):
-    """With ``calibration.carried`` a simulated log of the packaged detector's ring maps with the
-    model it carries (no calibration phase); aogm map says in one line when a map calibrated on
-    its own log instead."""
+    """By default (``calibration.carried``) a simulated log of the packaged detector's ring maps
+    with the model it carries: no calibration phase, the building's p_max fitted (``rates``), the
+    sensor's sigma, p_hit and p_rand as carried. With ``carried: false`` it calibrates, and aogm
+    map says so in one line."""
+    from aogm_cli.io.detectorfile import load_detector
     from aogm_cli.report.map_run import map_file, resolve_params
 
-    carried = map_file(corridor_door_log, "em", resolve_params(overrides={"calibration": {"carried": True}}))
+    carried = map_file(corridor_door_log, "em", resolve_params())
     assert carried.learned["origin"] == "carried by the packaged detector"
-    assert "calibration" not in carried.stats["phase_seconds"]
-    result = CliRunner().invoke(main, ["map", str(corridor_door_log), "--mode", "em", "-o", str(tmp_path / "m.h5"),
-                                       "--quiet"])
+    assert "calibration" not in carried.stats["phase_seconds"] and "rates" in carried.stats["phase_seconds"]
+    model = load_detector().sensor_models[0]["model"]
+    assert {k: carried.learned["sensor"][k] for k in ("sigma", "p_hit", "p_rand")} == {
+        k: model[k] for k in ("sigma", "p_hit", "p_rand")}
+    assert 0 <= carried.learned["rates"]["p_max"] < 1 and carried.learned["rates"]["p_max"] != model["p_max"]
+    own = tmp_path / "own.yaml"
+    own.write_text("calibration: {carried: false}\n")
+    result = CliRunner().invoke(main, ["map", str(corridor_door_log), "--mode", "em", "--params", str(own), "-o",
+                                       str(tmp_path / "m.h5"), "--quiet"])
     assert result.exit_code == 0, result.output
     assert "calibrated the sensor's model on this log" in result.output

@@ -8,7 +8,6 @@ get EM's residual probability, and the other cells the same scale (``joined_view
 
 from __future__ import annotations
 
-import dataclasses
 from typing import NamedTuple
 
 import numpy as np
@@ -17,7 +16,7 @@ from aogm_cli.core.log import Log
 from aogm_cli.mapping.cluster import grown, label_clusters, near_occupied, readings_near_clusters
 from aogm_cli.mapping.em import EMOutcome, EMProblem, ProblemFor, em_problem, em_readings, em_view, find_root
 from aogm_cli.mapping.params import EMConfig, MapParams
-from aogm_cli.mapping.standard import standard_log_odds
+from aogm_cli.mapping.standard import occupied_evidence
 from aogm_cli.sensor_models.ray import axis_counts, is_narrow_beam
 from aogm_cli.sensor_models.readings import LaidOutReadings, cone_bands
 
@@ -53,12 +52,8 @@ def contested_cells(log: Log, grid, params: MapParams, log_odds: np.ndarray,
     map cannot explain them (walls that specular or multipath readings, too long, cleared).
     One more standard pass, with the inverse model's free evidence set to nothing (and the
     deflected beams, ``shadow``, stopped: they hit nothing)."""
-    # Elfes' occupied arcs, whatever model the map uses (the exact model has no evidence of its own)
-    inverse = dataclasses.replace(params.inverse_model, l_free=params.inverse_model.l0,
-                                  model="elfes" if params.inverse_model.model == "exact" else params.inverse_model.model)
     cuts = None if shadow is None else shadow.reshape(np.shape(log.ranges))
-    hits, _ = standard_log_odds(log, grid, dataclasses.replace(params, inverse_model=inverse), cuts=cuts)
-    return (hits - params.inverse_model.l0 >= params.adaptive.contested) & (log_odds <= 0)
+    return (occupied_evidence(log, grid, params, cuts) >= params.adaptive.contested) & (log_odds <= 0)
 
 
 def find_clusters(run: LaidOutReadings, flags: np.ndarray, standard, params: MapParams,

@@ -10,7 +10,10 @@ from dataclasses import dataclass
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig
 
 SENSOR_KEYS = ("sigma", "p_rand", "p_hit", "p_max")  # the forward model's parameters calibration sets
-ONCE = ("specular_deg", "opening_deg")  # and those learned once, before EM (``calibration.incidence_at``, ``opening_at``)
+ONCE = ("specular_deg", "opening_deg")
+# what a robot's model (a file's, or the detector's) leaves to each log: the building's specular
+# angle and its share of max-range readings (``stages.rates``)
+BUILDING = ("specular_deg", "p_max")  # and those learned once, before EM (``calibration.incidence_at``, ``opening_at``)
 
 # where a sensor model came from (``Learned.origin``)
 CONFIGURED = "configured"  # the values of --params / the defaults: nothing learned
@@ -54,6 +57,7 @@ class Learned:
     calibration: dict | None = None  # ``calibration.calibration_rounds``' record
     seconds: float = 0.0
     made_by: str | None = None  # the mode of the map of the same log that learned it (``carried``)
+    rates: dict | None = None  # the building's p_max fitted for a robot's model (``stages.rates``)
 
     def model(self, configured: ForwardModelConfig) -> ForwardModelConfig:
         """The forward model EM uses: ``configured`` with what was learned in its place."""
@@ -82,4 +86,4 @@ class Learned:
     def as_dict(self) -> dict:
         """What the map file records beside its params (root attribute ``learned``)."""
         return {"sensor": None if self.sensor is None else self.sensor.as_dict(), "origin": self.origin,
-                "specular_deg": self.specular_deg, "opening_deg": self.opening_deg}
+                "specular_deg": self.specular_deg, "opening_deg": self.opening_deg, "rates": self.rates}

@@ -119,13 +119,14 @@ class CalibrationConfig:
     which of its parameters (``learn``: sigma, p_rand, p_hit, p_max in rounds with EM; specular_deg
     and opening_deg once, before them), in at most ``rounds`` EM runs alternated with closed-form
     fits, ended when no parameter moves by more than ``tolerance`` (sigma relative, the
-    probabilities absolute); or, with ``carried``, take the model the detector carries for the
-    log's sensor (``report.map_run.carried_model``; off by default: the training worlds' median
-    misses a specular building's share of long readings, docs/algorithms.md). How the rounds work
-    inside is ``calibration.TUNING``."""
+    probabilities absolute). With ``carried`` (the default) a simulated log of a sensor the
+    detector carries a model of (``report.map_run.carried_model``: learned once, on its training
+    logs) takes it instead, and only the building's part is learned from the log (the specular
+    angle; p_max at its standard map, ``stages.rates``). How the rounds work inside is
+    ``calibration.TUNING``."""
 
     enabled: bool = True
-    carried: bool = False
+    carried: bool = True
     learn: str = "sigma,p_rand,p_hit,p_max,specular_deg"
     rounds: int = 4
     tolerance: float = 0.02

@@ -17,11 +17,12 @@ from aogm_cli.core.log import Log
 from aogm_cli.core.occupancy_map import OccupancyMap
 from aogm_cli.mapping import adaptive as A
 from aogm_cli.mapping import em as E
-from aogm_cli.mapping.calibration import calibration_rounds
-from aogm_cli.mapping.learned import FROM_LOG, Learned, SensorModel
+from aogm_cli.mapping.calibration import MAX_READINGS, calibration_rounds, fit_at_map, sample_readings
+from aogm_cli.mapping.learned import BUILDING, FROM_LOG, Learned, SensorModel
 from aogm_cli.mapping.params import EMConfig, MapParams
 from aogm_cli.mapping.pipeline import Progress, TimedSource, params_json
 from aogm_cli.mapping.standard import (
+    occupied_evidence,
     probability_from_log_odds,
     set_up,
     standard_log_odds,
@@ -31,6 +32,13 @@ from aogm_cli.mapping.standard import (
 )
 from aogm_cli.sensor_models.ray import is_narrow_beam
 from aogm_cli.sensor_models.readings import LaidOutReadings, lay_out_readings
+
+# log-odds of occupied evidence alone that put a cell the map holds free among the walls the
+# building's rates are fitted at (``rates``; measured on the 13 worlds without a Pioneer with the
+# carried model: 2 keeps corridor_specular's wall (leak 0.003, 0.087 at the map alone), 1 and 3 no
+# better; docs/algorithms.md, "The sensor model a detector carries")
+RATES_EVIDENCE = 2.0
+RATES_START = 0.05  # the fit of p_max starts from at least this share (from 0 it would get no weight)
 
 
 @dataclass(frozen=True)
@@ -141,12 +149,12 @@ def run_stages(stages: tuple[Stage, ...], state: State, clock=time.perf_counter)
 def learns(s: State, key: str) -> bool:
     """Whether this map learns ``key`` (a forward model parameter) from its log: calibration on
     and ``key`` listed, and not given. A model carried from another map of the same log gives
-    everything; one from a file (a robot's) the sensor's part, so only the specular angle (the
-    building's) is learned."""
+    everything; one from a file or carried by the detector (a robot's) the sensor's part, so only
+    the building's (``learned.BUILDING``: the specular angle and p_max) is learned."""
     config = s.params.calibration
     if not config.enabled or key not in config.learned:
         return False
-    return s.given is None or (s.given.made_by is None and key == "specular_deg")
+    return s.given is None or (s.given.made_by is None and key in BUILDING)
 
 
 # --- the stages ----------------------------------------------------------------------------------
@@ -268,6 +276,27 @@ def calibration(s: State) -> State:
     return s.but(learned=dataclasses.replace(s.learned, sensor=sensor, origin=FROM_LOG, calibration=record))
 
 
+def rates(s: State) -> State:
+    """With a robot's model (carried by the detector, or a file's): the building's share of
+    max-range readings (p_max: beams that specular walls send away, open space) fitted on a
+    sample of the readings (``calibration.fit_at_map``) at the standard map thresholded, with the
+    cells the occupied evidence alone holds occupied by ``RATES_EVIDENCE``
+    (``standard.occupied_evidence``): the walls passing beams cleared are there, so that the
+    readings crossing them count as lost ones, as a calibration of the log finds them; the
+    sensor's sigma, p_hit and p_rand are kept."""
+    keys = tuple(k for k in ("p_max",) if learns(s, k))
+    cuts = None if s.readings.shadow is None else _cuts(s.readings)
+    walls = (s.standard.log_odds > 0) | (occupied_evidence(s.whole, s.grid, s.in_use, cuts) >= RATES_EVIDENCE)
+    config = dataclasses.replace(s.params.calibration, learn=",".join(keys))
+    sample = sample_readings(s.readings, MAX_READINGS)
+    forward = s.in_use.em.forward
+    start = dataclasses.replace(forward, **{k: max(getattr(forward, k), RATES_START) for k in keys})
+    fit = fit_at_map(s.readings, sample, np.ascontiguousarray(walls.reshape(-1)), start, config).forward
+    values = {k: float(getattr(fit, k)) for k in keys}
+    return s.but(learned=dataclasses.replace(s.learned, sensor=dataclasses.replace(s.learned.sensor, **values),
+                                             rates=values))
+
+
 def index(s: State) -> State:
     """EM's problem under the start map, with the forward model learned or given."""
     config = s.in_use.em
@@ -319,6 +348,12 @@ def thins_outside(s: State) -> bool:
 
 def runs_em(s: State) -> bool:
     return s.clusters is None or s.clusters.count > 0
+
+
+def fits_rates(s: State) -> bool:
+    """A robot's model (``learns`` the building's part only) whose p_max the log sets."""
+    robots = s.given is not None and s.given.made_by is None and s.given.sensor is not None
+    return runs_em(s) and robots and learns(s, "p_max")
 
 
 def calibrates(s: State) -> bool:

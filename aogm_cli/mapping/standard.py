@@ -252,6 +252,18 @@ def standard_pass(log, grid: GridSpec, params: MapParams, cuts=None):
     return log_odds, observed, time.perf_counter() - t0 - timed.io_seconds
 
 
+def occupied_evidence(log, grid: GridSpec, params: MapParams, cuts=None) -> np.ndarray:
+    """(H, W) float32: the log-odds the readings' occupied arcs alone give each cell (one more
+    standard pass with no free evidence; Elfes' arcs whatever model the map uses, as the exact
+    model has none of its own; ``cuts`` stop deflected beams, which hit nothing): where echoes
+    end, though passing beams may have cleared the cell in the map (a wall that specular or
+    multipath readings cross)."""
+    inverse = dataclasses.replace(params.inverse_model, l_free=params.inverse_model.l0,
+                                  model="elfes" if params.inverse_model.model == "exact" else params.inverse_model.model)
+    hits, _ = standard_log_odds(log, grid, dataclasses.replace(params, inverse_model=inverse), cuts=cuts)
+    return hits - np.float32(params.inverse_model.l0)
+
+
 def thins(sensor: SensorSpec, grid: GridSpec, params: MapParams, always: bool = False) -> bool:
     """Whether the map is thinned by the exact inverse model (``thin_pass``): ``exact.thin`` on
     (or ``always``: the em and adaptive modes) for a map not made by that model, of a cone. A
