@@ -39,12 +39,12 @@ PREPARE = (  # the em and adaptive modes' first stages
     Stage("readings", S.readings),
     Stage("opening", S.opening, when=S.learns_opening),
     Stage("deflections", S.deflections),
+    Stage("rates", S.rates, when=S.fits_rates),
     Stage("thinning", S.thinning, when=S.thinned),
 )
 EM_STAGES = (  # and their last
     Stage("start", S.start, timed=False),
     Stage("calibration", S.calibration, when=S.calibrates),
-    Stage("rates", S.rates, when=S.fits_rates),
     Stage("index", S.index, when=S.runs_em),
     Stage("sweeps", S.sweeps, when=S.runs_em),
     Stage("view", S.em_view),
