@@ -4,7 +4,8 @@ Run as ``python bench/bench_seed_adaptive.py [--runs 5] [--json OUT]`` (part of 
 bench-scale``). Simulates corridor_door and corridor_specular (seed 1) and maps each log in this
 one process with ``aogm_cli.mapping.modes.map_file`` (which compiles every kernel first, outside
 ``runtime_s``): standard, em, adaptive with the packaged detector, and adaptive with
-``--detector all`` and ``--detector none``, ``--runs`` rounds of every mode, keeping each
+``--detector all`` and ``--detector none``, and with the thinned map outside its clusters
+(``adaptive:thinned``), ``--runs`` rounds of every mode, keeping each
 mode's best ``runtime_s``. Each map is evaluated against its log's truth as ``aogm compare`` does
 (``evaluation.metrics.evaluate``, and the planner's leak and block). ``standard:thin`` is the
 standard mode with ``exact.thin`` (the Elfes map thinned by the exact inverse model); ``--params``
@@ -33,7 +34,9 @@ from aogm_cli.world.loader import load_world
 
 ROOT = Path(__file__).resolve().parents[1]
 WORLDS = ("corridor_door", "corridor_specular")
-LABELS = ("standard", "standard:thin", "em", "adaptive", "adaptive:all", "adaptive:none")
+LABELS = ("standard", "standard:thin", "em", "adaptive", "adaptive:thinned", "adaptive:all", "adaptive:none")
+# adaptive:thinned: adaptive with the thinned map outside its clusters (docs/algorithms.md)
+THINNED = {"adaptive": {"outside": "thinned", "contested": 0.1, "weak": 0, "grow": 0}}
 
 
 def mapped(log_path: Path, label: str, params):
@@ -41,6 +44,9 @@ def mapped(log_path: Path, label: str, params):
     if label == "standard:thin":
         thin = dataclasses.replace(params, exact=dataclasses.replace(params.exact, thin=True))
         return map_file(log_path, "standard", thin)
+    if label == "adaptive:thinned":
+        adaptive = dataclasses.replace(params.adaptive, **THINNED["adaptive"])
+        return map_file(log_path, "adaptive", dataclasses.replace(params, adaptive=adaptive))
     mode, detector = parse_mode(label)
     return map_file(log_path, mode, params, detector)
 
@@ -52,6 +58,7 @@ def measure(log_path: Path, runs: int, params_file: str | None = None) -> dict[s
     with LogReader(log_path) as reader:
         truth = reader.truth()
         poses = reader.poses()
+        readings = reader.n_scans * reader.sensor.count
     maps: dict[str, list] = {label: [] for label in LABELS}
     for _ in range(runs):
         for label in LABELS:
@@ -74,6 +81,8 @@ def measure(log_path: Path, runs: int, params_file: str | None = None) -> dict[s
             "flagged_share": stats["flagged_readings"] / stats["readings"] if "flagged_readings" in stats else None,
             "cluster_share": (stats["cells_in_clusters"] / stats["observed_cells"]
                               if stats.get("observed_cells") else None),
+            # the readings EM takes (those whose cones reach a candidate cell), of every reading
+            "reading_share": stats["em_readings"] / readings if "em_readings" in stats else None,
             "index_entries": stats.get("index_entries"),
             # each phase's best over the runs (standard, readings, detector, clusters, index,
             # calibration, sweeps, view: the map's /stats phase_seconds)
@@ -90,14 +99,15 @@ def report(world: str, rows: dict[str, dict]) -> dict:
     std = rows["standard"]["runtime_s"]
     print(f"\n{world}")
     print(f"  {'mode':<14} {'best ms':>9} {'x std':>7} {'accuracy':>9} {'occ. F1':>8} {'leak':>6} {'block':>6} "
-          f"{'checks':>6} {'flagged':>8} {'clusters':>9} {'index entries':>13}")
+          f"{'checks':>6} {'flagged':>8} {'clusters':>9} {'readings':>9} {'index entries':>13}")
     for label, r in rows.items():
         share = "" if r["flagged_share"] is None else f"{r['flagged_share']:.1%}"
         clusters = "" if r["cluster_share"] is None else f"{r['cluster_share']:.1%}"
+        em_readings = "" if r["reading_share"] is None else f"{r['reading_share']:.1%}"
         entries = "" if r["index_entries"] is None else f"{r['index_entries']:,}"
         print(f"  {label:<14} {r['runtime_s'] * 1e3:>9.2f} {r['runtime_s'] / std:>7.2f} {r['accuracy']:>9.4f} "
               f"{r['occupied_f1']:>8.4f} {r['leak']:>6.3f} {r['block']:>6.3f} {r['checks_passed']:>3}/{r['checks']:<2} "
-              f"{share:>8} {clusters:>9} {entries:>13}")
+              f"{share:>8} {clusters:>9} {em_readings:>9} {entries:>13}")
     print("  where the time goes (best ms per phase):")
     for label, r in rows.items():
         print(f"  {label:<14} " + ", ".join(f"{k} {v * 1e3:.2f}" for k, v in r["phases"].items()))
@@ -115,6 +125,10 @@ def report(world: str, rows: dict[str, dict]) -> dict:
     print(f"  adaptive - em: accuracy {vs_em:+.4f} (target within 0.005: {verdict(abs(vs_em) <= 0.005)}), leak "
           f"{leak:+.4f}, block {block:+.4f} (targets within 0.01: {verdict(abs(leak) <= 0.01 and abs(block) <= 0.01)}); "
           f"checks {ad['checks_passed']}/{ad['checks']} ({verdict(checks)})")
+    thin = rows["adaptive:thinned"]
+    print(f"  adaptive:thinned: x{thin['runtime_s'] / std:.2f} standard, em / it x{em['runtime_s'] / thin['runtime_s']:.2f}; "
+          f"- em: accuracy {thin['accuracy'] - em['accuracy']:+.4f}, leak {thin['leak'] - em['leak']:+.4f}, "
+          f"block {thin['block'] - em['block']:+.4f}; checks {thin['checks_passed']}/{thin['checks']}")
     print(f"  packaged detector vs --detector all: runtime all / packaged x{speedup:.2f} (target >= 1.5: "
           f"{verdict(speedup >= 1.5)}), accuracy packaged - all {vs_all:+.4f} (target within 0.002: "
           f"{verdict(abs(vs_all) <= 0.002)})")
