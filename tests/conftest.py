@@ -147,3 +147,16 @@ def read_csv():
         return rows[0], [dict(zip(rows[0], row, strict=True)) for row in rows[1:]]
 
     return read
+
+
+# The files whose tests take longest (each 20-50 s of a worker's time: documented commands run as
+# subprocesses, signals, full disks, damaged files, a Dask cluster) run first, so that the two
+# pytest workers of make test share them from the start instead of one running the last of them
+# alone while the other waits.
+SLOW_FIRST = ("test_documented_commands.py", "test_interrupts.py", "test_disk_full.py", "test_bad_files.py",
+              "test_dask.py", "test_api.py", "test_fuzz.py")
+
+
+def pytest_collection_modifyitems(items):
+    order = {name: i for i, name in enumerate(SLOW_FIRST)}
+    items.sort(key=lambda item: order.get(item.path.name, len(SLOW_FIRST)))  # stable: the rest as collected
