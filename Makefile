@@ -42,7 +42,8 @@ demo: $(STAMP)
 # both workers would otherwise compile each: on a clean clone the suite took 232 s instead of 256 s
 # (3 s when the cache is warm)
 kernels: $(DEV)
-	$(BIN)/python tests/warm_kernels.py em & p=$$!; $(BIN)/python tests/warm_kernels.py rest && wait $$p
+	d=$$(mktemp -d); $(BIN)/python tests/warm_kernels.py em $$d & p=$$!; \
+	  $(BIN)/python tests/warm_kernels.py rest $$d && wait $$p; s=$$?; rm -rf $$d; exit $$s
 
 test: kernels
 	$(BIN)/python -m pytest -n auto

@@ -1,10 +1,12 @@
 """Compile aogm's numba kernels into their on-disk cache before the test workers start (``make test``).
 
-Run as ``python tests/warm_kernels.py em`` and ``python tests/warm_kernels.py rest`` at once: two
-processes compile two disjoint halves (EM's kernels; the simulator's, the standard, laser and
-exact mappers' and the scores'), where every pytest worker would otherwise compile nearly all of
-them itself on a clean clone, both cores compiling the same kernels. Nothing is asserted: a test
-that needs a kernel compiles it anyway if this did not.
+Run as ``python tests/warm_kernels.py em DIR`` and ``python tests/warm_kernels.py rest DIR`` at
+once (``make kernels``): two processes compile two disjoint halves (EM's kernels for many
+readings, calibration's, the exact and standard mappers' and the scores'; the simulator's, which
+writes corridor_door's log into DIR for the other to map, EM's for one reading and the laser's),
+where every pytest worker would otherwise compile nearly all of them itself on a clean clone, both
+cores compiling the same kernels. Nothing is asserted: a test that needs a kernel compiles it
+anyway if this did not.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ import dataclasses
 import math
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -27,56 +30,74 @@ def sonar():
     return SensorSpec(mount=np.array([[0.1, 0.0, 0.0], [0.0, 0.1, math.pi / 2]]))
 
 
-def warm_em() -> None:
+def warm_em(folder: str) -> None:
+    from aogm_cli.evaluation.consistency import map_consistency
+    from aogm_cli.evaluation.holdout import HoldoutSplit, holdout_scores, split_log
     from aogm_cli.io.logfile import LogReader
-    from aogm_cli.mapping.modes import map_in_mode, warm_up
+    from aogm_cli.mapping.modes import map_in_mode, map_source, warm_up
     from aogm_cli.report.map_run import resolve_params
 
-    warm_up(sonar(), resolve_params(), "adaptive", single=False)  # the other process compiles the single reading's
-    with tempfile.TemporaryDirectory() as folder:  # learning the beam's opening and the specular angle at walls
-        learn = {"calibration": {"learn": "sigma,p_rand,p_hit,p_max,specular_deg,opening_deg", "rounds": 1}}
-        with LogReader(simulated(folder, "corridor_door")) as reader:
-            map_in_mode(reader, "em", resolve_params(None, learn))
+    params = resolve_params()
+    warm_up(sonar(), params, "adaptive", single=False)  # the other process compiles the single reading's
+    path = handed(folder, "corridor_door")  # simulated by the other process (the simulator compiled once)
+    # learning the beam's opening and the specular angle at walls, calibrated on the log (the
+    # detector carries a model for this ring: with it the log would not calibrate)
+    learn = {"calibration": {"learn": "sigma,p_rand,p_hit,p_max,specular_deg,opening_deg", "rounds": 1,
+                             "carried": False}}
+    thin = dataclasses.replace(params, exact=dataclasses.replace(params.exact, thin=True))
+    with LogReader(path) as reader:
+        map_in_mode(reader, "em", resolve_params(None, learn))
+        m = map_source(reader, "standard", thin)
+        split = HoldoutSplit(0.1, 1)
+        kept, _ = split_log(reader, split)
+        holdout_scores(reader, map_source(kept, "standard", params), split)
+    map_consistency(str(path), m)
 
 
 def simulated(folder: str, world: str) -> Path:
+    """The log of ``world`` at seed 1 in ``folder``, written whole before it appears there."""
     from aogm_cli.io.logfile import write_log
     from aogm_cli.simulation.sonar import simulate
     from aogm_cli.world.loader import load_world
 
     path = Path(folder) / f"{world}.h5"
-    write_log(path, simulate(load_world(ROOT / "worlds" / f"{world}.yaml"), seed=1))
+    part = path.with_suffix(".part")
+    write_log(part, simulate(load_world(ROOT / "worlds" / f"{world}.yaml"), seed=1))
+    part.replace(path)
     return path
 
 
-def warm_rest() -> None:
+def handed(folder: str, world: str, wait: float = 600.0) -> Path:
+    """``simulated(folder, world)`` as the other process writes it (simulated here if it does not
+    appear within ``wait`` seconds)."""
+    path = Path(folder) / f"{world}.h5"
+    deadline = time.monotonic() + wait
+    while not path.exists() and time.monotonic() < deadline:
+        time.sleep(0.2)
+    return path if path.exists() else simulated(folder, world)
+
+
+def warm_rest(folder: str) -> None:
     from aogm_cli.core.log import SensorSpec
-    from aogm_cli.evaluation.consistency import map_consistency
-    from aogm_cli.evaluation.holdout import HoldoutSplit, holdout_scores, split_log
-    from aogm_cli.io.logfile import LogReader
-    from aogm_cli.mapping.modes import map_in_mode, map_source, tiny_log, warm_single
+    from aogm_cli.mapping.modes import map_in_mode, tiny_log, warm_single
     from aogm_cli.report.map_run import resolve_params
 
+    simulated(folder, "corridor_door")  # first: the other process maps it
     params = resolve_params()
     warm_single(sonar(), params)  # EM's kernels for one reading, while the other process compiles them for many
-    thin = dataclasses.replace(params, exact=dataclasses.replace(params.exact, thin=True))
     laser = SensorSpec(mount=np.array([[0.0, 0.0, 0.0]]), kind="laser", beam_width=math.radians(0.5), min_range=0.0,
                        max_range=8.0, noise_sigma=0.01)
     map_in_mode(tiny_log(laser), "standard", params)
-    with tempfile.TemporaryDirectory() as folder:
-        path = simulated(folder, "corridor_door")
-        for world in ("corridor_door_real", "cluttered_lab_real", "cluttered_lab_pioneer"):  # the simulator with errors, side lobes and sequential firing
-            simulated(folder, world)
-        with LogReader(path) as reader:
-            m = map_source(reader, "standard", thin)
-            split = HoldoutSplit(0.1, 1)
-            kept, _ = split_log(reader, split)
-            holdout_scores(reader, map_source(kept, "standard", params), split)
-        map_consistency(str(path), m)
+    for world in ("corridor_door_real", "cluttered_lab_real", "cluttered_lab_pioneer"):
+        simulated(folder, world)  # the simulator with errors, side lobes and sequential firing
 
 
 if __name__ == "__main__":
     from aogm_cli.cli import keep_cone_templates
 
     keep_cone_templates()  # the templates built here are kept on disk for the test workers, as a command keeps them
-    {"em": warm_em, "rest": warm_rest}[sys.argv[1]]()
+    if len(sys.argv) > 2:  # the folder both processes share (make kernels)
+        {"em": warm_em, "rest": warm_rest}[sys.argv[1]](sys.argv[2])
+    else:
+        with tempfile.TemporaryDirectory() as shared:
+            {"em": warm_em, "rest": warm_rest}[sys.argv[1]](shared)
