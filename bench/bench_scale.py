@@ -180,7 +180,8 @@ def simulate_size(scans: int, folder: Path, args) -> tuple[Path, Child]:
 
 
 HEADER = (f"{'scans':>7} {'readings':>9} {'mode':<14} {'runtime_s':>9} {'x std':>7} {'wall_s':>7} "
-          f"{'peak GB':>7} {'B/reading':>9} {'index entries':>13} {'sweeps':>6}  phases (s)")
+          f"{'peak GB':>7} {'B/reading':>9} {'index entries':>13} {'sweeps':>6} {'clusters':>8} {'em reads':>8}  "
+          "phases (s)")
 
 
 def _fmt(v, spec: str, none: str = "–") -> str:
@@ -194,7 +195,18 @@ def row_line(r: Row) -> str:
     phases = " ".join(f"{k} {v:.2f}" for k, v in (r.phase_seconds or {}).items())
     return (f"{r.scans:>7} {r.readings:>9} {r.label:<14} {r.runtime_s:>9.3f} "
             f"{_fmt(r.ratio_to_standard, '>7.1f'):>7} {r.wall_s:>7.1f} {r.peak_rss_bytes / 1e9:>7.2f} "
-            f"{r.bytes_per_reading:>9,.0f} {_fmt(r.index_entries, ','):>13} {_fmt(r.sweeps, 'd'):>6}  {phases}")
+            f"{r.bytes_per_reading:>9,.0f} {_fmt(r.index_entries, ','):>13} {_fmt(r.sweeps, 'd'):>6} "
+            f"{shares(r.stats, r.readings)}  {phases}")
+
+
+def shares(stats: dict, readings: int) -> str:
+    """The clusters' cells per observed cell and the readings EM takes per reading (blank where
+    the mode has none)."""
+    cells = stats.get("cells_in_clusters")
+    observed = stats.get("observed_cells")
+    clusters = f"{cells / observed:.1%}" if cells is not None and observed else ""
+    taken = f"{stats['em_readings'] / readings:.1%}" if stats.get("em_readings") is not None and readings else ""
+    return f"{clusters:>8} {taken:>8}"
 
 
 def growth(rows: list[Row], labels: list[str]) -> dict:
