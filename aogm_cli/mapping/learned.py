@@ -10,10 +10,10 @@ from dataclasses import dataclass
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig
 
 SENSOR_KEYS = ("sigma", "p_rand", "p_hit", "p_max")  # the forward model's parameters calibration sets
-ONCE = ("specular_deg", "opening_deg")
+ONCE = ("specular_deg", "opening_deg")  # and those learned once, before EM (``calibration.incidence_at``, ``opening_at``)
 # what a robot's model (a file's, or the detector's) leaves to each log: the building's specular
 # angle and its share of max-range readings (``stages.rates``)
-BUILDING = ("specular_deg", "p_max")  # and those learned once, before EM (``calibration.incidence_at``, ``opening_at``)
+BUILDING = ("specular_deg", "p_max")
 
 # where a sensor model came from (``Learned.origin``)
 CONFIGURED = "configured"  # the values of --params / the defaults: nothing learned

@@ -287,15 +287,14 @@ def rates(s: State) -> State:
     (``standard.occupied_evidence``): the walls passing beams cleared are there, so that the
     readings crossing them count as lost ones, as a calibration of the log finds them; the
     sensor's sigma, p_hit and p_rand are kept."""
-    keys = tuple(k for k in ("p_max",) if learns(s, k))
     cuts = None if s.readings.shadow is None else _cuts(s.readings)
     walls = (s.standard.log_odds > 0) | (occupied_evidence(s.whole, s.grid, s.in_use, cuts) >= RATES_EVIDENCE)
-    config = dataclasses.replace(s.params.calibration, learn=",".join(keys))
-    sample = sample_readings(s.readings, RATES_READINGS)
+    config = dataclasses.replace(s.params.calibration, learn="p_max")
     forward = s.in_use.em.forward
-    start = dataclasses.replace(forward, **{k: max(getattr(forward, k), RATES_START) for k in keys})
-    fit = fit_at_map(s.readings, sample, np.ascontiguousarray(walls.reshape(-1)), start, config).forward
-    values = {k: float(getattr(fit, k)) for k in keys}
+    start = dataclasses.replace(forward, p_max=max(forward.p_max, RATES_START))
+    fit = fit_at_map(s.readings, sample_readings(s.readings, RATES_READINGS), np.ascontiguousarray(walls.reshape(-1)),
+                     start, config).forward
+    values = {"p_max": float(fit.p_max)}
     return s.but(learned=dataclasses.replace(s.learned, sensor=dataclasses.replace(s.learned.sensor, **values),
                                              rates=values))
 

@@ -266,7 +266,7 @@ def occupied_evidence(log, grid: GridSpec, params: MapParams, cuts=None) -> np.n
 
 def thins(sensor: SensorSpec, grid: GridSpec, params: MapParams, always: bool = False) -> bool:
     """Whether the map is thinned by the exact inverse model (``thin_pass``): ``exact.thin`` on
-    (or ``always``: the em and adaptive modes) for a map not made by that model, of a cone. A
+    (or ``always``: adaptive with ``outside: thinned``) for a map not made by that model, of a cone. A
     narrow beam's map (rays, which draw walls one cell thick) is not thinned (docs/algorithms.md,
     "The exact inverse model")."""
     return ((always or params.exact.thin) and params.inverse_model.model != "exact"

@@ -13,7 +13,7 @@ import numpy as np
 
 from aogm_cli.core.budget import Limits, check
 from aogm_cli.core.occupancy_map import OccupancyMap
-from aogm_cli.detector.network import ConstantDetector
+from aogm_cli.detector.network import ConstantDetector, Detector
 from aogm_cli.io import template_store
 from aogm_cli.io.detectorfile import BASELINE_DETECTORS, file_sha256, load_detector
 from aogm_cli.io.logfile import LogReader
@@ -64,7 +64,7 @@ def map_file(path: str | Path, mode: str, params: MapParams, detector: str | Non
     def run(log):
         model = given
         if model is None and mode != "standard" and params.calibration.enabled and params.calibration.carried:
-            model = carried_model(detector, log.sensor, log.truth_grid() is not None)
+            model = carried_model(detector, log.sensor, log.truth_grid() is not None, flagger.detector)
         return map_source(log, mode, params, flagger, progress, limits, str(path), model)
 
     if source is not None:
@@ -73,13 +73,15 @@ def map_file(path: str | Path, mode: str, params: MapParams, detector: str | Non
         return run(reader)
 
 
-def carried_model(detector: str | None, sensor, simulated: bool) -> Learned | None:
+def carried_model(detector: str | None, sensor, simulated: bool, loaded=None) -> Learned | None:
     """The sensor model that the detector ``detector`` (a file; the packaged one for None or a
-    baseline) carries for ``sensor`` of a ``simulated`` log or not (``io.modelfile.model_for``), as a map takes it: learned once
-    for the robot, so only the building's specular angle is learned from the log; None when it
-    carries none for that sensor (the map calibrates on its log)."""
+    baseline) carries for ``sensor`` of a ``simulated`` log or not (``io.modelfile.model_for``),
+    as a map takes it: learned once for the robot, so only the building's part (``learned.BUILDING``)
+    is learned from the log; None when it carries none for that sensor (the map calibrates on its
+    log). ``loaded``: that detector as the adaptive mode already read it (a baseline's is not)."""
     spec = None if detector in BASELINE_DETECTORS else detector
-    model = model_for(load_detector(spec).sensor_models, sensor, simulated)
+    carrier = loaded if isinstance(loaded, Detector) else load_detector(spec)
+    model = model_for(carrier.sensor_models, sensor, simulated)
     if model is None:
         return None
     values = model["model"]
