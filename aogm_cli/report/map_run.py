@@ -90,10 +90,12 @@ def carried_model(detector: str | None, sensor, simulated: bool, loaded=None) ->
 
 
 def calibration_notice(path, m: OccupancyMap) -> str | None:
-    """The line that says a map calibrated its sensor's model on its own log (no model given, none
-    carried by the detector for that sensor), or None."""
+    """The line that says a map calibrated its sensor's model on its own log (no model given, and
+    none carried by the detector for that sensor or ``calibration.carried`` false), or None."""
     if m.mode == "standard" or (m.learned or {}).get("origin") != FROM_LOG:
         return None
+    if not m.params.get("calibration", {}).get("carried", True):
+        return f"{path}: calibrated the sensor's model on this log (calibration.carried is false)"
     return (f"{path}: calibrated the sensor's model on this log (the detector carries none for its sensor; "
             "aogm calibrate LOG -o MODEL learns one, --forward-model MODEL carries it)")
 
