@@ -32,8 +32,11 @@ def _limited():
 
 
 def run_full(args, cwd) -> subprocess.CompletedProcess:
+    # no bytecode written by the limited child: Python's own write of a .pyc is cut at LIMIT bytes
+    # and kept (a short write is no error to it), and every later import of that module fails
+    env = os.environ | {"PYTHONDONTWRITEBYTECODE": "1"}
     return subprocess.run([sys.executable, "-m", "aogm_cli", *map(str, args)], cwd=cwd, preexec_fn=_limited,
-                          capture_output=True, text=True, timeout=300)
+                          capture_output=True, text=True, timeout=300, env=env)
 
 
 def digest(*paths) -> list[str]:
