@@ -19,9 +19,11 @@ from aogm_cli.sensor_models.inverse_model import InverseModelConfig
 
 def ratios(p, g, g0, p_hit, const, w):
     n = len(p)
+    g = np.asarray(g, float)
+    j0 = int(np.argmax(g != 0)) if g.any() else n  # the cells before the window: g = 0
     out = np.empty(n)
-    cone_ratios(np.asarray(p, float), np.asarray(g, float), g0, p_hit, const, w, n,
-                np.empty(n), np.empty(n), np.empty(n), out)
+    assert cone_ratios(np.asarray(p, float), g, j0, g0, p_hit, const, w, n,
+                       np.empty(n), np.empty(n), np.empty(n), np.empty(n), out)
     return np.log(out)
 
 
@@ -50,6 +52,53 @@ def test_linear_pass_matches_brute_force_on_random_cones():
         g = rng.uniform(0.0, 12.0, n) * (rng.random(n) < 0.6)  # cells before the window have g = 0
         args = (p, g, rng.uniform(0.0, 5.0), rng.uniform(0.1, 0.99), rng.uniform(1e-3, 0.1), rng.uniform(0.5, 0.95))
         np.testing.assert_allclose(ratios(*args), brute_force(*args), rtol=0, atol=1e-9)
+
+
+def three_passes(p, g, g0, p_hit, const, w):
+    """The ratios as the comment above ``cone_ratios`` writes them: forward, backward, then per cell."""
+    n, q = len(p), 1.0 - p_hit
+    a, u, r, out = [0.0] * n, [0.0] * n, [0.0] * n, [0.0] * n
+    prod, acc = 1.0, 0.0
+    for j in range(n):
+        u[j], a[j] = acc, prod
+        acc += p[j] * p_hit * g[j] * prod
+        prod *= 1.0 - p_hit * p[j]
+    tail = g0
+    for j in range(n - 1, -1, -1):
+        r[j] = tail
+        tail = p[j] * p_hit * g[j] + (1.0 - p_hit * p[j]) * tail
+    for j in range(n):
+        out[j] = (const + w * (u[j] + a[j] * (p_hit * g[j] + q * r[j]))) / (const + w * (u[j] + a[j] * r[j]))
+    return out
+
+
+def test_split_passes_equal_the_three_passes_bit_for_bit():
+    # long cones (to a sonar's 2,600 cells) of cells before the window, then a window of echoes;
+    # dense priors make the beam's return through them negligible: cone_ratios then says so
+    # (False), and only when every ratio is exactly 1
+    rng = np.random.default_rng(11)
+    skipped = 0
+    for trial in range(300):
+        j0, n_window = int(rng.integers(0, 2600)), int(rng.integers(0, 12))
+        n = j0 + n_window
+        if n == 0:
+            continue
+        p = rng.choice([0.1, 0.01, 0.5, 0.99, 1e-3], n) * rng.uniform(0.5, 1.0, n)
+        if trial % 3 == 0:
+            p[:] = 1e-3  # a cone across free cells: its far cells still see the echo
+        g = np.zeros(n)
+        g[j0:] = rng.uniform(0.0, 13.3, n_window) * (rng.random(n_window) < 0.9)
+        g0 = (0.0, 13.3, 1e-300)[trial % 3]
+        p_hit, const, w = 0.7, 0.05 / 5.0 + 0.1 * g0, 0.85
+        out = np.empty(n)
+        scratch = [np.empty(n) for _ in range(4)]
+        expected = np.array(three_passes(list(p), list(g), g0, p_hit, const, w))
+        if cone_ratios(p, g, j0, g0, p_hit, const, w, n, *scratch, out):
+            assert np.array_equal(out, expected)
+        else:
+            skipped += 1
+            assert (expected == 1.0).all()
+    assert 10 < skipped < 290  # both paths taken
 
 
 def test_two_cells_by_hand():

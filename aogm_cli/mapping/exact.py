@@ -10,7 +10,7 @@ import numpy as np
 
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import SensorSpec
-from aogm_cli.sensor_models.cone import ConeTemplates, flat_offsets, reading_geometry
+from aogm_cli.sensor_models.cone import SPARE_MASK, ConeTemplates, flat_offsets, reading_geometry
 from aogm_cli.sensor_models.exact_inverse import BOUND, MARGIN, ExactModelConfig, cone_scratch, exact_inverse_updates
 from aogm_cli.sensor_models.forward_model import ExpectationReadings, ForwardModelConfig, deflect
 from aogm_cli.sensor_models.readings import forward_templates, reading_spans
@@ -20,7 +20,8 @@ class ExactMapper:
     """``update`` with chunks of scans (ranges as ``readings.echo_ranges`` gives them), then
     ``result``, as ``standard.StandardMapper``; the cones are the forward model's (EM's), and
     ``forward`` its parameters. The state is one flat float32 grid of probabilities, -1 until
-    observed; the prior is ``config``'s, the bounds +-``BOUND``."""
+    observed (then SPARE_MASK + 1 spare cells of 0 for cone cells outside the grid:
+    ``exact_inverse.exact_inverse_updates``); the prior is ``config``'s, the bounds +-``BOUND``."""
 
     def __init__(self, sensor: SensorSpec, grid: GridSpec, config: ExactModelConfig, forward: ForwardModelConfig,
                  templates: ConeTemplates | None = None):
@@ -33,7 +34,10 @@ class ExactMapper:
                       float(forward.window), float(sensor.max_range))
         self.bounds = (_sigmoid(-BOUND), _sigmoid(BOUND), float(config.prior))
         self.scratch = cone_scratch(self.templates)
-        self.state = np.full(grid.height * grid.width, -1.0, dtype=np.float32)
+        n = grid.height * grid.width
+        self._flat = np.zeros(n + SPARE_MASK + 1, dtype=np.float32)
+        self.state = self._flat[:n]  # the grid's cells
+        self.state[:] = -1.0
 
     def update(self, pose: np.ndarray, ranges: np.ndarray, cut: np.ndarray | None = None) -> None:
         """Apply scans (pose (T, 3), ranges (T, S)) in order; a finite ``cut`` ((T, S) template
@@ -45,7 +49,7 @@ class ExactMapper:
         readings = ExpectationReadings(rows.reshape(-1).astype(np.int64), cols.reshape(-1).astype(np.int64),
                                        bins.reshape(-1).astype(np.int64), z, limit)
         for span in reading_spans(z.size):  # back in Python between spans, where a signal's handler runs
-            exact_inverse_updates(self.templates.kernel_arrays, self.flat, self.grid.shape, readings, self.state,
+            exact_inverse_updates(self.templates.kernel_arrays, self.flat, self.grid.shape, readings, self._flat,
                                   self.model, self.bounds, self.scratch, span)
 
     def result(self) -> tuple[np.ndarray, np.ndarray]:

@@ -12,7 +12,7 @@ import numba
 import numpy as np
 
 from aogm_cli.core.errors import InputError
-from aogm_cli.sensor_models.cone import cone_flat_cells
+from aogm_cli.sensor_models.cone import cone_flat_cells, range_search
 from aogm_cli.sensor_models.forward_model import cone_entries, cone_reach, gaussian_at
 
 BOUND = 7.0  # the exact model's log-odds stay within +-BOUND (the standard map's clamps starve it)
@@ -71,34 +71,72 @@ class ExactModelConfig:
 # that far), above at it, near 1 behind a likely obstacle, which the beam did not reach. No division
 # by a_j: a cell believed occupied (a_j -> 1 - p_hit) costs nothing extra; and the map is kept as
 # probabilities, so that a cell's update is a few multiplications (no exp or log per cell).
+#
+# Speed (the thinned map's pass; every result bit for bit as the plain three passes above):
+# * most of a cone lies before the Gaussian window (g = 0, ``gaussian_at``): there U_j = 0 and the
+#   terms in g vanish exactly (0 + x = x), so those cells take A_j and R_j alone, S_j(1) = A_j (q R_j)
+#   and S_j(0) = A_j R_j, and no Gaussian is evaluated for them; within the window one exp per
+#   distinct range (a template holds cells of equal range next to each other);
+# * the forward product (A) and the backward one (R) before the window are independent chains of
+#   multiplications: one loop runs both, so that their latencies overlap;
+# * the ratios are a loop without dependencies, vectorised with the divisions (numba's "numpy" error
+#   model: no zero test per division; no denominator here is 0: C > 0, odds + 1 - P >= 1 - P > 0);
+# * a reading whose every w S_j is below half an ulp of C (p(z | m) = C whatever the map: the beam
+#   cannot have come back through the cells before the window, say a max-range reading across
+#   unknown cells) has every ratio exactly 1: it changes no observed cell and marks the others
+#   observed at the prior. Once the forward product A drops below that bound the rest is skipped
+#   (``cone_ratios``' ``floor``). Bounds, g_max the largest of G0 and the window's g: S_j <= A R / q
+#   before the window whatever j (A_j R_j is prod_{l != j} a_l times R at the window, and a_j >= q),
+#   S_j <= A (n_window + 2) g_max within it (R_j is an expectation of g values); their rounding (a
+#   relative 1e-12 over a cone) is covered four times over.
 
 
-@numba.njit(cache=True)
-def cone_ratios(p, g, g0, p_hit, const, w, n, a, u, r, out):
+@numba.njit(cache=True, error_model="numpy")
+def cone_ratios(p, g, j0, g0, p_hit, const, w, n, a, u, r, na, out):
     """out[j] = p(z | m_j = 1) / p(z | m_j = 0) for the first ``n`` cells of one cone: ``p``
-    their occupancy, ``g`` their Gaussians N(z; d_j, sigma^2), ``g0`` G0 = N(z; z_max), ``const``
-    C and ``w`` of the reading (see the comment above). ``a``, ``u``, ``r`` are scratch of at
-    least ``n`` entries."""
+    their occupancy, ``g`` their Gaussians N(z; d_j, sigma^2), of which the first ``j0`` (the
+    cells before the Gaussian window) are 0 and not read, ``g0`` G0 = N(z; z_max), ``const`` C
+    and ``w`` of the reading (see the comment above). ``a``, ``u``, ``r``, ``na`` are scratch of
+    at least ``n`` entries. Returns False, leaving ``out`` unset, when every ratio is exactly 1
+    (the reading explains nothing about these cells; the comment above)."""
     q = 1.0 - p_hit
-    prod = 1.0
-    acc = 0.0
     for j in range(n):
+        na[j] = 1.0 - p_hit * p[j]
+    # backward through the window, and the bound of every S_j per unit of the forward product
+    tail = g0
+    top = g0
+    for j in range(n - 1, j0 - 1, -1):
+        r[j] = tail
+        tail = p[j] * p_hit * g[j] + na[j] * tail
+        top = max(top, g[j])
+    floor = const * 2.0**-56 / (w * top * (n - j0 + 2) / q)
+    # before the window: forward (A) and backward (R) at once
+    prod = 1.0
+    for i in range(j0):
+        a[i] = prod
+        prod *= na[i]
+        jb = j0 - 1 - i
+        r[jb] = tail
+        tail = na[jb] * tail
+        if prod < floor:
+            return False
+    acc = 0.0
+    for j in range(j0, n):
         u[j] = acc
         a[j] = prod  # A_j
         acc += p[j] * p_hit * g[j] * prod
-        prod *= 1.0 - p_hit * p[j]
-    tail = g0
-    for j in range(n - 1, -1, -1):
-        r[j] = tail
-        tail = p[j] * p_hit * g[j] + (1.0 - p_hit * p[j]) * tail
-    for j in range(n):
+        prod *= na[j]
+    for j in range(j0):
+        out[j] = (const + w * (a[j] * (q * r[j]))) / (const + w * (a[j] * r[j]))
+    for j in range(j0, n):
         s1 = u[j] + a[j] * (p_hit * g[j] + q * r[j])
         s0 = u[j] + a[j] * r[j]
         out[j] = (const + w * s1) / (const + w * s0)
+    return True
 
 
 # _nrt=False (as the standard kernel): nothing is allocated per reading; the scratch comes in
-@numba.njit(cache=True, _nrt=False)
+@numba.njit(cache=True, _nrt=False, error_model="numpy")
 def exact_inverse_updates(tpl, flat, shape, readings, state, model, bounds, scratch, span):
     """Apply readings t = span[0] .. span[1] - 1 in order to the flat float32 occupancy ``state``
     (negative: not yet observed, taken as ``bounds[2]``, the prior): each cell of the reading's
@@ -106,11 +144,14 @@ def exact_inverse_updates(tpl, flat, shape, readings, state, model, bounds, scra
     probability then clamped to [bounds[0], bounds[1]].
 
     ``tpl``, ``flat``: the forward templates and their ``cone.FlatOffsets`` for the grid's width;
-    ``shape`` (height, width) of the grid ``state`` covers (plus the spare cells ``cone_flat_cells``
-    sends outside cells to); ``readings`` is ``forward_model.ExpectationReadings`` (template
-    ranges; +inf a max-range reading; ``limit`` cuts a deflected beam); ``model`` (p_rand, p_max,
-    p_hit, sigma, window, z_max); ``scratch`` (``cone_scratch``): (int32 (longest template,),
-    float64 (7, same): p, g, a, u, r, out and the cells' flat ids)."""
+    ``shape`` (height, width) of the grid; ``state`` holds its height * width cells and then
+    SPARE_MASK + 1 spare cells of 0, where ``cone_flat_cells`` sends cone cells outside the grid:
+    occupancy 0 leaves every product and sum unchanged to the last bit (a = 1, no term), so they
+    need no test until the write, which skips them; ``readings`` is
+    ``forward_model.ExpectationReadings`` (template ranges; +inf a max-range reading; ``limit``
+    cuts a deflected beam); ``model`` (p_rand, p_max, p_hit, sigma, window, z_max); ``scratch``
+    (``cone_scratch``): (int32 (longest template,), float64 (7, same): p, g, a, u, r, 1 - p_hit p,
+    out)."""
     p_rand, p_max, p_hit, sigma, window, z_max = model
     p_min, p_max_clamp, prior = bounds
     height, width = shape
@@ -118,6 +159,9 @@ def exact_inverse_updates(tpl, flat, shape, readings, state, model, bounds, scra
     ext = tpl.extent
     ranges = tpl.ranges
     w = 1.0 - p_rand - p_max
+    # what a reading whose ratios are all 1 leaves in an unobserved cell: the prior, as the
+    # update below computes it
+    kept_prior = np.float32(min(max(prior / (prior + 1.0 - prior), p_min), p_max_clamp))
     ib = scratch[0]
     fl = scratch[1]
     p = fl[0]
@@ -125,8 +169,8 @@ def exact_inverse_updates(tpl, flat, shape, readings, state, model, bounds, scra
     a = fl[2]
     u = fl[3]
     r = fl[4]
-    out = fl[5]
-    where = fl[6]
+    na = fl[5]
+    out = fl[6]
     for t in range(span[0], span[1]):  # in order: each reading sees the map the earlier ones left
         z = readings.z[t]
         if not z == z:  # NaN: no reading
@@ -141,24 +185,38 @@ def exact_inverse_updates(tpl, flat, shape, readings, state, model, bounds, scra
         rk = ranges[tpl.offsets[b] : tpl.offsets[b + 1]]
         m = cone_entries(rk, z, limit, sigma, window)
         cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width)
-        n = 0
+        # the cells before the Gaussian window (g = 0): the slack keeps any cell whose g might
+        # not round to 0 in the window
+        j0 = min(range_search(rk, tpl.range_index[b], tpl.resolution, z - window * sigma - 1e-9, False), m)
+        cells = ib[:m]
+        pm = p[:m]
         for j in range(m):
-            c = ib[j]
-            if c >= n_cells:  # outside the grid: no cell, no term
-                continue
-            v = state[c]
-            p[n] = prior if v < 0.0 else v
-            g[n] = gaussian_at(z, rk[j], sigma, window)
-            where[n] = c
-            n += 1
+            v = state[np.uint64(np.uint32(cells[j]))]
+            pm[j] = prior if v < 0.0 else v
+        last = -1.0
+        gj = 0.0
+        for j in range(j0, m):
+            if rk[j] != last:
+                last = rk[j]
+                gj = gaussian_at(z, last, sigma, window)
+            g[j] = gj
         u0 = (z - z_max) / sigma
         g0 = math.exp(-0.5 * u0 * u0) / (math.sqrt(2.0 * math.pi) * sigma)
         const = p_rand / z_max + p_max * g0
-        cone_ratios(p, g, g0, p_hit, const, w, n, a, u, r, out)
-        for j in range(n):
-            c = np.int64(where[j])
-            odds = p[j] * out[j]
-            state[c] = min(max(odds / (odds + 1.0 - p[j]), p_min), p_max_clamp)
+        if not cone_ratios(p, g, j0, g0, p_hit, const, w, m, a, u, r, na, out):
+            for j in range(m):  # every ratio 1: the cone's unobserved cells become observed
+                c = np.uint64(np.uint32(cells[j]))
+                if c < n_cells and state[c] < 0.0:
+                    state[c] = kept_prior
+            continue
+        om = out[:m]
+        for j in range(m):
+            odds = pm[j] * om[j]
+            om[j] = min(max(odds / (odds + 1.0 - pm[j]), p_min), p_max_clamp)
+        for j in range(m):
+            c = np.uint64(np.uint32(cells[j]))
+            if c < n_cells:
+                state[c] = om[j]
 
 
 def cone_scratch(templates) -> tuple[np.ndarray, np.ndarray]:
