@@ -396,3 +396,18 @@ def test_a_window_wide_enough_for_the_gaussian_to_underflow():
     assert index.cell.max() < 10 * GRID.width + 10 and (index.g[index.cell > 10 * GRID.width + 6] > 0.0).all()
     result, _, _ = run_case(case)
     assert result.objective[0] == pytest.approx(log_likelihoods(index, case.start).sum(), rel=1e-9)
+
+
+def test_one_reading_takes_the_kernels_compiled_for_many():
+    # numpy calls a column of a one-row table contiguous (a strided one for many rows): the kernels
+    # take the tables and their columns themselves, so that a problem of one reading (a cluster that
+    # one reading reaches) runs the kernels compiled for many (modes.warm_up compiles no other)
+    kernels = (E.K._reading_extent, E.K._window_rows, E.K._init_state, E.K._objective, E.K._sweep_tiles)
+    run_case(random_case(3))
+    compiled = [list(kernel.signatures) for kernel in kernels]
+    forward = ForwardModelConfig(sigma=0.05, p_rand=0.05, p_hit=0.4, p_max=0.0)
+    case = one_reading_case(0.5, forward, occupied_cols=(8,))
+    case.candidates = np.arange(10 * GRID.width, 11 * GRID.width)
+    result, _, _ = run_case(case)
+    assert result.sweeps >= 1 and result.candidates.size > 0
+    assert [list(kernel.signatures) for kernel in kernels] == compiled

@@ -1,9 +1,9 @@
 """Compile aogm's numba kernels into their on-disk cache before the test workers start (``make test``).
 
 Run as ``python tests/warm_kernels.py em DIR`` and ``python tests/warm_kernels.py rest DIR`` at
-once (``make kernels``): two processes compile two disjoint halves (EM's kernels for many
-readings, calibration's, the exact and standard mappers' and the scores'; the simulator's, which
-writes corridor_door's log into DIR for the other to map, EM's for one reading and the laser's),
+once (``make kernels``): two processes compile two disjoint halves (EM's kernels,
+calibration's, the exact and standard mappers' and the scores'; the simulator's, which writes
+corridor_door's log into DIR for the other to map, and the laser's),
 where every pytest worker would otherwise compile nearly all of them itself on a clean clone, both
 cores compiling the same kernels. Nothing is asserted: a test that needs a kernel compiles it
 anyway if this did not.
@@ -38,7 +38,7 @@ def warm_em(folder: str) -> None:
     from aogm_cli.report.map_run import resolve_params
 
     params = resolve_params()
-    warm_up(sonar(), params, "adaptive", single=False)  # the other process compiles the single reading's
+    warm_up(sonar(), params, "adaptive")
     path = handed(folder, "corridor_door")  # simulated by the other process (the simulator compiled once)
     # learning the beam's opening and the specular angle at walls, calibrated on the log (the
     # detector carries a model for this ring: with it the log would not calibrate)
@@ -79,12 +79,11 @@ def handed(folder: str, world: str, wait: float = 600.0) -> Path:
 
 def warm_rest(folder: str) -> None:
     from aogm_cli.core.log import SensorSpec
-    from aogm_cli.mapping.modes import map_in_mode, tiny_log, warm_single
+    from aogm_cli.mapping.modes import map_in_mode, tiny_log
     from aogm_cli.report.map_run import resolve_params
 
     simulated(folder, "corridor_door")  # first: the other process maps it
     params = resolve_params()
-    warm_single(sonar(), params)  # EM's kernels for one reading, while the other process compiles them for many
     laser = SensorSpec(mount=np.array([[0.0, 0.0, 0.0]]), kind="laser", beam_width=math.radians(0.5), min_range=0.0,
                        max_range=8.0, noise_sigma=0.01)
     map_in_mode(tiny_log(laser), "standard", params)

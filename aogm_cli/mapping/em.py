@@ -130,21 +130,21 @@ def em_readings(cones, templates, grid, z_max: float, config: ForwardModelConfig
     z_eff[:] = np.where(np.isfinite(z), np.minimum(z, z_max), z_max)
     # entries before this range are beyond the Gaussian's window (a margin against rounding)
     lower = z_eff - config.window * config.sigma - 1e-9
-    m, jlo = ints[:, K.I_M], ints[:, K.I_JLO]
-    box = ints[:, K.I_BOX:K.I_BOX + 4].T
-    reach2 = ints[:, K.I_REACH2:K.I_REACH2 + 2].T
-    inside = ints[:, K.I_INSIDE]
+    no_order = np.zeros(0, dtype=np.int32)
+    tables = K.ReadingTables(ints, floats, no_order, no_order, no_order)  # the orders are not needed yet
     for span in reading_spans(n):
-        K._reading_extent(templates.kernel_arrays, K.row_groups(templates), (rows, cols, bins, z_eff, limits, lower),
-                          (float(config.sigma), float(config.window)), grid.shape, (m, jlo, box, reach2, inside), span)
+        K._reading_extent(templates.kernel_arrays, K.row_groups(templates), tables, (limits, lower),
+                          (float(config.sigma), float(config.window)), grid.shape, span)
     g0, const, _ = reading_constants(z, z_max, config)
     floats[:, K.F_G0] = g0
     floats[:, K.F_CONST] = const
+    box = ints[:, K.I_BOX:K.I_BOX + 4].T
     window_hi = ints[:, K.I_WINDOW_HI]
-    rd = K.EMReadings(rows, cols, bins, z_eff, floats[:, K.F_G0], floats[:, K.F_CONST], m, jlo, box, reach2, inside,
-                      window_hi, _order(box[0]), _order(box[1]), np.zeros(0, dtype=np.int32), ints, floats)
+    rd = K.EMReadings(rows, cols, bins, z_eff, floats[:, K.F_G0], floats[:, K.F_CONST], ints[:, K.I_M],
+                      ints[:, K.I_JLO], box, ints[:, K.I_REACH2:K.I_REACH2 + 2].T, ints[:, K.I_INSIDE], window_hi,
+                      _order(box[0]), _order(box[1]), no_order, ints, floats)
     for span in reading_spans(n):
-        K._window_rows(templates.kernel_arrays, rd, grid.height, window_hi, span)  # needs the fields above only
+        K._window_rows(templates.kernel_arrays, tables, grid.height, span)  # needs the columns above only
     return rd._replace(window_leave=_order(window_hi))
 
 
@@ -189,8 +189,9 @@ def em_problem(rd: K.EMReadings, templates, shape: tuple[int, int], occupied: np
         labels = np.ascontiguousarray(labels, dtype=np.int64).reshape(-1)
         marks = (seen, labels, np.arange(int(labels.max(initial=0)) + 1, dtype=np.int64), np.empty((4, n), dtype=np.int64))
     flat, occupied = flat_offsets(templates, shape[1]), _flat_bool(occupied)
+    tables = K.reading_tables(rd)
     for span in reading_spans(n):
-        K._init_state(templates.kernel_arrays, flat, rd, model, occupied, shape, marks, state, span)
+        K._init_state(templates.kernel_arrays, flat, tables, model, occupied, shape, marks, span)  # into state
     parent = None
     if labels is not None:
         box = rd.ints[:, K.I_BOX:K.I_BOX + 4].T
@@ -266,6 +267,11 @@ def _grown(work: K.TileWork) -> K.TileWork:
     return work._replace(**grow)
 
 
+# the sweep's stand-in for TileWork.slot: it takes the column from the readings' table itself
+# (``em_kernels.ReadingTables``), the one layout whatever the readings
+NO_SLOT = np.zeros(0, dtype=np.int32)
+
+
 def _scratch_bytes(work: K.TileWork) -> int:
     return int(sum(a.nbytes for a in work))
 
@@ -279,10 +285,11 @@ def run_em(problem: EMProblem, occupied: np.ndarray, candidates: np.ndarray, con
     once more, so that its residuals describe the map it leaves (not needed between the sweeps
     of a calibration)."""
     occupied = _flat_bool(occupied)
-    rd, model, state = problem.readings, problem.model, problem.state
+    rd, model = problem.readings, problem.model
     tpl, groups = problem.templates.kernel_arrays, K.row_groups(problem.templates)
     flat = flat_offsets(problem.templates, problem.shape[1])
     cand = _candidates(candidates, problem.shape)._replace(occupied=occupied)
+    tables = K.reading_tables(rd)  # the readings and their state as the kernels take them
     work = _work(rd, cand.tile_clock.shape[1])
     ctl = work.ctl
     peak = [0, _scratch_bytes(work)]
@@ -297,7 +304,7 @@ def run_em(problem: EMProblem, occupied: np.ndarray, candidates: np.ndarray, con
         work.slot.fill(-1)
         while True:
             ctl[K.CTL_BUDGET] = K.PAUSE_WORK
-            status = K._sweep_tiles(tpl, flat, groups, rd, model, cand, state, work)
+            status = K._sweep_tiles(tpl, flat, groups, tables, model, cand, work._replace(slot=NO_SLOT))
             if status == K.DONE:
                 break
             if status == K.NEED_BUFFERS:
@@ -307,14 +314,14 @@ def run_em(problem: EMProblem, occupied: np.ndarray, candidates: np.ndarray, con
         peak[0] = max(peak[0], work.pair_pos.shape[0])
         return tuple(int(ctl[i] - b) for i, b in zip((K.CTL_FLIPS, K.CTL_SCORED, K.CTL_PAIRS), before, strict=True))
 
-    objective = [K._objective(rd, model, state, occupied, cand.cell)]
+    objective = [K._objective(tables, model, occupied, cand.cell)]
     flips, scored, pairs = [], [], []
     for sweep in range(1, config.max_sweeps + 1):
         n_flips, n_scored, n_pairs = one_pass(K.SWEEP)
         flips.append(n_flips)
         scored.append(n_scored)
         pairs.append(n_pairs)
-        objective.append(K._objective(rd, model, state, occupied, cand.cell))
+        objective.append(K._objective(tables, model, occupied, cand.cell))
         if progress:
             progress(sweep, n_flips, objective[-1])
         if n_flips == 0:

@@ -121,26 +121,12 @@ def tiny_log(sensor: SensorSpec) -> Log:
     return Log(np.arange(3.0), pose, ranges, sensor, source="warm-up")
 
 
-def one_reading(sensor: SensorSpec) -> Log:
-    """One scan of the first sensor of ``sensor``, one echo: EM's smallest problem."""
-    z = 0.5 * (max(sensor.min_range, 0.0) + sensor.max_range)
-    return Log(np.zeros(1), np.zeros((1, 3)), np.full((1, 1), z, dtype=np.float32),
-               dataclasses.replace(sensor, mount=np.asarray(sensor.mount)[:1]), source="warm-up")
-
-
-def warm_single(sensor: SensorSpec, params: MapParams) -> None:
-    """Compile EM's kernels for a problem of one reading: numpy calls a one-element column
-    contiguous, so numba compiles them again for it (a cluster that one reading reaches), which
-    would otherwise happen on the clock."""
-    calibration = dataclasses.replace(params.calibration, enabled=False)
-    map_in_mode(one_reading(sensor), "em", dataclasses.replace(params, calibration=calibration))
-
-
-def warm_up(sensor: SensorSpec, params: MapParams, mode: str, single: bool = True) -> None:
+def warm_up(sensor: SensorSpec, params: MapParams, mode: str) -> None:
     """Compile (or load from numba's cache) the kernels ``mode`` runs, by running the mode's
     own pipeline on ``tiny_log(sensor)``, so that ``runtime_s`` leaves compilation out. EM
-    modes run twice (to convergence and stopped by the sweep limit: each ends in its own kernel), then
-    on a single reading (``warm_single``; ``single`` False leaves that out).
+    modes run twice (to convergence and stopped by the sweep limit: each ends in its own kernel);
+    EM's kernels take the same types whatever the number of readings (``em_kernels.ReadingTables``),
+    so that these serve a cluster of one reading too.
     Cached kernels are loaded without numba's full start-up (``core.jit_cache``)."""
     jit_cache.load_lean()
     log = tiny_log(sensor)
@@ -153,5 +139,3 @@ def warm_up(sensor: SensorSpec, params: MapParams, mode: str, single: bool = Tru
         one_sweep = dataclasses.replace(params, em=dataclasses.replace(params.em, forward=forward, max_sweeps=1),
                                         calibration=dataclasses.replace(params.calibration, learn=learn))
         map_in_mode(log, mode, one_sweep)
-        if single:
-            warm_single(sensor, params)

@@ -1,12 +1,14 @@
 """The layout of EM's kernels' arrays: the readings' int and float columns, the control
-words of a sweep, the named tuples the kernels take (``RowGroups``, ``EMReadings``, ``EMModel``,
-``EMState``, ``Candidates``, ``TileWork``) and the templates grouped by row."""
+words of a sweep, the named tuples the kernels take (``RowGroups``, ``ReadingTables``, ``EMModel``,
+``Candidates``, ``TileWork``) and those they take apart (``EMReadings``, ``EMState``), and the
+templates grouped by row."""
 
 from __future__ import annotations
 
 import functools
 from typing import NamedTuple
 
+import numba
 import numpy as np
 from llvmlite import ir
 from numba import types
@@ -18,8 +20,8 @@ __all__ = [  # what the package re-exports: the layout every caller of the kerne
     "CTL_SCORED", "CTL_SEG", "CTL_SIZE", "CTL_WINDOW_LEAVE", "Candidates", "DONE", "EMModel", "EMReadings",
     "EMState", "FLOATS", "F_CONST", "F_G0", "F_LOG", "F_RATIO", "F_S", "F_WSUM", "F_Z", "INTS", "I_BIN",
     "I_BOX", "I_COL0", "I_INSIDE", "I_JLO", "I_M", "I_NFAR", "I_NOBS", "I_REACH2", "I_ROW0", "I_SLOT",
-    "I_STAMP", "I_WINDOW_HI", "NEED_BUFFERS", "PAUSED", "PAUSE_WORK", "RowGroups", "SCORE", "SEGMENT",
-    "SWEEP", "TileWork", "row_groups",
+    "I_STAMP", "I_WINDOW_HI", "NEED_BUFFERS", "PAUSED", "PAUSE_WORK", "ReadingTables", "RowGroups", "SCORE",
+    "SEGMENT", "SWEEP", "TileWork", "reading_tables", "row_groups",
 ]
 
 SWEEP = 0  # TileWork.ctl[CTL_MODE]: flip candidates that raise the objective
@@ -119,6 +121,52 @@ class EMState(NamedTuple):
     stamp: np.ndarray  # (R,) int32 the clock when the reading last changed
 
 
+class ReadingTables(NamedTuple):
+    """What the kernels take of an ``EMReadings`` (``reading_tables``): its two tables and its
+    orders, from which they take the columns (``_columns``).
+
+    A column of a table is strided, unless the table has one row (or none): numpy calls such a
+    column contiguous and numba would compile every kernel again for it (for a cluster that one
+    reading reaches). A table is contiguous whatever its rows, so the kernels have one signature,
+    and their columns, taken in compiled code, are the strided arrays they were compiled for.
+    """
+
+    ints: np.ndarray  # (R, INTS) int32
+    floats: np.ndarray  # (R, FLOATS) float64
+    enter: np.ndarray  # int32 EMReadings' orders
+    leave: np.ndarray
+    window_leave: np.ndarray
+
+
+def reading_tables(rd: EMReadings) -> ReadingTables:
+    """The ``ReadingTables`` of ``rd`` (its columns must be those of its tables, as
+    ``em.em_readings`` and ``em.em_problem`` make them)."""
+    return ReadingTables(rd.ints, rd.floats, rd.enter, rd.leave, rd.window_leave)
+
+
+@numba.njit(cache=True, inline="always")
+def _columns(tables):
+    """Compiled: the ``EMReadings`` and ``EMState`` of ``tables`` (``ReadingTables``), views of
+    its columns."""
+    ints, floats = tables.ints, tables.floats
+    rd = EMReadings(ints[:, I_ROW0], ints[:, I_COL0], ints[:, I_BIN], floats[:, F_Z], floats[:, F_G0],
+                    floats[:, F_CONST], ints[:, I_M], ints[:, I_JLO], ints[:, I_BOX:I_BOX + 4].T,
+                    ints[:, I_REACH2:I_REACH2 + 2].T, ints[:, I_INSIDE], ints[:, I_WINDOW_HI], tables.enter,
+                    tables.leave, tables.window_leave, ints, floats)
+    state = EMState(floats[:, F_S], floats[:, F_WSUM], ints[:, I_NOBS], ints[:, I_NFAR],
+                    floats[:, F_RATIO:F_RATIO + 2], floats[:, F_LOG:F_LOG + 2], ints[:, I_STAMP])
+    return rd, state
+
+
+@numba.njit(cache=True, inline="always")
+def _tile_work(scratch, slot):
+    """Compiled: ``scratch`` (a ``TileWork`` whose ``slot`` is a stand-in) with ``slot``, the
+    column of the readings' int table (``ReadingTables``) that holds their arena slots."""
+    s = scratch
+    return TileWork(s.ctl, s.active, s.seg_ptr, s.seg_list, s.count, s.pair_pos, s.pair_j, s.pair_g, slot, s.obs_j,
+                    s.obs_g, s.pre, s.seg_fill, s.tile_t, s.far_lo, s.far_hi, s.far_sum, s.spans, s.seg_mask)
+
+
 class Candidates(NamedTuple):
     """The cells EM may flip, in flat-id order, and what the sweeps remember of each."""
 
@@ -142,7 +190,8 @@ class TileWork(NamedTuple):
     pair_pos: np.ndarray  # int64 listing (position in the tile's reading list) of each window pair
     pair_j: np.ndarray  # int64 template entry
     pair_g: np.ndarray  # float64 its Gaussian (0 before the window)
-    slot: np.ndarray  # (R,) int32 where each active reading's window obstacles are in the arena (-1: none)
+    slot: np.ndarray  # (R,) int32 where each active reading's window obstacles are in the arena (-1: none);
+    # a column of the readings' int table (I_SLOT), which the sweep takes itself (``_tile_work``)
     obs_j: np.ndarray  # int64 arena: per slot its reading (header), then a bit per window entry (occupied or not)
     obs_g: np.ndarray  # float64 arena: the window obstacles' Gaussians, in range order
     pre: np.ndarray  # float64 arena: their prefix sums (one more than obstacles)

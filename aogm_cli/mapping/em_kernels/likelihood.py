@@ -9,6 +9,7 @@ import math
 import numba
 import numpy as np
 
+from aogm_cli.mapping.em_kernels.layout import _columns
 from aogm_cli.mapping.em_kernels.readings import _entry_cell
 from aogm_cli.mapping.em_kernels.windows import _rank
 from aogm_cli.sensor_models.forward_model import gaussian_at
@@ -47,9 +48,9 @@ def _find(parent, x):
 # _nrt=False (a private numba option): the kernel allocates nothing, and without numba's
 # reference counting its tuples' arrays cost nothing per reading
 @numba.njit(cache=True, _nrt=False)
-def _init_state(tpl, flat, rd, model, occupied, grid_shape, marks, state, span):
-    """The ``EMState`` of each reading span[0] <= t < span[1] under ``occupied`` (one walk of
-    its cone, nearest first).
+def _init_state(tpl, flat, tables, model, occupied, grid_shape, marks, span):
+    """The ``EMState`` (in ``tables``, ``ReadingTables``) of each reading span[0] <= t < span[1]
+    under ``occupied`` (one walk of its cone, nearest first).
 
     ``marks`` = (seen, labels, parent, box): with a non-empty ``seen`` (flat bool) every
     cone cell is marked in it; with non-empty ``labels`` (flat int, 0 outside every cluster)
@@ -57,6 +58,7 @@ def _init_state(tpl, flat, rd, model, occupied, grid_shape, marks, state, span):
     gets the rows and columns of each reading's cluster cells (row_lo > row_hi: none), the
     only ones EM may flip: the reading need only be active there.
     """
+    rd, state = _columns(tables)
     seen, labels, parent, box = marks
     height, width = grid_shape
     qpow = model.qpow
@@ -221,8 +223,10 @@ def _update_reading(t, j, g, adding, model, rd, state, work):
 
 
 @numba.njit(cache=True)
-def _objective(rd, model, state, occupied, cand_cell):
-    """sum_t log p(z_t | m) plus l_prior per occupied candidate."""
+def _objective(tables, model, occupied, cand_cell):
+    """sum_t log p(z_t | m) plus l_prior per occupied candidate (the readings and their state in
+    ``tables``, ``ReadingTables``)."""
+    rd, state = _columns(tables)
     const = rd.const
     w = model.w
     s = state.s

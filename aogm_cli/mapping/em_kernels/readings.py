@@ -6,6 +6,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from aogm_cli.mapping.em_kernels.layout import _columns
 from aogm_cli.sensor_models.forward_model import cone_entries
 
 
@@ -23,17 +24,19 @@ def _entry_cell(tpl, k, j, row0, col0, height, width):
 
 
 @numba.njit(cache=True)
-def _reading_extent(tpl, groups, readings, gauss, grid_shape, out, span):
-    """Per reading span[0] <= t < span[1] of ``readings`` = (rows, cols, bins, z, limits,
-    lower): the entries of its cone (m: up to ``limits``, and beyond z only while the
-    Gaussian, ``gauss`` = (sigma, window), is not 0, as ``forward_model.cone_entries``), the
-    first entry at range >= ``lower`` (jlo), the grid rows and columns its cone spans (row_lo >
-    row_hi: none) and the squared offsets (cells) of entries m - 1 and jlo - 1
-    (``EMReadings.reach2``)."""
-    rows, cols, bins, z, limits, lower = readings
+def _reading_extent(tpl, groups, tables, bounds, gauss, grid_shape, span):
+    """Per reading span[0] <= t < span[1] of ``tables`` (``ReadingTables``: its cells, bins and
+    z), with ``bounds`` = (limits, lower): the entries of its cone (m: up to ``limits``, and
+    beyond z only while the Gaussian, ``gauss`` = (sigma, window), is not 0, as
+    ``forward_model.cone_entries``), the first entry at range >= ``lower`` (jlo), the grid rows
+    and columns its cone spans (row_lo > row_hi: none) and the squared offsets (cells) of entries
+    m - 1 and jlo - 1 (``EMReadings.reach2``), into the tables' columns."""
+    rd, _ = _columns(tables)
+    rows, cols, bins, z = rd.row0, rd.col0, rd.bin, rd.z
+    limits, lower = bounds
     sigma, window = gauss
     height, width = grid_shape
-    out_m, out_jlo, out_box, out_reach2, out_inside = out
+    out_m, out_jlo, out_box, out_reach2, out_inside = rd.m, rd.jlo, rd.box, rd.reach2, rd.inside
     for t in range(span[0], span[1]):
         k = bins[t]
         b = tpl.base_bin[k]
@@ -78,9 +81,11 @@ def _reading_extent(tpl, groups, readings, gauss, grid_shape, out, span):
 
 
 @numba.njit(cache=True)
-def _window_rows(tpl, rd, height, out, span):
+def _window_rows(tpl, tables, height, span):
     """The last grid row of the window cells (entries jlo .. m - 1; -1: none) of each reading
-    span[0] <= t < span[1]."""
+    span[0] <= t < span[1] of ``tables`` (``ReadingTables``), into its column ``window_hi``."""
+    rd, _ = _columns(tables)
+    out = rd.window_hi
     for t in range(span[0], span[1]):
         k = rd.bin[t]
         s0 = tpl.offsets[tpl.base_bin[k]]

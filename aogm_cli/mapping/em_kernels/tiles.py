@@ -37,10 +37,13 @@ from aogm_cli.mapping.em_kernels.layout import (
     CTL_SEG,
     CTL_WINDOW_LEAVE,
     DONE,
+    I_SLOT,
     NEED_BUFFERS,
     PAUSED,
     SEGMENT,
     SWEEP,
+    _columns,
+    _tile_work,
     _trailing_zeros,
 )
 from aogm_cli.mapping.em_kernels.likelihood import _far_changed, _flip_gain, _set_sum, _update_reading
@@ -277,11 +280,13 @@ def _row_unchanged(rd, cand, state, work, r, n_seg):
     return True
 
 
-# _nrt=False: the sweep allocates nothing (its scratch comes in ``work``), and without numba's
+# _nrt=False: the sweep allocates nothing (its scratch comes in ``scratch``), and without numba's
 # reference-counting runtime the arrays it hands to the inlined helpers cost nothing per call
 @numba.njit(cache=True, _nrt=False)
-def _sweep_tiles(tpl, flat, groups, rd, model, cand, state, work):
-    """One pass over the candidates in flat-id order, tile by tile (see the module docstring):
+def _sweep_tiles(tpl, flat, groups, tables, model, cand, scratch):
+    """One pass over the candidates in flat-id order, tile by tile (see the module docstring), of
+    the readings and their state in ``tables`` (``ReadingTables``), with ``scratch`` (a
+    ``TileWork``, its ``slot`` a stand-in: the tables' column is taken here, ``_tile_work``):
     ctl[CTL_MODE] SWEEP keeps each flip that raises the objective, SCORE scores every
     candidate into ``last_gain`` and flips none.
 
@@ -297,6 +302,8 @@ def _sweep_tiles(tpl, flat, groups, rd, model, cand, state, work):
     there, with the row's listing kept, ctl[CTL_LISTED]), else DONE. Every call does at least
     one tile or row before it pauses; where it pauses changes nothing computed.
     """
+    rd, state = _columns(tables)
+    work = _tile_work(scratch, rd.ints[:, I_SLOT])
     ctl = work.ctl
     height, n_seg = cand.tile_clock.shape
     width = cand.of_cell.shape[0] // height
