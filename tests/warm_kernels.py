@@ -1,9 +1,9 @@
 """Compile aogm's numba kernels into their on-disk cache before the test workers start (``make test``).
 
 Run as ``python tests/warm_kernels.py em DIR`` and ``python tests/warm_kernels.py rest DIR`` at
-once (``make kernels``): two processes compile two disjoint halves (EM's kernels,
-calibration's, the exact and standard mappers' and the scores'; the simulator's, which writes
-corridor_door's log into DIR for the other to map, and the laser's),
+once (``make kernels``): two processes compile two disjoint halves (EM's kernels and
+calibration's; the simulator's, which writes corridor_door's log into DIR for the other to map
+with EM, the laser's, the exact model's, the held-out scores' and the consistency's),
 where every pytest worker would otherwise compile nearly all of them itself on a clean clone, both
 cores compiling the same kernels. Nothing is asserted: a test that needs a kernel compiles it
 anyway if this did not.
@@ -31,22 +31,32 @@ def sonar():
 
 
 def warm_em(folder: str) -> None:
-    from aogm_cli.evaluation.consistency import map_consistency
-    from aogm_cli.evaluation.holdout import HoldoutSplit, holdout_scores, split_log
     from aogm_cli.io.logfile import LogReader
-    from aogm_cli.mapping.modes import map_in_mode, map_source, warm_up
+    from aogm_cli.mapping.modes import map_in_mode, warm_up
     from aogm_cli.report.map_run import resolve_params
 
-    params = resolve_params()
-    warm_up(sonar(), params, "adaptive")
+    warm_up(sonar(), resolve_params(), "adaptive")
     path = handed(folder, "corridor_door")  # simulated by the other process (the simulator compiled once)
     # learning the beam's opening and the specular angle at walls, calibrated on the log (the
     # detector carries a model for this ring: with it the log would not calibrate)
     learn = {"calibration": {"learn": "sigma,p_rand,p_hit,p_max,specular_deg,opening_deg", "rounds": 1,
                              "carried": False}}
-    thin = dataclasses.replace(params, exact=dataclasses.replace(params.exact, thin=True))
     with LogReader(path) as reader:
         map_in_mode(reader, "em", resolve_params(None, learn))
+
+
+def warm_standard(path: Path) -> None:
+    """The thinned standard map (the exact model's kernel), held-out scores and the map's
+    consistency with the log, on the log at ``path``."""
+    from aogm_cli.evaluation.consistency import map_consistency
+    from aogm_cli.evaluation.holdout import HoldoutSplit, holdout_scores, split_log
+    from aogm_cli.io.logfile import LogReader
+    from aogm_cli.mapping.modes import map_source
+    from aogm_cli.report.map_run import resolve_params
+
+    params = resolve_params()
+    thin = dataclasses.replace(params, exact=dataclasses.replace(params.exact, thin=True))
+    with LogReader(path) as reader:
         m = map_source(reader, "standard", thin)
         split = HoldoutSplit(0.1, 1)
         kept, _ = split_log(reader, split)
@@ -82,11 +92,12 @@ def warm_rest(folder: str) -> None:
     from aogm_cli.mapping.modes import map_in_mode, tiny_log
     from aogm_cli.report.map_run import resolve_params
 
-    simulated(folder, "corridor_door")  # first: the other process maps it
+    door = simulated(folder, "corridor_door")  # first: the other process maps it with EM
     params = resolve_params()
     laser = SensorSpec(mount=np.array([[0.0, 0.0, 0.0]]), kind="laser", beam_width=math.radians(0.5), min_range=0.0,
                        max_range=8.0, noise_sigma=0.01)
     map_in_mode(tiny_log(laser), "standard", params)
+    warm_standard(door)
     for world in ("corridor_door_real", "cluttered_lab_real", "cluttered_lab_pioneer"):
         simulated(folder, world)  # the simulator with errors, side lobes and sequential firing
 
