@@ -37,7 +37,7 @@ def run(*args, env=None):
 def cluster(require):
     """A two-worker LocalCluster (one thread each, separate processes); its scheduler's address."""
     distributed = require.module("distributed")
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as c:
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as c:
         yield c.scheduler_address
 
 

@@ -236,7 +236,7 @@ def test_cluster_page(workspace, tiny_door_world, require):
     (workspace / "worlds").mkdir()
     (workspace / "worlds" / "tiny_door.yaml").write_text(tiny_door_world)
     (workspace / "logs").mkdir()
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as c:
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as c:
         ws = Workspace(workspace, {"tcp://10.0.0.5:8786": c.scheduler_address, "/shared/": "", "--seeds 1-100":
                                    "--seeds 1-3"})
         run_page(ws, lines_of("cluster.md"))
