@@ -65,12 +65,14 @@ def _init_state(tpl, flat, tables, model, occupied, grid_shape, marks, span):
     p_hit = model.p_hit
     mark = seen.shape[0] > 0
     join = labels.shape[0] > 0
+    inv_width = 1.0 / width
     for t in range(span[0], span[1]):
         state.stamp[t] = 0
         far = 0
         k = 0
         acc = 0.0
         first = 0
+        last = 0  # the cluster of the cone's last cluster cell: the next is mostly in it too
         if join:
             box[0, t] = height
             box[1, t] = -1
@@ -91,7 +93,11 @@ def _init_state(tpl, flat, tables, model, occupied, grid_shape, marks, span):
                 if mark:
                     seen[cell] = True
                 if join and labels[cell] > 0:
-                    row = cell // width
+                    row = np.int64(cell * inv_width)  # cell // width without a division per cell:
+                    if row * width > cell:  # the product is off by at most one row either way
+                        row -= 1
+                    elif (row + 1) * width <= cell:
+                        row += 1
                     col = cell - row * width
                     box[0, t] = min(box[0, t], row)
                     box[1, t] = max(box[1, t], row)
@@ -99,11 +105,12 @@ def _init_state(tpl, flat, tables, model, occupied, grid_shape, marks, span):
                     box[3, t] = max(box[3, t], col)
                     if first == 0:
                         first = labels[cell]
-                    else:
+                    elif labels[cell] != last:  # the same cluster again joins nothing
                         a = _find(parent, first)
                         c = _find(parent, labels[cell])
                         if a != c:
                             parent[max(a, c)] = min(a, c)
+                    last = labels[cell]
                 if not occupied[cell]:
                     continue
                 g = 0.0 if j < rd.jlo[t] else gaussian_at(rd.z[t], tpl.ranges[s0 + j], model.sigma, model.window)
