@@ -70,10 +70,10 @@ bench: $(STAMP)
 
 # Benchmarks at building scale (not part of test or bench; README "Benchmarks at scale"): adaptive
 # mapping on the two seed worlds (best of BENCH_RUNS, one process), then the generated office floor at
-# SCALE_SIZES scans in every mode of SCALE_MODES, each map in its own process under SCALE_MEMORY of
+# SCALE_SIZES scans in every mode of SCALE_MODES (/1: on one thread), each map in its own process under SCALE_MEMORY of
 # address space (a run that does not fit is a failed row). Worlds, logs, maps and JSON: out/bench-scale/.
 SCALE_SIZES  ?= 2000,10000,50000,200000
-SCALE_MODES  ?= standard,em,adaptive,adaptive:all,adaptive:none
+SCALE_MODES  ?= standard,em,em/1,adaptive,adaptive/1,adaptive:all,adaptive:none
 SCALE_MEMORY ?= 12G
 SCALE_ARGS   ?=
 BENCH_RUNS   ?= 5

@@ -1,12 +1,12 @@
 """Benchmark at building scale: the generated office at 2k to 200k scans, mapped in every mode.
 
 Run as ``python bench/bench_scale.py [--sizes 2000,10000,50000,200000]
-[--modes standard,em,adaptive,adaptive:all,adaptive:none] [--skip em@200000] [--repeat N]
+[--modes standard,em,em/1,adaptive,adaptive/1,adaptive:all,adaptive:none] [--skip em@200000] [--repeat N]
 [--timeout S] [--max-memory 12G] [--address-space SIZE] [--workdir DIR] [--json OUT]``
 (``make bench-scale``). For each size it writes the office world of ``bench/office_world.py``
 (60 m x 40 m, 40 rooms, 24 sonars), simulates it (``aogm simulate --seed 1``) and maps the log
 in every mode (``adaptive:all`` and ``adaptive:none`` are ``aogm map --mode adaptive
---detector all|none``), each map made by ``aogm map`` in its own process, so that its peak RSS
+--detector all|none``; ``/1``: with ``--threads 1``, else on every core), each map made by ``aogm map`` in its own process, so that its peak RSS
 (``ru_maxrss`` from ``os.wait4``) is its own. The standard map is made first at every size.
 Every child runs under an address-space limit (``RLIMIT_AS``: ``--address-space``, by default
 ``--max-memory``, which is also aogm's own estimate check) and ``--timeout``: a run that is
@@ -48,12 +48,16 @@ MODES = ("standard", "em", "adaptive", "adaptive:all", "adaptive:none")
 SONARS = 24
 
 
-def parse_mode(label: str) -> tuple[str, str | None]:
-    """(mode, detector) of a row label: ``adaptive:all`` is adaptive with ``--detector all``."""
-    mode, _, detector = label.partition(":")
-    if mode not in ("standard", "em", "adaptive") or (detector and mode != "adaptive"):
-        raise ValueError(f"expected standard, em, adaptive or adaptive:DETECTOR, got {label!r}")
-    return mode, detector or None
+def parse_mode(label: str) -> tuple[str, str | None, int | None]:
+    """(mode, detector, threads) of a row label: ``adaptive:all`` is adaptive with ``--detector
+    all``, ``em/1`` em with ``--threads 1`` (no ``/N``: every core, aogm's default)."""
+    name, slash, threads = label.partition("/")
+    mode, _, detector = name.partition(":")
+    if (mode not in ("standard", "em", "adaptive") or (detector and mode != "adaptive")
+            or (slash and not (threads.isdigit() and int(threads) >= 1))):
+        raise ValueError(f"expected standard, em, adaptive or adaptive:DETECTOR, each with /THREADS or not, "
+                         f"got {label!r}")
+    return mode, detector or None, int(threads) if slash else None
 
 
 @dataclass
@@ -143,12 +147,14 @@ def map_row(log: Path, scans: int, label: str, folder: Path, args) -> Row:
     """Map ``log`` in ``label``'s mode ``args.repeat`` times, each in a child process: the best
     run's runtime_s and /stats, the shortest wall time, the largest peak RSS; the first failure
     makes the row a failure."""
-    mode, detector = parse_mode(label)
+    mode, detector, threads = parse_mode(label)
     readings = scans * SONARS
-    out = folder / f"office_{scans}_{label.replace(':', '_')}.h5"
+    out = folder / f"office_{scans}_{label.replace(':', '_').replace('/', '_t')}.h5"
     cmd = [AOGM, "map", str(log), "--mode", mode, "-o", str(out), "--quiet", "--max-memory", args.max_memory]
     if detector:
         cmd += ["--detector", detector]
+    if threads:
+        cmd += ["--threads", str(threads)]
     row = Row(scans, readings, label, "ok")
     for _ in range(args.repeat):
         child = run_child(cmd, args.timeout, args.limit_as, out.with_suffix(".stderr"))

@@ -5,7 +5,8 @@ bench-scale``). Simulates corridor_door and corridor_specular (seed 1) and maps 
 one process with ``aogm_cli.mapping.modes.map_file`` (which compiles every kernel first, outside
 ``runtime_s``): standard, em, adaptive with the packaged detector, and adaptive with
 ``--detector all`` and ``--detector none``, and with the thinned map outside its clusters
-(``adaptive:thinned``), ``--runs`` rounds of every mode, keeping each
+(``adaptive:thinned``), em and adaptive on one thread too (``em/1``, ``adaptive/1``; the
+others on every core, aogm's default), ``--runs`` rounds of every mode, keeping each
 mode's best ``runtime_s``. Each map is evaluated against its log's truth as ``aogm compare`` does
 (``evaluation.metrics.evaluate``, and the planner's leak and block). ``standard:thin`` is the
 standard mode with ``exact.thin`` (the Elfes map thinned by the exact inverse model); ``--params``
@@ -25,6 +26,7 @@ from pathlib import Path
 
 from bench_scale import parse_mode
 
+from aogm_cli.core.budget import Limits, using
 from aogm_cli.evaluation.metrics import evaluate
 from aogm_cli.evaluation.planner import ROBOT_RADIUS, planner_metrics
 from aogm_cli.io.logfile import LogReader, write_log
@@ -34,20 +36,26 @@ from aogm_cli.world.loader import load_world
 
 ROOT = Path(__file__).resolve().parents[1]
 WORLDS = ("corridor_door", "corridor_specular")
-LABELS = ("standard", "standard:thin", "em", "adaptive", "adaptive:thinned", "adaptive:all", "adaptive:none")
+LABELS = ("standard", "standard:thin", "em", "em/1", "adaptive", "adaptive/1", "adaptive:thinned", "adaptive:all",
+          "adaptive:none")
+# em/1, adaptive/1: on one thread (the others on every core, aogm's default: ``--threads``)
 # adaptive:thinned: adaptive with the thinned map outside its clusters (docs/algorithms.md)
 THINNED = {"adaptive": {"outside": "thinned", "contested": 0.1, "weak": 0, "grow": 0}}
 
 
 def mapped(log_path: Path, label: str, params):
-    """The map of ``label``: a mode, ``adaptive:DETECTOR`` or ``standard:thin``."""
+    """The map of ``label``: a mode, ``adaptive:DETECTOR`` or ``standard:thin``, ``/N`` on N threads."""
+    name, _, threads = label.partition("/")
+    if threads:
+        with using(Limits(threads=int(threads))):
+            return mapped(log_path, name, params)
     if label == "standard:thin":
         thin = dataclasses.replace(params, exact=dataclasses.replace(params.exact, thin=True))
         return map_file(log_path, "standard", thin)
     if label == "adaptive:thinned":
         adaptive = dataclasses.replace(params.adaptive, **THINNED["adaptive"])
         return map_file(log_path, "adaptive", dataclasses.replace(params, adaptive=adaptive))
-    mode, detector = parse_mode(label)
+    mode, detector, _ = parse_mode(label)
     return map_file(log_path, mode, params, detector)
 
 
@@ -129,10 +137,16 @@ def report(world: str, rows: dict[str, dict]) -> dict:
     print(f"  adaptive:thinned: x{thin['runtime_s'] / std:.2f} standard, em / it x{em['runtime_s'] / thin['runtime_s']:.2f}; "
           f"- em: accuracy {thin['accuracy'] - em['accuracy']:+.4f}, leak {thin['leak'] - em['leak']:+.4f}, "
           f"block {thin['block'] - em['block']:+.4f}; checks {thin['checks_passed']}/{thin['checks']}")
+    em1, ad1 = rows["em/1"], rows["adaptive/1"]
+    print(f"  threads: em on one / on all x{em1['runtime_s'] / em['runtime_s']:.2f}, adaptive "
+          f"x{ad1['runtime_s'] / ad['runtime_s']:.2f}; on one thread: em x{em1['runtime_s'] / std:.2f} standard, "
+          f"adaptive x{ad1['runtime_s'] / std:.2f}")
     print(f"  packaged detector vs --detector all: runtime all / packaged x{speedup:.2f} (target >= 1.5: "
           f"{verdict(speedup >= 1.5)}), accuracy packaged - all {vs_all:+.4f} (target within 0.002: "
           f"{verdict(abs(vs_all) <= 0.002)})")
     return {"adaptive_over_standard": ratio, "em_over_adaptive": faster, "em_over_standard": em_ratio,
+            "em_one_thread_over_all": em1["runtime_s"] / em["runtime_s"],
+            "adaptive_one_thread_over_all": ad1["runtime_s"] / ad["runtime_s"],
             "adaptive_minus_em_accuracy": vs_em, "adaptive_minus_em_leak": leak, "adaptive_minus_em_block": block,
             "adaptive_checks_passed": checks, "all_over_packaged_runtime": speedup, "packaged_minus_all_accuracy": vs_all}
 

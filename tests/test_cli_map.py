@@ -63,6 +63,30 @@ def test_parameters_from_options_and_file_are_recorded(corridor_door_log, tmp_pa
     assert recorded["inverse_model"]["model"] == "constant" and recorded["em"]["p_hit"] == 0.5
 
 
+@pytest.mark.parametrize("mode", ["em", "adaptive"])
+def test_the_same_map_on_one_thread_and_on_two(corridor_door_log, tmp_path, mode):
+    # the corridor's EM problem (2904 readings, 420 columns) is swept in 7 column bands, those of
+    # one colour at once on --threads; every array and every count is the same as on one thread
+    maps = []
+    for threads in (1, 2):
+        out = tmp_path / f"{threads}.h5"
+        result = run("map", corridor_door_log, "--mode", mode, "-o", out, "--threads", threads, "-q")
+        assert result.exit_code == 0, result.output
+        maps.append(read_map_file(out))
+    one, two = maps
+    for name in ("probability", "observed", "occupied", "clusters"):
+        a, b = getattr(one, name, None), getattr(two, name, None)
+        assert (a is None) == (b is None) and (a is None or np.array_equal(a, b)), name
+    assert one.stats["flips_per_sweep"] == two.stats["flips_per_sweep"]
+    assert one.stats["objective_per_sweep"] == two.stats["objective_per_sweep"]
+
+
+def test_threads_below_one_exit_2(corridor_door_log, tmp_path):
+    out = tmp_path / "m.h5"
+    result = run("map", corridor_door_log, "--mode", "em", "-o", out, "--threads", 0, "-q")
+    assert result.exit_code == 2 and "--threads" in result.output and not out.exists()
+
+
 @pytest.mark.parametrize(
     "text, key", [("inverse_model: {l_ocq: 1}\n", "inverse_model.l_ocq"), ("em: {p_hit: 2}\n", "em.p_hit"), ("[1, 2\n", "p.yaml"),
                   ("exact: {prior: 1.5}\n", "exact.prior"), ("exact: {thin: 1}\n", "exact.thin"),

@@ -15,8 +15,10 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
+from aogm_cli.core.budget import Limits, using
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.mapping import em as E
+from aogm_cli.mapping import sweeps as S
 from aogm_cli.mapping.em import em_problem, em_readings, find_root, run_em
 from aogm_cli.mapping.params import EMConfig
 from aogm_cli.sensor_models import readings as laid_out
@@ -27,16 +29,18 @@ GRID = GridSpec(0.0, 0.0, 0.1, 30, 70)
 Z_MAX = 2.5
 
 
-def climb(index, occupied, candidates, l_prior, max_sweeps):
-    """The reference: (map, flips per sweep, objective after each sweep, the start's first)."""
+def climb(index, occupied, candidates, l_prior, max_sweeps, order=None):
+    """The reference: (map, flips per sweep, objective after each sweep, the start's first),
+    visiting the candidates in ``order`` (default: increasing flat id)."""
     m = occupied.copy()
     candidates = np.unique(candidates)
+    order = candidates if order is None else order
     data = log_likelihoods(index, m).sum()
     objective = [data + l_prior * m[candidates].sum()]
     flips = []
     for _ in range(max_sweeps):
         n = 0
-        for c in candidates:
+        for c in order:
             m[c] = not m[c]
             flipped = log_likelihoods(index, m).sum()
             if flipped - data + (l_prior if m[c] else -l_prior) > 1e-9:
@@ -140,11 +144,11 @@ def random_case(seed, grid=GRID, n_readings=(4, 41), max_sweeps=20, beams=(2.0, 
     return case
 
 
-def check_against_reference(case, result, occupied, problem):
+def check_against_reference(case, result, occupied, problem, order=None):
     index = case.index()
     l_prior = case.config.l_prior
     assert np.array_equal(np.flatnonzero(problem.seen), np.unique(index.cell))  # the cells the cones hold
-    m, flips, objective = climb(index, case.start, case.candidates, l_prior, case.config.max_sweeps)
+    m, flips, objective = climb(index, case.start, case.candidates, l_prior, case.config.max_sweeps, order)
     assert np.array_equal(result.candidates, np.unique(case.candidates))
     assert result.flips == flips and result.sweeps == len(flips)
     assert np.array_equal(occupied, m)
@@ -200,6 +204,54 @@ def test_residual_is_exact_when_stopped_by_max_sweeps(seed):
     result, occupied, problem = run_case(case)
     assert result.sweeps == 1
     check_against_reference(case, result, occupied, problem)
+
+
+def band_order(case, phases):
+    """The candidates as banded sweeps visit them: colour by colour, band by band, each band's
+    by flat id (rows, then columns within the band)."""
+    cells = np.unique(case.candidates)
+    cols = cells % case.grid.width
+    return np.concatenate([cells[(cols >= band.seg_lo * E.K.SEGMENT) & (cols < band.seg_hi * E.K.SEGMENT)]
+                           for bands in phases for band in bands])
+
+
+WIDE = GridSpec(0.0, 0.0, 0.1, 16, 230)  # 8 segments; cones of 2.5 m: bands of 1 or 2 segments
+
+
+@pytest.mark.parametrize("seed", [30, 31, 32, 34])
+def test_banded_sweeps_climb_as_the_reference_in_band_order(seed, monkeypatch):
+    monkeypatch.setattr(S, "BAND_READINGS", 1)
+    case = random_case(seed, WIDE, n_readings=(60, 90), beams=(8.0, 30.0))
+    occupied = case.start.copy()
+    problem = case.problem(occupied)
+    phases, order = S.sweep_bands(problem.readings, WIDE.width)
+    assert len(phases) >= 2 and sum(len(bands) for bands in phases) > len(phases) and order is not None
+    readings_before = problem.readings.ints[:, :E.K.I_NOBS].copy()
+    result = run_em(problem, occupied, case.candidates, case.config)
+    assert sum(result.flips) > 0
+    check_against_reference(case, result, occupied, problem, band_order(case, phases))
+    # the readings are back in their order, their state that of the final map (as a fresh problem's)
+    assert np.array_equal(problem.readings.ints[:, :E.K.I_NOBS], readings_before)
+    fresh = case.problem(occupied.copy())
+    for column in (E.K.I_NOBS, E.K.I_NFAR):
+        assert np.array_equal(problem.readings.ints[:, column], fresh.readings.ints[:, column])
+    assert np.allclose(problem.readings.floats[:, E.K.F_S], fresh.readings.floats[:, E.K.F_S], rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("seed", [30, 33])
+def test_the_same_run_on_any_number_of_threads(seed, monkeypatch):
+    monkeypatch.setattr(S, "BAND_READINGS", 1)
+    runs = []
+    for threads in (1, 2, 3):
+        case = random_case(seed, WIDE, n_readings=(60, 90), beams=(8.0, 30.0), max_sweeps=3)
+        with using(Limits(threads=threads)):
+            result, occupied, _ = run_case(case)
+        runs.append((result, occupied))
+    (one, map_one), *others = runs
+    for result, occupied in others:
+        assert np.array_equal(occupied, map_one)
+        assert result.flips == one.flips and result.objective == one.objective and result.scored == one.scored
+        assert np.array_equal(result.residual, one.residual)
 
 
 def test_more_readings_than_one_word_of_the_active_set():
@@ -314,7 +366,7 @@ def tiny_work(rd, n_seg):
     return work._replace(spans=np.empty((work.spans.shape[0], 1), dtype=np.int64), **one)
 
 
-ORIGINAL_WORK, ORIGINAL_GROWN = E._work, E._grown
+ORIGINAL_WORK, ORIGINAL_GROWN = S._work, S._grown
 
 
 @pytest.mark.parametrize("seed", [3, 11, 12, 20])
@@ -323,8 +375,8 @@ def test_scratch_grown_mid_sweep_gives_the_same_run(seed, monkeypatch):
     case = random_case(seed, n_readings=(30, 80))
     expected, expected_map, _ = run_case(case)
     grown = []
-    monkeypatch.setattr(E, "_work", tiny_work)
-    monkeypatch.setattr(E, "_grown", lambda work: grown.append(1) or ORIGINAL_GROWN(work))
+    monkeypatch.setattr(S, "_work", tiny_work)
+    monkeypatch.setattr(S, "_grown", lambda work: grown.append(1) or ORIGINAL_GROWN(work))
     result, occupied, problem = run_case(case)
     assert len(grown) >= 3
     assert np.array_equal(occupied, expected_map) and result.flips == expected.flips
@@ -345,7 +397,7 @@ def test_sweeps_paused_before_every_tile_give_the_same_run(seed, tiny, monkeypat
     monkeypatch.setattr(laid_out, "READINGS_PER_CALL", 3)
     monkeypatch.setattr(E.K, "_sweep_tiles", lambda *args: statuses.append(sweep(*args)) or statuses[-1])
     if tiny:
-        monkeypatch.setattr(E, "_work", tiny_work)
+        monkeypatch.setattr(S, "_work", tiny_work)
     result, occupied, problem = run_case(case)
     assert statuses.count(E.K.PAUSED) >= 10 * (result.sweeps + 1)
     assert (E.K.NEED_BUFFERS in statuses) == tiny

@@ -19,6 +19,7 @@ from aogm_cli.cli.options import (
     quiet_option,
     refuse_huge_grids,
     resolution_option,
+    threads_option,
 )
 from aogm_cli.io.outputs import resolve_outputs
 
@@ -36,8 +37,9 @@ from aogm_cli.io.outputs import resolve_outputs
 @parameter_options
 @quiet_option
 @budget_options
+@threads_option
 def calibrate(log_file, mode, output, detector, params_file, resolution, quiet, max_memory=16e9, max_work=None,
-              **options) -> None:
+              threads=None, **options) -> None:
     """Learn the forward model (sigma, p_rand, p_hit, p_max, specular_deg) from LOG.h5 and print it.
 
     Thrun's EM learns its sensor model too: at a binary map, the expectations of each
@@ -79,7 +81,7 @@ def calibrate(log_file, mode, output, detector, params_file, resolution, quiet, 
     with progress_bar(params.em.max_sweeps * (params.calibration.rounds + 1), f"calibrate ({mode})", quiet,
                       unit="sweep") as advance:
         result = map_file(log_file, mode, params, detector, lambda phase, done, total: advance(1),
-                          limits=limits_of(max_memory, max_work))
+                          limits=limits_of(max_memory, max_work, threads))
     record = result.stats.get("calibration")
     if record is None:  # adaptive without clusters: EM never ran
         raise click.UsageError(f"{log_file}: the detector flagged no cluster; nothing to calibrate in adaptive mode")

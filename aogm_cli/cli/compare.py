@@ -27,6 +27,7 @@ from aogm_cli.cli.options import (
     resume_option,
     scheduler_option,
     seed_option,
+    threads_option,
 )
 from aogm_cli.io.outputs import resolve_outputs
 
@@ -67,9 +68,10 @@ from aogm_cli.io.outputs import resolve_outputs
 @seed_option
 @quiet_option
 @budget_options
+@threads_option
 def compare(inputs, modes_text, detector, params_file, forward_model, json_out, csv_out, figure_out, maps_dir, from_json, requires,
             require_checks, jobs, scheduler, resume, holdout, robot_radius, calibrate, seed, quiet, max_memory=16e9,
-            max_work=None):
+            max_work=None, threads=None):
     """Map every log in every mode, evaluate each map against the log's truth, and print a table
     (accuracy, occupied F1, Brier, checks passed, leak, block, surface recall, runtime, runtime
     relative to the standard map of the same log). em and adaptive learn their forward model from each log (--calibrate,
@@ -184,7 +186,8 @@ def compare(inputs, modes_text, detector, params_file, forward_model, json_out, 
     radius = _robot_radius(robot_radius)
     check_executor(jobs, scheduler)
     params = resolve_params(params_file, {"calibration": {"enabled": calibrate}})
-    job = CompareJob(params, detector, split, limits_of(max_memory, max_work), radius, forward_model)
+    job = CompareJob(params, detector, split, limits_of(max_memory, max_work, _threads(threads, jobs)), radius,
+                     forward_model)
     entries = lib.collect_inputs(list(inputs))
     modes = lib.parse_modes(modes_text) if modes_text else lib.default_modes(entries)
     _check_gates(gates, require_checks, modes, split is not None)
@@ -211,6 +214,15 @@ def compare(inputs, modes_text, detector, params_file, forward_model, json_out, 
     _commit_outputs(files, maps_dir, [json_out, csv_out, figure_out], quiet)
     gate_failed = _report_gates(gates, require_checks, results, labels, exit_now=not failures)
     report_failures(failures, lambda key: f"{key[0]} ({key[1]})", gate_failed)
+
+
+def _threads(threads: int | None, jobs: int) -> int | None:
+    """EM's threads in each of ``jobs`` workers: --threads, or the cores shared among them."""
+    if threads is not None or jobs <= 1:
+        return threads
+    from aogm_cli.core.budget import Limits
+
+    return max(1, Limits().thread_count() // jobs)
 
 
 def _robot_radius(value: float | None) -> float:
@@ -274,7 +286,8 @@ def _check_budget(entries, modes, job, params_file: str | None) -> None:
 # options that only mapping uses: refused with --from-json (parameter name -> option)
 MAPPING_OPTIONS = {"figure_out": "--figure", "maps_dir": "--maps-dir", "modes_text": "--modes", "detector": "--detector",
                    "params_file": "--params", "forward_model": "--forward-model", "jobs": "--jobs", "scheduler": "--scheduler", "resume": "--resume", "holdout": "--holdout", "robot_radius": "--robot-radius", "calibrate": "--calibrate/--no-calibrate",
-                   "seed": "--seed", "max_memory": "--max-memory", "max_work": "--max-work"}
+                   "seed": "--seed", "max_memory": "--max-memory", "max_work": "--max-work",
+                   "threads": "--threads"}
 
 
 def _refuse_mapping_options(ctx: click.Context) -> None:

@@ -19,6 +19,7 @@ from aogm_cli.cli.options import (
     quiet_option,
     refuse_huge_grids,
     resolution_option,
+    threads_option,
 )
 from aogm_cli.io.outputs import resolve_outputs
 from aogm_cli.mapping.params import EMConfig
@@ -80,8 +81,9 @@ def parameter_overrides(resolution: float | None, calibrate: bool | None, option
 @calibrate_option
 @quiet_option
 @budget_options
+@threads_option
 def map_log(log_file, mode, output, png, detector, params_file, forward_model, resolution, calibrate, quiet,
-            max_memory=16e9, max_work=None, **options) -> None:
+            max_memory=16e9, max_work=None, threads=None, **options) -> None:
     """Build an occupancy-grid map from LOG.h5.
 
     \b
@@ -125,7 +127,8 @@ def map_log(log_file, mode, output, png, detector, params_file, forward_model, r
         def progress(phase, done, total):
             advance(1)
 
-        result = map_file(log_file, mode, params, detector, progress, limits=limits_of(max_memory, max_work), given=given)
+        result = map_file(log_file, mode, params, detector, progress, limits=limits_of(max_memory, max_work, threads),
+                          given=given)
     outputs = [(output, map_bytes(result, record))]
     if png:
         from aogm_cli.report.picture import map_png

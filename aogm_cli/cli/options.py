@@ -11,7 +11,8 @@ its outputs with ``io.outputs.resolve_outputs`` before any work."""
 # --params, --detector    map, compare
 # --resolution            map, calibrate (check: its own, 0.05 by default); refuse_huge_grids: map, calibrate, compare
 # --calibrate/--no-calibrate  map, compare (``calibration.enabled``)
-# --max-memory/--max-work simulate, map, compare (``budget_options``; ``core.budget``)
+# --max-memory/--max-work simulate, map, compare, calibrate (``budget_options``; ``core.budget``)
+# --threads               map, compare, calibrate (``threads_option``: EM's sweeps; ``core.budget.Limits``)
 # --jobs/-j, --scheduler  simulate, compare (``core.executors``: a local process pool, a Dask cluster)
 # --resume                simulate, compare (--maps-dir): skip outputs already complete and valid
 # LOG arguments as a folder or a glob (``expand_log_paths``): train
@@ -226,10 +227,18 @@ def budget_options(f):
                         help="Refuse runs estimated to need more memory, e.g. 20G.")(f)
 
 
-def limits_of(max_memory: float, max_work: float | None):
+def threads_option(f):
+    """``--threads N``: the threads EM's sweeps may use (``core.budget.Limits.threads``)."""
+    return click.option("--threads", type=click.IntRange(min=1), metavar="N",
+                        help="Threads for EM's sweeps (em and adaptive): bands of the grid no reading joins are "
+                             "swept at once; the map is the same for any N.  [default: every core; with --jobs, "
+                             "the cores shared among the workers]")(f)
+
+
+def limits_of(max_memory: float, max_work: float | None, threads: int | None = None):
     from aogm_cli.core.budget import Limits
 
-    return Limits(max_memory=max_memory, max_work=max_work)
+    return Limits(max_memory=max_memory, max_work=max_work, threads=threads)
 
 
 class LazyDefault(click.Option):

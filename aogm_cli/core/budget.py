@@ -1,10 +1,11 @@
-"""The budget of one run: ``Limits`` on its memory and work (defaults sized for a 2-core, 24 GB machine),
+"""The budget of one run: ``Limits`` on its memory, work and threads (defaults sized for a 2-core, 24 GB machine),
 and ``check``, which refuses an ``Estimate`` over them before any work with an ``InputError`` saying
 what the run would need; ``parse_size`` reads sizes such as 16G."""
 
 from __future__ import annotations
 
 import math
+import os
 import re
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -24,9 +25,18 @@ _UNITS = {"": 1.0, "B": 1.0, "K": 1e3, "M": 1e6, "G": 1e9, "T": 1e12, "P": 1e15}
 class Limits:
     max_memory: float = DEFAULT_MAX_MEMORY
     max_work: float | None = None  # None: DEFAULT_MAX_WORK of the estimate's unit
+    threads: int | None = None  # threads EM's sweeps may use; None: every core this process may run on
 
     def work_limit(self, unit: str) -> float:
         return float(self.max_work) if self.max_work is not None else DEFAULT_MAX_WORK[unit]
+
+    def thread_count(self) -> int:
+        if self.threads is not None:
+            return max(1, int(self.threads))
+        try:
+            return len(os.sched_getaffinity(0))
+        except (AttributeError, OSError):  # not Linux
+            return os.cpu_count() or 1
 
 
 @dataclass(frozen=True)

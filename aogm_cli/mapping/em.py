@@ -24,6 +24,7 @@ from aogm_cli.mapping import em_kernels as K
 from aogm_cli.mapping.calibration import MAX_READINGS, incidence_at, opening_at, sample_readings
 from aogm_cli.mapping.params import EMConfig, MapParams
 from aogm_cli.mapping.standard import HIDDEN_GAIN, probability_from_log_odds, thin_pass
+from aogm_cli.mapping.sweeps import Sweeps
 from aogm_cli.sensor_models.cone import flat_offsets
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig, cone_limits, reading_constants
 from aogm_cli.sensor_models.ray import is_narrow_beam
@@ -43,7 +44,7 @@ class EMResult:
     scored: list[int]  # candidates scored per sweep (the rest were unchanged since)
     pairs: list[int]  # (candidate, reading) pairs generated per sweep
     peak_pairs: int  # the most pairs one tile held
-    scratch_bytes: int  # the tiles' scratch at its largest
+    scratch_bytes: int  # the tiles' scratch (of one thread) at its largest
 
 
 # a candidate EM leaves free is decided by the data when occupancy would lower the data
@@ -222,58 +223,8 @@ def _candidates(cells: np.ndarray, shape: tuple[int, int]) -> K.Candidates:
     row_first = np.searchsorted(cells, np.arange(height + 1, dtype=np.int64) * width)
     n_seg = -(-width // K.SEGMENT)
     return K.Candidates(cells, of_cell, row_first, np.zeros(0, dtype=np.bool_), np.full(cells.size, -1, dtype=np.int64),
-                        np.zeros(cells.size), np.full((height, n_seg), -1, dtype=np.int64))
-
-
-def _work(rd: K.EMReadings, n_seg: int) -> K.TileWork:
-    n_readings = rd.z.shape[0]
-    pairs = 1 << 16
-    room = 1 << 14
-    return K.TileWork(np.zeros(K.CTL_SIZE, dtype=np.int64), np.zeros(n_readings // 64 + 1, dtype=np.uint64),
-                      np.zeros(n_seg + 1, dtype=np.int64), np.empty(max(1024, n_readings // 8), dtype=np.int64),
-                      np.zeros(K.SEGMENT + 1, dtype=np.int64), np.empty(pairs, dtype=np.int64),
-                      np.empty(pairs, dtype=np.int64), np.empty(pairs), rd.ints[:, K.I_SLOT],
-                      np.empty(room, dtype=np.int64), np.empty(room), np.empty(room), np.zeros(n_seg, dtype=np.int64),
-                      np.empty(1024, dtype=np.int64), np.empty(1024, dtype=np.int64), np.empty(1024, dtype=np.int64),
-                      np.zeros((2, K.SEGMENT + 1)),
-                      np.empty((11, max(1024, n_readings // 8)), dtype=np.int64), np.zeros(n_seg, dtype=np.int64))
-
-
-def _grown(work: K.TileWork) -> K.TileWork:
-    """``work`` with every buffer the kernel asked for (ctl's NEED_* sizes) half as large again."""
-    ctl = work.ctl
-    grow = {}
-    if ctl[K.CTL_NEED_LIST] > work.seg_list.shape[0]:
-        grow["seg_list"] = np.empty(int(ctl[K.CTL_NEED_LIST] * 1.5) + 1, dtype=np.int64)
-    if ctl[K.CTL_NEED_LIST] > work.spans.shape[1]:
-        grow["spans"] = np.empty((11, int(ctl[K.CTL_NEED_LIST] * 1.5) + 1), dtype=np.int64)
-    if ctl[K.CTL_NEED_LIST] > work.far_lo.shape[0]:
-        size = int(ctl[K.CTL_NEED_LIST] * 1.5) + 1
-        grow |= {name: np.empty(size, dtype=np.int64) for name in ("tile_t", "far_lo", "far_hi")}
-    if ctl[K.CTL_NEED_PAIRS] > work.pair_pos.shape[0]:
-        size = int(ctl[K.CTL_NEED_PAIRS] * 1.5) + 1
-        grow |= {"pair_pos": np.empty(size, dtype=np.int64), "pair_j": np.empty(size, dtype=np.int64),
-                 "pair_g": np.empty(size)}
-    if ctl[K.CTL_NEED_ROOM] > work.obs_j.shape[0]:
-        need = int(ctl[K.CTL_NEED_ROOM])
-        size = max(need, min(int(need * 1.5) + 1, K.ARENA_ENTRIES))
-        used = int(ctl[K.CTL_BUMP])  # live slots keep their places
-        for name in ("obs_j", "obs_g", "pre"):
-            old = getattr(work, name)
-            grow[name] = np.empty(size, dtype=old.dtype)
-            grow[name][:used] = old[:used]
-    ctl[K.CTL_NEED_LIST] = ctl[K.CTL_NEED_PAIRS] = ctl[K.CTL_NEED_ROOM] = 0
-    ctl[K.CTL_LISTED] = -1  # the row is listed again (into the new buffers)
-    return work._replace(**grow)
-
-
-# the sweep's stand-in for TileWork.slot: it takes the column from the readings' table itself
-# (``em_kernels.ReadingTables``), the one layout whatever the readings
-NO_SLOT = np.zeros(0, dtype=np.int32)
-
-
-def _scratch_bytes(work: K.TileWork) -> int:
-    return int(sum(a.nbytes for a in work))
+                        np.zeros(cells.size), np.full((n_seg, height), -1, dtype=np.int64).T)  # a segment's clocks
+    # in one run of memory: two bands' threads write apart
 
 
 def run_em(problem: EMProblem, occupied: np.ndarray, candidates: np.ndarray, config: EMConfig,
@@ -285,49 +236,25 @@ def run_em(problem: EMProblem, occupied: np.ndarray, candidates: np.ndarray, con
     once more, so that its residuals describe the map it leaves (not needed between the sweeps
     of a calibration)."""
     occupied = _flat_bool(occupied)
-    rd, model = problem.readings, problem.model
-    tpl, groups = problem.templates.kernel_arrays, K.row_groups(problem.templates)
-    flat = flat_offsets(problem.templates, problem.shape[1])
     cand = _candidates(candidates, problem.shape)._replace(occupied=occupied)
-    tables = K.reading_tables(rd)  # the readings and their state as the kernels take them
-    work = _work(rd, cand.tile_clock.shape[1])
-    ctl = work.ctl
-    peak = [0, _scratch_bytes(work)]
-
-    def one_pass(mode: int) -> tuple[int, int, int]:
-        nonlocal work
-        before = ctl[K.CTL_FLIPS], ctl[K.CTL_SCORED], ctl[K.CTL_PAIRS]
-        ctl[K.CTL_MODE], ctl[K.CTL_ROW], ctl[K.CTL_SEG], ctl[K.CTL_ENTER], ctl[K.CTL_LEAVE] = mode, 0, 0, 0, 0
-        ctl[K.CTL_BUMP] = ctl[K.CTL_WINDOW_LEAVE] = 0
-        ctl[K.CTL_LISTED] = -1
-        work.active.fill(0)
-        work.slot.fill(-1)
-        while True:
-            ctl[K.CTL_BUDGET] = K.PAUSE_WORK
-            status = K._sweep_tiles(tpl, flat, groups, tables, model, cand, work._replace(slot=NO_SLOT))
-            if status == K.DONE:
-                break
-            if status == K.NEED_BUFFERS:
-                work = _grown(work)
-                peak[1] = max(peak[1], _scratch_bytes(work))
-            # PAUSED: back in Python, where a pending signal's handler runs (core.interrupts); resume
-        peak[0] = max(peak[0], work.pair_pos.shape[0])
-        return tuple(int(ctl[i] - b) for i, b in zip((K.CTL_FLIPS, K.CTL_SCORED, K.CTL_PAIRS), before, strict=True))
-
+    sweeps = Sweeps(problem, cand)
+    model, tables = problem.model, sweeps.tables
     objective = [K._objective(tables, model, occupied, cand.cell)]
     flips, scored, pairs = [], [], []
-    for sweep in range(1, config.max_sweeps + 1):
-        n_flips, n_scored, n_pairs = one_pass(K.SWEEP)
-        flips.append(n_flips)
-        scored.append(n_scored)
-        pairs.append(n_pairs)
-        objective.append(K._objective(tables, model, occupied, cand.cell))
-        if progress:
-            progress(sweep, n_flips, objective[-1])
-        if n_flips == 0:
-            break
-    if final and not (flips and flips[-1] == 0):  # stopped by max_sweeps: score every candidate once more
-        one_pass(K.SCORE)
+    with sweeps:
+        for sweep in range(1, config.max_sweeps + 1):
+            n_flips, n_scored, n_pairs = sweeps.one_pass(K.SWEEP)
+            flips.append(n_flips)
+            scored.append(n_scored)
+            pairs.append(n_pairs)
+            objective.append(K._objective(tables, model, occupied, cand.cell))
+            if progress:
+                progress(sweep, n_flips, objective[-1])
+            if n_flips == 0:
+                break
+        if final and not (flips and flips[-1] == 0):  # stopped by max_sweeps: score every candidate once more
+            sweeps.one_pass(K.SCORE)
+    peak = sweeps.peak
     residual = K._residual_from_gains(cand.cell, occupied, cand.last_gain, model.l_prior)
     return EMResult(len(flips), flips, [float(v) for v in objective], cand.cell, residual, scored, pairs,
                     int(peak[0]), int(peak[1]))

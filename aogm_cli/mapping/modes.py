@@ -11,7 +11,7 @@ from typing import NamedTuple
 import numpy as np
 
 from aogm_cli.core import jit_cache
-from aogm_cli.core.budget import Limits, check
+from aogm_cli.core.budget import Limits, active_limits, check, using
 from aogm_cli.core.log import Log, SensorSpec
 from aogm_cli.core.occupancy_map import MODES, OccupancyMap
 from aogm_cli.detector.network import ConstantDetector
@@ -105,7 +105,8 @@ def map_source(log, mode: str, params: MapParams, flagger: Flagger = ALL, progre
     warm_up(log.sensor, params, mode)
     t_compile = time.perf_counter() - t0
     t0 = time.perf_counter()
-    m = map_in_mode(log, mode, params, flagger, progress, given)
+    with using(limits or active_limits()):  # EM's sweeps take their threads from the limits in force
+        m = map_in_mode(log, mode, params, flagger, progress, given)
     t_total = time.perf_counter() - t0
     m.stats["untimed_seconds"] = {"compile": t_compile, "read_and_set_up": max(0.0, t_total - m.runtime_s)}
     return m

@@ -17,7 +17,7 @@ from numba.extending import intrinsic
 __all__ = [  # what the package re-exports: the layout every caller of the kernels needs
     "ARENA_ENTRIES", "CTL_BUDGET", "CTL_BUMP", "CTL_CLOCK", "CTL_ENTER", "CTL_FLIPS", "CTL_LEAVE",
     "CTL_LISTED", "CTL_MODE", "CTL_NEED_LIST", "CTL_NEED_PAIRS", "CTL_NEED_ROOM", "CTL_PAIRS", "CTL_ROW",
-    "CTL_SCORED", "CTL_SEG", "CTL_SIZE", "CTL_WINDOW_LEAVE", "Candidates", "DONE", "EMModel", "EMReadings",
+    "CTL_SCORED", "CTL_SEG", "CTL_SG_HI", "CTL_SG_LO", "CTL_SIZE", "CTL_WINDOW_LEAVE", "Candidates", "DONE", "EMModel", "EMReadings",
     "EMState", "FLOATS", "F_CONST", "F_G0", "F_LOG", "F_RATIO", "F_S", "F_WSUM", "F_Z", "INTS", "I_BIN",
     "I_BOX", "I_COL0", "I_INSIDE", "I_JLO", "I_M", "I_NFAR", "I_NOBS", "I_REACH2", "I_ROW0", "I_SLOT",
     "I_STAMP", "I_WINDOW_HI", "NEED_BUFFERS", "PAUSED", "PAUSE_WORK", "ReadingTables", "RowGroups", "SCORE",
@@ -42,7 +42,8 @@ CTL_NEED_LIST, CTL_NEED_PAIRS, CTL_NEED_ROOM = 3, 4, 5
 CTL_ENTER, CTL_LEAVE, CTL_CLOCK, CTL_FLIPS, CTL_SCORED, CTL_PAIRS = 6, 7, 8, 9, 10, 11
 CTL_BUMP, CTL_WINDOW_LEAVE = 12, 13
 CTL_BUDGET, CTL_LISTED = 14, 15
-CTL_SIZE = 16
+CTL_SG_LO, CTL_SG_HI = 16, 17  # the band's segments: the sweep visits tiles sg_lo <= sg < sg_hi
+CTL_SIZE = 18
 DONE, NEED_BUFFERS, PAUSED = 0, 1, 2
 # the work (in window pairs: see _sweep_tiles) after which a sweep pauses, so that the caller is
 # back in Python, where a signal's handler runs, many times a second: on the 50k-scan office a
@@ -164,7 +165,8 @@ def _tile_work(scratch, slot):
     column of the readings' int table (``ReadingTables``) that holds their arena slots."""
     s = scratch
     return TileWork(s.ctl, s.active, s.seg_ptr, s.seg_list, s.count, s.pair_pos, s.pair_j, s.pair_g, slot, s.obs_j,
-                    s.obs_g, s.pre, s.seg_fill, s.tile_t, s.far_lo, s.far_hi, s.far_sum, s.spans, s.seg_mask)
+                    s.obs_g, s.pre, s.seg_fill, s.tile_t, s.far_lo, s.far_hi, s.far_sum, s.spans, s.seg_mask, s.members,
+                    s.enter, s.leave, s.window_leave)
 
 
 class Candidates(NamedTuple):
@@ -176,14 +178,14 @@ class Candidates(NamedTuple):
     occupied: np.ndarray  # (H * W,) bool the map
     stamp: np.ndarray  # (C,) int64 the clock when last scored (-1: never)
     last_gain: np.ndarray  # (C,) float64 the last data gain of flipping
-    tile_clock: np.ndarray  # (H, n_seg) int64 the clock when each tile was last visited (-1: never)
+    tile_clock: np.ndarray  # (H, n_seg) int64, Fortran order, the clock when each tile was last visited (-1: never)
 
 
 class TileWork(NamedTuple):
     """The tiles' scratch; ``ctl`` holds the control words (CTL_*), the rest grows on demand."""
 
     ctl: np.ndarray  # (CTL_SIZE,) int64
-    active: np.ndarray  # (R / 64 + 1,) uint64 bit set of the readings active at the row
+    active: np.ndarray  # (R / 64 + 1,) uint64 bit set of the band's readings (positions) active at the row
     seg_ptr: np.ndarray  # (n_seg + 1,) int64
     seg_list: np.ndarray  # int64 readings of each segment, ascending
     count: np.ndarray  # int64 pairs per candidate of the tile (+1)
@@ -202,6 +204,12 @@ class TileWork(NamedTuple):
     far_sum: np.ndarray  # (2, SEGMENT + 1) float64 differences of sum_t log far ratio along the tile (add, remove)
     spans: np.ndarray  # (11, n) int64 the row's active readings' ``RowSpan``s, readings and columns (seg_list points into it)
     seg_mask: np.ndarray  # (n_seg,) int64 bit k of segment s: column s * SEGMENT + k holds a candidate
+    # the band's readings (``mapping.sweeps``): those whose cones reach its columns, by position i;
+    # ``active`` is a bit set of positions
+    members: np.ndarray  # int64 position -> reading
+    enter: np.ndarray  # int64 positions by their readings' row_lo (stable; ``EMReadings.enter`` for all)
+    leave: np.ndarray  # by row_hi
+    window_leave: np.ndarray  # by window_hi
 
 
 @intrinsic

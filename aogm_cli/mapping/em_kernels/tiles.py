@@ -35,6 +35,8 @@ from aogm_cli.mapping.em_kernels.layout import (
     CTL_ROW,
     CTL_SCORED,
     CTL_SEG,
+    CTL_SG_HI,
+    CTL_SG_LO,
     CTL_WINDOW_LEAVE,
     DONE,
     I_SLOT,
@@ -147,28 +149,38 @@ def _window_pairs(i, t, span, r, c0, c1, c_start, fill, tpl, groups, rd, model, 
 
 @numba.njit(cache=True, inline="always")
 def _advance(rd, work, r):
-    """The active bit set at row r: readings whose cone rows reach r (repeatable)."""
+    """The active bit set at row r: the band's readings whose cone rows reach r (repeatable).
+    A reading's arena slot is dropped when it enters (a slot another band's sweep left points
+    into that sweep's arena), when it leaves and when the sweep is past its window."""
     ctl = work.ctl
     active = work.active
-    n_read = rd.z.shape[0]
+    members = work.members
+    n_read = members.shape[0]
     e = ctl[CTL_ENTER]
-    while e < n_read and rd.box[0, rd.enter[e]] <= r:
-        t = rd.enter[e]
-        active[t >> 6] |= np.uint64(1) << np.uint64(t & 63)
+    while e < n_read and rd.box[0, members[work.enter[e]]] <= r:
+        i = work.enter[e]
+        active[i >> 6] |= np.uint64(1) << np.uint64(i & 63)
+        work.slot[members[i]] = -1
         e += 1
     ctl[CTL_ENTER] = e
     k = ctl[CTL_LEAVE]
-    while k < n_read and rd.box[1, rd.leave[k]] < r:
-        t = rd.leave[k]
-        active[t >> 6] &= ~(np.uint64(1) << np.uint64(t & 63))
-        work.slot[t] = -1  # its arena slot (if any) is dead
+    while k < n_read and rd.box[1, members[work.leave[k]]] < r:
+        i = work.leave[k]
+        active[i >> 6] &= ~(np.uint64(1) << np.uint64(i & 63))
+        work.slot[members[i]] = -1  # its arena slot (if any) is dead
         k += 1
     ctl[CTL_LEAVE] = k
     k = ctl[CTL_WINDOW_LEAVE]
-    while k < n_read and rd.window_hi[rd.window_leave[k]] < r:
-        work.slot[rd.window_leave[k]] = -1  # the sweep is past its window: no tile needs the slot again
+    while k < n_read and rd.window_hi[members[work.window_leave[k]]] < r:
+        work.slot[members[work.window_leave[k]]] = -1  # the sweep is past its window: no tile needs the slot again
         k += 1
     ctl[CTL_WINDOW_LEAVE] = k
+
+
+@numba.njit(cache=True, inline="always")
+def _active_words(work):
+    """The words of the active bit set the band's readings use (the set is sized for all)."""
+    return (work.members.shape[0] + 63) >> 6
 
 
 @numba.njit(cache=True, inline="always")
@@ -192,9 +204,10 @@ def _span_mask(lo, hi, s):
 def _list_segments(tpl, groups, rd, cand, work, r, n_seg):
     """The row's active readings with their ``RowSpan`` in ``spans`` (one each), and each
     segment's (ascending) in seg_ptr / seg_list, as positions in ``spans``: a reading is
-    listed where its cone holds a candidate of the row (``seg_mask``). False (with the size
-    needed in ctl) when a buffer is too small."""
+    listed where its cone holds a candidate of the row in the band's columns (``seg_mask``).
+    False (with the size needed in ctl) when a buffer is too small."""
     active = work.active
+    members = work.members
     seg_ptr = work.seg_ptr
     fill = work.seg_fill
     sp = work.spans
@@ -204,15 +217,17 @@ def _list_segments(tpl, groups, rd, cand, work, r, n_seg):
         seg_ptr[s] = 0
     for s in range(n_seg):
         mask[s] = 0
+    c_lo, c_hi = _band_columns(work, width)
     for c in range(cand.row_first[r], cand.row_first[r + 1]):
         col = cand.cell[c] - r * width
-        mask[col // SEGMENT] |= np.int64(1) << np.int64(col % SEGMENT)
+        if c_lo <= col < c_hi:
+            mask[col // SEGMENT] |= np.int64(1) << np.int64(col % SEGMENT)
     n = 0
     visited = 0
-    for wi in range(active.shape[0]):
+    for wi in range(_active_words(work)):
         word = active[wi]
         while word != np.uint64(0):
-            t = (wi << 6) + np.int64(_trailing_zeros(word))
+            t = members[(wi << 6) + np.int64(_trailing_zeros(word))]
             word &= word - np.uint64(1)  # the lowest set bit off
             visited += 1
             span = _row_span(tpl, groups, rd, t, r)
@@ -222,7 +237,7 @@ def _list_segments(tpl, groups, rd, cand, work, r, n_seg):
                     lo, hi = col0 + span.o_lo, col0 + span.o_hi
                 else:
                     lo, hi = col0 - span.o_hi, col0 - span.o_lo
-                lo, hi = max(lo, rd.box[2, t]), min(hi, rd.box[3, t])
+                lo, hi = max(lo, rd.box[2, t], c_lo), min(hi, rd.box[3, t], c_hi - 1)
                 if lo <= hi:
                     if n >= sp.shape[1]:
                         work.ctl[CTL_NEED_LIST] = max(work.ctl[CTL_NEED_LIST], 2 * sp.shape[1])
@@ -238,7 +253,7 @@ def _list_segments(tpl, groups, rd, cand, work, r, n_seg):
                             listed = True
                     if listed:
                         n += 1
-    work.ctl[CTL_BUDGET] -= active.shape[0] + 2 * visited  # a listed reading costs about two window pairs
+    work.ctl[CTL_BUDGET] -= _active_words(work) + 2 * visited  # a listed reading costs about two window pairs
     for s in range(n_seg):
         seg_ptr[s + 1] += seg_ptr[s]
         fill[s] = seg_ptr[s]
@@ -255,38 +270,50 @@ def _list_segments(tpl, groups, rd, cand, work, r, n_seg):
 
 
 @numba.njit(cache=True, inline="always")
-def _row_unchanged(rd, cand, state, work, r, n_seg):
-    """True (and every candidate of row r stamped as scored now) when no active reading
-    changed since the row's tiles were last visited: a check of one stamp per reading
+def _band_columns(work, width):
+    """The columns [c_lo, c_hi) of the band's tiles (ctl's CTL_SG_LO, CTL_SG_HI)."""
+    return work.ctl[CTL_SG_LO] * SEGMENT, min(work.ctl[CTL_SG_HI] * SEGMENT, width)
+
+
+@numba.njit(cache=True, inline="always")
+def _row_unchanged(rd, cand, state, work, r):
+    """True (and every candidate of row r in the band stamped as scored now) when no active
+    reading changed since the row's tiles were last visited: a check of one stamp per reading
     instead of listing them (late sweeps change few readings)."""
-    since = cand.tile_clock[r, 0]
-    for s in range(1, n_seg):
+    sg_lo, sg_hi = work.ctl[CTL_SG_LO], work.ctl[CTL_SG_HI]
+    since = cand.tile_clock[r, sg_lo]
+    for s in range(sg_lo + 1, sg_hi):
         since = min(since, cand.tile_clock[r, s])
     if since < 0:
         return False
     active = work.active
-    for wi in range(active.shape[0]):
+    for wi in range(_active_words(work)):
         word = active[wi]
         while word != np.uint64(0):
-            t = (wi << 6) + np.int64(_trailing_zeros(word))
+            t = work.members[(wi << 6) + np.int64(_trailing_zeros(word))]
             word &= word - np.uint64(1)
             if state.stamp[t] > since:
                 return False
     now = work.ctl[CTL_CLOCK]
+    width = cand.of_cell.shape[0] // cand.tile_clock.shape[0]
+    c_lo, c_hi = _band_columns(work, width)
     for c in range(cand.row_first[r], cand.row_first[r + 1]):
-        cand.stamp[c] = now
-    for s in range(n_seg):
+        if c_lo <= cand.cell[c] - r * width < c_hi:
+            cand.stamp[c] = now
+    for s in range(sg_lo, sg_hi):
         cand.tile_clock[r, s] = now
     return True
 
 
 # _nrt=False: the sweep allocates nothing (its scratch comes in ``scratch``), and without numba's
 # reference-counting runtime the arrays it hands to the inlined helpers cost nothing per call
-@numba.njit(cache=True, _nrt=False)
+@numba.njit(cache=True, _nrt=False, nogil=True)
 def _sweep_tiles(tpl, flat, groups, tables, model, cand, scratch):
-    """One pass over the candidates in flat-id order, tile by tile (see the module docstring), of
-    the readings and their state in ``tables`` (``ReadingTables``), with ``scratch`` (a
-    ``TileWork``, its ``slot`` a stand-in: the tables' column is taken here, ``_tile_work``):
+    """One pass over the candidates of a band (the tiles of segments ctl[CTL_SG_LO] to
+    ctl[CTL_SG_HI], the readings ``scratch.members``) in flat-id order, tile by tile (see the
+    module docstring), of the readings and their state in ``tables`` (``ReadingTables``), with
+    ``scratch`` (a ``TileWork``, its ``slot`` a stand-in: the tables' column is taken here,
+    ``_tile_work``). Bands no reading joins may be swept at once, on threads (``mapping.sweeps``):
     ctl[CTL_MODE] SWEEP keeps each flip that raises the objective, SCORE scores every
     candidate into ``last_gain`` and flips none.
 
@@ -323,8 +350,8 @@ def _sweep_tiles(tpl, flat, groups, tables, model, cand, scratch):
         ctl[CTL_ROW] = r
         _advance(rd, work, r)
         if mode == SWEEP and ctl[CTL_SEG] == 0:
-            ctl[CTL_BUDGET] -= work.active.shape[0]
-            if _row_unchanged(rd, cand, state, work, r, n_seg):
+            ctl[CTL_BUDGET] -= _active_words(work)
+            if _row_unchanged(rd, cand, state, work, r):
                 fresh = False
                 continue  # no reading whose cone crosses the row changed since its last visit
         if ctl[CTL_LISTED] != r:  # else listed before a pause, and still so
@@ -333,7 +360,7 @@ def _sweep_tiles(tpl, flat, groups, tables, model, cand, scratch):
             ctl[CTL_LISTED] = r
         c_pos = ca
         row_base = r * width
-        for sg in range(ctl[CTL_SEG], n_seg):
+        for sg in range(max(ctl[CTL_SEG], ctl[CTL_SG_LO]), ctl[CTL_SG_HI]):
             c0 = sg * SEGMENT
             c1 = min(c0 + SEGMENT, width)
             while c_pos < cb and cand.cell[c_pos] < row_base + c0:

@@ -1,0 +1,234 @@
+"""EM's sweeps as ``run_em`` runs them: the grid's column bands (``sweep_bands``), colour by colour,
+the bands of one colour at once on threads (``Sweeps``), each band a call of the tile kernel
+(``em_kernels._sweep_tiles``) resumed after every pause and every growth of its scratch."""
+
+from __future__ import annotations
+
+import concurrent.futures
+import queue
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+from aogm_cli.core.budget import active_limits
+from aogm_cli.mapping import em_kernels as K
+from aogm_cli.sensor_models.cone import flat_offsets
+
+# bytes of slack on either side of a scratch's small arrays: two threads' control words and tile
+# sums written at every tile must not share a cache line (measured on the office of 5000 scans:
+# each thread's bands took 40% longer on two threads than on one without it)
+SLACK = 128
+
+
+def _apart(shape, dtype=np.int64) -> np.ndarray:
+    """Zeros of ``shape`` (C-contiguous) with SLACK bytes of their own before and after."""
+    n = int(np.prod(shape))
+    pad = SLACK // np.dtype(dtype).itemsize
+    return np.zeros(n + 2 * pad, dtype=dtype)[pad:pad + n].reshape(shape)
+
+
+def _work(rd: K.EMReadings, n_seg: int) -> K.TileWork:
+    n_readings = rd.z.shape[0]
+    pairs = 1 << 16
+    room = 1 << 14
+    none = np.zeros(0, dtype=np.int64)  # the band's readings, set per band (``Sweeps._band``)
+    return K.TileWork(_apart(K.CTL_SIZE), _apart(n_readings // 64 + 1, np.uint64),
+                      _apart(n_seg + 1), np.empty(max(1024, n_readings // 8), dtype=np.int64),
+                      _apart(K.SEGMENT + 1), np.empty(pairs, dtype=np.int64),
+                      np.empty(pairs, dtype=np.int64), np.empty(pairs), rd.ints[:, K.I_SLOT],
+                      np.empty(room, dtype=np.int64), np.empty(room), np.empty(room), _apart(n_seg),
+                      _apart(1024), _apart(1024), _apart(1024), _apart((2, K.SEGMENT + 1), np.float64),
+                      np.empty((11, max(1024, n_readings // 8)), dtype=np.int64), _apart(n_seg),
+                      none, none, none, none)
+
+
+# A sweep visits column bands of the grid, colour by colour (``sweep_bands``): two bands of one colour
+# are separated by bands at least as wide as any reading's cone, so no reading reaches both and they
+# can be swept at once, each on its own thread, with the same result as one after the other. The
+# order (colour 0's bands left to right, then colour 1's, ...) depends on the problem alone, so the
+# map is the same on any number of threads. A problem of fewer readings than BAND_READINGS (a
+# calibration's sample of a small log, a probe, the tests' cases) is one band: its threads would
+# cost more than they save.
+BAND_READINGS = 2048
+
+
+@dataclass(frozen=True)
+class Band:
+    """Tile segments [seg_lo, seg_hi) of every row, and the readings whose cones reach them."""
+
+    seg_lo: int
+    seg_hi: int
+    members: np.ndarray  # int64 readings
+    enter: np.ndarray  # int64 positions in members by their readings' row_lo (stable)
+    leave: np.ndarray  # ... by row_hi
+    window_leave: np.ndarray  # ... by window_hi
+
+
+def sweep_bands(rd: K.EMReadings, width: int,
+                min_readings: int | None = None) -> tuple[list[list[Band]], np.ndarray | None]:
+    """The bands of one sweep, by colour, and the order of the readings they are numbered in
+    (None: as they are). Bands are ``w`` segments wide (the last takes the rest), w * SEGMENT at
+    least half the widest cone's columns, so that the colour-1 bands between two bands of one
+    colour are as wide as any cone; one band when there are fewer than ``min_readings`` readings
+    (default BAND_READINGS) or no more bands than colours. The readings are ordered by the middle column of their cones,
+    so that two threads seldom write one cache line of the readings' tables."""
+    n_read = rd.z.shape[0]
+    n_seg = -(-width // K.SEGMENT)
+    box = rd.box
+    live = box[0] <= box[1]
+    whole = [[Band(0, n_seg, np.arange(n_read, dtype=np.int64), rd.enter.astype(np.int64),
+                   rd.leave.astype(np.int64), rd.window_leave.astype(np.int64))]]
+    if n_read < (BAND_READINGS if min_readings is None else min_readings) or not live.any():
+        return whole, None
+    span = int((box[3] - box[2] + 1)[live].max())
+    w = -(-span // (2 * K.SEGMENT))
+    colours = 1 + -(-span // (w * K.SEGMENT))
+    n_bands = n_seg // w
+    if n_bands <= colours:
+        return whole, None
+    order = np.argsort(np.where(live, box[2].astype(np.int64) + box[3], -1), kind="stable")
+    box, live, window_hi = box[:, order], live[order], rd.window_hi[order]
+    edges = [i * w for i in range(n_bands)] + [n_seg]
+    bands = []
+    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+        members = np.flatnonzero(live & (box[2] < hi * K.SEGMENT) & (box[3] >= lo * K.SEGMENT)).astype(np.int64)
+        orders = (np.argsort(key[members], kind="stable").astype(np.int64) for key in (box[0], box[1], window_hi))
+        bands.append(Band(lo, hi, members, *orders))
+    return [bands[c::colours] for c in range(colours)], order
+
+
+def _permuted(rd: K.EMReadings, order: np.ndarray) -> K.EMReadings:
+    """``rd``'s readings (and their state) in ``order``: new tables, the columns views of them."""
+    ints, floats = rd.ints[order], rd.floats[order]
+    return K.EMReadings(ints[:, K.I_ROW0], ints[:, K.I_COL0], ints[:, K.I_BIN], floats[:, K.F_Z], floats[:, K.F_G0],
+                        floats[:, K.F_CONST], ints[:, K.I_M], ints[:, K.I_JLO], ints[:, K.I_BOX:K.I_BOX + 4].T,
+                        ints[:, K.I_REACH2:K.I_REACH2 + 2].T, ints[:, K.I_INSIDE], ints[:, K.I_WINDOW_HI],
+                        rd.enter[:0], rd.leave[:0], rd.window_leave[:0], ints, floats)
+
+
+def _grown(work: K.TileWork) -> K.TileWork:
+    """``work`` with every buffer the kernel asked for (ctl's NEED_* sizes) half as large again."""
+    ctl = work.ctl
+    grow = {}
+    if ctl[K.CTL_NEED_LIST] > work.seg_list.shape[0]:
+        grow["seg_list"] = np.empty(int(ctl[K.CTL_NEED_LIST] * 1.5) + 1, dtype=np.int64)
+    if ctl[K.CTL_NEED_LIST] > work.spans.shape[1]:
+        grow["spans"] = np.empty((11, int(ctl[K.CTL_NEED_LIST] * 1.5) + 1), dtype=np.int64)
+    if ctl[K.CTL_NEED_LIST] > work.far_lo.shape[0]:
+        size = int(ctl[K.CTL_NEED_LIST] * 1.5) + 1
+        grow |= {name: np.empty(size, dtype=np.int64) for name in ("tile_t", "far_lo", "far_hi")}
+    if ctl[K.CTL_NEED_PAIRS] > work.pair_pos.shape[0]:
+        size = int(ctl[K.CTL_NEED_PAIRS] * 1.5) + 1
+        grow |= {"pair_pos": np.empty(size, dtype=np.int64), "pair_j": np.empty(size, dtype=np.int64),
+                 "pair_g": np.empty(size)}
+    if ctl[K.CTL_NEED_ROOM] > work.obs_j.shape[0]:
+        need = int(ctl[K.CTL_NEED_ROOM])
+        size = max(need, min(int(need * 1.5) + 1, K.ARENA_ENTRIES))
+        used = int(ctl[K.CTL_BUMP])  # live slots keep their places
+        for name in ("obs_j", "obs_g", "pre"):
+            old = getattr(work, name)
+            grow[name] = np.empty(size, dtype=old.dtype)
+            grow[name][:used] = old[:used]
+    ctl[K.CTL_NEED_LIST] = ctl[K.CTL_NEED_PAIRS] = ctl[K.CTL_NEED_ROOM] = 0
+    ctl[K.CTL_LISTED] = -1  # the row is listed again (into the new buffers)
+    return work._replace(**grow)
+
+
+# the sweep's stand-in for TileWork.slot: it takes the column from the readings' table itself
+# (``em_kernels.ReadingTables``), the one layout whatever the readings
+NO_SLOT = np.zeros(0, dtype=np.int32)
+
+
+def _scratch_bytes(work: K.TileWork) -> int:
+    return int(sum(a.nbytes for a in work))
+
+
+class Sweeps:
+    """The sweeps of one run of EM over ``cand`` (``em_kernels.Candidates``): ``one_pass(mode)``
+    visits every band, colour by colour, the bands of a colour on up to ``Limits.threads``
+    threads (``core.budget``), one scratch each. Use as a context manager: on leaving, the
+    threads end and the readings' tables hold their state in the problem's order again."""
+
+    def __init__(self, problem, cand: K.Candidates):  # problem: an em.EMProblem (the layer above)
+        rd = problem.readings
+        self.problem, self.cand, self.model = problem, cand, problem.model
+        self.kernel_args = (problem.templates.kernel_arrays, flat_offsets(problem.templates, problem.shape[1]),
+                            K.row_groups(problem.templates))
+        self.phases, self.order = sweep_bands(rd, problem.shape[1])
+        if self.order is not None:  # the readings by column while the bands sweep, put back on leaving
+            rd = _permuted(rd, self.order)
+        self.readings = rd
+        self.tables = K.reading_tables(rd)  # the readings and their state as the kernels take them
+        self.threads = min(active_limits().thread_count(), max(len(bands) for bands in self.phases))
+        self.works = queue.SimpleQueue()  # one scratch per thread
+        for _ in range(self.threads):
+            self.works.put(_work(rd, cand.tile_clock.shape[1]))
+        self.peak = [0, 0]  # the most pairs of a tile, the bytes of a thread's scratch
+        self.clock = 0  # accepted flips so far: a band starts at the clock its colour starts at
+        self.seconds: dict[int, float] = {}  # each band's (by seg_lo) time in the last pass: the order of a colour's
+        # bands on the threads (which changes nothing computed)
+        self.pool = ThreadPoolExecutor(self.threads, thread_name_prefix="aogm-em") if self.threads > 1 else None
+
+    def __enter__(self) -> Sweeps:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.pool is not None:
+            self.pool.shutdown()
+        if self.order is not None:
+            self.problem.readings.ints[self.order] = self.readings.ints
+            self.problem.readings.floats[self.order] = self.readings.floats
+
+    def one_pass(self, mode: int) -> tuple[int, int, int]:
+        """One sweep (``mode`` em_kernels.SWEEP) or scoring pass (SCORE): (flips, candidates
+        scored, pairs generated)."""
+        totals = [0, 0, 0]
+        for bands in self.phases:
+            stop = threading.Event()
+            if self.pool is None:
+                done = [self._band(band, mode, stop) for band in bands]
+            else:  # the costliest bands of the last pass first, so that the threads end together
+                by_cost = sorted(bands, key=lambda band: -self.seconds.get(band.seg_lo, 0.0))
+                futures = [self.pool.submit(self._band, band, mode, stop) for band in by_cost]
+                try:
+                    while concurrent.futures.wait(futures, timeout=0.05).not_done:
+                        pass  # the main thread wakes for a signal's handler (core.interrupts)
+                finally:
+                    stop.set()  # an exception here: the other bands stop at their next pause
+                done = [f.result() for f in futures]
+            for i in range(3):
+                totals[i] += sum(d[i] for d in done)
+            self.clock = max(d[3] for d in done)
+        return tuple(totals)
+
+    def _band(self, band: Band, mode: int, stop: threading.Event) -> tuple[int, int, int, int]:
+        """Sweep one band with a scratch of the pool: (flips, scored, pairs, the clock after)."""
+        work = self.works.get()
+        t0 = time.perf_counter()
+        try:
+            ctl = work.ctl
+            ctl[:] = 0
+            ctl[K.CTL_MODE], ctl[K.CTL_CLOCK] = mode, self.clock
+            ctl[K.CTL_SG_LO], ctl[K.CTL_SG_HI], ctl[K.CTL_LISTED] = band.seg_lo, band.seg_hi, -1
+            work = work._replace(members=band.members, enter=band.enter, leave=band.leave,
+                                 window_leave=band.window_leave)
+            work.active.fill(0)
+            self.peak[1] = max(self.peak[1], _scratch_bytes(work))
+            while not stop.is_set():
+                ctl[K.CTL_BUDGET] = K.PAUSE_WORK
+                status = K._sweep_tiles(*self.kernel_args, self.tables, self.model,
+                                        self.cand, work._replace(slot=NO_SLOT))
+                if status == K.DONE:
+                    break
+                if status == K.NEED_BUFFERS:
+                    work = _grown(work)
+                    self.peak[1] = max(self.peak[1], _scratch_bytes(work))
+                # PAUSED: back in Python, where a pending signal's handler runs (core.interrupts); resume
+            self.peak[0] = max(self.peak[0], work.pair_pos.shape[0])
+            return tuple(int(ctl[i]) for i in (K.CTL_FLIPS, K.CTL_SCORED, K.CTL_PAIRS, K.CTL_CLOCK))
+        finally:
+            self.seconds[band.seg_lo] = time.perf_counter() - t0
+            self.works.put(work)
