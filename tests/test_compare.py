@@ -314,3 +314,16 @@ def test_em_and_adaptive_share_one_calibration_per_log(logs, tmp_path):
     alone = run("compare", logs[0], "--modes", "em", "--maps-dir", tmp_path / "alone", "-q")
     assert alone.exit_code == 0, alone.output
     assert "made_by" not in read_map_file(tmp_path / "alone" / "door_1_em.h5").stats["calibration"]
+
+
+def test_jobs_share_the_cores_among_their_threads(monkeypatch):
+    # compare --jobs J: each worker's EM sweeps take cores // J threads unless --threads says
+    from aogm_cli.cli import compare as compare_cli
+    from aogm_cli.core import budget
+
+    monkeypatch.setattr(budget.os, "sched_getaffinity", lambda pid: set(range(8)), raising=False)
+    assert compare_cli._threads(None, 1) is None  # one process: every core (Limits' default)
+    assert compare_cli._threads(None, 2) == 4 and compare_cli._threads(None, 3) == 2
+    assert compare_cli._threads(None, 16) == 1
+    assert compare_cli._threads(3, 2) == 3
+    assert budget.Limits(threads=None).thread_count() == 8 and budget.Limits(threads=2).thread_count() == 2
