@@ -12,6 +12,7 @@ from aogm_cli.evaluation.metrics import evaluate
 from aogm_cli.io.logfile import read_log
 from aogm_cli.io.map_server import read_map_yaml
 from aogm_cli.io.mapfile import read_map_file
+from aogm_cli.mapping import sweeps
 
 
 def run(*args):
@@ -64,15 +65,20 @@ def test_parameters_from_options_and_file_are_recorded(corridor_door_log, tmp_pa
 
 
 @pytest.mark.parametrize("mode", ["em", "adaptive"])
-def test_the_same_map_on_one_thread_and_on_two(corridor_door_log, tmp_path, mode):
-    # the corridor's EM problem (2904 readings, 420 columns) is swept in 7 column bands, those of
-    # one colour at once on --threads; every array and every count is the same as on one thread
+def test_the_same_map_on_one_thread_and_on_two(corridor_door_log, tmp_path, mode, monkeypatch):
+    # with bands for problems of any size, the corridor's EM problem (2904 readings, 420 columns) is
+    # swept in 7 column bands, those of one colour at once on --threads; every array and every count
+    # is the same as on one thread
+    monkeypatch.setattr(sweeps, "BAND_READINGS", 1)
+    bands, sweep_bands = [], sweeps.sweep_bands
+    monkeypatch.setattr(sweeps, "sweep_bands", lambda *a: bands.append(sweep_bands(*a)) or bands[-1])
     maps = []
     for threads in (1, 2):
         out = tmp_path / f"{threads}.h5"
         result = run("map", corridor_door_log, "--mode", mode, "-o", out, "--threads", threads, "-q")
         assert result.exit_code == 0, result.output
         maps.append(read_map_file(out))
+    assert max(sum(len(colour) for colour in phases) for phases, _ in bands) == 7
     one, two = maps
     for name in ("probability", "observed", "occupied", "clusters"):
         a, b = getattr(one, name, None), getattr(two, name, None)
