@@ -76,7 +76,8 @@ def sweep_bands(rd: K.EMReadings, width: int,
     least half the widest cone's columns, so that the colour-1 bands between two bands of one
     colour are as wide as any cone; one band when there are fewer than ``min_readings`` readings
     (default BAND_READINGS) or no more bands than colours. The readings are ordered by the middle column of their cones,
-    so that two threads seldom write one cache line of the readings' tables."""
+    so that two threads seldom write one cache line of the readings' tables, and then by their first
+    row, so that those a band's sweep holds at a row lie together."""
     n_read = rd.z.shape[0]
     n_seg = -(-width // K.SEGMENT)
     box = rd.box
@@ -91,7 +92,10 @@ def sweep_bands(rd: K.EMReadings, width: int,
     n_bands = n_seg // w
     if n_bands <= colours:
         return whole, None
-    order = np.argsort(np.where(live, box[2].astype(np.int64) + box[3], -1), kind="stable")
+    # by the band of the middle column, then by first row: a band's readings active at a row lie
+    # together in the tables, its own part of them
+    middle = np.where(live, (box[2].astype(np.int64) + box[3]) // (2 * w * K.SEGMENT), -1)
+    order = np.lexsort((box[0], middle))
     box, live, window_hi = box[:, order], live[order], rd.window_hi[order]
     edges = [i * w for i in range(n_bands)] + [n_seg]
     bands = []
