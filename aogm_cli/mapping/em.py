@@ -45,6 +45,8 @@ class EMResult:
     pairs: list[int]  # (candidate, reading) pairs generated per sweep
     peak_pairs: int  # the most pairs one tile held
     scratch_bytes: int  # the tiles' scratch (of one thread) at its largest
+    threads: int = 1  # the sweeps' threads (mapping.sweeps: several where the grid holds bands)
+    band_seconds: float = 0.0  # the sweeps' work, each band's time added up (on one thread: their wall time)
 
 
 # a candidate EM leaves free is decided by the data when occupancy would lower the data
@@ -257,7 +259,7 @@ def run_em(problem: EMProblem, occupied: np.ndarray, candidates: np.ndarray, con
     peak = sweeps.peak
     residual = K._residual_from_gains(cand.cell, occupied, cand.last_gain, model.l_prior)
     return EMResult(len(flips), flips, [float(v) for v in objective], cand.cell, residual, scored, pairs,
-                    int(peak[0]), int(peak[1]))
+                    int(peak[0]), int(peak[1]), sweeps.threads, sweeps.band_seconds)
 
 
 @dataclass
@@ -291,12 +293,13 @@ def em_stats(outcome: EMOutcome | None) -> dict:
     """The map's statistics of EM's final run (zeros without one)."""
     if outcome is None:
         return {"sweeps": 0, "flips_per_sweep": [], "objective_per_sweep": [], "scored_per_sweep": [],
-                "pairs_per_sweep": [], "candidate_cells": 0, "em_readings": 0, "index_entries": 0, "scratch_bytes": 0}
+                "pairs_per_sweep": [], "candidate_cells": 0, "em_readings": 0, "index_entries": 0, "scratch_bytes": 0,
+                "sweep_threads": 0, "band_seconds": 0.0}
     r = outcome.result
     return {"sweeps": r.sweeps, "flips_per_sweep": r.flips, "objective_per_sweep": r.objective,
             "scored_per_sweep": r.scored, "pairs_per_sweep": r.pairs, "candidate_cells": int(r.candidates.size),
             "em_readings": int(outcome.problem.readings.z.size), "index_entries": r.peak_pairs,
-            "scratch_bytes": r.scratch_bytes}
+            "scratch_bytes": r.scratch_bytes, "sweep_threads": r.threads, "band_seconds": r.band_seconds}
 
 
 def em_view(log_odds: np.ndarray, observed: np.ndarray, outcome: EMOutcome | None, grid, poses: np.ndarray, sensor,

@@ -18,8 +18,10 @@ from aogm_cli.mapping import em_kernels as K
 from aogm_cli.sensor_models.cone import flat_offsets
 
 # bytes of slack on either side of a scratch's small arrays: two threads' control words and tile
-# sums written at every tile must not share a cache line (measured on the office of 5000 scans:
-# each thread's bands took 40% longer on two threads than on one without it)
+# sums, written at every tile, must not share a cache line wherever the allocator puts them (on the
+# office of 5000 scans the bands' busy time on two threads was 40% over one thread's before the
+# readings were ordered by row, and within noise of it after, with or without the slack:
+# docs/algorithms.md)
 SLACK = 128
 
 
@@ -30,15 +32,15 @@ def _apart(shape, dtype=np.int64) -> np.ndarray:
     return np.zeros(n + 2 * pad, dtype=dtype)[pad:pad + n].reshape(shape)
 
 
-def _work(rd: K.EMReadings, n_seg: int) -> K.TileWork:
-    n_readings = rd.z.shape[0]
+def _work(tables: K.ReadingTables, n_seg: int) -> K.TileWork:
+    n_readings = tables.ints.shape[0]
     pairs = 1 << 16
     room = 1 << 14
     none = np.zeros(0, dtype=np.int64)  # the band's readings, set per band (``Sweeps._band``)
     return K.TileWork(_apart(K.CTL_SIZE), _apart(n_readings // 64 + 1, np.uint64),
                       _apart(n_seg + 1), np.empty(max(1024, n_readings // 8), dtype=np.int64),
                       _apart(K.SEGMENT + 1), np.empty(pairs, dtype=np.int64),
-                      np.empty(pairs, dtype=np.int64), np.empty(pairs), rd.ints[:, K.I_SLOT],
+                      np.empty(pairs, dtype=np.int64), np.empty(pairs), tables.ints[:, K.I_SLOT],
                       np.empty(room, dtype=np.int64), np.empty(room), np.empty(room), _apart(n_seg),
                       _apart(1024), _apart(1024), _apart(1024), _apart((2, K.SEGMENT + 1), np.float64),
                       np.empty((11, max(1024, n_readings // 8)), dtype=np.int64), _apart(n_seg),
@@ -69,22 +71,21 @@ class Band:
     window_leave: np.ndarray  # ... by window_hi
 
 
-def sweep_bands(rd: K.EMReadings, width: int,
-                min_readings: int | None = None) -> tuple[list[list[Band]], np.ndarray | None]:
+def sweep_bands(rd: K.EMReadings, width: int) -> tuple[list[list[Band]], np.ndarray | None]:
     """The bands of one sweep, by colour, and the order of the readings they are numbered in
     (None: as they are). Bands are ``w`` segments wide (the last takes the rest), w * SEGMENT at
     least half the widest cone's columns, so that the colour-1 bands between two bands of one
-    colour are as wide as any cone; one band when there are fewer than ``min_readings`` readings
-    (default BAND_READINGS) or no more bands than colours. The readings are ordered by the middle column of their cones,
-    so that two threads seldom write one cache line of the readings' tables, and then by their first
-    row, so that those a band's sweep holds at a row lie together."""
+    colour are as wide as any cone; one band when there are fewer than BAND_READINGS readings or
+    no more bands than colours. The readings are ordered by the band of their cones' middle
+    column, so that two threads seldom write one cache line of the readings' tables, and then by
+    their first row, so that those a band's sweep holds at a row lie together."""
     n_read = rd.z.shape[0]
     n_seg = -(-width // K.SEGMENT)
     box = rd.box
     live = box[0] <= box[1]
     whole = [[Band(0, n_seg, np.arange(n_read, dtype=np.int64), rd.enter.astype(np.int64),
                    rd.leave.astype(np.int64), rd.window_leave.astype(np.int64))]]
-    if n_read < (BAND_READINGS if min_readings is None else min_readings) or not live.any():
+    if n_read < BAND_READINGS or not live.any():
         return whole, None
     span = int((box[3] - box[2] + 1)[live].max())
     w = -(-span // (2 * K.SEGMENT))
@@ -106,13 +107,11 @@ def sweep_bands(rd: K.EMReadings, width: int,
     return [bands[c::colours] for c in range(colours)], order
 
 
-def _permuted(rd: K.EMReadings, order: np.ndarray) -> K.EMReadings:
-    """``rd``'s readings (and their state) in ``order``: new tables, the columns views of them."""
-    ints, floats = rd.ints[order], rd.floats[order]
-    return K.EMReadings(ints[:, K.I_ROW0], ints[:, K.I_COL0], ints[:, K.I_BIN], floats[:, K.F_Z], floats[:, K.F_G0],
-                        floats[:, K.F_CONST], ints[:, K.I_M], ints[:, K.I_JLO], ints[:, K.I_BOX:K.I_BOX + 4].T,
-                        ints[:, K.I_REACH2:K.I_REACH2 + 2].T, ints[:, K.I_INSIDE], ints[:, K.I_WINDOW_HI],
-                        rd.enter[:0], rd.leave[:0], rd.window_leave[:0], ints, floats)
+def _permuted(rd: K.EMReadings, order: np.ndarray) -> K.ReadingTables:
+    """The tables of ``rd``'s readings (and their state) in ``order``: copies. The sweep takes no
+    order of them (a band has its own)."""
+    none = rd.enter[:0]
+    return K.ReadingTables(rd.ints[order], rd.floats[order], none, none, none)
 
 
 def _grown(work: K.TileWork) -> K.TileWork:
@@ -164,18 +163,19 @@ class Sweeps:
         self.kernel_args = (problem.templates.kernel_arrays, flat_offsets(problem.templates, problem.shape[1]),
                             K.row_groups(problem.templates))
         self.phases, self.order = sweep_bands(rd, problem.shape[1])
-        if self.order is not None:  # the readings by column while the bands sweep, put back on leaving
-            rd = _permuted(rd, self.order)
-        self.readings = rd
-        self.tables = K.reading_tables(rd)  # the readings and their state as the kernels take them
+        # the readings and their state as the kernels take them: by column while the bands sweep
+        # (put back on leaving)
+        self.tables = K.reading_tables(rd) if self.order is None else _permuted(rd, self.order)
         self.threads = min(active_limits().thread_count(), max(len(bands) for bands in self.phases))
         self.works = queue.SimpleQueue()  # one scratch per thread
         for _ in range(self.threads):
-            self.works.put(_work(rd, cand.tile_clock.shape[1]))
+            self.works.put(_work(self.tables, cand.tile_clock.shape[1]))
         self.peak = [0, 0]  # the most pairs of a tile, the bytes of a thread's scratch
         self.clock = 0  # accepted flips so far: a band starts at the clock its colour starts at
         self.seconds: dict[int, float] = {}  # each band's (by seg_lo) time in the last pass: the order of a colour's
         # bands on the threads (which changes nothing computed)
+        self.band_seconds = 0.0  # the bands' times added up over the run: against the sweeps' wall time on
+        # several threads, how busy they were
         self.pool = ThreadPoolExecutor(self.threads, thread_name_prefix="aogm-em") if self.threads > 1 else None
 
     def __enter__(self) -> Sweeps:
@@ -185,8 +185,8 @@ class Sweeps:
         if self.pool is not None:
             self.pool.shutdown()
         if self.order is not None:
-            self.problem.readings.ints[self.order] = self.readings.ints
-            self.problem.readings.floats[self.order] = self.readings.floats
+            self.problem.readings.ints[self.order] = self.tables.ints
+            self.problem.readings.floats[self.order] = self.tables.floats
 
     def one_pass(self, mode: int) -> tuple[int, int, int]:
         """One sweep (``mode`` em_kernels.SWEEP) or scoring pass (SCORE): (flips, candidates
@@ -207,6 +207,7 @@ class Sweeps:
                 done = [f.result() for f in futures]
             for i in range(3):
                 totals[i] += sum(d[i] for d in done)
+            self.band_seconds += sum(self.seconds[band.seg_lo] for band in bands)
             self.clock = max(d[3] for d in done)
         return tuple(totals)
 
