@@ -65,7 +65,7 @@ def find_clusters(run: LaidOutReadings, flags: np.ndarray, standard, params: Map
     * "elfes" (Elfes' map outside the clusters): the ``contested`` cells (``contested_cells``,
       one more standard pass over ``log``) and the ``weak`` ones, whose log-odds lie within
       ``adaptive.weak`` of the prior (space behind a wall that one random reading crossed);
-    * "thinned" (the thinned map outside, its undecided cells unknown): the cells the thinned
+    * "thinned" (the thinned map outside, its free cells no reading holds free unknown): the cells the thinned
       map holds free but the exact inverse model holds occupied by ``adaptive.contested``
       log-odds or more (walls that too-long specular or multipath readings cleared), from the
       exact model's evidence the thinning computed;

@@ -11,9 +11,16 @@ import numpy as np
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import SensorSpec
 from aogm_cli.sensor_models.cone import SPARE_MASK, ConeTemplates, flat_offsets, reading_geometry
-from aogm_cli.sensor_models.exact_inverse import BOUND, MARGIN, ExactModelConfig, cone_scratch, exact_inverse_updates
+from aogm_cli.sensor_models.exact_inverse import (
+    BOUND,
+    MARGIN,
+    ExactModelConfig,
+    cone_scratch,
+    exact_inverse_updates,
+    map_evidence_sums,
+)
 from aogm_cli.sensor_models.forward_model import ExpectationReadings, ForwardModelConfig, deflect
-from aogm_cli.sensor_models.readings import forward_templates, reading_spans
+from aogm_cli.sensor_models.readings import LaidOutReadings, forward_templates, reading_spans
 
 
 class ExactMapper:
@@ -30,8 +37,7 @@ class ExactMapper:
         self.sensor, self.grid, self.config = sensor, grid, config
         self.templates = forward_templates(grid, sensor) if templates is None else templates
         self.flat = flat_offsets(self.templates, grid.width)
-        self.model = (float(forward.p_rand), float(forward.p_max), float(forward.p_hit), float(forward.sigma),
-                      float(forward.window), float(sensor.max_range))
+        self.model = _model(forward, sensor.max_range)
         self.bounds = (_sigmoid(-BOUND), _sigmoid(BOUND), float(config.prior))
         self.scratch = cone_scratch(self.templates)
         n = grid.height * grid.width
@@ -58,6 +64,30 @@ class ExactMapper:
         observed = p >= 0.0
         p[~observed] = self.config.prior
         return np.log(p / (1.0 - p)).astype(np.float32), observed
+
+
+def _model(forward: ForwardModelConfig, z_max: float) -> tuple:
+    """The kernels' ``model``: (p_rand, p_max, p_hit, sigma, window, z_max)."""
+    return (float(forward.p_rand), float(forward.p_max), float(forward.p_hit), float(forward.sigma),
+            float(forward.window), float(z_max))
+
+
+def map_evidence(run: LaidOutReadings, forward: ForwardModelConfig, occupied: np.ndarray) -> np.ndarray:
+    """(H, W) float64: each cell's evidence at the binary map ``occupied`` (flat or (H, W) bool),
+    log p(Z | m, cell occupied) - log p(Z | m, cell free) over every reading of ``run`` (its
+    deflected beams cut), as EM scores a candidate (``em.decided``), in one pass over the cones
+    (``exact_inverse.map_evidence_sums``): where it is near 0 no reading decides the cell."""
+    grid, templates = run.grid, run.templates
+    n = grid.height * grid.width
+    occupancy = np.zeros(n + SPARE_MASK + 1, dtype=np.float32)
+    occupancy[:n] = np.asarray(occupied, dtype=bool).reshape(-1)
+    z, limit = deflect(run.z, run.shadow, run.sensor.max_range)
+    readings = ExpectationReadings(run.rows, run.cols, run.bins, z, limit)
+    evidence = np.zeros(n)
+    model, scratch, flat = _model(forward, run.sensor.max_range), cone_scratch(templates), flat_offsets(templates, grid.width)
+    for span in reading_spans(z.size):
+        map_evidence_sums(templates.kernel_arrays, flat, grid.shape, readings, occupancy, model, scratch, span, evidence)
+    return evidence.reshape(grid.shape)
 
 
 def _sigmoid(x: float) -> float:

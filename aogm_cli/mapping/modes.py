@@ -53,7 +53,8 @@ MODE_STAGES = {
     "standard": STANDARD,
     "em": PREPARE + EM_STAGES,
     "adaptive": PREPARE[:-1] + (Stage("thinning", S.thinning, when=S.thins_outside), Stage("detector", S.detect),
-                                Stage("clusters", S.clusters)) + EM_STAGES,
+                                Stage("clusters", S.clusters)) + EM_STAGES[:-1]
+    + (Stage("decided", S.decided, when=S.keeps_thinned), EM_STAGES[-1]),
 }
 
 

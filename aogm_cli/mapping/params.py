@@ -84,7 +84,7 @@ class AdaptiveConfig:
     besides the flagged readings' walls the ``contested`` cells, whose occupied evidence alone
     reaches this many log-odds but which the standard map holds free, and the ``weak`` cells,
     whose log-odds lie within this of the prior; 0: none) or "thinned" (the map thinned by the
-    exact inverse model, its undecided cells unknown to a planner; besides the walls the cells it
+    exact inverse model, its free cells that no reading holds free unknown to a planner; besides the walls the cells it
     holds free but the exact model holds occupied by ``contested`` log-odds); every cluster grown
     by ``grow`` cells (8-connected; sonar cones only); and the ``scale`` of the probabilities
     outside the clusters: "em", the EM probability of the cluster cells that the log's readings

@@ -18,17 +18,18 @@ from aogm_cli.core.occupancy_map import OccupancyMap
 from aogm_cli.mapping import adaptive as A
 from aogm_cli.mapping import em as E
 from aogm_cli.mapping.calibration import calibration_rounds, fit_at_map, sample_readings
+from aogm_cli.mapping.exact import map_evidence
 from aogm_cli.mapping.learned import BUILDING, FROM_LOG, Learned, SensorModel
 from aogm_cli.mapping.params import EMConfig, MapParams
 from aogm_cli.mapping.pipeline import Progress, TimedSource, params_json
 from aogm_cli.mapping.standard import (
+    HIDDEN_GAIN,
     occupied_evidence,
     probability_from_log_odds,
     set_up,
     standard_log_odds,
     thin_pass,
     thins,
-    undecided,
 )
 from aogm_cli.sensor_models.ray import is_narrow_beam
 from aogm_cli.sensor_models.readings import LaidOutReadings, lay_out_readings
@@ -47,19 +48,11 @@ RATES_READINGS = 1000
 @dataclass(frozen=True)
 class StandardMap:
     """A log-odds map and its observed cells, (H, W) each (``standard.standard_map``); once
-    thinned (``standard.thin_pass``), Elfes' log-odds before and the exact model's ``evidence``."""
+    thinned (``standard.thin_pass``), the exact model's ``evidence``."""
 
     log_odds: np.ndarray
     observed: np.ndarray
-    elfes: np.ndarray | None = None
     evidence: np.ndarray | None = None
-
-    def undecided(self, inverse) -> np.ndarray:
-        """The cells a planner sees unknown: none, or once thinned those no reading decided
-        (``standard.undecided``; ``inverse`` the inverse model's settings)."""
-        if self.evidence is None:
-            return np.zeros_like(self.observed)
-        return undecided(self.log_odds, self.observed, self.elfes, self.evidence, inverse)
 
 
 @dataclass(frozen=True)
@@ -107,6 +100,7 @@ class State:
     occupied: np.ndarray | None = None  # flat bool: EM's binary map, updated in place
     problem: Problem | None = None
     em: E.EMOutcome | None = None
+    decided: np.ndarray | None = None  # (H, W) bool: the cells the data hold free at the final map
     view: View | None = None
 
     def but(self, **changes) -> State:
@@ -229,7 +223,7 @@ def thinning(s: State) -> State:
     log = s.log
     cuts = None if s.readings is None else _cuts(s.readings)
     log_odds, evidence = thin_pass(log, s.grid, s.in_use, s.standard.log_odds, s.standard.observed, cuts)
-    return s.but(standard=StandardMap(log_odds, s.standard.observed, s.standard.log_odds, evidence))
+    return s.but(standard=StandardMap(log_odds, s.standard.observed, evidence))
 
 
 def detect(s: State) -> State:
@@ -313,6 +307,17 @@ def sweeps(s: State) -> State:
     return s.but(em=E.EMOutcome(p.config, result, p.problem))
 
 
+def decided(s: State) -> State:
+    """Which cells the data hold free at the map adaptive leaves (the thinned map outside the
+    clusters, EM's inside): those whose occupancy would lower the readings' likelihood by more
+    than ``HIDDEN_GAIN`` (``exact.map_evidence``), as EM decides the cells it leaves free
+    (``em.decided``). Outside the clusters a free cell the data do not hold free is behind a
+    wall, crossed only by readings the map cannot explain, or one the readings want occupied: a
+    planner sees it unknown (``em_view``)."""
+    evidence = map_evidence(s.readings, s.in_use.em.forward, s.occupied)
+    return s.but(decided=evidence < -HIDDEN_GAIN)
+
+
 def standard_view(s: State) -> State:
     """The standard map's probabilities."""
     log_odds, observed = s.standard.log_odds, s.standard.observed
@@ -326,8 +331,8 @@ def em_view(s: State) -> State:
         return s.but(view=View(*E.em_view(s.standard.log_odds, s.standard.observed, s.em, s.grid, whole.pose,
                                          whole.sensor, params)))
     observed = s.standard.observed
-    if params.adaptive.outside == "thinned":  # outside the clusters the thinned map, its undecided cells unknown
-        observed = observed & ~(s.standard.undecided(params.inverse_model) & (s.clusters.ids == 0))
+    if s.decided is not None:  # outside the clusters the thinned map, its free cells no reading decides unknown
+        observed = observed & ~((s.clusters.ids == 0) & (s.standard.log_odds <= 0) & ~s.decided)
     return s.but(view=View(*A.joined_view(s.standard.log_odds, observed, s.em, s.clusters.ids, whole, s.grid,
                                           params)))
 
@@ -346,6 +351,11 @@ def thins_outside(s: State) -> bool:
     """Adaptive with ``adaptive.outside`` "thinned" thins a cone's map: it keeps it outside the
     clusters (and ``exact.thin`` thins it in any mode)."""
     return thins(s.log.sensor, s.grid, s.params, always=s.params.adaptive.outside == "thinned")
+
+
+def keeps_thinned(s: State) -> bool:
+    """Adaptive with ``adaptive.outside`` "thinned": the thinned map stands outside the clusters."""
+    return s.params.adaptive.outside == "thinned"
 
 
 def runs_em(s: State) -> bool:

@@ -273,8 +273,7 @@ def thins(sensor: SensorSpec, grid: GridSpec, params: MapParams, always: bool = 
             and not is_narrow_beam(sensor, grid.resolution))
 
 
-UNDECIDED = 0.45  # log-odds: Elfes' free evidence a cell needs to be decided (``undecided``)
-HIDDEN_GAIN = 0.05  # log-odds: and the exact model's (EM's ``em.HIDDEN_GAIN``)
+HIDDEN_GAIN = 0.05  # log-odds: the evidence that decides a cell free (EM's ``em.decided``, adaptive's ``stages.decided``)
 
 
 class Thinned(NamedTuple):
@@ -295,17 +294,6 @@ def thin_pass(log, grid: GridSpec, params: MapParams, log_odds: np.ndarray, obse
     exact = standard_log_odds(log, grid, exact_params, cuts=cuts)
     evidence = np.where(exact[1], exact[0] - np.float32(params.exact.l0), np.float32(0.0))
     return Thinned(thinned(log_odds, observed, exact, params.exact, params.inverse_model.clamp_min), evidence)
-
-
-def undecided(log_odds: np.ndarray, observed: np.ndarray, elfes: np.ndarray, evidence: np.ndarray,
-              inverse: InverseModelConfig) -> np.ndarray:
-    """(H, W) bool: the observed cells the thinned map ``log_odds`` holds free though no reading
-    decided them: Elfes' map (``elfes``) holds them within ``UNDECIDED`` log-odds of its prior
-    and the exact model's ``evidence`` against occupancy is less than ``HIDDEN_GAIN`` (as EM's
-    hidden cells, ``em.decided``): behind walls that a stray reading crossed. A planner sees
-    them unknown (``em.residual_into``)."""
-    return (observed & (log_odds <= 0) & (elfes - np.float32(inverse.l0) > -UNDECIDED)
-            & (evidence > -HIDDEN_GAIN))
 
 
 def truth_grid_map(log: Log) -> tuple[np.ndarray, np.ndarray]:

@@ -135,6 +135,51 @@ def cone_ratios(p, g, j0, g0, p_hit, const, w, n, a, u, r, na, out):
     return True
 
 
+@numba.njit(cache=True, _nrt=False, error_model="numpy")
+def _reading_ratios(tpl, flat, shape, readings, t, state, prior, model, ib, fl):
+    """Reading t's cone under the flat occupancy ``state`` (negative: ``prior``): its cells'
+    flat ids in ``ib``, their occupancy in ``fl[0]`` and their ``cone_ratios`` in ``fl[6]``.
+    Returns the number m of cone cells, negated when every ratio is exactly 1 (``fl[6]`` unset),
+    0 for no reading or a cone off the grid (the arguments as ``exact_inverse_updates``')."""
+    p_rand, p_max, p_hit, sigma, window, z_max = model
+    height, width = shape
+    ext = tpl.extent
+    z = readings.z[t]
+    if not z == z:  # NaN: no reading
+        return 0
+    row0 = readings.rows[t]
+    col0 = readings.cols[t]
+    if row0 + ext < 0 or row0 - ext >= height or col0 + ext < 0 or col0 - ext >= width:
+        return 0
+    z, limit = cone_reach(z, readings.limit[t], z_max, sigma, window)
+    k = readings.bins[t]
+    b = tpl.base_bin[k]
+    rk = tpl.ranges[tpl.offsets[b] : tpl.offsets[b + 1]]
+    m = cone_entries(rk, z, limit, sigma, window)
+    cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width)
+    # the cells before the Gaussian window (g = 0): the slack keeps any cell whose g might
+    # not round to 0 in the window
+    j0 = min(range_search(rk, tpl.range_index[b], tpl.resolution, z - window * sigma - 1e-9, False), m)
+    p = fl[0]
+    g = fl[1]
+    for j in range(m):
+        v = state[np.uint64(np.uint32(ib[j]))]
+        p[j] = prior if v < 0.0 else v
+    last = -1.0
+    gj = 0.0
+    for j in range(j0, m):
+        if rk[j] != last:
+            last = rk[j]
+            gj = gaussian_at(z, last, sigma, window)
+        g[j] = gj
+    u0 = (z - z_max) / sigma
+    g0 = math.exp(-0.5 * u0 * u0) / (math.sqrt(2.0 * math.pi) * sigma)
+    const = p_rand / z_max + p_max * g0
+    if not cone_ratios(p, g, j0, g0, p_hit, const, 1.0 - p_rand - p_max, m, fl[2], fl[3], fl[4], fl[5], fl[6]):
+        return -m
+    return m
+
+
 # _nrt=False (as the standard kernel): nothing is allocated per reading; the scratch comes in
 @numba.njit(cache=True, _nrt=False, error_model="numpy")
 def exact_inverse_updates(tpl, flat, shape, readings, state, model, bounds, scratch, span):
@@ -152,71 +197,49 @@ def exact_inverse_updates(tpl, flat, shape, readings, state, model, bounds, scra
     cuts a deflected beam); ``model`` (p_rand, p_max, p_hit, sigma, window, z_max); ``scratch``
     (``cone_scratch``): (int32 (longest template,), float64 (7, same): p, g, a, u, r, 1 - p_hit p,
     out)."""
-    p_rand, p_max, p_hit, sigma, window, z_max = model
     p_min, p_max_clamp, prior = bounds
-    height, width = shape
-    n_cells = height * width
-    ext = tpl.extent
-    ranges = tpl.ranges
-    w = 1.0 - p_rand - p_max
+    n_cells = shape[0] * shape[1]
     # what a reading whose ratios are all 1 leaves in an unobserved cell: the prior, as the
     # update below computes it
     kept_prior = np.float32(min(max(prior / (prior + 1.0 - prior), p_min), p_max_clamp))
     ib = scratch[0]
     fl = scratch[1]
-    p = fl[0]
-    g = fl[1]
-    a = fl[2]
-    u = fl[3]
-    r = fl[4]
-    na = fl[5]
-    out = fl[6]
     for t in range(span[0], span[1]):  # in order: each reading sees the map the earlier ones left
-        z = readings.z[t]
-        if not z == z:  # NaN: no reading
-            continue
-        row0 = readings.rows[t]
-        col0 = readings.cols[t]
-        if row0 + ext < 0 or row0 - ext >= height or col0 + ext < 0 or col0 - ext >= width:
-            continue
-        z, limit = cone_reach(z, readings.limit[t], z_max, sigma, window)
-        k = readings.bins[t]
-        b = tpl.base_bin[k]
-        rk = ranges[tpl.offsets[b] : tpl.offsets[b + 1]]
-        m = cone_entries(rk, z, limit, sigma, window)
-        cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width)
-        # the cells before the Gaussian window (g = 0): the slack keeps any cell whose g might
-        # not round to 0 in the window
-        j0 = min(range_search(rk, tpl.range_index[b], tpl.resolution, z - window * sigma - 1e-9, False), m)
-        cells = ib[:m]
-        pm = p[:m]
-        for j in range(m):
-            v = state[np.uint64(np.uint32(cells[j]))]
-            pm[j] = prior if v < 0.0 else v
-        last = -1.0
-        gj = 0.0
-        for j in range(j0, m):
-            if rk[j] != last:
-                last = rk[j]
-                gj = gaussian_at(z, last, sigma, window)
-            g[j] = gj
-        u0 = (z - z_max) / sigma
-        g0 = math.exp(-0.5 * u0 * u0) / (math.sqrt(2.0 * math.pi) * sigma)
-        const = p_rand / z_max + p_max * g0
-        if not cone_ratios(p, g, j0, g0, p_hit, const, w, m, a, u, r, na, out):
-            for j in range(m):  # every ratio 1: the cone's unobserved cells become observed
-                c = np.uint64(np.uint32(cells[j]))
+        m = _reading_ratios(tpl, flat, shape, readings, t, state, prior, model, ib, fl)
+        if m < 0:
+            for j in range(-m):  # every ratio 1: the cone's unobserved cells become observed
+                c = np.uint64(np.uint32(ib[j]))
                 if c < n_cells and state[c] < 0.0:
                     state[c] = kept_prior
             continue
-        om = out[:m]
+        pm = fl[0][:m]
+        om = fl[6][:m]
         for j in range(m):
             odds = pm[j] * om[j]
             om[j] = min(max(odds / (odds + 1.0 - pm[j]), p_min), p_max_clamp)
         for j in range(m):
-            c = np.uint64(np.uint32(cells[j]))
+            c = np.uint64(np.uint32(ib[j]))
             if c < n_cells:
                 state[c] = om[j]
+
+
+@numba.njit(cache=True, _nrt=False, error_model="numpy")
+def map_evidence_sums(tpl, flat, shape, readings, occupancy, model, scratch, span, evidence):
+    """Add to the flat float64 ``evidence`` (height * width) each reading's log p(z | m_j = 1) -
+    log p(z | m_j = 0) for the cells j of its cone, every other cell as the fixed binary map
+    ``occupancy`` (flat float32 0 / 1, then SPARE_MASK + 1 spare cells of 0) has it: summed over
+    the readings, EM's evidence of each cell at that map (``em.decided``). A cone's ratio for cell
+    j does not read cell j itself, so no cell is changed. Arguments as ``exact_inverse_updates``'."""
+    n_cells = shape[0] * shape[1]
+    ib = scratch[0]
+    fl = scratch[1]
+    for t in range(span[0], span[1]):
+        m = _reading_ratios(tpl, flat, shape, readings, t, occupancy, 0.0, model, ib, fl)
+        om = fl[6]
+        for j in range(m):  # none when every ratio is 1
+            c = np.uint64(np.uint32(ib[j]))
+            if c < n_cells:
+                evidence[c] += math.log(om[j])
 
 
 def cone_scratch(templates) -> tuple[np.ndarray, np.ndarray]:
