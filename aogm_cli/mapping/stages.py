@@ -354,8 +354,9 @@ def thins_outside(s: State) -> bool:
 
 
 def keeps_thinned(s: State) -> bool:
-    """Adaptive with ``adaptive.outside`` "thinned": the thinned map stands outside the clusters."""
-    return s.params.adaptive.outside == "thinned"
+    """Adaptive with ``adaptive.outside`` "thinned" on a map that was thinned (not a narrow beam's):
+    the thinned map stands outside the clusters."""
+    return s.params.adaptive.outside == "thinned" and s.standard.evidence is not None
 
 
 def runs_em(s: State) -> bool:
