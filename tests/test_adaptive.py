@@ -30,7 +30,8 @@ def detector_with_threshold(tmp_path, threshold):
 
 
 def test_no_flagged_reading_gives_the_standard_map(corridor_door_log, tmp_path):
-    params = resolve_params(overrides={"adaptive": {"contested": 0.0, "weak": 0.0}})  # no contested or weak cells either
+    # Elfes' map outside the clusters, and no contested or weak cells either
+    params = resolve_params(overrides={"adaptive": {"outside": "elfes", "contested": 0.0, "weak": 0.0}})
     never = detector_with_threshold(tmp_path, 1.0)  # p(y = 1) stays below 1 on these readings
     adaptive = map_file(corridor_door_log, "adaptive", params, str(never))
     standard = map_file(corridor_door_log, "standard", params)
@@ -42,8 +43,9 @@ def test_no_flagged_reading_gives_the_standard_map(corridor_door_log, tmp_path):
 
 
 def test_em_changes_nothing_outside_the_clusters(corridor_door_log):
-    """With ``adaptive.scale: mixed``, the standard map's own probabilities outside the clusters."""
-    params = resolve_params(overrides={"adaptive": {"scale": "mixed"}})
+    """With Elfes' map outside the clusters and ``adaptive.scale: mixed``, the standard map's own
+    probabilities outside the clusters."""
+    params = resolve_params(overrides={"adaptive": {"outside": "elfes", "scale": "mixed"}})
     adaptive = map_file(corridor_door_log, "adaptive", params)
     standard = map_file(corridor_door_log, "standard", params)
     # outside the clusters and the robot's footprint (cleared, as EM's map is)
@@ -65,18 +67,22 @@ def test_em_changes_nothing_outside_the_clusters(corridor_door_log):
 def test_one_scale_keeps_what_the_map_believes_and_the_order_outside(corridor_door_log):
     """The default scale changes only the probabilities outside the clusters: every cell keeps
     its side of 0.5 (and so accuracy, checks and what a planner sees), the cells inside keep
-    EM's residuals, and the cells outside keep their order."""
-    mixed = map_file(corridor_door_log, "adaptive", resolve_params(overrides={"adaptive": {"scale": "mixed"}}))
-    one = map_file(corridor_door_log, "adaptive", resolve_params())
-    assert one.params["adaptive"]["scale"] == "em" and mixed.params["adaptive"]["scale"] == "mixed"
-    assert np.array_equal(one.observed, mixed.observed) and np.array_equal(one.occupied, mixed.occupied)
-    np.testing.assert_array_equal(np.sign(one.probability - 0.5), np.sign(mixed.probability - 0.5))
-    inside = mixed.clusters > 0
-    np.testing.assert_array_equal(one.probability[inside], mixed.probability[inside])
-    outside = mixed.observed & ~inside
-    order = np.argsort(mixed.probability[outside], kind="stable")
-    assert np.all(np.diff(one.probability[outside][order]) >= 0)
-    assert not np.array_equal(one.probability[outside], mixed.probability[outside])
+    EM's residuals; with Elfes' map outside (the hit rates' scale) the cells outside keep their
+    order, with the thinned map (EM's residuals at the final map) they rank by their evidence."""
+    for outside_map in ("elfes", "thinned"):
+        mixed = map_file(corridor_door_log, "adaptive",
+                         resolve_params(overrides={"adaptive": {"outside": outside_map, "scale": "mixed"}}))
+        one = map_file(corridor_door_log, "adaptive", resolve_params(overrides={"adaptive": {"outside": outside_map}}))
+        assert one.params["adaptive"]["scale"] == "em" and mixed.params["adaptive"]["scale"] == "mixed"
+        assert np.array_equal(one.observed, mixed.observed) and np.array_equal(one.occupied, mixed.occupied)
+        np.testing.assert_array_equal(np.sign(one.probability - 0.5), np.sign(mixed.probability - 0.5))
+        inside = mixed.clusters > 0
+        np.testing.assert_array_equal(one.probability[inside], mixed.probability[inside])
+        outside = mixed.observed & ~inside
+        assert not np.array_equal(one.probability[outside], mixed.probability[outside])
+        if outside_map == "elfes":
+            order = np.argsort(mixed.probability[outside], kind="stable")
+            assert np.all(np.diff(one.probability[outside][order]) >= 0)
 
 
 def test_a_bad_scale_is_refused_naming_it():
@@ -152,13 +158,13 @@ def test_weak_cells_alone_make_clusters(corridor_door_log, tmp_path):
     """With no flagged reading and no contested cell, the cells whose standard log-odds lie
     within ``adaptive.weak`` of the prior are clustered, and only they."""
     never = detector_with_threshold(tmp_path, 1.0)
-    params = resolve_params(overrides={"adaptive": {"contested": 0.0, "grow": 0}})
+    params = resolve_params(overrides={"adaptive": {"outside": "elfes", "contested": 0.0, "grow": 0}})
     adaptive = map_file(corridor_door_log, "adaptive", params, str(never))
     standard = map_file(corridor_door_log, "standard", params)
     weak = standard.observed & (np.abs(standard.log_odds) < params.adaptive.weak)
     assert np.array_equal(adaptive.clusters > 0, weak)
     # grown by one cell (8-connected), within the observed cells
-    params = resolve_params(overrides={"adaptive": {"contested": 0.0, "grow": 1}})
+    params = resolve_params(overrides={"adaptive": {"outside": "elfes", "contested": 0.0, "grow": 1}})
     adaptive = map_file(corridor_door_log, "adaptive", params, str(never))
     assert np.array_equal(adaptive.clusters > 0, standard.observed & cluster.grown(weak, 1))
 
@@ -179,12 +185,13 @@ def test_adaptive_cli_writes_clusters_and_stats(corridor_door_log, tmp_path):
     assert m.stats["clusters"] == int(m.clusters.max())
     # the runtime is the sum of the phases, each recorded, named as the em mode names its own
     phases = m.stats["phase_seconds"]
-    # the sensor's model carried by the detector: the building's p_max fitted (rates), no calibration
-    assert set(phases) == {"standard", "readings", "deflections", "detector", "clusters", "index", "rates", "sweeps",
-                           "view"}
+    # the sensor's model carried by the detector: the building's p_max fitted (rates), no calibration;
+    # so the thinned map outside the clusters (thinning) and its free cells checked (decided)
+    assert set(phases) == {"standard", "readings", "deflections", "thinning", "detector", "clusters", "index",
+                           "rates", "sweeps", "decided", "view"}
     assert m.runtime_s == pytest.approx(sum(phases.values()), rel=1e-12)
     em = read_map_file(_em_map(corridor_door_log, tmp_path))
-    assert set(em.stats["phase_seconds"]) == set(phases) - {"detector", "clusters"}
+    assert set(em.stats["phase_seconds"]) == set(phases) - {"detector", "clusters", "thinning", "decided"}
     shared = {"sweeps", "flips_per_sweep", "objective_per_sweep", "scored_per_sweep", "pairs_per_sweep",
               "candidate_cells", "em_readings", "index_entries", "scratch_bytes"}
     assert shared <= set(m.stats) and shared <= set(em.stats)  # one stats format for both modes
@@ -272,12 +279,15 @@ def test_thinned_outside_keeps_clusters_small_and_reports_undecided_cells_unknow
     with LogReader(corridor_door_log) as r:
         body = footprint(thinned.grid, r.poses(), r.sensor)
     outside = (adaptive.clusters == 0) & ~body
-    # outside the clusters EM's binary map is the thinned map's
-    assert np.array_equal(adaptive.occupied[outside], ((thinned.log_odds > 0) & adaptive.observed)[outside])
+    # outside the clusters EM's binary map is adaptive's thinned map, which frees at least what the
+    # standard mode's thinning frees (it thins to the exact model's prior: stages.OUTSIDE_MARGIN)
+    ours = (adaptive.log_odds > 0) & adaptive.observed
+    assert np.array_equal(adaptive.occupied[outside], ours[outside])
+    assert not np.any(ours & ~(thinned.log_odds > 0))
     unknown = thinned.observed & ~adaptive.observed & outside
-    assert unknown.any() and np.all(thinned.probability[unknown] <= 0.5)
-    default = map_file(corridor_door_log, "adaptive", resolve_params())
-    assert default.stats["cells_in_clusters"] > 0.5 * default.stats["observed_cells"]
+    assert unknown.any() and np.all(adaptive.log_odds[unknown] <= 0)
+    elfes = map_file(corridor_door_log, "adaptive", resolve_params(overrides={"adaptive": {"outside": "elfes"}}))
+    assert elfes.stats["cells_in_clusters"] > 0.5 * elfes.stats["observed_cells"]
     # a planner reaches where it does on EM's map: the free cells no reading holds free are
     # unknown, the door frame's decided cells free (the rule before, Elfes' and the exact model's
     # evidence at the cell, left the frame unknown: block 0.078 against EM's 0.056)
@@ -291,7 +301,8 @@ def test_thinned_outside_keeps_clusters_small_and_reports_undecided_cells_unknow
 
 def test_thinned_outside_clusters_the_contested_cells(corridor_door_log):
     """With no flagged reading, the thinned design's clusters are exactly the cells the thinned
-    map holds free and the exact model holds occupied by ``adaptive.contested`` or more."""
+    map holds free and the exact model holds occupied by ``adaptive.contested`` or more, and the
+    wall layers next to them that the thinning freed."""
     from aogm_cli.mapping import stages as S
     from aogm_cli.mapping.modes import MODE_STAGES, resolved_params
     from aogm_cli.mapping.pipeline import TimedSource, log_grid
@@ -303,10 +314,12 @@ def test_thinned_outside_clusters_the_contested_cells(corridor_door_log):
     names = [stage.name for stage in MODE_STAGES["adaptive"]]
     state, _ = S.run_stages(MODE_STAGES["adaptive"][:names.index("detector")], state)
     none = np.zeros(log.ranges.size, dtype=bool)
-    ids, count = find_clusters(state.readings, none, state.standard, params, log)
+    ids, count = find_clusters(state.readings, none, state.standard, params, "thinned", log)
     sm = state.standard
     contested = sm.observed & (sm.log_odds <= 0) & (sm.evidence >= 0.1)
-    assert count > 0 and np.array_equal(ids > 0, contested)
+    # grown by one cell into the wall layers the thinning freed (Elfes' map holds them occupied)
+    layers = cluster.grown(contested, 1) & sm.observed & (sm.elfes > 0) & (sm.log_odds <= 0)
+    assert count > 0 and layers.any() and np.array_equal(ids > 0, contested | layers)
 
 
 def test_map_evidence_is_ems_evidence_at_the_map(corridor_door_log):
@@ -335,3 +348,21 @@ def test_map_evidence_is_ems_evidence_at_the_map(corridor_door_log):
     finite = np.isfinite(scored)
     assert finite.mean() > 0.99 and (evidence < -1).mean() > 0.1
     np.testing.assert_allclose(evidence[finite], scored[finite], rtol=1e-6, atol=1e-6)
+
+
+def test_residual_scale_by_hand():
+    """Outside the clusters a cell takes EM's residual logistic(evidence + l_prior) on its side of
+    0.5; cells not listed, and unknown ones, keep theirs."""
+    from aogm_cli.mapping.adaptive import SIDE, residual_scale
+
+    l_prior = math.log(0.3 / 0.7)
+    probability = np.array([[0.9, 0.2, 0.7, 0.3, 0.12]], dtype=np.float32)
+    evidence = np.array([[3.0, -4.0, -2.0, 2.0, 1.0]])
+    cells = np.array([[True, True, True, True, False]])
+    out = residual_scale(probability, cells, evidence, l_prior)
+    r = 1.0 / (1.0 + np.exp(-(evidence + l_prior)))
+    # occupied and free with evidence to match; an occupied cell the readings want free stays just
+    # above 0.5, a free one they want occupied just below
+    expected = [r[0, 0], r[0, 1], 0.5 + SIDE, 0.5 - SIDE, 0.12]
+    np.testing.assert_allclose(out[0], expected, rtol=1e-6)
+    assert out.dtype == probability.dtype and probability[0, 2] == np.float32(0.7)

@@ -95,11 +95,11 @@ def _sigmoid(x: float) -> float:
 
 
 def thinned(log_odds: np.ndarray, observed: np.ndarray, exact: tuple[np.ndarray, np.ndarray], config: ExactModelConfig,
-            free: float) -> np.ndarray:
+            free: float, margin: float = MARGIN) -> np.ndarray:
     """The standard map ``log_odds`` (H, W) with the observed cells that the exact model's map
-    ``exact`` (its log-odds and observed) holds free, more than ``MARGIN`` below its
+    ``exact`` (its log-odds and observed) holds free, more than ``margin`` below its
     prior, set to ``free`` (the standard map's free clamp)."""
     exact_log_odds, exact_observed = exact
     out = log_odds.copy()
-    out[observed & exact_observed & (exact_log_odds < config.l0 - MARGIN)] = np.float32(free)
+    out[observed & exact_observed & (exact_log_odds < config.l0 - margin)] = np.float32(free)
     return out

@@ -52,7 +52,7 @@ EM_STAGES = (  # and their last
 MODE_STAGES = {
     "standard": STANDARD,
     "em": PREPARE + EM_STAGES,
-    "adaptive": PREPARE[:-1] + (Stage("thinning", S.thinning, when=S.thins_outside), Stage("detector", S.detect),
+    "adaptive": PREPARE[:-1] + (Stage("thinning", S.thinning_outside, when=S.thins_outside), Stage("detector", S.detect),
                                 Stage("clusters", S.clusters)) + EM_STAGES[:-1]
     + (Stage("decided", S.decided, when=S.keeps_thinned), EM_STAGES[-1]),
 }
@@ -138,6 +138,9 @@ def warm_up(sensor: SensorSpec, params: MapParams, mode: str) -> None:
         # few readings), so that the deflected beams' kernel runs too
         forward = dataclasses.replace(params.em.forward, specular_deg=30.0)
         learn = ",".join(k for k in params.calibration.learned if k != "specular_deg") or "sigma"
+        # and, for adaptive, with the thinned map outside the clusters (the tiny log has no model
+        # given, so "auto" chose Elfes' map above)
         one_sweep = dataclasses.replace(params, em=dataclasses.replace(params.em, forward=forward, max_sweeps=1),
-                                        calibration=dataclasses.replace(params.calibration, learn=learn))
+                                        calibration=dataclasses.replace(params.calibration, learn=learn),
+                                        adaptive=dataclasses.replace(params.adaptive, outside="thinned"))
         map_in_mode(log, mode, one_sweep)

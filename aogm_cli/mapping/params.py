@@ -80,17 +80,21 @@ class EMConfig:
 @dataclass(frozen=True)
 class AdaptiveConfig:
     """What the adaptive map is outside its clusters and where they lie (``adaptive.find_clusters``;
-    docs/algorithms.md, "The adaptive mapper", measures each): ``outside`` "elfes" (Elfes' map;
-    besides the flagged readings' walls the ``contested`` cells, whose occupied evidence alone
-    reaches this many log-odds but which the standard map holds free, and the ``weak`` cells,
-    whose log-odds lie within this of the prior; 0: none) or "thinned" (the map thinned by the
-    exact inverse model, its free cells that no reading holds free unknown to a planner; besides the walls the cells it
-    holds free but the exact model holds occupied by ``contested`` log-odds); every cluster grown
-    by ``grow`` cells (8-connected; sonar cones only); and the ``scale`` of the probabilities
-    outside the clusters: "em", the EM probability of the cluster cells that the log's readings
-    end in as often (``adaptive.one_scale``), or "mixed", the map's own."""
+    docs/algorithms.md, "The adaptive mapper", measures each): ``outside`` "thinned" (the map
+    thinned by the exact inverse model, its free cells that no reading holds free at the final map
+    unknown to a planner; clusters on the flagged readings' walls, grown by one cell into the wall
+    layers the thinning removed, and on the cells it holds free but the exact model holds occupied
+    by ``contested`` log-odds), "elfes" (Elfes' map; besides the flagged readings' walls the
+    ``contested`` cells, whose occupied evidence alone reaches this many log-odds but which the
+    standard map holds free, and the ``weak`` cells, whose log-odds lie within this of the prior
+    (0: none), every cluster grown by ``grow`` cells; sonar cones only) or "auto" (the default:
+    "thinned" where the sensor's forward model is known before the map is made, carried by the
+    detector or given, "elfes" where it is learned from the log, after the clusters; a narrow
+    beam's map is never thinned); and the ``scale`` of the probabilities outside the clusters:
+    "em", the EM probability of the cluster cells that the log's readings end in as often
+    (``adaptive.one_scale``), or "mixed", the map's own."""
 
-    outside: str = "elfes"
+    outside: str = "auto"
     contested: float = 0.5
     weak: float = 0.45
     grow: int = 2
@@ -98,8 +102,8 @@ class AdaptiveConfig:
 
     def validate(self) -> AdaptiveConfig:
         check_field_types(self)
-        if self.outside not in ("elfes", "thinned"):
-            raise InputError(f"expected 'elfes' or 'thinned', got {self.outside!r}", key="outside")
+        if self.outside not in ("auto", "elfes", "thinned"):
+            raise InputError(f"expected 'auto', 'elfes' or 'thinned', got {self.outside!r}", key="outside")
         if self.scale not in ("em", "mixed"):
             raise InputError(f"expected 'em' or 'mixed', got {self.scale!r}", key="scale")
         if isinstance(self.grow, bool) or not isinstance(self.grow, int) or self.grow < 0:

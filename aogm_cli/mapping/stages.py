@@ -31,6 +31,7 @@ from aogm_cli.mapping.standard import (
     thin_pass,
     thins,
 )
+from aogm_cli.sensor_models.exact_inverse import MARGIN
 from aogm_cli.sensor_models.ray import is_narrow_beam
 from aogm_cli.sensor_models.readings import LaidOutReadings, lay_out_readings
 
@@ -48,11 +49,12 @@ RATES_READINGS = 1000
 @dataclass(frozen=True)
 class StandardMap:
     """A log-odds map and its observed cells, (H, W) each (``standard.standard_map``); once
-    thinned (``standard.thin_pass``), the exact model's ``evidence``."""
+    thinned (``standard.thin_pass``), the exact model's ``evidence`` and Elfes' log-odds before."""
 
     log_odds: np.ndarray
     observed: np.ndarray
     evidence: np.ndarray | None = None
+    elfes: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -100,7 +102,7 @@ class State:
     occupied: np.ndarray | None = None  # flat bool: EM's binary map, updated in place
     problem: Problem | None = None
     em: E.EMOutcome | None = None
-    decided: np.ndarray | None = None  # (H, W) bool: the cells the data hold free at the final map
+    evidence: np.ndarray | None = None  # (H, W): each cell's evidence at the final map (``decided``)
     view: View | None = None
 
     def but(self, **changes) -> State:
@@ -218,12 +220,26 @@ def _cuts(run: LaidOutReadings) -> np.ndarray | None:
     return None if run.shadow is None else run.shadow.reshape(run.ranges.shape)
 
 
-def thinning(s: State) -> State:
+def thinning(s: State, margin: float = MARGIN) -> State:
     """The standard map thinned by the exact inverse model (``standard.thin_pass``)."""
     log = s.log
     cuts = None if s.readings is None else _cuts(s.readings)
-    log_odds, evidence = thin_pass(log, s.grid, s.in_use, s.standard.log_odds, s.standard.observed, cuts)
-    return s.but(standard=StandardMap(log_odds, s.standard.observed, evidence))
+    log_odds, evidence = thin_pass(log, s.grid, s.in_use, s.standard.log_odds, s.standard.observed, cuts, margin)
+    return s.but(standard=StandardMap(log_odds, s.standard.observed, evidence, s.standard.log_odds))
+
+
+# log-odds below the exact model's prior at which adaptive's thinning frees a cell when the thinned map
+# stands outside the clusters: any (the ``decided`` stage then checks each free cell against the
+# readings). On the 13 worlds (seed 1) the clusters' mean share 0.151 at ``MARGIN`` (0.5), 0.138 at 0,
+# accuracy within 0.002 of it; the standard mode's ``exact.thin`` keeps 0.5 (at 0 it fails
+# furnished_room's and corridor_specular_real's checks: leak 0.081)
+OUTSIDE_MARGIN = 0.0
+
+
+def thinning_outside(s: State) -> State:
+    """Adaptive's thinning: at ``OUTSIDE_MARGIN`` when the thinned map stands outside the clusters,
+    else (``exact.thin`` with Elfes' map outside) as the em mode's."""
+    return thinning(s, OUTSIDE_MARGIN if outside(s) == "thinned" else MARGIN)
 
 
 def detect(s: State) -> State:
@@ -234,7 +250,7 @@ def detect(s: State) -> State:
 
 def clusters(s: State) -> State:
     """The clusters of the flagged readings, with the contested and weak cells (``adaptive.find_clusters``)."""
-    ids, count = A.find_clusters(s.readings, s.clusters.flags, s.standard, s.in_use, s.whole)
+    ids, count = A.find_clusters(s.readings, s.clusters.flags, s.standard, s.in_use, outside(s), s.whole)
     return s.but(clusters=Clusters(ids, count, s.clusters.flags))
 
 
@@ -256,9 +272,15 @@ def _on_sweep(s: State):
 
 
 def start(s: State) -> State:
-    """EM's start: the thresholded standard map (the em mode's empty with ``em.start`` "empty")."""
+    """EM's start: the thresholded standard map (the em mode's empty with ``em.start`` "empty");
+    with the thinned map outside the clusters, Elfes' map inside them, so that EM thins a wall's
+    inner layers there as it does from Elfes' map (started from the thinned map it keeps single
+    cells of them: corridor_door's block 0.061, against 0.057 and EM's 0.056)."""
     empty = s.clusters is None and s.params.em.start != "standard"
     flat = np.zeros(s.grid.height * s.grid.width, bool) if empty else (s.standard.log_odds > 0).reshape(-1)
+    if s.clusters is not None and s.standard.elfes is not None and outside(s) == "thinned":
+        inside = s.clusters.ids.reshape(-1) > 0
+        flat[inside] = s.standard.elfes.reshape(-1)[inside] > 0
     return s.but(occupied=np.ascontiguousarray(flat))
 
 
@@ -308,14 +330,14 @@ def sweeps(s: State) -> State:
 
 
 def decided(s: State) -> State:
-    """Which cells the data hold free at the map adaptive leaves (the thinned map outside the
-    clusters, EM's inside): those whose occupancy would lower the readings' likelihood by more
-    than ``HIDDEN_GAIN`` (``exact.map_evidence``), as EM decides the cells it leaves free
-    (``em.decided``). Outside the clusters a free cell the data do not hold free is behind a
-    wall, crossed only by readings the map cannot explain, or one the readings want occupied: a
-    planner sees it unknown (``em_view``)."""
-    evidence = map_evidence(s.readings, s.in_use.em.forward, s.occupied)
-    return s.but(decided=evidence < -HIDDEN_GAIN)
+    """Each cell's evidence at the map adaptive leaves (the thinned map outside the clusters, EM's
+    inside), as EM scores a candidate (``exact.map_evidence``). Outside the clusters a free cell
+    is free to a planner only where its occupancy would lower the readings' likelihood by more
+    than ``HIDDEN_GAIN``, as EM decides the cells it leaves free (``em.decided``); the others are
+    behind a wall, crossed only by readings the map cannot explain, or wanted occupied by the
+    readings: unknown (``em_view``). Their probabilities are EM's residuals at that map
+    (``adaptive.joined_view``)."""
+    return s.but(evidence=map_evidence(s.readings, s.in_use.em.forward, s.occupied))
 
 
 def standard_view(s: State) -> State:
@@ -331,10 +353,10 @@ def em_view(s: State) -> State:
         return s.but(view=View(*E.em_view(s.standard.log_odds, s.standard.observed, s.em, s.grid, whole.pose,
                                          whole.sensor, params)))
     observed = s.standard.observed
-    if s.decided is not None:  # outside the clusters the thinned map, its free cells no reading decides unknown
-        observed = observed & ~((s.clusters.ids == 0) & (s.standard.log_odds <= 0) & ~s.decided)
+    if s.evidence is not None:  # outside the clusters the thinned map, its free cells no reading holds free unknown
+        observed = observed & ~((s.clusters.ids == 0) & (s.standard.log_odds <= 0) & ~(s.evidence < -HIDDEN_GAIN))
     return s.but(view=View(*A.joined_view(s.standard.log_odds, observed, s.em, s.clusters.ids, whole, s.grid,
-                                          params)))
+                                          params, s.evidence)))
 
 
 # when a stage runs
@@ -347,16 +369,29 @@ def thinned(s: State) -> bool:
     return thins(log.sensor, s.grid, s.params)
 
 
+def outside(s: State) -> str:
+    """What the adaptive map is outside its clusters (``adaptive.outside``): "auto" is "thinned"
+    for a cone whose forward model is known before the map is made (carried by the detector, from
+    a file or from another map of the log: the thinning and the clusters need it), else "elfes"
+    (the model is learned from the log by EM in the clusters, after them; a narrow beam's map is
+    never thinned)."""
+    chosen = s.params.adaptive.outside
+    if chosen != "auto":
+        return chosen
+    known = s.given is not None and s.given.sensor is not None
+    return "thinned" if known and not is_narrow_beam(s.log.sensor, s.grid.resolution) else "elfes"
+
+
 def thins_outside(s: State) -> bool:
-    """Adaptive with ``adaptive.outside`` "thinned" thins a cone's map: it keeps it outside the
-    clusters (and ``exact.thin`` thins it in any mode)."""
-    return thins(s.log.sensor, s.grid, s.params, always=s.params.adaptive.outside == "thinned")
+    """Adaptive with the thinned map outside its clusters thins a cone's map (and ``exact.thin``
+    thins it in any mode)."""
+    return thins(s.log.sensor, s.grid, s.params, always=outside(s) == "thinned")
 
 
 def keeps_thinned(s: State) -> bool:
-    """Adaptive with ``adaptive.outside`` "thinned" on a map that was thinned (not a narrow beam's):
-    the thinned map stands outside the clusters."""
-    return s.params.adaptive.outside == "thinned" and s.standard.evidence is not None
+    """Adaptive with the thinned map outside its clusters, on a map that was thinned (not a narrow
+    beam's)."""
+    return outside(s) == "thinned" and s.standard.evidence is not None
 
 
 def runs_em(s: State) -> bool:

@@ -29,7 +29,7 @@ from aogm_cli.sensor_models.cone import (
     range_search,
     reading_geometry,
 )
-from aogm_cli.sensor_models.exact_inverse import ExactModelConfig
+from aogm_cli.sensor_models.exact_inverse import MARGIN, ExactModelConfig
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig
 from aogm_cli.sensor_models.inverse_model import (
     InverseModelConfig,
@@ -285,15 +285,15 @@ class Thinned(NamedTuple):
 
 
 def thin_pass(log, grid: GridSpec, params: MapParams, log_odds: np.ndarray, observed: np.ndarray,
-              cuts=None) -> Thinned:
-    """The standard map ``log_odds`` thinned by the exact inverse model (``exact.thinned``): one
-    more pass over ``log`` with the exact model (``cuts`` stop deflected beams). The em and
-    adaptive modes thin the map after the angle of incidence is learned from the map as Elfes'
-    model makes it."""
+              cuts=None, margin: float = MARGIN) -> Thinned:
+    """The standard map ``log_odds`` thinned by the exact inverse model (``exact.thinned``, at
+    ``margin``): one more pass over ``log`` with the exact model (``cuts`` stop deflected beams).
+    The em and adaptive modes thin the map after the angle of incidence is learned from the map as
+    Elfes' model makes it."""
     exact_params = dataclasses.replace(params, inverse_model=dataclasses.replace(params.inverse_model, model="exact"))
     exact = standard_log_odds(log, grid, exact_params, cuts=cuts)
     evidence = np.where(exact[1], exact[0] - np.float32(params.exact.l0), np.float32(0.0))
-    return Thinned(thinned(log_odds, observed, exact, params.exact, params.inverse_model.clamp_min), evidence)
+    return Thinned(thinned(log_odds, observed, exact, params.exact, params.inverse_model.clamp_min, margin), evidence)
 
 
 def truth_grid_map(log: Log) -> tuple[np.ndarray, np.ndarray]:
