@@ -4,8 +4,8 @@ Run as ``python bench/bench_seed_adaptive.py [--runs 5] [--json OUT]`` (part of 
 bench-scale``). Simulates corridor_door and corridor_specular (seed 1) and maps each log in this
 one process with ``aogm_cli.mapping.modes.map_file`` (which compiles every kernel first, outside
 ``runtime_s``): standard, em, adaptive with the packaged detector, and adaptive with
-``--detector all`` and ``--detector none``, and with the thinned map outside its clusters
-(``adaptive:thinned``), ``--runs`` rounds of every mode, keeping each
+``--detector all`` and ``--detector none``, and with Elfes' map outside its clusters
+(``adaptive:elfes``, the design before the thinned map became the default for these logs), ``--runs`` rounds of every mode, keeping each
 mode's best ``runtime_s``. Each map is evaluated against its log's truth as ``aogm compare`` does
 (``evaluation.metrics.evaluate``, and the planner's leak and block). ``standard:thin`` is the
 standard mode with ``exact.thin`` (the Elfes map thinned by the exact inverse model); ``--params``
@@ -35,18 +35,19 @@ from aogm_cli.world.loader import load_world
 
 ROOT = Path(__file__).resolve().parents[1]
 WORLDS = ("corridor_door", "corridor_specular")
-LABELS = ("standard", "standard:thin", "em", "adaptive", "adaptive:thinned", "adaptive:all", "adaptive:none")
-# adaptive:thinned: adaptive with the thinned map outside its clusters (docs/algorithms.md)
-THINNED = {"adaptive": {"outside": "thinned", "contested": 0.1, "weak": 0, "grow": 0}}
+LABELS = ("standard", "standard:thin", "em", "adaptive", "adaptive:elfes", "adaptive:all", "adaptive:none")
+# adaptive:elfes: adaptive with Elfes' map outside its clusters (docs/algorithms.md; the default, "auto",
+# keeps the thinned map outside them on these logs, whose sensor's model the detector carries)
+ELFES = {"adaptive": {"outside": "elfes"}}
 
 
 def mapped(log_path: Path, label: str, params):
-    """The map of ``label``: a mode, ``adaptive:DETECTOR`` or ``standard:thin``."""
+    """The map of ``label``: a mode, ``adaptive:DETECTOR``, ``adaptive:elfes`` or ``standard:thin``."""
     if label == "standard:thin":
         thin = dataclasses.replace(params, exact=dataclasses.replace(params.exact, thin=True))
         return map_file(log_path, "standard", thin)
-    if label == "adaptive:thinned":
-        adaptive = dataclasses.replace(params.adaptive, **THINNED["adaptive"])
+    if label == "adaptive:elfes":
+        adaptive = dataclasses.replace(params.adaptive, **ELFES["adaptive"])
         return map_file(log_path, "adaptive", dataclasses.replace(params, adaptive=adaptive))
     mode, detector, _ = parse_mode(label)
     return map_file(log_path, mode, params, detector)
@@ -127,10 +128,10 @@ def report(world: str, rows: dict[str, dict]) -> dict:
     print(f"  adaptive - em: accuracy {vs_em:+.4f} (target within 0.005: {verdict(abs(vs_em) <= 0.005)}), leak "
           f"{leak:+.4f}, block {block:+.4f} (targets within 0.01: {verdict(abs(leak) <= 0.01 and abs(block) <= 0.01)}); "
           f"checks {ad['checks_passed']}/{ad['checks']} ({verdict(checks)})")
-    thin = rows["adaptive:thinned"]
-    print(f"  adaptive:thinned: x{thin['runtime_s'] / std:.2f} standard, em / it x{em['runtime_s'] / thin['runtime_s']:.2f}; "
-          f"- em: accuracy {thin['accuracy'] - em['accuracy']:+.4f}, leak {thin['leak'] - em['leak']:+.4f}, "
-          f"block {thin['block'] - em['block']:+.4f}; checks {thin['checks_passed']}/{thin['checks']}")
+    elfes = rows["adaptive:elfes"]
+    print(f"  adaptive:elfes: x{elfes['runtime_s'] / std:.2f} standard, em / it x{em['runtime_s'] / elfes['runtime_s']:.2f}; "
+          f"- em: accuracy {elfes['accuracy'] - em['accuracy']:+.4f}, leak {elfes['leak'] - em['leak']:+.4f}, "
+          f"block {elfes['block'] - em['block']:+.4f}; checks {elfes['checks_passed']}/{elfes['checks']}")
     print(f"  EM's sweeps on {em['sweep_threads']} thread(s) (a log of fewer than {BAND_READINGS} readings is "
           "swept as one band: its --threads change nothing; make bench-scale's em/1 rows measure them)")
     print(f"  packaged detector vs --detector all: runtime all / packaged x{speedup:.2f} (target >= 1.5: "
