@@ -348,6 +348,14 @@ def test_map_evidence_is_ems_evidence_at_the_map(corridor_door_log):
     finite = np.isfinite(scored)
     assert finite.mean() > 0.99 and (evidence < -1).mean() > 0.1
     np.testing.assert_allclose(evidence[finite], scored[finite], rtol=1e-6, atol=1e-6)
+    # in parts on threads: the same evidence, bit for bit, for any thread count
+    from aogm_cli.core.budget import Limits, using
+
+    with using(Limits(threads=1)):
+        one = map_evidence(state.readings, config.forward, occ)
+    for threads in (2, 3):
+        with using(Limits(threads=threads)):
+            assert np.array_equal(map_evidence(state.readings, config.forward, occ), one)
 
 
 def test_residual_scale_by_hand():

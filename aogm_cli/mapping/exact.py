@@ -4,10 +4,14 @@ the forward model given the map so far (``sensor_models.exact_inverse``); and th
 
 from __future__ import annotations
 
+import concurrent.futures
 import math
+import threading
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
+from aogm_cli.core.budget import active_limits
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import SensorSpec
 from aogm_cli.sensor_models.cone import SPARE_MASK, ConeTemplates, flat_offsets, reading_geometry
@@ -72,22 +76,54 @@ def _model(forward: ForwardModelConfig, z_max: float) -> tuple:
             float(forward.window), float(z_max))
 
 
+# the evidence pass's readings in this many parts, each summed into its own grid (on up to as many
+# threads) and the grids added in their order: the same evidence, bit for bit, for any thread count
+EVIDENCE_PARTS = 4
+
+
 def map_evidence(run: LaidOutReadings, forward: ForwardModelConfig, occupied: np.ndarray) -> np.ndarray:
     """(H, W) float64: each cell's evidence at the binary map ``occupied`` (flat or (H, W) bool),
     log p(Z | m, cell occupied) - log p(Z | m, cell free) over every reading of ``run`` (its
     deflected beams cut), as EM scores a candidate (``em.decided``), in one pass over the cones
-    (``exact_inverse.map_evidence_sums``): where it is near 0 no reading decides the cell."""
+    (``exact_inverse.map_evidence_sums``), in ``EVIDENCE_PARTS`` parts on up to
+    ``Limits.threads`` threads (``core.budget``): where it is near 0 no reading decides the cell."""
     grid, templates = run.grid, run.templates
     n = grid.height * grid.width
     occupancy = np.zeros(n + SPARE_MASK + 1, dtype=np.float32)
     occupancy[:n] = np.asarray(occupied, dtype=bool).reshape(-1)
     z, limit = deflect(run.z, run.shadow, run.sensor.max_range)
     readings = ExpectationReadings(run.rows, run.cols, run.bins, z, limit)
-    evidence = np.zeros(n)
-    model, scratch, flat = _model(forward, run.sensor.max_range), cone_scratch(templates), flat_offsets(templates, grid.width)
-    for span in reading_spans(z.size):
-        map_evidence_sums(templates.kernel_arrays, flat, grid.shape, readings, occupancy, model, scratch, span, evidence)
-    return evidence.reshape(grid.shape)
+    model, flat = _model(forward, run.sensor.max_range), flat_offsets(templates, grid.width)
+    bounds = np.linspace(0, z.size, EVIDENCE_PARTS + 1).astype(np.int64)
+    stop = threading.Event()
+
+    def part(k: int) -> np.ndarray:
+        evidence, scratch = np.zeros(n), cone_scratch(templates)
+        for start, end in reading_spans(int(bounds[k + 1] - bounds[k])):
+            if stop.is_set():  # the main thread's signal handler raised (core.interrupts)
+                break
+            span = (int(bounds[k]) + start, int(bounds[k]) + end)
+            map_evidence_sums(templates.kernel_arrays, flat, grid.shape, readings, occupancy, model, scratch, span,
+                              evidence)
+        return evidence
+
+    threads = min(active_limits().thread_count(), EVIDENCE_PARTS)
+    if threads == 1:
+        total = part(0)
+        for k in range(1, EVIDENCE_PARTS):
+            total += part(k)
+        return total.reshape(grid.shape)
+    with ThreadPoolExecutor(threads, thread_name_prefix="aogm-evidence") as pool:
+        futures = [pool.submit(part, k) for k in range(EVIDENCE_PARTS)]
+        try:
+            while concurrent.futures.wait(futures, timeout=0.05).not_done:
+                pass  # the main thread wakes for a signal's handler
+        finally:
+            stop.set()
+        total = futures[0].result()
+        for f in futures[1:]:
+            total += f.result()
+    return total.reshape(grid.shape)
 
 
 def _sigmoid(x: float) -> float:

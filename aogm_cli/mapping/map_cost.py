@@ -25,6 +25,9 @@ BYTES_PER_READING = 300
 BYTES_PER_SHADOW = 8
 BYTES_PER_SURFACE_CELL = 24
 BYTES_PER_TEMPLATE_CELL = 48  # the disc the cone templates are cut from (int64 offsets, ranges, angles)
+# adaptive on a sonar log: the thinned map's exact-model state and evidence (float32 x 3), and the
+# evidence at the final map in its parts (float64 x ``exact.EVIDENCE_PARTS``, 4)
+BYTES_PER_THINNED_CELL = 12 + 8 * 4
 SAMPLE_BLOCKS, BLOCK_SCANS = 32, 64  # ranges read to estimate the cones' mean size
 
 
@@ -71,6 +74,8 @@ def map_estimate(reader, mode: str, params: MapParams) -> Estimate:
         if not narrow and params.surface.enabled:
             reading_bytes += readings * BYTES_PER_SHADOW
             grid_bytes += cells * BYTES_PER_SURFACE_CELL
+        if not narrow and mode == "adaptive":
+            grid_bytes += cells * BYTES_PER_THINNED_CELL
         work += entries * params.em.max_sweeps
     memory = grid_bytes + reading_bytes
     detail = (f"a {grid.height} x {grid.width} grid at {res:g} m, {readings:.3g} readings, "

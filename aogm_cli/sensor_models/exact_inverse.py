@@ -232,7 +232,7 @@ def exact_inverse_updates(tpl, flat, shape, readings, state, model, bounds, scra
                 state[c] = om[j]
 
 
-@numba.njit(cache=True, _nrt=False, error_model="numpy")
+@numba.njit(cache=True, _nrt=False, error_model="numpy", nogil=True)
 def map_evidence_sums(tpl, flat, shape, readings, occupancy, model, scratch, span, evidence):
     """Add to the flat float64 ``evidence`` (height * width) each reading's log p(z | m_j = 1) -
     log p(z | m_j = 0) for the cells j of its cone, every other cell as the fixed binary map
