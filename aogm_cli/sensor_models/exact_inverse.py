@@ -143,22 +143,21 @@ def cone_ratios(p, g, j0, g0, p_hit, const, w, n, a, u, r, na, out, negligible=2
 
 
 @numba.njit(cache=True, _nrt=False, error_model="numpy")
-def _reading_ratios(tpl, flat, shape, readings, t, state, prior, model, ib, fl, negligible):
-    """Reading t's cone under the flat occupancy ``state`` (negative: ``prior``): its cells'
-    flat ids in ``ib``, their occupancy in ``fl[0]`` and their ``cone_ratios`` in ``fl[6]``.
-    Returns the number m of cone cells, negated when every ratio is exactly 1 (``fl[6]`` unset),
-    0 for no reading or a cone off the grid (the arguments as ``exact_inverse_updates``';
-    ``negligible`` as ``cone_ratios``')."""
+def _reading_cone(tpl, flat, shape, readings, t, state, prior, model, ib, fl):
+    """Reading t's cone under the flat occupancy ``state`` (negative: ``prior``): its cells' flat
+    ids in ``ib``, their occupancy in ``fl[0]``, their Gaussians in ``fl[1]`` (from the window
+    on). Returns (m, j0, g0, C): the number of cone cells (0 for no reading or a cone off the
+    grid), the first in the Gaussian window, G0 and the reading's constant (the comment above)."""
     p_rand, p_max, p_hit, sigma, window, z_max = model
     height, width = shape
     ext = tpl.extent
     z = readings.z[t]
     if not z == z:  # NaN: no reading
-        return 0
+        return 0, 0, 0.0, 0.0
     row0 = readings.rows[t]
     col0 = readings.cols[t]
     if row0 + ext < 0 or row0 - ext >= height or col0 + ext < 0 or col0 - ext >= width:
-        return 0
+        return 0, 0, 0.0, 0.0
     z, limit = cone_reach(z, readings.limit[t], z_max, sigma, window)
     k = readings.bins[t]
     b = tpl.base_bin[k]
@@ -182,9 +181,21 @@ def _reading_ratios(tpl, flat, shape, readings, t, state, prior, model, ib, fl, 
         g[j] = gj
     u0 = (z - z_max) / sigma
     g0 = math.exp(-0.5 * u0 * u0) / (math.sqrt(2.0 * math.pi) * sigma)
-    const = p_rand / z_max + p_max * g0
-    if not cone_ratios(p, g, j0, g0, p_hit, const, 1.0 - p_rand - p_max, m, fl[2], fl[3], fl[4], fl[5], fl[6],
-                       negligible):
+    return m, j0, g0, p_rand / z_max + p_max * g0
+
+
+@numba.njit(cache=True, _nrt=False, error_model="numpy")
+def _reading_ratios(tpl, flat, shape, readings, t, state, prior, model, ib, fl, negligible):
+    """``_reading_cone``, then the cone's ``cone_ratios`` in ``fl[6]``. Returns the number m of
+    cone cells, negated when every ratio is exactly 1 (``fl[6]`` unset; with a larger
+    ``negligible``, as ``cone_ratios``' within that share of 1), 0 for no reading or a cone off
+    the grid (the arguments as ``exact_inverse_updates``')."""
+    p_rand, p_max, p_hit = model[0], model[1], model[2]
+    m, j0, g0, const = _reading_cone(tpl, flat, shape, readings, t, state, prior, model, ib, fl)
+    if m == 0:
+        return 0
+    if not cone_ratios(fl[0], fl[1], j0, g0, p_hit, const, 1.0 - p_rand - p_max, m, fl[2], fl[3], fl[4], fl[5],
+                       fl[6], negligible):
         return -m
     return m
 
@@ -238,17 +249,51 @@ def map_evidence_sums(tpl, flat, shape, readings, occupancy, model, scratch, spa
     log p(z | m_j = 0) for the cells j of its cone, every other cell as the fixed binary map
     ``occupancy`` (flat float32 0 / 1, then SPARE_MASK + 1 spare cells of 0) has it: summed over
     the readings, EM's evidence of each cell at that map (``em.decided``). A cone's ratio for cell
-    j does not read cell j itself, so no cell is changed. Arguments as ``exact_inverse_updates``'."""
+    j does not read cell j itself, so no cell is changed. Arguments as ``exact_inverse_updates``'.
+
+    Over a binary map the cells before the Gaussian window take one of two ratios: with K of them
+    occupied and R the backward sum at the window, A_j R_j is q^K R for a free cell and q^(K - 1) R
+    for an occupied one (the comment above), so the ratios are (C + w q^(K+1) R) / (C + w q^K R)
+    and (C + w q^K R) / (C + w q^(K-1) R); the window's cells are ``cone_ratios`` with w q^K. A
+    reading whose ratios are all within ``NEGLIGIBLE`` of 1 adds nothing."""
+    p_rand, p_max, p_hit = model[0], model[1], model[2]
+    w = 1.0 - p_rand - p_max
+    q = 1.0 - p_hit
     n_cells = shape[0] * shape[1]
     ib = scratch[0]
     fl = scratch[1]
+    p = fl[0]
+    g = fl[1]
+    out = fl[6]
     for t in range(span[0], span[1]):
-        m = _reading_ratios(tpl, flat, shape, readings, t, occupancy, 0.0, model, ib, fl, NEGLIGIBLE)
-        om = fl[6]
-        for j in range(m):  # none when every ratio is 1
+        m, j0, g0, const = _reading_cone(tpl, flat, shape, readings, t, occupancy, 0.0, model, ib, fl)
+        if m == 0:
+            continue
+        occupied = 0
+        for j in range(j0):
+            if p[j] > 0.0:
+                occupied += 1
+        wk = w * q**occupied
+        tail = g0  # R at the window's start
+        for j in range(m - 1, j0 - 1, -1):
+            tail = p[j] * p_hit * g[j] + (1.0 - p_hit * p[j]) * tail
+        n = m - j0
+        if n > 0 and cone_ratios(p[j0:m], g[j0:m], 0, g0, p_hit, const, wk, n, fl[2], fl[3], fl[4], fl[5], out,
+                                 NEGLIGIBLE):
+            for j in range(n):
+                c = np.uint64(np.uint32(ib[j0 + j]))
+                if c < n_cells:
+                    evidence[c] += math.log(out[j])
+        free = (const + wk * (q * tail)) / (const + wk * tail)
+        held = (const + wk * tail) / (const + wk * tail / q)
+        if abs(free - 1.0) < NEGLIGIBLE and (occupied == 0 or abs(held - 1.0) < NEGLIGIBLE):
+            continue
+        log_free = math.log(free)
+        log_held = math.log(held) if occupied > 0 else 0.0
+        for j in range(j0):
             c = np.uint64(np.uint32(ib[j]))
             if c < n_cells:
-                evidence[c] += math.log(om[j])
+                evidence[c] += log_held if p[j] > 0.0 else log_free
 
 
 def cone_scratch(templates) -> tuple[np.ndarray, np.ndarray]:
