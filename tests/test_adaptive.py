@@ -374,3 +374,20 @@ def test_residual_scale_by_hand():
     expected = [r[0, 0], r[0, 1], 0.5 + SIDE, 0.5 - SIDE, 0.12]
     np.testing.assert_allclose(out[0], expected, rtol=1e-6)
     assert out.dtype == probability.dtype and probability[0, 2] == np.float32(0.7)
+
+
+def test_auto_keeps_elfes_map_outside_where_the_model_is_learned_from_the_log(corridor_door_log):
+    """``adaptive.outside: auto`` keeps the thinned map outside the clusters where the sensor's
+    model is known before the map is made (here carried by the detector), and Elfes' map where
+    EM learns it from the log (``calibration.carried: false``), exactly as ``outside: elfes``."""
+    carried = map_file(corridor_door_log, "adaptive", resolve_params())
+    learned = map_file(corridor_door_log, "adaptive", resolve_params(overrides={"calibration": {"carried": False}}))
+    elfes = map_file(corridor_door_log, "adaptive",
+                     resolve_params(overrides={"calibration": {"carried": False}, "adaptive": {"outside": "elfes"}}))
+    assert carried.params["adaptive"]["outside"] == learned.params["adaptive"]["outside"] == "auto"
+    assert {"thinning", "decided"} <= set(carried.stats["phase_seconds"])
+    assert not {"thinning", "decided"} & set(learned.stats["phase_seconds"])
+    assert carried.stats["cells_in_clusters"] < 0.2 * carried.stats["observed_cells"]
+    assert learned.stats["cells_in_clusters"] > 0.5 * learned.stats["observed_cells"]
+    for name in ("probability", "observed", "occupied", "clusters"):
+        assert np.array_equal(getattr(learned, name), getattr(elfes, name)), name
