@@ -385,6 +385,7 @@ def test_auto_keeps_elfes_map_outside_where_the_model_is_learned_from_the_log(co
     elfes = map_file(corridor_door_log, "adaptive",
                      resolve_params(overrides={"calibration": {"carried": False}, "adaptive": {"outside": "elfes"}}))
     assert carried.params["adaptive"]["outside"] == learned.params["adaptive"]["outside"] == "auto"
+    assert (carried.stats["outside"], learned.stats["outside"]) == ("thinned", "elfes")  # what auto chose
     assert {"thinning", "decided"} <= set(carried.stats["phase_seconds"])
     assert not {"thinning", "decided"} & set(learned.stats["phase_seconds"])
     assert carried.stats["cells_in_clusters"] < 0.2 * carried.stats["observed_cells"]

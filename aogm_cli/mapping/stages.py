@@ -440,7 +440,8 @@ def map_stats(s: State, phases: dict, em: bool) -> dict:
         stats |= {"clusters": c.count, "cells_in_clusters": int((c.ids > 0).sum()),
                   "cluster_groups": A.coupled_groups(s.em.problem, c.count) if s.em is not None else 0,
                   "observed_cells": int(s.view.observed.sum()), "flagged_readings": int(c.flags.sum()),
-                  "readings": int(c.flags.size), "detector": s.detector_record["detector"]}
+                  "readings": int(c.flags.size), "detector": s.detector_record["detector"],
+                  "outside": outside(s)}  # what the map is outside the clusters (``adaptive.outside`` "auto" decided)
     return stats
 
 
