@@ -392,3 +392,9 @@ def test_auto_keeps_elfes_map_outside_where_the_model_is_learned_from_the_log(co
     assert learned.stats["cells_in_clusters"] > 0.5 * learned.stats["observed_cells"]
     for name in ("probability", "observed", "occupied", "clusters"):
         assert np.array_equal(getattr(learned, name), getattr(elfes, name)), name
+    # aogm map says in one line that the model was learned, and what a given one would change
+    from aogm_cli.report.map_run import calibration_notice
+
+    assert "adaptive keeps the thinned map outside its clusters" in calibration_notice("log.h5", learned)
+    assert "adaptive keeps" not in calibration_notice("log.h5", elfes)  # asked for Elfes' map
+    assert calibration_notice("log.h5", carried) is None

@@ -95,9 +95,13 @@ def calibration_notice(path, m: OccupancyMap) -> str | None:
     if m.mode == "standard" or (m.learned or {}).get("origin") != FROM_LOG:
         return None
     if not m.params.get("calibration", {}).get("carried", True):
-        return f"{path}: calibrated the sensor's model on this log (calibration.carried is false)"
-    return (f"{path}: calibrated the sensor's model on this log (the detector carries none for its sensor; "
-            "aogm calibrate LOG -o MODEL learns one, --forward-model MODEL carries it)")
+        why = "calibration.carried is false"
+    else:
+        why = ("the detector carries none for its sensor; aogm calibrate LOG -o MODEL learns one, --forward-model "
+               "MODEL carries it")
+    if m.mode == "adaptive" and m.stats.get("outside") == "elfes" and m.params.get("adaptive", {}).get("outside") == "auto":
+        why += "; with a model given, adaptive keeps the thinned map outside its clusters, at less cost"
+    return f"{path}: calibrated the sensor's model on this log ({why})"
 
 
 def learn_sensor_models(paths, params: MapParams, advance=None) -> tuple[dict, ...]:
