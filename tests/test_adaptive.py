@@ -247,6 +247,37 @@ def test_coupled_groups_joins_the_clusters_one_cone_holds():
         assert len({root[1], root[2], root[3]}) == 3
 
 
+def test_clusters_joined_in_different_parts_of_the_readings_share_a_root_on_any_thread_count():
+    """EM's set-up runs parts of the readings on threads, each with its own union-find: clusters
+    joined by readings of different parts end in one set, rooted at the least id, and every
+    reading's state is the same, on one thread and on two."""
+    from aogm_cli.core.budget import Limits, using
+    from aogm_cli.mapping.em import READING_PARTS
+
+    grid = GridSpec(0.0, 0.0, 0.1, 21, 41)
+    tpl = build_cone_templates(grid.resolution, math.radians(10.0), 4.0)
+    config = resolve_params().em
+    labels = np.zeros(grid.shape, dtype=np.int64)
+    labels[10, 8], labels[10, 14], labels[10, 20] = 3, 1, 2  # on the beam along +x of row 10
+    n = 2 * READING_PARTS
+    rows, cols, z = np.full(n, 2), np.full(n, 30), np.full(n, 0.5)  # short readings far from them
+    cols[0], z[0] = 5, 1.2  # the first part's first reading joins 3 and 1
+    cols[-1], z[-1] = 11, 1.2  # the last part's last reading joins 1 and 2
+    rows[[0, -1]] = 10
+    cones = (rows, cols, tpl.heading_bin(np.zeros(n)), z)
+    made = []
+    for threads in (1, 2):
+        with using(Limits(threads=threads)):
+            rd = em_readings(cones, tpl, grid, 4.0, config.forward)
+            problem = em_problem(rd, tpl, grid.shape, np.zeros(grid.height * grid.width, dtype=bool), config,
+                                 labels=labels.reshape(-1))
+        assert [find_root(problem.parent, k) for k in (1, 2, 3)] == [1, 1, 1]
+        made.append(problem)
+    assert np.array_equal(made[0].readings.ints, made[1].readings.ints)
+    assert np.array_equal(made[0].readings.floats, made[1].readings.floats)
+    assert np.array_equal(made[0].seen, made[1].seen)
+
+
 def test_readings_near_clusters_uses_the_cone_reach():
     grid = GridSpec(0.0, 0.0, 0.1, 50, 50)
     clusters = np.zeros(grid.shape, dtype=np.int32)

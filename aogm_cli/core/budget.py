@@ -1,12 +1,16 @@
 """The budget of one run: ``Limits`` on its memory, work and threads (defaults sized for a 2-core, 24 GB machine),
 and ``check``, which refuses an ``Estimate`` over them before any work with an ``InputError`` saying
-what the run would need; ``parse_size`` reads sizes such as 16G."""
+what the run would need; ``in_parts`` runs parts of a job on the threads; ``parse_size`` reads sizes such as 16G."""
 
 from __future__ import annotations
 
+import concurrent.futures
 import math
 import os
 import re
+import threading
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass
 
@@ -68,6 +72,25 @@ def using(limits: Limits):
         yield limits
     finally:
         _active = previous
+
+
+def in_parts(parts: int, work: Callable[[int, threading.Event], object]) -> list:
+    """``[work(k, stop) for k in range(parts)]``, the parts on up to ``Limits.threads`` threads (the
+    limits in force). ``work`` returns to Python now and then and ends early once ``stop`` is set:
+    the main thread waits in steps of 0.05 s, so a signal's handler runs (``core.interrupts``), and
+    sets it when that raises. The results come in part order."""
+    threads = min(active_limits().thread_count(), parts)
+    stop = threading.Event()
+    if threads <= 1:
+        return [work(k, stop) for k in range(parts)]
+    with ThreadPoolExecutor(threads, thread_name_prefix="aogm-part") as pool:
+        futures = [pool.submit(work, k, stop) for k in range(parts)]
+        try:
+            while concurrent.futures.wait(futures, timeout=0.05).not_done:
+                pass
+        finally:
+            stop.set()
+        return [f.result() for f in futures]
 
 
 def parse_size(text: str) -> float:

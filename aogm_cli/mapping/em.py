@@ -28,7 +28,7 @@ from aogm_cli.mapping.sweeps import Sweeps
 from aogm_cli.sensor_models.cone import flat_offsets
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig, cone_limits, reading_constants
 from aogm_cli.sensor_models.ray import is_narrow_beam
-from aogm_cli.sensor_models.readings import LaidOutReadings, forward_templates, reading_spans
+from aogm_cli.sensor_models.readings import LaidOutReadings, forward_templates, reading_parts
 from aogm_cli.sensor_models.surface import reading_shadows, surface_normals
 
 
@@ -135,9 +135,9 @@ def em_readings(cones, templates, grid, z_max: float, config: ForwardModelConfig
     lower = z_eff - config.window * config.sigma - 1e-9
     no_order = np.zeros(0, dtype=np.int32)
     tables = K.ReadingTables(ints, floats, no_order, no_order, no_order)  # the orders are not needed yet
-    for span in reading_spans(n):
-        K._reading_extent(templates.kernel_arrays, K.row_groups(templates), tables, (limits, lower),
-                          (float(config.sigma), float(config.window)), grid.shape, span)
+    groups, gauss = K.row_groups(templates), (float(config.sigma), float(config.window))
+    reading_parts(n, READING_PARTS, lambda _, span: K._reading_extent(templates.kernel_arrays, groups, tables,
+                                                                        (limits, lower), gauss, grid.shape, span))
     g0, const, _ = reading_constants(z, z_max, config)
     floats[:, K.F_G0] = g0
     floats[:, K.F_CONST] = const
@@ -146,9 +146,15 @@ def em_readings(cones, templates, grid, z_max: float, config: ForwardModelConfig
     rd = K.EMReadings(rows, cols, bins, z_eff, floats[:, K.F_G0], floats[:, K.F_CONST], ints[:, K.I_M],
                       ints[:, K.I_JLO], box, ints[:, K.I_REACH2:K.I_REACH2 + 2].T, ints[:, K.I_INSIDE], window_hi,
                       _order(box[0]), _order(box[1]), no_order, ints, floats)
-    for span in reading_spans(n):
-        K._window_rows(templates.kernel_arrays, tables, grid.height, span)  # needs the columns above only
+    # needs the columns above only
+    reading_parts(n, READING_PARTS, lambda _, span: K._window_rows(templates.kernel_arrays, tables, grid.height, span))
     return rd._replace(window_leave=_order(window_hi))
+
+
+# EM's set-up kernels (each reading's extent, window rows and likelihood state) in this many fixed
+# parts of the readings, on up to --threads threads: every output is a reading's own (the same for
+# any thread count)
+READING_PARTS = 4
 
 
 def _order(key: np.ndarray) -> np.ndarray:
@@ -187,20 +193,27 @@ def em_problem(rd: K.EMReadings, templates, shape: tuple[int, int], occupied: np
                       floats[:, K.F_RATIO:K.F_RATIO + 2], floats[:, K.F_LOG:K.F_LOG + 2], ints[:, K.I_STAMP])
     seen = np.zeros(shape[0] * shape[1], dtype=np.bool_)
     if labels is None:
-        marks = (seen, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((4, 0), dtype=np.int64))
+        marks = [(seen, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((4, 0), dtype=np.int64))]
+        marks *= READING_PARTS
     else:
         labels = np.ascontiguousarray(labels, dtype=np.int64).reshape(-1)
-        marks = (seen, labels, np.arange(int(labels.max(initial=0)) + 1, dtype=np.int64), np.empty((4, n), dtype=np.int64))
+        box = np.empty((4, n), dtype=np.int64)
+        # a union-find over the cluster ids per part (each reading joins the clusters its cone holds),
+        # joined after: the same clusters share a root, the least id, for any thread count
+        marks = [(seen, labels, np.arange(int(labels.max(initial=0)) + 1, dtype=np.int64), box)
+                 for _ in range(READING_PARTS)]
     flat, occupied = flat_offsets(templates, shape[1]), _flat_bool(occupied)
     tables = K.reading_tables(rd)
-    for span in reading_spans(n):
-        K._init_state(templates.kernel_arrays, flat, tables, model, occupied, shape, marks, span)  # into state
+    reading_parts(n, READING_PARTS, lambda k, span: K._init_state(templates.kernel_arrays, flat, tables, model, occupied,
+                                                                  shape, marks[k], span))  # into state
     parent = None
     if labels is not None:
-        box = rd.ints[:, K.I_BOX:K.I_BOX + 4].T
-        box[:] = marks[3]
-        rd = rd._replace(box=box, enter=_order(box[0]), leave=_order(box[1]))
-        parent = marks[2]
+        parent = marks[0][2]
+        for other in marks[1:]:
+            K._join_parents(parent, other[2])
+        box_in = rd.ints[:, K.I_BOX:K.I_BOX + 4].T
+        box_in[:] = box
+        rd = rd._replace(box=box_in, enter=_order(box_in[0]), leave=_order(box_in[1]))
     return EMProblem(rd, model, state, templates, shape, seen, parent)
 
 

@@ -4,14 +4,10 @@ the forward model given the map so far (``sensor_models.exact_inverse``); and th
 
 from __future__ import annotations
 
-import concurrent.futures
 import math
-import threading
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from aogm_cli.core.budget import active_limits
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import SensorSpec
 from aogm_cli.sensor_models.cone import SPARE_MASK, ConeTemplates, flat_offsets, reading_geometry
@@ -24,7 +20,7 @@ from aogm_cli.sensor_models.exact_inverse import (
     map_evidence_sums,
 )
 from aogm_cli.sensor_models.forward_model import ExpectationReadings, ForwardModelConfig, deflect
-from aogm_cli.sensor_models.readings import LaidOutReadings, forward_templates, reading_spans
+from aogm_cli.sensor_models.readings import LaidOutReadings, forward_templates, reading_parts, reading_spans
 
 
 class ExactMapper:
@@ -94,35 +90,17 @@ def map_evidence(run: LaidOutReadings, forward: ForwardModelConfig, occupied: np
     z, limit = deflect(run.z, run.shadow, run.sensor.max_range)
     readings = ExpectationReadings(run.rows, run.cols, run.bins, z, limit)
     model, flat = _model(forward, run.sensor.max_range), flat_offsets(templates, grid.width)
-    bounds = np.linspace(0, z.size, EVIDENCE_PARTS + 1).astype(np.int64)
-    stop = threading.Event()
+    parts = [np.zeros(n) for _ in range(EVIDENCE_PARTS)]
+    scratch = [cone_scratch(templates) for _ in range(EVIDENCE_PARTS)]
 
-    def part(k: int) -> np.ndarray:
-        evidence, scratch = np.zeros(n), cone_scratch(templates)
-        for start, end in reading_spans(int(bounds[k + 1] - bounds[k])):
-            if stop.is_set():  # the main thread's signal handler raised (core.interrupts)
-                break
-            span = (int(bounds[k]) + start, int(bounds[k]) + end)
-            map_evidence_sums(templates.kernel_arrays, flat, grid.shape, readings, occupancy, model, scratch, span,
-                              evidence)
-        return evidence
+    def sums(k: int, span: tuple[int, int]) -> None:
+        map_evidence_sums(templates.kernel_arrays, flat, grid.shape, readings, occupancy, model, scratch[k], span,
+                          parts[k])
 
-    threads = min(active_limits().thread_count(), EVIDENCE_PARTS)
-    if threads == 1:
-        total = part(0)
-        for k in range(1, EVIDENCE_PARTS):
-            total += part(k)
-        return total.reshape(grid.shape)
-    with ThreadPoolExecutor(threads, thread_name_prefix="aogm-evidence") as pool:
-        futures = [pool.submit(part, k) for k in range(EVIDENCE_PARTS)]
-        try:
-            while concurrent.futures.wait(futures, timeout=0.05).not_done:
-                pass  # the main thread wakes for a signal's handler
-        finally:
-            stop.set()
-        total = futures[0].result()
-        for f in futures[1:]:
-            total += f.result()
+    reading_parts(z.size, EVIDENCE_PARTS, sums)
+    total = parts[0]
+    for part in parts[1:]:  # in their order, whatever thread made each
+        total += part
     return total.reshape(grid.shape)
 
 

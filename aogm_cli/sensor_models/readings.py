@@ -4,12 +4,14 @@ templates every mode uses, each reading's sensor cell, heading bin and template 
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import NamedTuple
 
 import numba
 import numpy as np
 
+from aogm_cli.core.budget import in_parts
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import SensorSpec
 from aogm_cli.sensor_models.cone import ConeTemplates, build_cone_templates, cone_cells, flat_offsets, reading_geometry
@@ -64,6 +66,23 @@ def reading_spans(n: int) -> list[tuple[int, int]]:
     where a signal's handler runs (``core.interrupts``): a signal ends a run within a second
     whatever the log's size."""
     return [(a, min(a + READINGS_PER_CALL, n)) for a in range(0, n, READINGS_PER_CALL)]
+
+
+def reading_parts(n: int, parts: int, call: Callable[[int, tuple[int, int]], None]) -> None:
+    """``call(part, span)`` over readings 0 .. n - 1: ``parts`` fixed parts of them, each in spans
+    (``reading_spans``), the parts on up to ``Limits.threads`` threads (``core.budget.in_parts``).
+    A kernel whose outputs are each reading's own, or each part's, computes the same for any
+    thread count; it must release the GIL (numba's ``nogil``) for the threads to gain."""
+    bounds = np.linspace(0, n, parts + 1).astype(np.int64)
+
+    def part(k: int, stop) -> None:
+        first = int(bounds[k])
+        for start, end in reading_spans(int(bounds[k + 1]) - first):
+            if stop.is_set():  # the main thread's signal handler raised
+                return
+            call(k, (first + start, first + end))
+
+    in_parts(parts, part)
 
 
 @dataclass

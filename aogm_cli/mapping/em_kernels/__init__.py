@@ -3,6 +3,12 @@ where each reading's cone lies, each reading's likelihood state, the arena of wi
 obstacles, and the sweep over tiles of regenerated cones (one module each)."""
 
 from aogm_cli.mapping.em_kernels.layout import *  # noqa: F403
-from aogm_cli.mapping.em_kernels.likelihood import _find, _init_state, _objective, _residual_from_gains  # noqa: F401
+from aogm_cli.mapping.em_kernels.likelihood import (  # noqa: F401
+    _find,
+    _init_state,
+    _join_parents,
+    _objective,
+    _residual_from_gains,
+)
 from aogm_cli.mapping.em_kernels.readings import _reading_extent, _window_rows  # noqa: F401
 from aogm_cli.mapping.em_kernels.tiles import _sweep_tiles  # noqa: F401

@@ -45,9 +45,21 @@ def _find(parent, x):
     return x
 
 
+@numba.njit(cache=True)
+def _join_parents(parent, other):
+    """Join into the union-find ``parent`` every set of ``other`` (over the same ids), each root
+    the least id of its set, as ``_init_state`` joins them."""
+    for x in range(other.shape[0]):
+        a = _find(parent, x)
+        c = _find(parent, _find(other, x))
+        if a != c:
+            parent[max(a, c)] = min(a, c)
+
+
 # _nrt=False (a private numba option): the kernel allocates nothing, and without numba's
-# reference counting its tuples' arrays cost nothing per reading
-@numba.njit(cache=True, _nrt=False)
+# reference counting its tuples' arrays cost nothing per reading; nogil: parts of the readings
+# run on threads (``em.em_problem``)
+@numba.njit(cache=True, _nrt=False, nogil=True)
 def _init_state(tpl, flat, tables, model, occupied, grid_shape, marks, span):
     """The ``EMState`` (in ``tables``, ``ReadingTables``) of each reading span[0] <= t < span[1]
     under ``occupied`` (one walk of its cone, nearest first).

@@ -23,7 +23,7 @@ def _entry_cell(tpl, k, j, row0, col0, height, width):
     return r * width + c
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _reading_extent(tpl, groups, tables, bounds, gauss, grid_shape, span):
     """Per reading span[0] <= t < span[1] of ``tables`` (``ReadingTables``: its cells, bins and
     z), with ``bounds`` = (limits, lower): the entries of its cone (m: up to ``limits``, and
@@ -80,7 +80,7 @@ def _reading_extent(tpl, groups, tables, bounds, gauss, grid_shape, span):
         out_box[3, t] = c_hi
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _window_rows(tpl, tables, height, span):
     """The last grid row of the window cells (entries jlo .. m - 1; -1: none) of each reading
     span[0] <= t < span[1] of ``tables`` (``ReadingTables``), into its column ``window_hi``."""
