@@ -12,7 +12,7 @@ its outputs with ``io.outputs.resolve_outputs`` before any work."""
 # --resolution            map, calibrate (check: its own, 0.05 by default); refuse_huge_grids: map, calibrate, compare
 # --calibrate/--no-calibrate  map, compare (``calibration.enabled``)
 # --max-memory/--max-work simulate, map, compare, calibrate (``budget_options``; ``core.budget``)
-# --threads               map, compare, calibrate (``threads_option``: EM's sweeps; ``core.budget.Limits``)
+# --threads               map, compare, calibrate (``threads_option``: EM's sweeps and parts; ``core.budget.Limits``)
 # --jobs/-j, --scheduler  simulate, compare (``core.executors``: a local process pool, a Dask cluster)
 # --resume                simulate, compare (--maps-dir): skip outputs already complete and valid
 # LOG arguments as a folder or a glob (``expand_log_paths``): train
@@ -228,10 +228,12 @@ def budget_options(f):
 
 
 def threads_option(f):
-    """``--threads N``: the threads EM's sweeps may use (``core.budget.Limits.threads``)."""
+    """``--threads N``: the threads EM's sweeps and set-up, and adaptive's evidence pass, may use
+    (``core.budget.Limits.threads``)."""
     return click.option("--threads", type=click.IntRange(min=1), metavar="N",
                         help="Threads for EM's sweeps (em and adaptive): bands of the grid no reading joins are "
-                             "swept at once; the map is the same for any N.  [default: every core; with --jobs, "
+                             "swept at once; EM's set-up and adaptive's evidence pass run in parts of the "
+                             "readings; the map is the same for any N.  [default: every core; with --jobs, "
                              "the cores shared among the workers]")(f)
 
 

@@ -29,7 +29,7 @@ _UNITS = {"": 1.0, "B": 1.0, "K": 1e3, "M": 1e6, "G": 1e9, "T": 1e12, "P": 1e15}
 class Limits:
     max_memory: float = DEFAULT_MAX_MEMORY
     max_work: float | None = None  # None: DEFAULT_MAX_WORK of the estimate's unit
-    threads: int | None = None  # threads EM's sweeps may use; None: every core this process may run on
+    threads: int | None = None  # threads EM's sweeps and parts (``in_parts``) may use; None: every core this process may run on
 
     def work_limit(self, unit: str) -> float:
         return float(self.max_work) if self.max_work is not None else DEFAULT_MAX_WORK[unit]
