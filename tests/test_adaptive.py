@@ -252,7 +252,7 @@ def test_clusters_joined_in_different_parts_of_the_readings_share_a_root_on_any_
     joined by readings of different parts end in one set, rooted at the least id, and every
     reading's state is the same, on one thread and on two."""
     from aogm_cli.core.budget import Limits, using
-    from aogm_cli.mapping.em import READING_PARTS
+    from aogm_cli.sensor_models.readings import READING_PARTS
 
     grid = GridSpec(0.0, 0.0, 0.1, 21, 41)
     tpl = build_cone_templates(grid.resolution, math.radians(10.0), 4.0)

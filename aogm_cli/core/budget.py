@@ -84,13 +84,19 @@ def in_parts(parts: int, work: Callable[[int, threading.Event], object]) -> list
     if threads <= 1:
         return [work(k, stop) for k in range(parts)]
     with ThreadPoolExecutor(threads, thread_name_prefix="aogm-part") as pool:
-        futures = [pool.submit(work, k, stop) for k in range(parts)]
-        try:
-            while concurrent.futures.wait(futures, timeout=0.05).not_done:
-                pass
-        finally:
-            stop.set()
-        return [f.result() for f in futures]
+        return results_waking([pool.submit(work, k, stop) for k in range(parts)], stop)
+
+
+def results_waking(futures: list, stop: threading.Event) -> list:
+    """The results of ``futures`` in their order, the main thread waking every 0.05 s while it
+    waits, so that a signal's handler runs (``core.interrupts``); ``stop`` is set on the way out,
+    so that the other tasks end at their next pause when the wait raised."""
+    try:
+        while concurrent.futures.wait(futures, timeout=0.05).not_done:
+            pass
+    finally:
+        stop.set()
+    return [f.result() for f in futures]
 
 
 def parse_size(text: str) -> float:

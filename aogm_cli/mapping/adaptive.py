@@ -157,9 +157,9 @@ def residual_scale(probability: np.ndarray, cells: np.ndarray, evidence: np.ndar
     """``probability`` (H, W) with ``cells`` given EM's residual occupancy logistic(evidence +
     l_prior), as EM gives its own candidates (``em.decided``), each kept on its side of 0.5 (``SIDE``
     short of it): what the map believes is unchanged, and the cells outside the clusters rank on
-    the scale of those inside. On corridor_door_real and office_doors_real (seed 1, ``--holdout
-    0.1``) the held-out band AUC 0.9907 and 0.9957 with the hit rates' scale, 0.9942 and 0.9952 with
-    this (the standard map 0.9933, 0.9890; EM 0.9941, 0.9955)."""
+    the scale of those inside. On corridor_door_real and office_doors_real (seed 1, ``aogm compare
+    --holdout 0.1 --seed 1``) the held-out band AUC is 0.9942 and 0.9952 (the standard map 0.9933,
+    0.9890; EM 0.9941, 0.9955); the hit rates' scale gave the first 0.9907 (docs/algorithms.md)."""
     residual = 1.0 / (1.0 + np.exp(-(np.asarray(evidence, dtype=np.float64) + l_prior)))
     p = probability[cells]
     side = np.where(p > 0.5, np.maximum(residual[cells], 0.5 + SIDE), np.minimum(residual[cells], 0.5 - SIDE))

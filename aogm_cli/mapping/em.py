@@ -28,7 +28,7 @@ from aogm_cli.mapping.sweeps import Sweeps
 from aogm_cli.sensor_models.cone import flat_offsets
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig, cone_limits, reading_constants
 from aogm_cli.sensor_models.ray import is_narrow_beam
-from aogm_cli.sensor_models.readings import LaidOutReadings, forward_templates, reading_parts
+from aogm_cli.sensor_models.readings import READING_PARTS, LaidOutReadings, forward_templates, reading_parts
 from aogm_cli.sensor_models.surface import reading_shadows, surface_normals
 
 
@@ -136,7 +136,7 @@ def em_readings(cones, templates, grid, z_max: float, config: ForwardModelConfig
     no_order = np.zeros(0, dtype=np.int32)
     tables = K.ReadingTables(ints, floats, no_order, no_order, no_order)  # the orders are not needed yet
     groups, gauss = K.row_groups(templates), (float(config.sigma), float(config.window))
-    reading_parts(n, READING_PARTS, lambda _, span: K._reading_extent(templates.kernel_arrays, groups, tables,
+    reading_parts(n, lambda _, span: K._reading_extent(templates.kernel_arrays, groups, tables,
                                                                         (limits, lower), gauss, grid.shape, span))
     g0, const, _ = reading_constants(z, z_max, config)
     floats[:, K.F_G0] = g0
@@ -147,14 +147,8 @@ def em_readings(cones, templates, grid, z_max: float, config: ForwardModelConfig
                       ints[:, K.I_JLO], box, ints[:, K.I_REACH2:K.I_REACH2 + 2].T, ints[:, K.I_INSIDE], window_hi,
                       _order(box[0]), _order(box[1]), no_order, ints, floats)
     # needs the columns above only
-    reading_parts(n, READING_PARTS, lambda _, span: K._window_rows(templates.kernel_arrays, tables, grid.height, span))
+    reading_parts(n, lambda _, span: K._window_rows(templates.kernel_arrays, tables, grid.height, span))
     return rd._replace(window_leave=_order(window_hi))
-
-
-# EM's set-up kernels (each reading's extent, window rows and likelihood state) in this many fixed
-# parts of the readings, on up to --threads threads: every output is a reading's own (the same for
-# any thread count)
-READING_PARTS = 4
 
 
 def _order(key: np.ndarray) -> np.ndarray:
@@ -204,7 +198,7 @@ def em_problem(rd: K.EMReadings, templates, shape: tuple[int, int], occupied: np
                  for _ in range(READING_PARTS)]
     flat, occupied = flat_offsets(templates, shape[1]), _flat_bool(occupied)
     tables = K.reading_tables(rd)
-    reading_parts(n, READING_PARTS, lambda k, span: K._init_state(templates.kernel_arrays, flat, tables, model, occupied,
+    reading_parts(n, lambda k, span: K._init_state(templates.kernel_arrays, flat, tables, model, occupied,
                                                                   shape, marks[k], span))  # into state
     parent = None
     if labels is not None:

@@ -12,6 +12,7 @@ from aogm_cli.core.budget import Estimate, format_bytes
 from aogm_cli.mapping.params import MapParams
 from aogm_cli.mapping.pipeline import log_grid
 from aogm_cli.sensor_models.ray import is_narrow_beam
+from aogm_cli.sensor_models.readings import READING_PARTS
 
 BYTES_PER_CELL = 40  # log-odds, probability, observed, EM state, the map file in memory
 BYTES_PER_PADDED_CELL = 4  # the standard mapper's padded float32 state
@@ -26,8 +27,8 @@ BYTES_PER_SHADOW = 8
 BYTES_PER_SURFACE_CELL = 24
 BYTES_PER_TEMPLATE_CELL = 48  # the disc the cone templates are cut from (int64 offsets, ranges, angles)
 # adaptive on a sonar log: the thinned map's exact-model state and evidence (float32 x 3), and the
-# evidence at the final map in its parts (float64 x ``exact.EVIDENCE_PARTS``, 4)
-BYTES_PER_THINNED_CELL = 12 + 8 * 4
+# evidence at the final map in its parts (float64 x ``readings.READING_PARTS``)
+BYTES_PER_THINNED_CELL = 12 + 8 * READING_PARTS
 SAMPLE_BLOCKS, BLOCK_SCANS = 32, 64  # ranges read to estimate the cones' mean size
 
 

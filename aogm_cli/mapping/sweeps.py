@@ -4,7 +4,6 @@ the bands of one colour at once on threads (``Sweeps``), each band a call of the
 
 from __future__ import annotations
 
-import concurrent.futures
 import queue
 import threading
 import time
@@ -13,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aogm_cli.core.budget import active_limits
+from aogm_cli.core.budget import active_limits, results_waking
 from aogm_cli.mapping import em_kernels as K
 from aogm_cli.sensor_models.cone import flat_offsets
 
@@ -198,13 +197,7 @@ class Sweeps:
                 done = [self._band(band, mode, stop) for band in bands]
             else:  # the costliest bands of the last pass first, so that the threads end together
                 by_cost = sorted(bands, key=lambda band: -self.seconds.get(band.seg_lo, 0.0))
-                futures = [self.pool.submit(self._band, band, mode, stop) for band in by_cost]
-                try:
-                    while concurrent.futures.wait(futures, timeout=0.05).not_done:
-                        pass  # the main thread wakes for a signal's handler (core.interrupts)
-                finally:
-                    stop.set()  # an exception here: the other bands stop at their next pause
-                done = [f.result() for f in futures]
+                done = results_waking([self.pool.submit(self._band, band, mode, stop) for band in by_cost], stop)
             for i in range(3):
                 totals[i] += sum(d[i] for d in done)
             self.band_seconds += sum(self.seconds[band.seg_lo] for band in bands)

@@ -17,11 +17,9 @@ from aogm_cli.sensor_models.forward_model import cone_entries, cone_reach, gauss
 
 BOUND = 7.0  # the exact model's log-odds stay within +-BOUND (the standard map's clamps starve it)
 MARGIN = 0.5  # log-odds below the prior at which the thinning frees a cell
-# a reading whose every ratio is within this share of C of 1 is passed over (``cone_ratios``): in the
-# exact model's updates half an ulp (its ratios are then exactly 1, every map bit for bit); in the
-# evidence at a map a billionth (each log ratio below 1e-9: a million readings through one cell
-# add less than 0.001 to its evidence, against HIDDEN_GAIN's 0.05)
-EXACT = 2.0**-56
+# the evidence at a map (``map_evidence_sums``) passes over the cells of a reading whose ratios lie
+# within this of 1 (each log ratio below 1e-9: a million readings through one cell add less than
+# 0.001 to its evidence, against HIDDEN_GAIN's 0.05)
 NEGLIGIBLE = 1e-9
 
 
@@ -98,14 +96,13 @@ class ExactModelConfig:
 
 
 @numba.njit(cache=True, error_model="numpy")
-def cone_ratios(p, g, j0, g0, p_hit, const, w, n, a, u, r, na, out, negligible=2.0**-56):
+def cone_ratios(p, g, j0, g0, p_hit, const, w, n, a, u, r, na, out):
     """out[j] = p(z | m_j = 1) / p(z | m_j = 0) for the first ``n`` cells of one cone: ``p``
     their occupancy, ``g`` their Gaussians N(z; d_j, sigma^2), of which the first ``j0`` (the
     cells before the Gaussian window) are 0 and not read, ``g0`` G0 = N(z; z_max), ``const`` C
     and ``w`` of the reading (see the comment above). ``a``, ``u``, ``r``, ``na`` are scratch of
     at least ``n`` entries. Returns False, leaving ``out`` unset, when every ratio is exactly 1
-    (the reading explains nothing about these cells; the comment above), or, with a larger
-    ``negligible`` (a share of C), within that share of 1."""
+    (the reading explains nothing about these cells; the comment above)."""
     q = 1.0 - p_hit
     for j in range(n):
         na[j] = 1.0 - p_hit * p[j]
@@ -116,7 +113,7 @@ def cone_ratios(p, g, j0, g0, p_hit, const, w, n, a, u, r, na, out, negligible=2
         r[j] = tail
         tail = p[j] * p_hit * g[j] + na[j] * tail
         top = max(top, g[j])
-    floor = const * negligible / (w * top * (n - j0 + 2) / q)
+    floor = const * 2.0**-56 / (w * top * (n - j0 + 2) / q)
     # before the window: forward (A) and backward (R) at once
     prod = 1.0
     for i in range(j0):
@@ -185,17 +182,16 @@ def _reading_cone(tpl, flat, shape, readings, t, state, prior, model, ib, fl):
 
 
 @numba.njit(cache=True, _nrt=False, error_model="numpy")
-def _reading_ratios(tpl, flat, shape, readings, t, state, prior, model, ib, fl, negligible):
+def _reading_ratios(tpl, flat, shape, readings, t, state, prior, model, ib, fl):
     """``_reading_cone``, then the cone's ``cone_ratios`` in ``fl[6]``. Returns the number m of
-    cone cells, negated when every ratio is exactly 1 (``fl[6]`` unset; with a larger
-    ``negligible``, as ``cone_ratios``' within that share of 1), 0 for no reading or a cone off
-    the grid (the arguments as ``exact_inverse_updates``')."""
+    cone cells, negated when every ratio is exactly 1 (``fl[6]`` unset), 0 for no reading or a
+    cone off the grid (the arguments as ``exact_inverse_updates``')."""
     p_rand, p_max, p_hit = model[0], model[1], model[2]
     m, j0, g0, const = _reading_cone(tpl, flat, shape, readings, t, state, prior, model, ib, fl)
     if m == 0:
         return 0
     if not cone_ratios(fl[0], fl[1], j0, g0, p_hit, const, 1.0 - p_rand - p_max, m, fl[2], fl[3], fl[4], fl[5],
-                       fl[6], negligible):
+                       fl[6]):
         return -m
     return m
 
@@ -225,7 +221,7 @@ def exact_inverse_updates(tpl, flat, shape, readings, state, model, bounds, scra
     ib = scratch[0]
     fl = scratch[1]
     for t in range(span[0], span[1]):  # in order: each reading sees the map the earlier ones left
-        m = _reading_ratios(tpl, flat, shape, readings, t, state, prior, model, ib, fl, EXACT)
+        m = _reading_ratios(tpl, flat, shape, readings, t, state, prior, model, ib, fl)
         if m < 0:
             for j in range(-m):  # every ratio 1: the cone's unobserved cells become observed
                 c = np.uint64(np.uint32(ib[j]))
@@ -278,8 +274,8 @@ def map_evidence_sums(tpl, flat, shape, readings, occupancy, model, scratch, spa
         for j in range(m - 1, j0 - 1, -1):
             tail = p[j] * p_hit * g[j] + (1.0 - p_hit * p[j]) * tail
         n = m - j0
-        if n > 0 and cone_ratios(p[j0:m], g[j0:m], 0, g0, p_hit, const, wk, n, fl[2], fl[3], fl[4], fl[5], out,
-                                 NEGLIGIBLE):
+        if n > 0:  # the window's cells (with none before them, cone_ratios computes every ratio)
+            cone_ratios(p[j0:m], g[j0:m], 0, g0, p_hit, const, wk, n, fl[2], fl[3], fl[4], fl[5], out)
             for j in range(n):
                 c = np.uint64(np.uint32(ib[j0 + j]))
                 if c < n_cells:

@@ -68,11 +68,18 @@ def reading_spans(n: int) -> list[tuple[int, int]]:
     return [(a, min(a + READINGS_PER_CALL, n)) for a in range(0, n, READINGS_PER_CALL)]
 
 
-def reading_parts(n: int, parts: int, call: Callable[[int, tuple[int, int]], None]) -> None:
-    """``call(part, span)`` over readings 0 .. n - 1: ``parts`` fixed parts of them, each in spans
-    (``reading_spans``), the parts on up to ``Limits.threads`` threads (``core.budget.in_parts``).
-    A kernel whose outputs are each reading's own, or each part's, computes the same for any
-    thread count; it must release the GIL (numba's ``nogil``) for the threads to gain."""
+# the kernels that walk every reading's cone once on threads split the readings into this many fixed
+# parts (``reading_parts``): a fixed number, so that what they compute is the same for any thread count
+READING_PARTS = 4
+
+
+def reading_parts(n: int, call: Callable[[int, tuple[int, int]], None]) -> None:
+    """``call(part, span)`` over readings 0 .. n - 1: ``READING_PARTS`` fixed parts of them, each
+    in spans (``reading_spans``), the parts on up to ``Limits.threads`` threads
+    (``core.budget.in_parts``). A kernel whose outputs are each reading's own, or each part's,
+    computes the same for any thread count; it must release the GIL (numba's ``nogil``) for the
+    threads to gain."""
+    parts = READING_PARTS
     bounds = np.linspace(0, n, parts + 1).astype(np.int64)
 
     def part(k: int, stop) -> None:
