@@ -87,11 +87,12 @@ def _row_span(tpl, groups, rd, t, r):
     ext = tpl.extent
     if gv < -ext or gv > ext or rd.m[t] == 0:
         return RowSpan(0, 0, 0, 1, 1, 0, 1, 0)
-    first = groups.ptr[kind, b, gv + ext]
-    if first == groups.ptr[kind, b, gv + ext + 1]:
+    rows, at = groups.rows, gv + ext
+    if rows[kind, b, at, 1] == 0:
         return RowSpan(0, 0, 0, 1, 1, 0, 1, 0)
-    o_first = np.int64(groups.lo[kind, b, gv + ext])
-    o_last = np.int64(groups.hi[kind, b, gv + ext])
+    first = np.int64(rows[kind, b, at, 0])
+    o_first = np.int64(rows[kind, b, at, 2])
+    o_last = np.int64(rows[kind, b, at, 3])
     # a template entry's range is resolution * sqrt(dr^2 + dc^2): entries < m (or < jlo) are
     # the cells of the row with o^2 <= reach2 - gv^2, exactly, in integers
     v = _isqrt(rd.reach2[0, t] - gv * gv)
