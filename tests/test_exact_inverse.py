@@ -72,12 +72,15 @@ def three_passes(p, g, g0, p_hit, const, w):
     return out
 
 
-def test_split_passes_equal_the_three_passes_bit_for_bit():
+def test_split_passes_equal_the_three_passes():
     # long cones (to a sonar's 2,600 cells) of cells before the window, then a window of echoes;
     # dense priors make the beam's return through them negligible: cone_ratios then says so
-    # (False), and only when every ratio is exactly 1
+    # (False), and only when every ratio is exactly 1. Before the window the kernel takes one
+    # product of the cells' a_i where the three passes take A_j and R_j apart: the same ratios,
+    # rounded otherwise (a relative 3e-15 at most here)
     rng = np.random.default_rng(11)
     skipped = 0
+    worst = 0.0
     for trial in range(300):
         j0, n_window = int(rng.integers(0, 2600)), int(rng.integers(0, 12))
         n = j0 + n_window
@@ -94,11 +97,12 @@ def test_split_passes_equal_the_three_passes_bit_for_bit():
         scratch = [np.empty(n) for _ in range(4)]
         expected = np.array(three_passes(list(p), list(g), g0, p_hit, const, w))
         if cone_ratios(p, g, j0, g0, p_hit, const, w, n, *scratch, out):
-            assert np.array_equal(out, expected)
+            worst = max(worst, float(np.max(np.abs(out / expected - 1.0))))
         else:
             skipped += 1
             assert (expected == 1.0).all()
     assert 10 < skipped < 290  # both paths taken
+    assert worst < 1e-13, worst
 
 
 def test_two_cells_by_hand():
