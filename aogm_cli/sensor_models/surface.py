@@ -12,6 +12,7 @@ import numpy as np
 
 from aogm_cli.core.errors import InputError
 from aogm_cli.sensor_models.cone import cone_flat_cells, flat_offsets
+from aogm_cli.sensor_models.readings import READING_PARTS, reading_parts
 
 # What makes a cell a surface with a direction (``surface_normals``): heard by at least MIN_ECHOES
 # readings whose directions (as axes) have a doubled-angle mean resultant length of at least
@@ -77,11 +78,23 @@ def surface_normals(tpl, flat, shape: tuple[int, int], cones: tuple, z_max: floa
     normal[0, cells] = np.cos(angle)
     normal[1, cells] = np.sin(angle)
     passes = np.zeros(normal.shape[1], dtype=np.float32)
-    head_on_passes(tpl, flat, shape, readings, normal, math.cos(math.radians(HEAD_ON_DEG)) ** 2,
-                   float(resolution), float(z_max), passes)
+    cos2 = math.cos(math.radians(HEAD_ON_DEG)) ** 2
+    counted_in_parts(z.size, passes, lambda out, span: head_on_passes(tpl, flat, shape, readings, normal, cos2,
+                                                                     float(resolution), float(z_max), out, span))
     passed = cells[passes[cells] > MAX_PASS_SHARE * (passes[cells] + echoes)]
     normal[:, passed] = np.nan
     return normal
+
+
+def counted_in_parts(n: int, out: np.ndarray, count) -> None:
+    """``count(part_out, span)`` over the ``READING_PARTS`` fixed parts of n readings
+    (``readings.reading_parts``, on threads), each part into zeros of its own like ``out``, then
+    added into ``out`` in order: whole counts, exact in float32 below 2^24 a cell, so the result is
+    the same for any thread count and as one pass over every reading."""
+    parts = [np.zeros_like(out) for _ in range(READING_PARTS)]
+    reading_parts(n, lambda k, span: count(parts[k], span))
+    for part in parts:
+        out += part
 
 
 @numba.njit(cache=True, inline="always")
@@ -107,15 +120,16 @@ def cone_walk(tpl, flat, shape, row0, col0, k, end, right, ib):
     return m, r
 
 
-@numba.njit(cache=True)
-def head_on_passes(tpl, flat, shape, readings, normal, cos2, margin, z_max, out):
-    """out[c] += 1 for every reading of ``readings`` = (rows, cols, bins, z) whose cone holds the
-    surface cell c (``normal`` not NaN) more than ``margin`` before its range (every cell of a
-    reading without echo), met within the angle whose cos^2 is ``cos2`` of its normal."""
+@numba.njit(cache=True, nogil=True)
+def head_on_passes(tpl, flat, shape, readings, normal, cos2, margin, z_max, out, span):
+    """out[c] += 1 for every reading span[0] <= t < span[1] of ``readings`` = (rows, cols, bins, z)
+    whose cone holds the surface cell c (``normal`` not NaN) more than ``margin`` before its range
+    (every cell of a reading without echo), met within the angle whose cos^2 is ``cos2`` of its
+    normal."""
     rows, cols, bins, z = readings
     n_cells = shape[0] * shape[1]
     ib = np.empty(int(np.max(np.diff(tpl.offsets))), dtype=np.int32)
-    for t in range(z.shape[0]):
+    for t in range(span[0], span[1]):
         if not z[t] == z[t]:
             continue
         m, _ = cone_walk(tpl, flat, shape, rows[t], cols[t], bins[t], z_max if not z[t] < z_max else z[t] - margin,
@@ -175,29 +189,21 @@ def hidden(normal, cos2, cell, row0, col0, width):
 INCIDENCE_BINS = 9  # of 10 degrees, 0-90: ``incidence_counts``
 
 
-@numba.njit(cache=True)
-def incidence_counts(tpl, flat, shape, readings, occupied, normal, model, out):
-    """How often the readings echoed from, and passed, the occupied surface cells of the flat map
-    ``occupied`` (normals ``normal``), by angle of incidence: ``out`` (2, INCIDENCE_BINS) gets, per
-    10-degree bin, in row 0 the readings whose first occupied cell inside the Gaussian window (the
-    echo) is a surface met at that angle, and in row 1 the readings that passed an occupied surface
-    cell met at that angle at least ``margin`` before its range (once per reading and bin; a
-    reading without echo passes every one in its cone).
-
-    ``readings`` = (rows, cols, bins, z) (template ranges; >= z_max: no echo), ``model`` =
-    (sigma, window, z_max, margin)."""
+@numba.njit(cache=True, nogil=True)
+def incidence_kernel(tpl, flat, shape, readings, occupied, normal, model, out, span):
+    """``incidence_counts`` of the readings span[0] <= t < span[1]."""
     sigma, window, z_max, margin = model
     rows, cols, bins, z_all = readings
     n_cells = shape[0] * shape[1]
     ib = np.empty(int(np.max(np.diff(tpl.offsets))), dtype=np.int32)
     passed = np.zeros(INCIDENCE_BINS, dtype=np.bool_)
-    for t in range(z_all.shape[0]):
+    for t in range(span[0], span[1]):
         z = z_all[t]
         if not z == z:  # NaN
             continue
         at_max = not z < z_max
         m, r = cone_walk(tpl, flat, shape, rows[t], cols[t], bins[t], z_max if at_max else min(z + window * sigma, z_max),
-                     True, ib)
+                         True, ib)
         passed[:] = False
         for j in range(m):
             c = np.int64(ib[j])
@@ -216,6 +222,20 @@ def incidence_counts(tpl, flat, shape, readings, occupied, normal, model, out):
                     out[1, a] += 1.0
             if in_window:
                 break
+
+
+def incidence_counts(tpl, flat, shape, readings, occupied, normal, model, out):
+    """How often the readings echoed from, and passed, the occupied surface cells of the flat map
+    ``occupied`` (normals ``normal``), by angle of incidence: ``out`` (2, INCIDENCE_BINS) gets, per
+    10-degree bin, in row 0 the readings whose first occupied cell inside the Gaussian window (the
+    echo) is a surface met at that angle, and in row 1 the readings that passed an occupied surface
+    cell met at that angle at least ``margin`` before its range (once per reading and bin; a
+    reading without echo passes every one in its cone).
+
+    ``readings`` = (rows, cols, bins, z) (template ranges; >= z_max: no echo), ``model`` =
+    (sigma, window, z_max, margin)."""
+    counted_in_parts(readings[3].shape[0], out,
+                     lambda part, span: incidence_kernel(tpl, flat, shape, readings, occupied, normal, model, part, span))
 
 
 def specular_angle(counts: np.ndarray, fraction: float = 0.5, min_readings: int = 30) -> float:
@@ -243,10 +263,10 @@ def specular_angle(counts: np.ndarray, fraction: float = 0.5, min_readings: int 
     return 90.0
 
 
-@numba.njit(cache=True)
-def shadow_ranges(tpl, flat, shape, readings, normal, cos2, model, out):
-    """out[t] = the template range of the first cell of the core of reading t's cone (within the
-    angle whose cosine is ``core_cos`` of its axis), before its Gaussian window, that is a surface
+@numba.njit(cache=True, nogil=True)
+def shadow_ranges(tpl, flat, shape, readings, normal, cos2, model, out, span):
+    """out[t], span[0] <= t < span[1], = the template range of the first cell of the core of reading
+    t's cone (within the angle whose cosine is ``core_cos`` of its axis), before its Gaussian window, that is a surface
     met beyond the specular angle (``hidden``; out[t] untouched when there is none). ``readings``
     = (rows, cols, bins, z) (template ranges; >= z_max: no echo), ``model`` = (sigma, window,
     z_max, core_cos)."""
@@ -255,7 +275,7 @@ def shadow_ranges(tpl, flat, shape, readings, normal, cos2, model, out):
     rows, cols, bins, z_all = readings
     n_cells = shape[0] * shape[1]
     ib = np.empty(int(np.max(np.diff(tpl.offsets))), dtype=np.int32)
-    for t in range(z_all.shape[0]):
+    for t in range(span[0], span[1]):
         z = z_all[t]
         if not z == z:
             continue
@@ -283,9 +303,10 @@ def reading_shadows(run, normals: np.ndarray, forward, core: float = 1.0) -> np.
         return None
     out = np.full(run.z.shape[0], np.inf)
     grid = run.grid
-    shadow_ranges(run.templates.kernel_arrays, flat_offsets(run.templates, grid.width), grid.shape,
-                  (run.rows.astype(np.int64), run.cols.astype(np.int64), run.bins.astype(np.int64),
-                   run.z.astype(np.float64)), normals, cos2_of(forward.specular_deg),
-                  (float(forward.sigma), float(forward.window), float(run.sensor.max_range),
-                   math.cos(0.5 * core * run.sensor.beam_width)), out)
+    args = (run.templates.kernel_arrays, flat_offsets(run.templates, grid.width), grid.shape,
+            (run.rows.astype(np.int64), run.cols.astype(np.int64), run.bins.astype(np.int64), run.z.astype(np.float64)),
+            normals, cos2_of(forward.specular_deg),
+            (float(forward.sigma), float(forward.window), float(run.sensor.max_range),
+             math.cos(0.5 * core * run.sensor.beam_width)), out)
+    reading_parts(out.size, lambda _, span: shadow_ranges(*args, span))  # each reading's own: any thread count
     return out
