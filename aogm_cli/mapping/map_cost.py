@@ -21,10 +21,11 @@ BYTES_PER_PADDED_CELL = 4  # the standard mapper's padded float32 state
 # (12), the set-up's temporaries and the log's ranges (docs/benchmarks.md: `make bench-scale`'s peak RSS)
 BYTES_PER_READING = 300
 # EM / adaptive on a sonar log: where beams were deflected (float64 a reading), and a cell's surface
-# normal (float32 x 2) beside its echo sums (float32 x 3) and head-on passes (float32) while they
-# are made (``sensor_models.surface``)
+# normal (float32 x 2) beside its echo sums (float32 x 3) and head-on passes (float32, and a float32
+# per part of the readings while they are counted: ``surface.counted_in_parts``) while they are made
+# (``sensor_models.surface``)
 BYTES_PER_SHADOW = 8
-BYTES_PER_SURFACE_CELL = 24
+BYTES_PER_SURFACE_CELL = 24 + 4 * READING_PARTS
 BYTES_PER_TEMPLATE_CELL = 48  # the disc the cone templates are cut from (int64 offsets, ranges, angles)
 # adaptive on a sonar log: the thinned map's exact-model state and evidence (float32 x 3), and the
 # evidence at the final map in its parts (float64 x ``readings.READING_PARTS``)
