@@ -262,3 +262,20 @@ def test_bucket_size_does_not_change_the_scene_segments(bucket_size):
     w = world(walls=[{"points": [[0.5, 0.5], [3.5, 0.5], [3.5, 3.5]]}])
     scene = build_scene(w, bucket_size=bucket_size)
     assert scene.n_segments == 8
+
+
+@pytest.mark.parametrize("distance", [0.0, 0.04, 0.1, 0.15, 0.333])
+def test_cells_within_a_distance_stamped_as_the_distance_transform_finds_them(distance):
+    # a few marked cells get discs stamped (the robot's footprint), many the distance transform:
+    # the same cells, edges and corners of the grid included
+    from aogm_cli.core.grid import GridSpec
+
+    grid = GridSpec(-1.0, -2.0, 0.05, 37, 53)
+    rng = np.random.default_rng(5)
+    for n in (1, 3, 12):
+        mask = np.zeros(grid.shape, dtype=bool)
+        mask[rng.integers(0, grid.height, n), rng.integers(0, grid.width, n)] = True
+        mask[0, -1] = True  # a corner: its disc is cut by two edges
+        expected = ndimage.distance_transform_edt(~mask) * grid.resolution <= distance + 1e-9
+        assert_array_equal(grid.within(mask, distance), expected)
+    assert not grid.within(np.zeros(grid.shape, dtype=bool), 0.2).any()

@@ -139,14 +139,15 @@ def joined_view(log_odds: np.ndarray, observed: np.ndarray, outcome: EMOutcome |
     clusters put on EM's scale, unless ``adaptive.scale`` is "mixed": with each cell's
     ``evidence`` at the final map (the thinned map outside the clusters: ``stages.decided``), EM's
     residual there (``residual_scale``), else by the hit rates of the log's echoes (``one_scale``)."""
-    probability, observed = em_view(log_odds, observed, outcome, grid, whole.pose, whole.sensor, params)
+    robot = footprint(grid, whole.pose, whole.sensor) if outcome is not None or evidence is not None else None
+    probability, observed = em_view(log_odds, observed, outcome, grid, whole.pose, whole.sensor, params, robot)
     if params.adaptive.scale == "mixed" or (outcome is None and evidence is None):
         return probability, observed
     inside = clusters > 0
     if evidence is not None:
         outside = observed & ~inside
         scaled = residual_scale(probability, outside, evidence, params.em.l_prior)
-        body = outside & footprint(grid, whole.pose, whole.sensor)  # cleared: at most the free clamp still
+        body = outside & robot  # cleared: at most the free clamp still
         scaled[body] = np.minimum(scaled[body], probability[body])
         return scaled, observed
     ends, passes = axis_counts(whole.pose, whole.ranges, whole.sensor, grid)

@@ -310,15 +310,15 @@ def em_stats(outcome: EMOutcome | None) -> dict:
 
 
 def em_view(log_odds: np.ndarray, observed: np.ndarray, outcome: EMOutcome | None, grid, poses: np.ndarray, sensor,
-            params: MapParams) -> tuple[np.ndarray, np.ndarray]:
+            params: MapParams, body: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(probability, observed) (H, W) of an em or adaptive map: the standard map's, EM's residuals
-    on its candidates (``residual_into``), what a planner sees (``planner_view``), 0.5 where
-    unobserved."""
+    on its candidates (``residual_into``), what a planner sees (``planner_view``; ``body``: the
+    robot's ``footprint``, when the caller has it), 0.5 where unobserved."""
     probability = probability_from_log_odds(log_odds, observed).reshape(-1)
     if outcome is not None:
         free = probability_from_log_odds(np.float64(params.inverse_model.clamp_min))
         observed = planner_view(probability, observed, residual_into(probability, outcome.result, outcome.config),
-                                footprint(grid, poses, sensor), free)
+                                footprint(grid, poses, sensor) if body is None else body, free)
     probability = probability.reshape(grid.shape)
     probability[~observed] = 0.5
     return probability, observed
