@@ -123,13 +123,15 @@ class Fit:
 
     forward: F.ForwardModelConfig
     iterations: int
-    loglik_per_reading: float  # mean log p(z | m) of the sample under ``forward`` at the map
+    loglik_per_reading: float | None  # mean log p(z | m) of the sample under ``forward`` at the map (None: not asked)
 
 
 def fit_at_map(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: np.ndarray, forward: F.ForwardModelConfig,
-               config: CalibrationConfig, tuning: Tuning = TUNING) -> Fit:
+               config: CalibrationConfig, tuning: Tuning = TUNING, loglik: bool = True) -> Fit:
     """EM over the parameters alone at a fixed map: expectations, then ``m_step``, until the
-    parameters settle (``config.tolerance`` / 10) or ``tuning.fit_iterations``."""
+    parameters settle (``config.tolerance`` / 10) or ``tuning.fit_iterations``; with ``loglik``,
+    one more pass of expectations for the sample's mean log-likelihood under the fit (a round's
+    record: what the rates stage does not need)."""
     iterations = 0
     # the cones' obstacles found once, at twice the starting sigma, serve every iteration whose
     # sigma stays below (found again if it grows beyond): the same sums, one cone walk
@@ -146,6 +148,8 @@ def fit_at_map(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: 
         forward = new
         if done:
             break
+    if not loglik:
+        return Fit(forward, iterations, None)
     sums, _ = expectations(run, readings, occupied, forward, obstacles)
     n = max(sums[F.E_READINGS], 1.0)
     return Fit(forward, iterations, float(sums[F.E_LOGLIK] / n))

@@ -309,7 +309,7 @@ def rates(s: State) -> State:
     forward = s.in_use.em.forward
     start = dataclasses.replace(forward, p_max=max(forward.p_max, RATES_START))
     fit = fit_at_map(s.readings, sample_readings(s.readings, RATES_READINGS), np.ascontiguousarray(walls.reshape(-1)),
-                     start, config).forward
+                     start, config, loglik=False).forward
     values = {"p_max": float(fit.p_max)}
     return s.but(learned=dataclasses.replace(s.learned, sensor=dataclasses.replace(s.learned.sensor, **values),
                                              rates=values))
