@@ -10,7 +10,7 @@ import numba
 import numpy as np
 
 from aogm_cli.mapping.em_kernels.layout import _columns
-from aogm_cli.mapping.em_kernels.readings import _entry_cell
+from aogm_cli.mapping.em_kernels.readings import _bin_transform, _entry_cell
 from aogm_cli.mapping.em_kernels.windows import _rank
 from aogm_cli.sensor_models.forward_model import gaussian_at
 
@@ -96,10 +96,12 @@ def _init_state(tpl, flat, tables, model, occupied, grid_shape, marks, span):
             inside = rd.inside[t] != 0
             x_off = flat.offsets[flat.sel[k_bin, 0]]
             sign = flat.sel[k_bin, 1]
-            at = rd.row0[t] * width + rd.col0[t]
+            row0, col0 = np.int64(rd.row0[t]), np.int64(rd.col0[t])
+            at = row0 * width + col0
+            tr = _bin_transform(tpl, k_bin)
             for j in range(rd.m[t]):
-                cell = at + sign * np.int64(x_off[s0 + j]) if inside else _entry_cell(tpl, k_bin, j, rd.row0[t],
-                                                                                      rd.col0[t], height, width)
+                cell = at + sign * np.int64(x_off[s0 + j]) if inside else _entry_cell(tpl, s0, tr, j, row0, col0,
+                                                                                      height, width)
                 if cell < 0:
                     continue
                 if mark:

@@ -11,16 +11,24 @@ from aogm_cli.sensor_models.forward_model import cone_entries
 
 
 @numba.njit(cache=True, inline="always")
-def _entry_cell(tpl, k, j, row0, col0, height, width):
-    """Flat cell of entry j of heading bin k's cone from (row0, col0), or -1 outside the grid."""
-    s = tpl.offsets[tpl.base_bin[k]]
+def _entry_cell(tpl, s, tr, j, row0, col0, height, width):
+    """Flat cell of entry j of a cone from (row0, col0), or -1 outside the grid: ``s`` the first
+    entry of its stored bin, ``tr`` its heading bin's transform (``_bin_transform``), both taken
+    once per reading."""
     dc = np.int64(tpl.dcol[s + j])
     dr = np.int64(tpl.drow[s + j])
-    r = row0 + tpl.transform[k, 2] * dc + tpl.transform[k, 3] * dr
-    c = col0 + tpl.transform[k, 0] * dc + tpl.transform[k, 1] * dr
+    r = row0 + tr[2] * dc + tr[3] * dr
+    c = col0 + tr[0] * dc + tr[1] * dr
     if r < 0 or r >= height or c < 0 or c >= width:
         return -1
     return r * width + c
+
+
+@numba.njit(cache=True, inline="always")
+def _bin_transform(tpl, k):
+    """Heading bin k's transform of its stored bin's offsets, as ``_entry_cell`` takes it."""
+    return (np.int64(tpl.transform[k, 0]), np.int64(tpl.transform[k, 1]), np.int64(tpl.transform[k, 2]),
+            np.int64(tpl.transform[k, 3]))
 
 
 @numba.njit(cache=True, nogil=True)

@@ -7,7 +7,7 @@ import numba
 import numpy as np
 
 from aogm_cli.mapping.em_kernels.layout import ARENA_ENTRIES, CTL_BUMP, CTL_NEED_ROOM
-from aogm_cli.mapping.em_kernels.readings import _entry_cell
+from aogm_cli.mapping.em_kernels.readings import _bin_transform, _entry_cell
 from aogm_cli.sensor_models.forward_model import gaussian_at
 
 
@@ -50,10 +50,12 @@ def _build_window(t, tpl, flat, rd, model, cand, work):
     inside = rd.inside[t] != 0
     x_off = flat.offsets[flat.sel[k_bin, 0]]
     sign = flat.sel[k_bin, 1]
-    at = rd.row0[t] * width + rd.col0[t]
+    row0, col0 = np.int64(rd.row0[t]), np.int64(rd.col0[t])
+    at = row0 * width + col0
+    tr = _bin_transform(tpl, k_bin)
     for j in range(rd.jlo[t], rd.m[t]):
-        cell = at + sign * np.int64(x_off[s0 + j]) if inside else _entry_cell(tpl, k_bin, j, rd.row0[t], rd.col0[t],
-                                                                              height, width)
+        cell = at + sign * np.int64(x_off[s0 + j]) if inside else _entry_cell(tpl, s0, tr, j, row0, col0, height,
+                                                                              width)
         if cell < 0 or not cand.occupied[cell]:
             continue
         g = gaussian_at(rd.z[t], tpl.ranges[s0 + j], model.sigma, model.window)
