@@ -85,7 +85,7 @@ def in_parts(parts: int, work: Callable[[int, threading.Event], object]) -> list
         return [work(k, stop) for k in range(parts)]
     futures = [_pool(threads).submit(work, k, stop) for k in range(parts)]
     try:
-        return results_waking(futures, stop)
+        return _results_waking(futures, stop)
     except BaseException:
         concurrent.futures.wait(futures)  # stop is set: the parts end at their next pause, none outlives the call
         raise
@@ -106,7 +106,7 @@ def _pool(threads: int) -> ThreadPoolExecutor:
         return _pools[key]
 
 
-def results_waking(futures: list, stop: threading.Event) -> list:
+def _results_waking(futures: list, stop: threading.Event) -> list:
     """The results of ``futures`` in their order, the main thread waking every 0.05 s while it
     waits, so that a signal's handler runs (``core.interrupts``); ``stop`` is set on the way out,
     so that the other tasks end at their next pause when the wait raised."""

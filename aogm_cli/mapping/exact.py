@@ -24,8 +24,8 @@ from aogm_cli.sensor_models.readings import (
     READING_PARTS,
     LaidOutReadings,
     forward_templates,
-    reading_parts,
     reading_spans,
+    summed_in_parts,
 )
 
 
@@ -82,9 +82,8 @@ def map_evidence(run: LaidOutReadings, forward: ForwardModelConfig, occupied: np
     """(H, W) float64: each cell's evidence at the binary map ``occupied`` (flat or (H, W) bool),
     log p(Z | m, cell occupied) - log p(Z | m, cell free) over every reading of ``run`` (its
     deflected beams cut), as EM scores a candidate (``em.decided``), in one pass over the cones
-    (``exact_inverse.map_evidence_sums``), in ``READING_PARTS`` parts on up to ``Limits.threads``
-    threads (``readings.reading_parts``), each summed into its own grid and the grids added in their
-    order (the same evidence for any thread count): where it is near 0 no reading decides the cell."""
+    (``exact_inverse.map_evidence_sums``), its parts summed on threads (``readings.summed_in_parts``:
+    the same evidence for any thread count): where it is near 0 no reading decides the cell."""
     grid, templates = run.grid, run.templates
     n = grid.height * grid.width
     occupancy = np.zeros(n + SPARE_MASK + 1, dtype=np.float32)
@@ -92,17 +91,10 @@ def map_evidence(run: LaidOutReadings, forward: ForwardModelConfig, occupied: np
     z, limit = deflect(run.z, run.shadow, run.sensor.max_range)
     readings = ExpectationReadings(run.rows, run.cols, run.bins, z, limit)
     model, flat = _model(forward, run.sensor.max_range), flat_offsets(templates, grid.width)
-    parts = [np.zeros(n) for _ in range(READING_PARTS)]
     scratch = [cone_scratch(templates) for _ in range(READING_PARTS)]
-
-    def sums(k: int, span: tuple[int, int]) -> None:
-        map_evidence_sums(templates.kernel_arrays, flat, grid.shape, readings, occupancy, model, scratch[k], span,
-                          parts[k])
-
-    reading_parts(z.size, sums)
-    total = parts[0]
-    for part in parts[1:]:  # in their order, whatever thread made each
-        total += part
+    total = np.zeros(n)
+    summed_in_parts(z.size, total, lambda k, part, span: map_evidence_sums(
+        templates.kernel_arrays, flat, grid.shape, readings, occupancy, model, scratch[k], span, part))
     return total.reshape(grid.shape)
 
 

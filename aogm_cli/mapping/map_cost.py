@@ -22,7 +22,7 @@ BYTES_PER_PADDED_CELL = 4  # the standard mapper's padded float32 state
 BYTES_PER_READING = 300
 # EM / adaptive on a sonar log: where beams were deflected (float64 a reading), and a cell's surface
 # normal (float32 x 2) beside its echo sums (float32 x 3) and head-on passes (float32, and a float32
-# per part of the readings while they are counted: ``surface.counted_in_parts``) while they are made
+# per part of the readings while they are counted: ``readings.summed_in_parts``) while they are made
 # (``sensor_models.surface``)
 BYTES_PER_SHADOW = 8
 BYTES_PER_SURFACE_CELL = 24 + 4 * READING_PARTS

@@ -7,12 +7,11 @@ from __future__ import annotations
 import queue
 import threading
 import time
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 
-from aogm_cli.core.budget import active_limits, results_waking
+from aogm_cli.core.budget import active_limits, in_parts
 from aogm_cli.mapping import em_kernels as K
 from aogm_cli.sensor_models.cone import flat_offsets
 
@@ -153,8 +152,8 @@ def _scratch_bytes(work: K.TileWork) -> int:
 class Sweeps:
     """The sweeps of one run of EM over ``cand`` (``em_kernels.Candidates``): ``one_pass(mode)``
     visits every band, colour by colour, the bands of a colour on up to ``Limits.threads``
-    threads (``core.budget``), one scratch each. Use as a context manager: on leaving, the
-    threads end and the readings' tables hold their state in the problem's order again."""
+    threads (``core.budget.in_parts``), one scratch each. Use as a context manager: on leaving,
+    the readings' tables hold their state in the problem's order again."""
 
     def __init__(self, problem, cand: K.Candidates):  # problem: an em.EMProblem (the layer above)
         rd = problem.readings
@@ -175,14 +174,11 @@ class Sweeps:
         # bands on the threads (which changes nothing computed)
         self.band_seconds = 0.0  # the bands' times added up over the run: against the sweeps' wall time on
         # several threads, how busy they were
-        self.pool = ThreadPoolExecutor(self.threads, thread_name_prefix="aogm-em") if self.threads > 1 else None
 
     def __enter__(self) -> Sweeps:
         return self
 
     def __exit__(self, *exc) -> None:
-        if self.pool is not None:
-            self.pool.shutdown()
         if self.order is not None:
             self.problem.readings.ints[self.order] = self.tables.ints
             self.problem.readings.floats[self.order] = self.tables.floats
@@ -192,12 +188,10 @@ class Sweeps:
         scored, pairs generated)."""
         totals = [0, 0, 0]
         for bands in self.phases:
-            stop = threading.Event()
-            if self.pool is None:
-                done = [self._band(band, mode, stop) for band in bands]
-            else:  # the costliest bands of the last pass first, so that the threads end together
-                by_cost = sorted(bands, key=lambda band: -self.seconds.get(band.seg_lo, 0.0))
-                done = results_waking([self.pool.submit(self._band, band, mode, stop) for band in by_cost], stop)
+            # the costliest bands of the last pass first, so that the threads end together (each band
+            # starts at the colour's clock: their order changes nothing computed)
+            by_cost = sorted(bands, key=lambda band: -self.seconds.get(band.seg_lo, 0.0))
+            done = in_parts(len(by_cost), lambda k, stop, by_cost=by_cost: self._band(by_cost[k], mode, stop))
             for i in range(3):
                 totals[i] += sum(d[i] for d in done)
             self.band_seconds += sum(self.seconds[band.seg_lo] for band in bands)

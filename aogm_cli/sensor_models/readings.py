@@ -92,6 +92,16 @@ def reading_parts(n: int, call: Callable[[int, tuple[int, int]], None]) -> None:
     in_parts(parts, part)
 
 
+def summed_in_parts(n: int, out: np.ndarray, call: Callable[[int, np.ndarray, tuple[int, int]], None]) -> None:
+    """``call(part, part_out, span)`` over readings 0 .. n - 1 (``reading_parts``), each part adding
+    into zeros of its own like ``out``, the parts then added into ``out`` in their order, whatever
+    thread made each: the same sums for any thread count (whole counts: as one pass made them)."""
+    sums = [np.zeros_like(out) for _ in range(READING_PARTS)]
+    reading_parts(n, lambda k, span: call(k, sums[k], span))
+    for part in sums:
+        out += part
+
+
 @dataclass
 class LaidOutReadings:
     """Every reading of a log laid out for the forward model (what EM and adaptive map from)."""

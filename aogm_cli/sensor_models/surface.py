@@ -12,7 +12,7 @@ import numpy as np
 
 from aogm_cli.core.errors import InputError
 from aogm_cli.sensor_models.cone import cone_flat_cells, flat_offsets
-from aogm_cli.sensor_models.readings import READING_PARTS, reading_parts
+from aogm_cli.sensor_models.readings import reading_parts, summed_in_parts
 
 # What makes a cell a surface with a direction (``surface_normals``): heard by at least MIN_ECHOES
 # readings whose directions (as axes) have a doubled-angle mean resultant length of at least
@@ -79,22 +79,11 @@ def surface_normals(tpl, flat, shape: tuple[int, int], cones: tuple, z_max: floa
     normal[1, cells] = np.sin(angle)
     passes = np.zeros(normal.shape[1], dtype=np.float32)
     cos2 = math.cos(math.radians(HEAD_ON_DEG)) ** 2
-    counted_in_parts(z.size, passes, lambda out, span: head_on_passes(tpl, flat, shape, readings, normal, cos2,
-                                                                     float(resolution), float(z_max), out, span))
+    summed_in_parts(z.size, passes, lambda _, out, span: head_on_passes(tpl, flat, shape, readings, normal, cos2,
+                                                                       float(resolution), float(z_max), out, span))
     passed = cells[passes[cells] > MAX_PASS_SHARE * (passes[cells] + echoes)]
     normal[:, passed] = np.nan
     return normal
-
-
-def counted_in_parts(n: int, out: np.ndarray, count) -> None:
-    """``count(part_out, span)`` over the ``READING_PARTS`` fixed parts of n readings
-    (``readings.reading_parts``, on threads), each part into zeros of its own like ``out``, then
-    added into ``out`` in order: whole counts, exact in float32 below 2^24 a cell, so the result is
-    the same for any thread count and as one pass over every reading."""
-    parts = [np.zeros_like(out) for _ in range(READING_PARTS)]
-    reading_parts(n, lambda k, span: count(parts[k], span))
-    for part in parts:
-        out += part
 
 
 @numba.njit(cache=True, inline="always")
@@ -234,8 +223,8 @@ def incidence_counts(tpl, flat, shape, readings, occupied, normal, model, out):
 
     ``readings`` = (rows, cols, bins, z) (template ranges; >= z_max: no echo), ``model`` =
     (sigma, window, z_max, margin)."""
-    counted_in_parts(readings[3].shape[0], out,
-                     lambda part, span: incidence_kernel(tpl, flat, shape, readings, occupied, normal, model, part, span))
+    summed_in_parts(readings[3].shape[0], out,
+                    lambda _, part, span: incidence_kernel(tpl, flat, shape, readings, occupied, normal, model, part, span))
 
 
 def specular_angle(counts: np.ndarray, fraction: float = 0.5, min_readings: int = 30) -> float:
