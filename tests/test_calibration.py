@@ -357,6 +357,35 @@ def test_a_long_log_calibrates_on_runs_of_consecutive_scans(corridor_door_log):
     assert C._scan_blocks(run_, scans) is None
 
 
+def test_a_wide_sensor_calibrates_on_a_bounded_number_of_readings(corridor_door_log):
+    """With many beams a scan, the runs hold at most calibration's max_mapped_readings readings:
+    fewer scans than max_scans (a laser's 180 beams: 355 scans of 64,000 readings), the same
+    runs of consecutive scans."""
+    from aogm_cli.io.logfile import LogReader
+    from aogm_cli.mapping.params import EMConfig
+    from aogm_cli.mapping.pipeline import log_grid
+    from aogm_cli.sensor_models.readings import lay_out_readings
+
+    with LogReader(corridor_door_log) as reader:
+        log, grid = reader.read(), log_grid(reader, 0.05)
+    run_ = lay_out_readings(log.pose, log.ranges, log.sensor, grid)
+    scans, width = log.ranges.shape
+    assert C.calibration_scans(run_, C.Tuning(max_scans=100, max_mapped_readings=40 * width + width - 1)) == 40
+    assert C.calibration_scans(run_, C.Tuning(max_scans=40, max_mapped_readings=10**9)) == 40
+    assert C.calibration_scans(run_, C.TUNING) == C.TUNING.max_scans  # 24 sonars: the scans bound the runs
+    calls = []
+
+    def em_step(config, occupied, subset):
+        calls.append(subset.reshape(scans, width)[:, 0].copy())
+        return 1.0, 1, "result"
+
+    tuning = C.Tuning(max_scans=100, max_mapped_readings=40 * width, subsample=1)
+    _, record = C.calibration_rounds(run_, np.zeros(grid.height * grid.width, dtype=bool), EMConfig(),
+                                     CalibrationConfig(rounds=2), em_step, tuning=tuning)
+    assert calls[1].sum() == 40 and record["readings_used"] <= 40 * width
+    assert "4 runs of 10 consecutive scans" in record["fitted_at"]
+
+
 # --- the sensor model a detector carries (issue 36) --------------------------------------------
 
 

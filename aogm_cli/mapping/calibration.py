@@ -38,6 +38,8 @@ class Tuning:
     subsample: int = 2  # the rounds' maps are made from every n-th scan
     start_subsample: int = 4  # and the broad first map from every n-th
     max_scans: int = 2000  # a longer log calibrates on this many scans, in CAL_BLOCKS runs
+    # and on at most this many readings (a sensor of more than 32 beams: a laser's 180 a scan, 355 scans)
+    max_mapped_readings: int = 64_000
     pass_margin: float = 0.3  # m: a reading passed a surface cell when its echo lies this far beyond
     specular_rate: float = 0.5  # the specular angle: where the echo rate falls below this share of head-on
     # bounds of the learned values: sigma from a tenth of a typical 5 cm cell to half a metre; p_rand,
@@ -220,7 +222,8 @@ def calibration_rounds(run: LaidOutReadings, occupied: np.ndarray, em: EMConfig,
     Returns (the EM config of the last fit, the record: the starting values, per round the
     fitted values, the mean log-likelihood of the sample at the fit and EM's objective and
     sweeps, and the final values)."""
-    blocks = _scan_blocks(run, tuning.max_scans)
+    max_scans = calibration_scans(run, tuning)
+    blocks = _scan_blocks(run, max_scans)
     if blocks is not None:  # a long log: the rounds map (and fit on) blocks of its scans only
         select = blocks if select is None else select & blocks
     readings = sample_readings(run, tuning.max_readings, select)
@@ -228,7 +231,7 @@ def calibration_rounds(run: LaidOutReadings, occupied: np.ndarray, em: EMConfig,
     start = occupied.copy()
     record = {"initial": model_values(em.forward), "readings_used": int(readings.z.shape[0]),
               "fitted_at": f"1 scan in {tuning.start_subsample}, then 1 in {tuning.subsample}"
-              + ("" if blocks is None else f", of {CAL_BLOCKS} runs of {tuning.max_scans // CAL_BLOCKS} consecutive scans"),
+              + ("" if blocks is None else f", of {CAL_BLOCKS} runs of {max_scans // CAL_BLOCKS} consecutive scans"),
               "rounds": []}
     used = dataclasses.replace(em, forward=dataclasses.replace(em.forward, sigma=max(em.forward.sigma, tuning.start_sigma)))
     step = dataclasses.replace(used, max_sweeps=min(em.max_sweeps, tuning.start_sweeps))
@@ -250,6 +253,14 @@ def calibration_rounds(run: LaidOutReadings, occupied: np.ndarray, em: EMConfig,
             break
     record["final"] = model_values(used.forward)
     return used, record
+
+
+def calibration_scans(run: LaidOutReadings, tuning: Tuning = TUNING) -> int:
+    """How many of ``run``'s scans a long log calibrates on: ``tuning.max_scans``, fewer when
+    they would hold more than ``tuning.max_mapped_readings`` readings (a scan of many beams), so
+    that calibration's cost is bounded in readings whatever the sensor."""
+    width = run.ranges.shape[1]
+    return max(CAL_BLOCKS, min(tuning.max_scans, tuning.max_mapped_readings // max(width, 1)))
 
 
 def _scan_blocks(run: LaidOutReadings, max_scans: int) -> np.ndarray | None:

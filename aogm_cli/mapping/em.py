@@ -23,7 +23,7 @@ from aogm_cli.core.log import Log
 from aogm_cli.mapping import em_kernels as K
 from aogm_cli.mapping.calibration import MAX_READINGS, incidence_at, opening_at, sample_readings
 from aogm_cli.mapping.params import EMConfig, MapParams
-from aogm_cli.mapping.standard import HIDDEN_GAIN, probability_from_log_odds, thin_pass
+from aogm_cli.mapping.standard import decided_free, probability_from_log_odds, thin_pass
 from aogm_cli.mapping.sweeps import Sweeps
 from aogm_cli.sensor_models.cone import flat_offsets
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig, cone_limits, reading_constants
@@ -62,7 +62,7 @@ def decided(result: EMResult, config: EMConfig) -> np.ndarray:
     beyond every cone's window or barely inside it), where the prior alone decides."""
     with np.errstate(divide="ignore"):
         evidence = np.log(result.residual) - np.log1p(-result.residual) - config.l_prior  # log p(Z|occ) - log p(Z|free)
-    return (result.residual > 0.5) | (evidence < -HIDDEN_GAIN)
+    return (result.residual > 0.5) | decided_free(evidence)
 
 
 def residual_into(probability: np.ndarray, result: EMResult, config: EMConfig) -> np.ndarray:

@@ -23,7 +23,7 @@ from aogm_cli.mapping.learned import BUILDING, FROM_LOG, Learned, SensorModel
 from aogm_cli.mapping.params import EMConfig, MapParams
 from aogm_cli.mapping.pipeline import Progress, TimedSource, params_json
 from aogm_cli.mapping.standard import (
-    HIDDEN_GAIN,
+    decided_free,
     occupied_evidence,
     probability_from_log_odds,
     set_up,
@@ -102,7 +102,7 @@ class State:
     occupied: np.ndarray | None = None  # flat bool: EM's binary map, updated in place
     problem: Problem | None = None
     em: E.EMOutcome | None = None
-    evidence: np.ndarray | None = None  # (H, W): each cell's evidence at the final map (``decided``)
+    final_evidence: np.ndarray | None = None  # (H, W): each cell's evidence at the final map (``decided``)
     view: View | None = None
 
     def but(self, **changes) -> State:
@@ -337,7 +337,7 @@ def decided(s: State) -> State:
     behind a wall, crossed only by readings the map cannot explain, or wanted occupied by the
     readings: unknown (``em_view``). Their probabilities are EM's residuals at that map
     (``adaptive.joined_view``)."""
-    return s.but(evidence=map_evidence(s.readings, s.in_use.em.forward, s.occupied))
+    return s.but(final_evidence=map_evidence(s.readings, s.in_use.em.forward, s.occupied))
 
 
 def standard_view(s: State) -> State:
@@ -353,10 +353,10 @@ def em_view(s: State) -> State:
         return s.but(view=View(*E.em_view(s.standard.log_odds, s.standard.observed, s.em, s.grid, whole.pose,
                                          whole.sensor, params)))
     observed = s.standard.observed
-    if s.evidence is not None:  # outside the clusters the thinned map, its free cells no reading holds free unknown
-        observed = observed & ~((s.clusters.ids == 0) & (s.standard.log_odds <= 0) & ~(s.evidence < -HIDDEN_GAIN))
+    if s.final_evidence is not None:  # outside the clusters the thinned map, its free cells no reading holds free unknown
+        observed = observed & ~((s.clusters.ids == 0) & (s.standard.log_odds <= 0) & ~decided_free(s.final_evidence))
     return s.but(view=View(*A.joined_view(s.standard.log_odds, observed, s.em, s.clusters.ids, whole, s.grid,
-                                          params, s.evidence)))
+                                          params, s.final_evidence)))
 
 
 # when a stage runs

@@ -276,6 +276,12 @@ def thins(sensor: SensorSpec, grid: GridSpec, params: MapParams, always: bool = 
 HIDDEN_GAIN = 0.05  # log-odds: the evidence that decides a cell free (EM's ``em.decided``, adaptive's ``stages.decided``)
 
 
+def decided_free(evidence: np.ndarray) -> np.ndarray:
+    """Where ``evidence`` (log p(Z | occupied) - log p(Z | free)) decides a cell free: its
+    occupancy would lower the readings' likelihood by more than ``HIDDEN_GAIN``."""
+    return evidence < -HIDDEN_GAIN
+
+
 class Thinned(NamedTuple):
     """``thin_pass``: the thinned map's log-odds and the exact model's evidence, its log-odds less
     its prior (0 where no reading reached), (H, W) each."""
