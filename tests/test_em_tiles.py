@@ -254,6 +254,28 @@ def test_the_same_run_on_any_number_of_threads(seed, monkeypatch):
         assert np.array_equal(result.residual, one.residual)
 
 
+@pytest.mark.parametrize("seed", range(300, 312))
+def test_cells_no_window_holds_are_held_free_as_the_reference(seed, monkeypatch):
+    """With the prior below one half, the candidates that start free and lie in no reading's
+    Gaussian window are left out of the sweeps (``em.HELD_FREE_SHARE`` 0: whatever their share)
+    and their residuals come from the readings' far runs: the same flips, objective and
+    residuals as the reference climb, which sweeps them all."""
+    monkeypatch.setattr(E, "HELD_FREE_SHARE", 0.0)
+    height, width = SHAPES[seed % len(SHAPES)]
+    case = random_case(seed, GridSpec(0.0, 0.0, 0.1, height, width), beams=(2.0, 8.0, 30.0))
+    case.config = dataclasses.replace(case.config, prior_occupied=0.3)
+    swept, held = E._flippable(case.problem(case.start.copy()), case.start, np.unique(case.candidates))
+    assert held.size > 0 and not case.start[held].any()
+    assert np.array_equal(np.union1d(swept, held), np.unique(case.candidates))
+    result, occupied, problem = run_case(case)
+    check_against_reference(case, result, occupied, problem)
+    assert not occupied[held].any()
+    # with a prior of one half none is held free: occupancy costs nothing, a flip may be a tie
+    even = dataclasses.replace(case.config, prior_occupied=0.5)
+    start = case.start.copy()
+    assert E._flippable(dataclasses.replace(case, config=even).problem(start), start, swept)[1].size == 0
+
+
 def test_more_readings_than_one_word_of_the_active_set():
     case = random_case(7, n_readings=(150, 151), beams=(8.0,))
     result, occupied, problem = run_case(case)

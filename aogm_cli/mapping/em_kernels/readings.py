@@ -102,3 +102,42 @@ def _window_rows(tpl, tables, height, span):
         for j in range(rd.jlo[t], rd.m[t]):
             hi = max(hi, rd.row0[t] + tc * np.int64(tpl.dcol[s0 + j]) + td * np.int64(tpl.drow[s0 + j]))
         out[t] = min(hi, height - 1)
+
+
+@numba.njit(cache=True, nogil=True)
+def _window_cells(tpl, tables, grid_shape, span, out):
+    """Mark in ``out`` (flat bool over the grid) the window cells (entries jlo .. m - 1: where
+    the Gaussian may be above 0) of each reading span[0] <= t < span[1] of ``tables``
+    (``ReadingTables``). Only True is written: parts may mark one array on threads."""
+    rd, _ = _columns(tables)
+    height, width = grid_shape
+    for t in range(span[0], span[1]):
+        k = rd.bin[t]
+        s = tpl.offsets[tpl.base_bin[k]]
+        tr = _bin_transform(tpl, k)
+        for j in range(rd.jlo[t], rd.m[t]):
+            c = _entry_cell(tpl, s, tr, j, np.int64(rd.row0[t]), np.int64(rd.col0[t]), height, width)
+            if c >= 0:
+                out[c] = True
+
+
+@numba.njit(cache=True, nogil=True)
+def _far_gains(tpl, tables, grid_shape, of_cell, span, out):
+    """Add each reading's log ratio of an obstacle added before its window (its state's
+    ``far_log[t, 0]``) into ``out[i]`` for every cell of its far run (entries 0 .. min(jlo, m)
+    - 1) with ``of_cell[cell] = i >= 0``: a free cell's gain of flipping, from the readings that
+    hold it before their windows (readings span[0] <= t < span[1] of ``tables``)."""
+    rd, state = _columns(tables)
+    height, width = grid_shape
+    for t in range(span[0], span[1]):
+        far = min(rd.jlo[t], rd.m[t])
+        if far <= 0:
+            continue
+        k = rd.bin[t]
+        s = tpl.offsets[tpl.base_bin[k]]
+        tr = _bin_transform(tpl, k)
+        v = state.far_log[t, 0]
+        for j in range(far):
+            c = _entry_cell(tpl, s, tr, j, np.int64(rd.row0[t]), np.int64(rd.col0[t]), height, width)
+            if c >= 0 and of_cell[c] >= 0:
+                out[of_cell[c]] += v
