@@ -261,7 +261,9 @@ def run_em(problem: EMProblem, occupied: np.ndarray, candidates: np.ndarray, con
     every = _candidates(candidates, problem.shape).cell
     swept, held_free = _flippable(problem, occupied, every)
     cand = _candidates(swept, problem.shape)._replace(occupied=occupied)
-    sweeps = Sweeps(problem, cand)
+    box = problem.readings.ints[:, K.I_BOX:K.I_BOX + 4]
+    whole_box = box.copy() if held_free.size else None
+    sweeps = Sweeps(_narrowed(problem, swept) if held_free.size else problem, cand)
     model, tables = problem.model, sweeps.tables
     objective = [K._objective(tables, model, occupied, cand.cell)]
     flips, scored, pairs = [], [], []
@@ -278,6 +280,8 @@ def run_em(problem: EMProblem, occupied: np.ndarray, candidates: np.ndarray, con
                 break
         if final and not (flips and flips[-1] == 0):  # stopped by max_sweeps: score every candidate once more
             sweeps.one_pass(K.SCORE)
+    if whole_box is not None:
+        box[:] = whole_box  # the problem's readings as they were
     peak = sweeps.peak
     gain = np.empty(every.size)
     gain[np.searchsorted(every, cand.cell)] = cand.last_gain
@@ -308,6 +312,21 @@ def _flippable(problem: EMProblem, occupied: np.ndarray, cells: np.ndarray) -> t
     if np.count_nonzero(~swept) < HELD_FREE_SHARE * cells.size:
         return cells, cells[:0]
     return cells[swept], cells[~swept]
+
+
+def _narrowed(problem: EMProblem, swept: np.ndarray) -> EMProblem:
+    """``problem`` with each reading's extent narrowed to the cells of ``swept`` its cone holds
+    (written into its readings' table, as a cluster problem's are: ``em_problem``), the only
+    rows and columns a sweep over them needs it at; ``run_em`` puts the extents back."""
+    rd = problem.readings
+    tables = K.reading_tables(rd)
+    mask = np.zeros(problem.shape[0] * problem.shape[1], dtype=np.bool_)
+    mask[swept] = True
+    box = np.empty((4, rd.z.shape[0]), dtype=np.int64)
+    tpl = problem.templates.kernel_arrays
+    reading_parts(rd.z.shape[0], lambda _, span: K._box_of_cells(tpl, tables, problem.shape, mask, span, box))
+    rd.box[:] = box
+    return dataclasses.replace(problem, readings=rd._replace(enter=_order(rd.box[0]), leave=_order(rd.box[1])))
 
 
 def _far_gains(problem: EMProblem, cells: np.ndarray) -> np.ndarray:

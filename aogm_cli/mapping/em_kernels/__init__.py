@@ -10,5 +10,11 @@ from aogm_cli.mapping.em_kernels.likelihood import (  # noqa: F401
     _objective,
     _residual_from_gains,
 )
-from aogm_cli.mapping.em_kernels.readings import _far_gains, _reading_extent, _window_cells, _window_rows  # noqa: F401
+from aogm_cli.mapping.em_kernels.readings import (  # noqa: F401
+    _box_of_cells,
+    _far_gains,
+    _reading_extent,
+    _window_cells,
+    _window_rows,
+)
 from aogm_cli.mapping.em_kernels.tiles import _sweep_tiles  # noqa: F401

@@ -141,3 +141,33 @@ def _far_gains(tpl, tables, grid_shape, of_cell, span, out):
             c = _entry_cell(tpl, s, tr, j, np.int64(rd.row0[t]), np.int64(rd.col0[t]), height, width)
             if c >= 0 and of_cell[c] >= 0:
                 out[of_cell[c]] += v
+
+
+@numba.njit(cache=True, nogil=True)
+def _box_of_cells(tpl, tables, grid_shape, mask, span, box):
+    """Into ``box`` (4, R): the rows and columns of the cone cells of each reading span[0] <= t
+    < span[1] of ``tables`` that ``mask`` (flat bool) marks (row_lo > row_hi: none), the only
+    ones a sweep over those cells needs the reading at."""
+    rd, _ = _columns(tables)
+    height, width = grid_shape
+    for t in range(span[0], span[1]):
+        box[0, t] = height
+        box[1, t] = -1
+        box[2, t] = width
+        box[3, t] = -1
+        if rd.box[0, t] > rd.box[1, t]:
+            continue
+        k = rd.bin[t]
+        s = tpl.offsets[tpl.base_bin[k]]
+        tr = _bin_transform(tpl, k)
+        row0, col0 = np.int64(rd.row0[t]), np.int64(rd.col0[t])
+        for j in range(rd.m[t]):
+            dc = np.int64(tpl.dcol[s + j])
+            dr = np.int64(tpl.drow[s + j])
+            r = row0 + tr[2] * dc + tr[3] * dr
+            c = col0 + tr[0] * dc + tr[1] * dr
+            if 0 <= r < height and 0 <= c < width and mask[r * width + c]:
+                box[0, t] = min(box[0, t], r)
+                box[1, t] = max(box[1, t], r)
+                box[2, t] = min(box[2, t], c)
+                box[3, t] = max(box[3, t], c)
