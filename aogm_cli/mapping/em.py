@@ -263,30 +263,32 @@ def run_em(problem: EMProblem, occupied: np.ndarray, candidates: np.ndarray, con
     cand = _candidates(swept, problem.shape)._replace(occupied=occupied)
     box = problem.readings.ints[:, K.I_BOX:K.I_BOX + 4]
     whole_box = box.copy() if held_free.size else None
-    sweeps = Sweeps(_narrowed(problem, swept) if held_free.size else problem, cand)
-    model, tables = problem.model, sweeps.tables
-    objective = [K._objective(tables, model, occupied, cand.cell)]
     flips, scored, pairs = [], [], []
-    with sweeps:
-        for sweep in range(1, config.max_sweeps + 1):
-            n_flips, n_scored, n_pairs = sweeps.one_pass(K.SWEEP)
-            flips.append(n_flips)
-            scored.append(n_scored)
-            pairs.append(n_pairs)
-            objective.append(K._objective(tables, model, occupied, cand.cell))
-            if progress:
-                progress(sweep, n_flips, objective[-1])
-            if n_flips == 0:
-                break
-        if final and not (flips and flips[-1] == 0):  # stopped by max_sweeps: score every candidate once more
-            sweeps.one_pass(K.SCORE)
-    if whole_box is not None:
-        box[:] = whole_box  # the problem's readings as they were
+    try:
+        sweeps = Sweeps(_narrowed(problem, swept) if held_free.size else problem, cand)
+        model, tables = problem.model, sweeps.tables
+        objective = [K._objective(tables, model, occupied, cand.cell)]
+        with sweeps:
+            for sweep in range(1, config.max_sweeps + 1):
+                n_flips, n_scored, n_pairs = sweeps.one_pass(K.SWEEP)
+                flips.append(n_flips)
+                scored.append(n_scored)
+                pairs.append(n_pairs)
+                objective.append(K._objective(tables, model, occupied, cand.cell))
+                if progress:
+                    progress(sweep, n_flips, objective[-1])
+                if n_flips == 0:
+                    break
+            if final and not (flips and flips[-1] == 0):  # stopped by max_sweeps: score every candidate once more
+                sweeps.one_pass(K.SCORE)
+    finally:
+        if whole_box is not None:
+            box[:] = whole_box  # the problem's readings as they were
     peak = sweeps.peak
     gain = np.empty(every.size)
     gain[np.searchsorted(every, cand.cell)] = cand.last_gain
     if held_free.size:
-        gain[np.searchsorted(every, held_free)] = _far_gains(problem, held_free)
+        gain[np.searchsorted(every, held_free)] = _held_free_gains(problem, held_free)
     residual = K._residual_from_gains(every, occupied, gain, model.l_prior)
     return EMResult(len(flips), flips, [float(v) for v in objective], every, residual, scored, pairs,
                     int(peak[0]), int(peak[1]), sweeps.threads, sweeps.band_seconds)
@@ -298,10 +300,10 @@ def _flippable(problem: EMProblem, occupied: np.ndarray, cells: np.ndarray) -> t
     Gaussian window, while the prior is below one half. Such a cell lies only before the windows
     of the readings that hold it, where an obstacle multiplies each reading's chance of its echo
     by 1 - p_hit: occupancy can only lower the readings' likelihood, and the prior too. Their
-    gains are then one walk of the cones' far runs (``_far_gains``), not a tile's in every sweep.
-    Not in a cluster problem (``em_problem``'s labels), whose readings' extents are narrowed to
-    its cells: there the walk costs more than the sweeps save (the intel log's adaptive map,
-    79.5% of its cluster cells held free: sweeps 1.03-1.21 s -> 1.14-1.30 s)."""
+    gains are then one walk of the cones' far runs (``_held_free_gains``), not a tile's in every
+    sweep. Not in a cluster problem (``em_problem``'s labels), whose readings' extents are
+    narrowed to its cells already: the intel log's adaptive map (79.5% of its cluster cells held
+    free) gained nothing measurable (docs/algorithms.md, the intel log's sweep)."""
     if problem.model.l_prior >= 0.0 or cells.size == 0 or problem.parent is not None:
         return cells, cells[:0]
     tables = K.reading_tables(problem.readings)
@@ -329,12 +331,12 @@ def _narrowed(problem: EMProblem, swept: np.ndarray) -> EMProblem:
     return dataclasses.replace(problem, readings=rd._replace(enter=_order(rd.box[0]), leave=_order(rd.box[1])))
 
 
-def _far_gains(problem: EMProblem, cells: np.ndarray) -> np.ndarray:
+def _held_free_gains(problem: EMProblem, cells: np.ndarray) -> np.ndarray:
     """The gain of flipping each of ``cells`` (free, in no window: ``_flippable``) at the
     problem's current state, as a sweep would score it: the readings' log ratios of an obstacle
     before their windows, summed in the readings' fixed parts (the same for any thread count)."""
-    of_cell = np.full(problem.shape[0] * problem.shape[1], -1, dtype=np.int64)
-    of_cell[cells] = np.arange(cells.size)
+    of_cell = np.full(problem.shape[0] * problem.shape[1], -1, dtype=np.int32)
+    of_cell[cells] = np.arange(cells.size, dtype=np.int32)
     tables = K.reading_tables(problem.readings)
     tpl = problem.templates.kernel_arrays
     out = np.zeros(cells.size)
