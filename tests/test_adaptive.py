@@ -407,7 +407,7 @@ def test_residual_scale_by_hand():
     assert out.dtype == probability.dtype and probability[0, 2] == np.float32(0.7)
 
 
-def test_auto_keeps_elfes_map_outside_where_the_model_is_learned_from_the_log(corridor_door_log):
+def test_auto_keeps_elfes_map_outside_where_the_model_is_learned_from_the_log(corridor_door_log, tmp_path):
     """``adaptive.outside: auto`` keeps the thinned map outside the clusters where the sensor's
     model is known before the map is made (here carried by the detector), and Elfes' map where
     EM learns it from the log (``calibration.carried: false``), exactly as ``outside: elfes``."""
@@ -426,6 +426,15 @@ def test_auto_keeps_elfes_map_outside_where_the_model_is_learned_from_the_log(co
     # aogm map says in one line that the model was learned, and what a given one would change
     from aogm_cli.report.map_run import calibration_notice
 
-    assert "adaptive keeps the thinned map outside its clusters" in calibration_notice("log.h5", learned)
-    assert "adaptive keeps" not in calibration_notice("log.h5", elfes)  # asked for Elfes' map
-    assert calibration_notice("log.h5", carried) is None
+    assert "adaptive keeps the thinned map outside its clusters" in calibration_notice(corridor_door_log, learned)
+    assert "adaptive keeps" not in calibration_notice(corridor_door_log, elfes)  # asked for Elfes' map
+    assert calibration_notice(corridor_door_log, carried) is None
+    # a laser's map is never thinned: a given model would not change what is outside its clusters
+    from aogm_cli.core.log import Log, SensorSpec
+    from aogm_cli.io.logfile import write_log
+
+    laser = tmp_path / "laser.h5"
+    sensor = SensorSpec(np.zeros((1, 3)), "laser", math.radians(0.5), 0.0, 4.0, 0.01)
+    write_log(laser, Log(np.zeros(1), np.zeros((1, 3)), np.ones((1, 1), dtype=np.float32), sensor, source="test"))
+    notice = calibration_notice(laser, learned)
+    assert "calibrated the sensor's model" in notice and "adaptive keeps" not in notice

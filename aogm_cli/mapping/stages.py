@@ -378,8 +378,13 @@ def outside(s: State) -> str:
     chosen = s.params.adaptive.outside
     if chosen != "auto":
         return chosen
-    known = s.given is not None and s.given.sensor is not None
-    return "thinned" if known and not is_narrow_beam(s.log.sensor, s.grid.resolution) else "elfes"
+    return auto_outside(s.given is not None and s.given.sensor is not None, s.log.sensor, s.grid.resolution)
+
+
+def auto_outside(known: bool, sensor, resolution: float) -> str:
+    """What ``adaptive.outside`` "auto" is for ``sensor`` at ``resolution``, its forward model
+    ``known`` before the map is made or not (``outside``)."""
+    return "thinned" if known and not is_narrow_beam(sensor, resolution) else "elfes"
 
 
 def thins_outside(s: State) -> bool:
