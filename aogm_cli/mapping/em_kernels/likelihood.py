@@ -10,7 +10,7 @@ import numba
 import numpy as np
 
 from aogm_cli.mapping.em_kernels.layout import _columns
-from aogm_cli.mapping.em_kernels.readings import _bin_transform, _entry_cell
+from aogm_cli.mapping.em_kernels.readings import _bin_transform, _entry_cell, _extend_box
 from aogm_cli.mapping.em_kernels.windows import _rank
 from aogm_cli.sensor_models.forward_model import gaussian_at
 
@@ -112,11 +112,7 @@ def _init_state(tpl, flat, tables, model, occupied, grid_shape, marks, span):
                         row -= 1
                     elif (row + 1) * width <= cell:
                         row += 1
-                    col = cell - row * width
-                    box[0, t] = min(box[0, t], row)
-                    box[1, t] = max(box[1, t], row)
-                    box[2, t] = min(box[2, t], col)
-                    box[3, t] = max(box[3, t], col)
+                    _extend_box(box, t, row, cell - row * width)
                     if first == 0:
                         first = labels[cell]
                     elif labels[cell] != last:  # the same cluster again joins nothing

@@ -11,17 +11,31 @@ from aogm_cli.sensor_models.forward_model import cone_entries
 
 
 @numba.njit(cache=True, inline="always")
-def _entry_cell(tpl, s, tr, j, row0, col0, height, width):
-    """Flat cell of entry j of a cone from (row0, col0), or -1 outside the grid: ``s`` the first
-    entry of its stored bin, ``tr`` its heading bin's transform (``_bin_transform``), both taken
-    once per reading."""
+def _entry_row_col(tpl, s, tr, j, row0, col0):
+    """Grid row and column of entry j of a cone from (row0, col0), inside the grid or not: ``s``
+    the first entry of its stored bin, ``tr`` its heading bin's transform (``_bin_transform``),
+    both taken once per reading."""
     dc = np.int64(tpl.dcol[s + j])
     dr = np.int64(tpl.drow[s + j])
-    r = row0 + tr[2] * dc + tr[3] * dr
-    c = col0 + tr[0] * dc + tr[1] * dr
+    return row0 + tr[2] * dc + tr[3] * dr, col0 + tr[0] * dc + tr[1] * dr
+
+
+@numba.njit(cache=True, inline="always")
+def _entry_cell(tpl, s, tr, j, row0, col0, height, width):
+    """Flat cell of entry j of a cone from (row0, col0), or -1 outside the grid (``_entry_row_col``)."""
+    r, c = _entry_row_col(tpl, s, tr, j, row0, col0)
     if r < 0 or r >= height or c < 0 or c >= width:
         return -1
     return r * width + c
+
+
+@numba.njit(cache=True, inline="always")
+def _extend_box(box, t, r, c):
+    """Reading t's box (``box`` (4, R): row_lo, row_hi, col_lo, col_hi) grown to hold cell (r, c)."""
+    box[0, t] = min(box[0, t], r)
+    box[1, t] = max(box[1, t], r)
+    box[2, t] = min(box[2, t], c)
+    box[3, t] = max(box[3, t], c)
 
 
 @numba.njit(cache=True, inline="always")
@@ -162,12 +176,6 @@ def _box_of_cells(tpl, tables, grid_shape, mask, span, box):
         tr = _bin_transform(tpl, k)
         row0, col0 = np.int64(rd.row0[t]), np.int64(rd.col0[t])
         for j in range(rd.m[t]):
-            dc = np.int64(tpl.dcol[s + j])
-            dr = np.int64(tpl.drow[s + j])
-            r = row0 + tr[2] * dc + tr[3] * dr
-            c = col0 + tr[0] * dc + tr[1] * dr
+            r, c = _entry_row_col(tpl, s, tr, j, row0, col0)
             if 0 <= r < height and 0 <= c < width and mask[r * width + c]:
-                box[0, t] = min(box[0, t], r)
-                box[1, t] = max(box[1, t], r)
-                box[2, t] = min(box[2, t], c)
-                box[3, t] = max(box[3, t], c)
+                _extend_box(box, t, r, c)
