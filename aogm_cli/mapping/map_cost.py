@@ -30,7 +30,7 @@ BYTES_PER_TEMPLATE_CELL = 48  # the disc the cone templates are cut from (int64 
 # adaptive on a sonar log: the thinned map's exact-model state and evidence (float32 x 3), and the
 # evidence at the final map in its parts (float64 x ``readings.READING_PARTS``)
 BYTES_PER_THINNED_CELL = 12 + 8 * READING_PARTS
-# EM's candidates held free out of its sweeps (``em._flippable``): the window marks and the swept
+# the em mode's candidates held free out of its sweeps (``em._flippable``): the window marks and the swept
 # mask (bool x 2), the held cells' numbers (int32) and their gains in the readings' parts (float64 x
 # ``readings.READING_PARTS``); each reading's narrowed extent and its orders (int64 x 4, int32 x 6)
 BYTES_PER_HELD_CELL = 6 + 8 * READING_PARTS
@@ -77,8 +77,10 @@ def map_estimate(reader, mode: str, params: MapParams) -> Estimate:
     reading_bytes = 0.0
     work = entries
     if mode != "standard":
-        reading_bytes = readings * (BYTES_PER_READING + BYTES_PER_HELD_READING)
-        grid_bytes += cells * BYTES_PER_HELD_CELL
+        reading_bytes = readings * BYTES_PER_READING
+        if mode == "em":  # adaptive's problems are its clusters', which hold no cell free (``em._flippable``)
+            reading_bytes += readings * BYTES_PER_HELD_READING
+            grid_bytes += cells * BYTES_PER_HELD_CELL
         if not narrow and params.surface.enabled:
             reading_bytes += readings * BYTES_PER_SHADOW
             grid_bytes += cells * BYTES_PER_SURFACE_CELL
