@@ -16,9 +16,11 @@ from aogm_cli.io.detectorfile import load_detector, save_detector
 from aogm_cli.io.logfile import LogReader
 from aogm_cli.io.mapfile import read_map_file
 from aogm_cli.mapping import cluster
-from aogm_cli.mapping.adaptive import coupled_groups, find_clusters, hit_rate_curve, one_scale, pool_adjacent_violators
+from aogm_cli.mapping.adaptive import coupled_groups, find_clusters
+from aogm_cli.mapping.view import hit_rate_curve, one_scale, pool_adjacent_violators
 from aogm_cli.mapping.cluster import label_clusters
-from aogm_cli.mapping.em import em_problem, em_readings, find_root, footprint
+from aogm_cli.mapping.em import em_problem, em_readings, find_root
+from aogm_cli.mapping.view import footprint
 from aogm_cli.report.map_run import map_file, resolve_params
 from aogm_cli.sensor_models.cone import build_cone_templates
 
@@ -334,16 +336,12 @@ def test_thinned_outside_clusters_the_contested_cells(corridor_door_log):
     """With no flagged reading, the thinned design's clusters are exactly the cells the thinned
     map holds free and the exact model holds occupied by ``adaptive.contested`` or more, and the
     wall layers next to them that the thinning freed."""
-    from aogm_cli.mapping import stages as S
-    from aogm_cli.mapping.modes import MODE_STAGES, resolved_params
-    from aogm_cli.mapping.pipeline import TimedSource, log_grid
+    from aogm_cli.mapping.modes import resolved_params, state_before
 
     with LogReader(corridor_door_log) as r:
         log = r.read()
     params = resolved_params(log, resolve_params(overrides=THINNED))
-    state = S.State(params, TimedSource(log), log_grid(log, params.resolution))
-    names = [stage.name for stage in MODE_STAGES["adaptive"]]
-    state, _ = S.run_stages(MODE_STAGES["adaptive"][:names.index("detector")], state)
+    state = state_before(log, "adaptive", params, "detector")
     none = np.zeros(log.ranges.size, dtype=bool)
     ids, count = find_clusters(state.readings, none, state.standard, params, "thinned", log)
     sm = state.standard
@@ -357,17 +355,13 @@ def test_map_evidence_is_ems_evidence_at_the_map(corridor_door_log):
     """``exact.map_evidence`` (one pass over the cones) gives each cell the evidence EM's
     scoring gives a candidate at the same binary map: log p(Z | m, occupied) - log p(Z | m, free)."""
     from aogm_cli.mapping import em as E
-    from aogm_cli.mapping import stages as S
     from aogm_cli.mapping.exact import map_evidence
-    from aogm_cli.mapping.modes import MODE_STAGES, resolved_params
-    from aogm_cli.mapping.pipeline import TimedSource, log_grid
+    from aogm_cli.mapping.modes import resolved_params, state_before
 
     with LogReader(corridor_door_log) as r:
         log = r.read()
     params = resolved_params(log, resolve_params())
-    state = S.State(params, TimedSource(log), log_grid(log, params.resolution))
-    names = [stage.name for stage in MODE_STAGES["em"]]
-    state, _ = S.run_stages(MODE_STAGES["em"][:names.index("start") + 1], state)
+    state = state_before(log, "em", params, "calibration")
     config = state.in_use.em
     occ = state.occupied.copy()
     problem, candidates = E.whole_log_problems(state.readings)(config, occ, None)
@@ -392,7 +386,7 @@ def test_map_evidence_is_ems_evidence_at_the_map(corridor_door_log):
 def test_residual_scale_by_hand():
     """Outside the clusters a cell takes EM's residual logistic(evidence + l_prior) on its side of
     0.5; cells not listed, and unknown ones, keep theirs."""
-    from aogm_cli.mapping.adaptive import SIDE, residual_scale
+    from aogm_cli.mapping.view import SIDE, residual_scale
 
     l_prior = math.log(0.3 / 0.7)
     probability = np.array([[0.9, 0.2, 0.7, 0.3, 0.12]], dtype=np.float32)
@@ -434,7 +428,14 @@ def test_auto_keeps_elfes_map_outside_where_the_model_is_learned_from_the_log(co
     from aogm_cli.io.logfile import write_log
 
     laser = tmp_path / "laser.h5"
-    sensor = SensorSpec(np.zeros((1, 3)), "laser", math.radians(0.5), 0.0, 4.0, 0.01)
-    write_log(laser, Log(np.zeros(1), np.zeros((1, 3)), np.ones((1, 1), dtype=np.float32), sensor, source="test"))
-    notice = calibration_notice(laser, learned)
+    bearings = np.linspace(-1.5, 1.5, 31)
+    sensor = SensorSpec(np.stack([np.zeros(31), np.zeros(31), bearings], axis=1), "laser", math.radians(0.5), 0.0,
+                        4.0, 0.01)
+    poses = np.stack([np.linspace(0.0, 1.0, 10), np.zeros(10), np.zeros(10)], axis=1)
+    ranges = np.tile(np.float32(2.0) / np.cos(bearings).astype(np.float32), (10, 1))  # a wall 2 m ahead
+    write_log(laser, Log(np.arange(10.0), poses, np.minimum(ranges, 3.9), sensor, source="test"))
+    laser_map = map_file(laser, "adaptive", resolve_params(overrides={"calibration": {"carried": False},
+                                                                       "resolution": 0.1}))
+    assert laser_map.plan["sensor"] == "narrow beam" and laser_map.stats["outside"] == "elfes"
+    notice = calibration_notice(laser, laser_map)
     assert "calibrated the sensor's model" in notice and "adaptive keeps" not in notice

@@ -181,7 +181,8 @@ def test_hidden_cells_keep_the_standard_estimate_only_when_asked():
     the probability held (the standard map's) with hidden: standard, gets the prior with
     hidden: prior, and with hidden: unobserved (the default) keeps a standard estimate above 0.5
     and is returned to be reported unobserved otherwise; one the data objects to never is."""
-    from aogm_cli.mapping.em import EMResult, decided, residual_into
+    from aogm_cli.mapping.em import EMResult
+    from aogm_cli.mapping.view import decided, residual_into
 
     prior = CONFIG.prior_occupied
     logistic = lambda x: 1 / (1 + math.exp(-x))  # noqa: E731
@@ -207,7 +208,7 @@ def test_planner_view_reports_unseen_cells_unobserved_and_clears_the_footprint()
     """On a 3 x 4 grid: the unseen cells become unobserved, the footprint's cells observed and
     at most the free probability, whatever EM or the standard map held there."""
     from aogm_cli.core.log import SensorSpec
-    from aogm_cli.mapping.em import footprint, planner_view
+    from aogm_cli.mapping.view import footprint, planner_view
 
     grid = GridSpec(0.0, 0.0, 1.0, 3, 4)
     sensor = SensorSpec(mount=np.array([[1.0, 0.0, 0.0], [0.0, 1.5, 1.6]]))

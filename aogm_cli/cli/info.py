@@ -95,6 +95,10 @@ def _map_lines(s: dict) -> list[str]:
         "parameters:",
         *(f"  {k}: {_value(v)}" for k, v in sorted(s["params"].items())),
     ]
+    for key, title in (("plan", "plan (decided before the first stage)"), ("learned", "learned (from the log or given)")):
+        if s.get(key):
+            lines += [f"{title}:", *(f"  {k}: {' > '.join(v) if k == 'stages' else _value(v)}"
+                                     for k, v in s[key].items())]
     stats = dict(s["stats"])
     calibration = stats.pop("calibration", None)
     lines += ["stats:", *(f"  {k}: {_value(v)}" for k, v in sorted(stats.items()))] if stats else ["stats: none"]

@@ -28,3 +28,4 @@ class OccupancyMap:
     clusters: np.ndarray | None = None  # adaptive
     stats: dict = field(default_factory=dict)
     learned: dict | None = None  # what the map learned from its log, apart from params (``mapping.learned``)
+    plan: dict | None = None  # what the map decided before its first stage (``mapping.plan``)

@@ -60,8 +60,9 @@ def map_bytes(m: OccupancyMap, provenance: dict | None = None) -> bytes:
         f.attrs["source_log"] = m.source_log
         f.attrs["runtime_s"] = float(m.runtime_s)
         f.attrs["params"] = json.dumps(m.params, sort_keys=True)
-        if m.learned is not None:
-            f.attrs["learned"] = json.dumps(m.learned, sort_keys=True)
+        for key in ("learned", "plan"):
+            if getattr(m, key) is not None:
+                f.attrs[key] = json.dumps(getattr(m, key), sort_keys=True)
         write_provenance(f, provenance)
         g = f.create_group("map")
         for k, v in m.grid.attrs().items():
@@ -163,6 +164,7 @@ def read_map_file(path: str | Path) -> OccupancyMap:
             source_log=header.source_log,
             stats=stats,
             learned=json_attr(f, "learned", path, "learned", dict, required=False),
+            plan=json_attr(f, "plan", path, "plan", dict, required=False),
             **grids,
         )
 

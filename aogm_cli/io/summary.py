@@ -56,6 +56,8 @@ def _map(file: str) -> dict:
         "occupied_cells": int((m.probability[m.observed] > 0.5).sum()),
         "runtime_s": m.runtime_s,
         "params": m.params,
+        "learned": m.learned,
+        "plan": m.plan,
         "stats": m.stats,
     }
 

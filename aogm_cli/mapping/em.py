@@ -12,22 +12,16 @@ em mode on every cell some cone holds (``whole_log_problems``); ``mapping.stages
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
-from aogm_cli.core.grid import GridSpec
-from aogm_cli.core.log import Log
 from aogm_cli.mapping import em_kernels as K
-from aogm_cli.mapping.calibration import MAX_READINGS, incidence_at, opening_at, sample_readings
-from aogm_cli.mapping.params import EMConfig, MapParams
-from aogm_cli.mapping.standard import decided_free, probability_from_log_odds, thin_pass
+from aogm_cli.mapping.params import EMConfig
 from aogm_cli.mapping.sweeps import Sweeps
 from aogm_cli.sensor_models.cone import flat_offsets
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig, cone_limits, reading_constants
-from aogm_cli.sensor_models.ray import is_narrow_beam
 from aogm_cli.sensor_models.readings import (
     READING_PARTS,
     LaidOutReadings,
@@ -35,7 +29,6 @@ from aogm_cli.sensor_models.readings import (
     reading_parts,
     summed_in_parts,
 )
-from aogm_cli.sensor_models.surface import reading_shadows, surface_normals
 
 
 @dataclass
@@ -54,65 +47,6 @@ class EMResult:
     threads: int = 1  # the sweeps' threads (mapping.sweeps: several where the grid holds bands)
     band_seconds: float = 0.0  # the sweeps' work, each band's time added up (on one thread: their wall time)
 
-
-# a candidate EM leaves free is decided by the data when occupancy would lower the data
-# log-likelihood by more than ``standard.HIDDEN_GAIN`` (log-odds); the others are the hidden cells
-# of ``em.hidden``
-
-
-def decided(result: EMResult, config: EMConfig) -> np.ndarray:
-    """Which of ``result``'s candidates the data decides: those believed occupied, and those
-    believed free whose occupancy would lower the data log-likelihood by more than
-    ``HIDDEN_GAIN``. The others are cells EM leaves free although no reading objects to
-    an obstacle there: hidden behind the obstacles the readings detect (a wall's far layers,
-    beyond every cone's window or barely inside it), where the prior alone decides."""
-    with np.errstate(divide="ignore"):
-        evidence = np.log(result.residual) - np.log1p(-result.residual) - config.l_prior  # log p(Z|occ) - log p(Z|free)
-    return (result.residual > 0.5) | decided_free(evidence)
-
-
-def residual_into(probability: np.ndarray, result: EMResult, config: EMConfig) -> np.ndarray:
-    """Write EM's residual occupancy into the flat ``probability`` at the candidates the data
-    decides (``decided``); the hidden ones (undecided: the prior alone puts them free) keep what
-    ``probability`` holds (the standard map's estimate) with ``config.hidden == "standard"``,
-    get the residual too with ``"prior"``, and with ``"unobserved"`` (the default) keep the
-    standard estimate where it is above 0.5 and are returned, to be reported unobserved, where
-    it is not: a planner must not drive where no reading says the way is free.
-
-    Returns the flat ids of the cells to report unobserved (empty but for ``"unobserved"``)."""
-    none = np.zeros(0, dtype=np.int64)
-    if config.hidden == "prior":
-        probability[result.candidates] = result.residual
-        return none
-    keep = decided(result, config)
-    probability[result.candidates[keep]] = result.residual[keep]
-    if config.hidden == "standard":
-        return none
-    hidden = result.candidates[~keep]
-    return hidden[probability[hidden] <= 0.5]
-
-
-def footprint(grid, poses: np.ndarray, sensor) -> np.ndarray:
-    """Bool (H, W): cells inside the sensor ring at some pose (within the smallest mount radius
-    of its position): the robot's own body stood there."""
-    radius = np.hypot(sensor.mount[:, 0], sensor.mount[:, 1])
-    return grid.cells_near(poses[:, 0], poses[:, 1], float(np.min(radius[np.isfinite(radius)])))
-
-
-def planner_view(probability: np.ndarray, observed: np.ndarray, unseen: np.ndarray, body: np.ndarray,
-                 free: float) -> np.ndarray:
-    """What EM's map claims, for a planner: the flat cells ``unseen`` (``residual_into``)
-    reported unobserved, and the robot's ``footprint`` ``body`` observed and free (probability
-    at most ``free``) whatever the readings say, as a costmap clears its footprint (no cone
-    covers those cells well, and a short random or crosstalk reading can leave an obstacle
-    there). ``probability`` (flat) is updated in place; returns the new observed (H, W)."""
-    out = observed.copy()
-    flat = out.reshape(-1)
-    flat[unseen] = False
-    cells = np.flatnonzero(body)
-    flat[cells] = True
-    probability[cells] = np.minimum(probability[cells], free)
-    return out
 
 
 def em_readings(cones, templates, grid, z_max: float, config: ForwardModelConfig,
@@ -383,68 +317,6 @@ def em_stats(outcome: EMOutcome | None) -> dict:
             "scored_per_sweep": r.scored, "pairs_per_sweep": r.pairs, "candidate_cells": int(r.candidates.size),
             "em_readings": int(outcome.problem.readings.z.size), "index_entries": r.peak_pairs,
             "scratch_bytes": r.scratch_bytes, "sweep_threads": r.threads, "band_seconds": r.band_seconds}
-
-
-def em_view(log_odds: np.ndarray, observed: np.ndarray, outcome: EMOutcome | None, grid, poses: np.ndarray, sensor,
-            params: MapParams, body: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(probability, observed) (H, W) of an em or adaptive map: the standard map's, EM's residuals
-    on its candidates (``residual_into``), what a planner sees (``planner_view``; ``body``: the
-    robot's ``footprint``, when the caller has it), 0.5 where unobserved."""
-    probability = probability_from_log_odds(log_odds, observed).reshape(-1)
-    if outcome is not None:
-        free = probability_from_log_odds(np.float64(params.inverse_model.clamp_min))
-        observed = planner_view(probability, observed, residual_into(probability, outcome.result, outcome.config),
-                                footprint(grid, poses, sensor) if body is None else body, free)
-    probability = probability.reshape(grid.shape)
-    probability[~observed] = 0.5
-    return probability, observed
-
-
-def surfaces(run: LaidOutReadings, params: MapParams, log_odds: np.ndarray) -> np.ndarray | None:
-    """The surfaces the echoes came from (``surface.surface_normals``), among the cells the
-    standard map ``log_odds`` holds occupied; None where the angle of incidence plays no part: a
-    narrow beam (a laser, which echoes off a wall at any angle but the most grazing) or
-    ``surface.enabled`` false."""
-    if not params.surface.enabled or is_narrow_beam(run.sensor, run.grid.resolution):
-        return None
-    grid = run.grid
-    believed = np.asarray(log_odds).reshape(grid.shape) > 0
-    return surface_normals(run.templates.kernel_arrays, flat_offsets(run.templates, grid.width), grid.shape,
-                           run.cones, run.sensor.max_range, grid.resolution, params.surface, believed)
-
-
-def specular_record(run: LaidOutReadings, params: MapParams, log_odds: np.ndarray, normals: np.ndarray) -> dict:
-    """The specular angle learned at the standard map ``log_odds`` (``calibration.incidence_at``)."""
-    believed = (np.asarray(log_odds) > 0).reshape(-1)
-    return incidence_at(run, sample_readings(run, MAX_READINGS), believed, params.em.forward, normals)
-
-
-def deflected_run(run: LaidOutReadings, normals: np.ndarray, params: MapParams) -> LaidOutReadings | None:
-    """``run`` with the readings whose beams met a surface beyond the specular angle before their
-    windows stopped there (``surface.reading_shadows``), or None when no beam was."""
-    shadow = reading_shadows(run, normals, params.em.forward, params.surface.core)
-    if shadow is None or not np.isfinite(shadow).any():
-        return None
-    return dataclasses.replace(run, shadow=shadow)
-
-
-def with_opening(whole: Log, grid: GridSpec, opening_deg: float) -> Log:
-    """``whole`` (a log in memory) with its sensor's beam narrowed to ``opening_deg`` (degrees,
-    ``em.opening_deg``), or ``whole`` itself when that is 0, not narrower than the beam, or the
-    beam is narrow already (a laser)."""
-    sensor = whole.sensor
-    if not 0 < math.radians(opening_deg) < sensor.beam_width - 1e-9 or is_narrow_beam(sensor, grid.resolution):
-        return whole
-    return dataclasses.replace(whole, sensor=dataclasses.replace(sensor, beam_width=math.radians(opening_deg)))
-
-
-def opening_record(whole: Log, run: LaidOutReadings, params: MapParams, log_odds: np.ndarray,
-                   observed: np.ndarray) -> dict:
-    """The beam's effective opening learned from the log (``calibration.opening_at``) at the
-    standard map ``log_odds`` thinned by the exact inverse model (``standard.thin_pass``)."""
-    thin = dataclasses.replace(params, exact=dataclasses.replace(params.exact, thin=True))
-    thinned = thin_pass(whole, run.grid, thin, log_odds, observed).log_odds
-    return opening_at(run, sample_readings(run, MAX_READINGS), (thinned > 0).reshape(-1), params.em.forward)
 
 
 def whole_log_problems(run: LaidOutReadings) -> ProblemFor:

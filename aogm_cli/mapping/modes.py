@@ -1,4 +1,4 @@
-"""The three modes, each a list of stages (``MODE_STAGES``), behind one call: ``map_source(log, mode,
+"""The three modes, each a list of stages (``mode_stages``) as a map's plan has them, behind one call: ``map_source(log, mode,
 params, detector)`` resolves the parameters the log derives (the grid's resolution), compiles every
 kernel the mode runs by mapping a tiny synthetic log with the same sensor, and maps the log."""
 
@@ -20,42 +20,55 @@ from aogm_cli.mapping.learned import Learned
 from aogm_cli.mapping.map_cost import map_estimate
 from aogm_cli.mapping.params import MapParams
 from aogm_cli.mapping.pipeline import Progress, TimedSource, log_grid
-from aogm_cli.mapping.stages import Stage
+from aogm_cli.mapping.plan import Plan, plan_map
+from aogm_cli.mapping.runner import Stage, has, lacks, run_stages
+from aogm_cli.mapping.state import State
 
-__all__ = ["ALL", "MODE_STAGES", "Flagger", "map_in_mode", "map_source", "warm_up"]
+__all__ = ["ALL", "Flagger", "map_in_mode", "map_source", "mode_stages", "planned", "state_before", "warm_up"]
 
-# Each mode as the list of its stages (``mapping.stages``): the standard map; em over every cell some
-# cone holds; adaptive over the clusters of the readings the detector flags.
-STANDARD = (
-    Stage("set_up", S.templates, timed=False),
-    Stage("standard", S.standard),
-    Stage("thinning", S.thinning, when=S.thinned),
-    Stage("view", S.standard_view, timed=False),
-)
-PREPARE = (  # the em and adaptive modes' first stages
-    Stage("read", S.read, timed=False),
-    Stage("standard", S.standard),
-    Stage("set_up", S.templates, timed=False),
-    Stage("readings", S.readings),
-    Stage("opening", S.opening, when=S.learns_opening),
-    Stage("deflections", S.deflections),
-    Stage("rates", S.rates, when=S.fits_rates),
-    Stage("thinning", S.thinning, when=S.thinned),
-)
-EM_STAGES = (  # and their last
-    Stage("start", S.start, timed=False),
-    Stage("calibration", S.calibration, when=S.calibrates),
-    Stage("index", S.index, when=S.runs_em),
-    Stage("sweeps", S.sweeps, when=S.runs_em),
-    Stage("view", S.em_view),
-)
-MODE_STAGES = {
-    "standard": STANDARD,
-    "em": PREPARE + EM_STAGES,
-    "adaptive": PREPARE[:-1] + (Stage("thinning", S.thinning_outside, when=S.thins_outside), Stage("detector", S.detect),
-                                Stage("clusters", S.clusters)) + EM_STAGES[:-1]
-    + (Stage("decided", S.decided, when=S.keeps_thinned), EM_STAGES[-1]),
-}
+
+def mode_stages(plan: Plan) -> tuple[Stage, ...]:
+    """The stages of ``plan.mode``, one line each, as the plan has them: the standard map; em over
+    every cell some cone holds; adaptive over the clusters of the readings the detector flags."""
+    if plan.mode == "standard":
+        stages = (
+            Stage("set_up", S.set_up_cones, timed=False),
+            Stage("standard", S.standard_streamed, writes=("standard",)),
+            plan.thinning is not None and Stage("thinning", S.thinning_streamed, ("standard",), ("standard",)),
+            Stage("view", S.standard_view, ("standard",), ("view",), timed=False),
+        )
+        return tuple(stage for stage in stages if stage)
+    adaptive = plan.mode == "adaptive"
+    em_runs = has("region")
+    stages = (
+        Stage("read", S.read, writes=("whole",), timed=False),
+        Stage("set_up", S.set_up_em, ("whole",), timed=False),
+        Stage("readings", S.readings, ("whole",), ("readings",)),
+        Stage("standard", S.standard, ("whole", "readings"), ("standard",)),
+        plan.learns_opening and Stage("opening", S.opening, ("whole", "readings", "standard"),
+                                      ("learned", "whole", "readings", "standard")),
+        plan.learns_opening and Stage("readings", S.readings, ("whole",), ("readings",), when=lacks("readings")),
+        plan.learns_opening and Stage("standard", S.standard, ("whole", "readings"), ("standard",),
+                                      when=lacks("standard")),
+        plan.incidence and Stage("deflections", S.deflections, ("readings", "standard"),
+                                 ("learned", "readings", "standard")),
+        plan.incidence and Stage("standard", S.standard, ("whole", "readings"), ("standard",), when=lacks("standard")),
+        plan.fits_rates and Stage("rates", S.rates, ("whole", "readings", "standard"), ("learned",)),
+        plan.thinning is not None and Stage("thinning", S.thinning, ("whole", "readings", "standard"), ("standard",)),
+        not adaptive and Stage("region", S.whole_log, ("readings",), ("region",), timed=False),
+        adaptive and Stage("detector", S.detect, ("whole",), ("flags",)),
+        adaptive and Stage("clusters", S.clusters, ("whole", "readings", "standard", "flags"), ("clusters", "region")),
+        Stage("start", S.start, ("standard", "clusters?"), ("occupied",), timed=False),
+        plan.calibrates and Stage("calibration", S.calibration, ("readings", "occupied", "region"), ("learned",),
+                                  when=em_runs),
+        Stage("index", S.index, ("region", "occupied"), ("problem", "candidates"), when=em_runs),
+        Stage("sweeps", S.sweeps, ("problem", "candidates", "occupied"), ("em",), when=em_runs),
+        plan.decides and Stage("decided", S.decided, ("readings", "occupied"), ("final_evidence",)),
+        not adaptive and Stage("view", S.em_mode_view, ("whole", "standard", "em"), ("view",)),
+        adaptive and Stage("view", S.adaptive_view, ("whole", "standard", "clusters", "em?", "final_evidence?"),
+                           ("view",)),
+    )
+    return tuple(stage for stage in stages if stage)  # a stage the plan leaves out is False
 
 
 class Flagger(NamedTuple):
@@ -71,18 +84,34 @@ ALL = Flagger(ConstantDetector(True), {"detector": "all"})  # the baseline that 
 
 def map_in_mode(log, mode: str, params: MapParams, flagger: Flagger = ALL, progress: Progress | None = None,
                 given: Learned | None = None) -> OccupancyMap:
-    """Map a log source (an open ``LogReader`` or a ``Log``) in ``mode`` (its stages,
-    ``MODE_STAGES``); adaptive flags readings with ``flagger``. ``given``: the forward model to
-    use instead of learning one (``mapping.learned``)."""
-    if mode not in MODE_STAGES:
-        raise ValueError(f"unknown mode {mode!r}; expected one of {', '.join(MODES)}")
-    source = TimedSource(log)
-    state = S.State(params, source, log_grid(log, params.resolution), given, *flagger, progress,
-                    learned=given or Learned())
-    state, phases = S.run_stages(MODE_STAGES[mode], state)
+    """Map a log source (an open ``LogReader`` or a ``Log``) in ``mode``: its plan (``plan.plan_map``),
+    then its stages (``mode_stages``); adaptive flags readings with ``flagger``. ``given``: the
+    forward model to use instead of learning one (``mapping.learned``)."""
+    stages, state = planned(log, mode, params, flagger, progress, given)
+    state, phases = run_stages(stages, state)
     if given is not None and given.seconds:  # learned by another map of this log: its cost counts here too
         phases["calibration"] = phases.get("calibration", 0.0) + given.seconds
-    return S.finished(mode, state, phases)
+    return S.finished(state, phases)
+
+
+def planned(log, mode: str, params: MapParams, flagger: Flagger = ALL, progress: Progress | None = None,
+            given: Learned | None = None) -> tuple[tuple[Stage, ...], State]:
+    """The stages of a ``mode`` map of ``log`` (``map_in_mode``) and its state before the first."""
+    if mode not in MODES:
+        raise ValueError(f"unknown mode {mode!r}; expected one of {', '.join(MODES)}")
+    grid = log_grid(log, params.resolution)
+    plan = plan_map(mode, params, log.sensor, grid.resolution, given)
+    stages = mode_stages(plan)
+    plan = dataclasses.replace(plan, stages=tuple(stage.name for stage in stages))
+    return stages, State(params, TimedSource(log), grid, plan, *flagger, progress, learned=given or Learned())
+
+
+def state_before(log, mode: str, params: MapParams, stage: str, given: Learned | None = None) -> State:
+    """The state of a ``mode`` map of ``log`` just before its first stage named ``stage`` runs:
+    what that stage is given (for tests and studies of one stage)."""
+    stages, state = planned(log, mode, params, given=given)
+    names = [s.name for s in stages]
+    return run_stages(stages[:names.index(stage)], state)[0]
 
 
 def resolved_params(log, params: MapParams) -> MapParams:

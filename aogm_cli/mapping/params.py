@@ -92,7 +92,7 @@ class AdaptiveConfig:
     detector or given, "elfes" where it is learned from the log, after the clusters; a narrow
     beam's map is never thinned); and the ``scale`` of the probabilities outside the clusters:
     "em", the EM probability of the cluster cells that the log's readings end in as often
-    (``adaptive.one_scale``), or "mixed", the map's own."""
+    (``view.one_scale``), or "mixed", the map's own."""
 
     outside: str = "auto"
     contested: float = 0.5

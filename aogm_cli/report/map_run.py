@@ -23,7 +23,7 @@ from aogm_cli.mapping.learned import FROM_LOG, Learned, SensorModel
 from aogm_cli.mapping.map_cost import map_estimate
 from aogm_cli.mapping.params import MapParams, params_from
 from aogm_cli.mapping.pipeline import Progress
-from aogm_cli.mapping.stages import auto_outside
+from aogm_cli.mapping.plan import CONE
 from aogm_cli.sensor_models import cone
 
 __all__ = ["BASELINE_DETECTORS", "NamedSource", "calibration_notice", "carried_model", "check_logs", "given_model",
@@ -101,16 +101,9 @@ def calibration_notice(path, m: OccupancyMap) -> str | None:
         why = ("the detector carries none for its sensor; aogm calibrate LOG -o MODEL learns one, --forward-model "
                "MODEL carries it")
     if (m.mode == "adaptive" and m.stats.get("outside") == "elfes" and m.params.get("adaptive", {}).get("outside") == "auto"
-            and _thinned_with_a_model(path, m)):
+            and (m.plan or {}).get("sensor") == CONE):  # a narrow beam's map is never thinned
         why += "; with a model given, adaptive keeps the thinned map outside its clusters, at less cost"
     return f"{path}: calibrated the sensor's model on this log ({why})"
-
-
-def _thinned_with_a_model(path, m: OccupancyMap) -> bool:
-    """Whether adaptive's "auto" would keep the thinned map outside the clusters of map ``m`` of
-    the log at ``path`` had its sensor's model been given (not for a narrow beam's map)."""
-    with LogReader(path) as reader:
-        return auto_outside(True, reader.sensor, m.grid.resolution) == "thinned"
 
 
 def learn_sensor_models(paths, params: MapParams, advance=None) -> tuple[dict, ...]:
