@@ -171,8 +171,8 @@ def map_params(**params: Any):
     >>> p.resolution, p.em.forward.sigma, p.calibration.enabled
     (0.1, 0.05, False)
     """
+    from aogm_cli.map_files import resolve_params
     from aogm_cli.mapping.params import SECTIONS
-    from aogm_cli.report.map_run import resolve_params
 
     for name, value in params.items():
         if name != "resolution" and name not in SECTIONS:
@@ -186,7 +186,7 @@ def map_params(**params: Any):
 def map_log(log_or_path: Log | str | Path, mode: str = "standard", detector: str | None = None,
             **params: Any) -> OccupancyMap:
     """Map a log (a ``Log`` or the path of a log file) in ``mode`` ("standard", "em" or
-    "adaptive"), as ``aogm map`` does (``mapping.modes.map_file`` / ``map_source``). ``detector``
+    "adaptive"), as ``aogm map`` does (``map_files.map_file``). ``detector``
     (adaptive): None for the packaged one, a detector file, or "all" / "none". ``params``: see
     ``map_params``, e.g. ``resolution=0.1, em={"prior_occupied": 0.2}, calibration={"enabled": False}``.
     A simulated log is mapped on its truth grid.
@@ -201,7 +201,7 @@ def map_log(log_or_path: Log | str | Path, mode: str = "standard", detector: str
     >>> adaptive.mode, adaptive.clusters.shape == adaptive.grid.shape
     ('adaptive', True)
     """
-    from aogm_cli.report.map_run import map_file
+    from aogm_cli.map_files import map_file
 
     resolved = map_params(**params)
     if isinstance(log_or_path, str | Path):

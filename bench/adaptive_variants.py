@@ -17,8 +17,8 @@ from pathlib import Path
 from aogm_cli.evaluation.metrics import evaluate
 from aogm_cli.evaluation.planner import ROBOT_RADIUS, planner_metrics
 from aogm_cli.io.logfile import LogReader
+from aogm_cli.map_files import map_file
 from aogm_cli.mapping.params import params_from
-from aogm_cli.report.map_run import map_file
 
 
 def main() -> None:

@@ -14,9 +14,9 @@ from pathlib import Path
 from seed_logs import for_each_seed_log
 
 from aogm_cli.io.logfile import LogReader
+from aogm_cli.map_files import map_file, resolve_params
 from aogm_cli.mapping.pipeline import log_grid
 from aogm_cli.mapping.standard import standard_pass
-from aogm_cli.report.map_run import map_file, resolve_params
 
 
 def bench(world_name: str, log_path: Path) -> None:

@@ -23,8 +23,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from aogm_cli.map_files import map_file
 from aogm_cli.mapping.params import params_from
-from aogm_cli.report.map_run import given_model, map_file
 
 ROOT = Path(__file__).resolve().parents[1]
 LOG = ROOT.parent / "shared" / "data" / "carmen" / "intel-corrected.log.gz"
@@ -57,11 +57,10 @@ def timed(log: Path, model: Path, runs: int) -> dict[str, dict]:
     """Per mode the best runtime_s and the best of each phase over ``runs`` rounds (the model given),
     and the em map calibrating on the log ("calibrating")."""
     params = params_from({"resolution": 0.1})
-    given = given_model(model, log)
     made: dict[str, list] = {mode: [] for mode in (*MODES, "calibrating")}
     for _ in range(runs):
         for mode in MODES:
-            made[mode].append(map_file(log, mode, params, given=None if mode == "standard" else given))
+            made[mode].append(map_file(log, mode, params, model=model))
         made["calibrating"].append(map_file(log, "em", params))
     out = {}
     for mode, maps in made.items():

@@ -28,8 +28,8 @@ from bench_scale import parse_mode
 from aogm_cli.evaluation.metrics import evaluate
 from aogm_cli.evaluation.planner import ROBOT_RADIUS, planner_metrics
 from aogm_cli.io.logfile import LogReader, write_log
+from aogm_cli.map_files import map_file, resolve_params
 from aogm_cli.mapping.sweeps import BAND_READINGS
-from aogm_cli.report.map_run import map_file, resolve_params
 from aogm_cli.simulation.sonar import simulate
 from aogm_cli.world.loader import load_world
 

@@ -23,10 +23,10 @@ from pathlib import Path
 import numpy as np
 
 from aogm_cli.io.logfile import LogReader, write_log
+from aogm_cli.map_files import map_file, resolve_params
 from aogm_cli.mapping import calibration as C
 from aogm_cli.mapping.params import MapParams
 from aogm_cli.mapping.pipeline import log_grid
-from aogm_cli.report.map_run import map_file, resolve_params
 from aogm_cli.sensor_models.readings import lay_out_readings
 from aogm_cli.simulation.sonar import simulate
 from aogm_cli.world.loader import load_world

@@ -18,7 +18,7 @@ import numpy as np
 from aogm_cli.evaluation.metrics import evaluate
 from aogm_cli.io.logfile import LogReader
 from aogm_cli.io.mapfile import read_map_file
-from aogm_cli.report.map_run import map_file, resolve_params
+from aogm_cli.map_files import map_file, resolve_params
 
 
 def main() -> None:

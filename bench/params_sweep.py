@@ -20,7 +20,7 @@ from pathlib import Path
 from aogm_cli.evaluation.metrics import evaluate
 from aogm_cli.io.detectorfile import default_detector_path, load_detector, save_detector
 from aogm_cli.io.logfile import read_log, write_log
-from aogm_cli.report.map_run import map_file, resolve_params
+from aogm_cli.map_files import map_file, resolve_params
 from aogm_cli.simulation.sonar import simulate
 from aogm_cli.world.loader import load_world
 

@@ -15,13 +15,12 @@ from aogm_cli.evaluation.planner import ROBOT_RADIUS, planner_metrics
 from aogm_cli.io.detectorfile import load_detector, save_detector
 from aogm_cli.io.logfile import LogReader
 from aogm_cli.io.mapfile import read_map_file
+from aogm_cli.map_files import map_file, resolve_params
 from aogm_cli.mapping import cluster
 from aogm_cli.mapping.adaptive import coupled_groups, find_clusters
-from aogm_cli.mapping.view import hit_rate_curve, one_scale, pool_adjacent_violators
 from aogm_cli.mapping.cluster import label_clusters
 from aogm_cli.mapping.em import em_problem, em_readings, find_root
-from aogm_cli.mapping.view import footprint
-from aogm_cli.report.map_run import map_file, resolve_params
+from aogm_cli.mapping.view import footprint, hit_rate_curve, one_scale, pool_adjacent_violators
 from aogm_cli.sensor_models.cone import build_cone_templates
 
 
@@ -313,7 +312,7 @@ def test_thinned_outside_keeps_clusters_small_and_reports_undecided_cells_unknow
         body = footprint(thinned.grid, r.poses(), r.sensor)
     outside = (adaptive.clusters == 0) & ~body
     # outside the clusters EM's binary map is adaptive's thinned map, which frees at least what the
-    # standard mode's thinning frees (it thins to the exact model's prior: stages.OUTSIDE_MARGIN)
+    # standard mode's thinning frees (it thins to the exact model's prior: plan.OUTSIDE_MARGIN)
     ours = (adaptive.log_odds > 0) & adaptive.observed
     assert np.array_equal(adaptive.occupied[outside], ours[outside])
     assert not np.any(ours & ~(thinned.log_odds > 0))
@@ -343,7 +342,7 @@ def test_thinned_outside_clusters_the_contested_cells(corridor_door_log):
     params = resolved_params(log, resolve_params(overrides=THINNED))
     state = state_before(log, "adaptive", params, "detector")
     none = np.zeros(log.ranges.size, dtype=bool)
-    ids, count = find_clusters(state.readings, none, state.standard, params, "thinned", log)
+    ids, count = find_clusters(state.readings, none, state.standard, params, state.plan, log)
     sm = state.standard
     contested = sm.observed & (sm.log_odds <= 0) & (sm.evidence >= 0.1)
     # grown by one cell into the wall layers the thinning freed (Elfes' map holds them occupied)
@@ -418,7 +417,7 @@ def test_auto_keeps_elfes_map_outside_where_the_model_is_learned_from_the_log(co
     for name in ("probability", "observed", "occupied", "clusters"):
         assert np.array_equal(getattr(learned, name), getattr(elfes, name)), name
     # aogm map says in one line that the model was learned, and what a given one would change
-    from aogm_cli.report.map_run import calibration_notice
+    from aogm_cli.map_files import calibration_notice
 
     assert "adaptive keeps the thinned map outside its clusters" in calibration_notice(corridor_door_log, learned)
     assert "adaptive keeps" not in calibration_notice(corridor_door_log, elfes)  # asked for Elfes' map

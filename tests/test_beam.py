@@ -10,10 +10,10 @@ from numpy.testing import assert_allclose, assert_array_equal
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import Log, SensorSpec
 from aogm_cli.io.logfile import write_log
+from aogm_cli.map_files import map_file
 from aogm_cli.mapping.beam import BeamMapper
 from aogm_cli.mapping.params import MapParams
 from aogm_cli.mapping.standard import StandardMapper, _mapper_for, standard_map
-from aogm_cli.report.map_run import map_file
 from aogm_cli.sensor_models.inverse_model import InverseModelConfig
 from aogm_cli.sensor_models.ray import is_narrow_beam, ray_cells
 

@@ -395,7 +395,7 @@ def test_carried_model_maps_without_calibrating(corridor_door_log, tmp_path):
     sensor's sigma, p_hit and p_rand as carried. With ``carried: false`` it calibrates, and aogm
     map says so in one line."""
     from aogm_cli.io.detectorfile import load_detector
-    from aogm_cli.report.map_run import map_file, resolve_params
+    from aogm_cli.map_files import map_file, resolve_params
 
     carried = map_file(corridor_door_log, "em", resolve_params())
     assert carried.learned["origin"] == "carried by the packaged detector"

@@ -135,3 +135,35 @@ def test_render_and_ros_export_round_trip(corridor_door_log, tmp_path):
     assert back.origin[:2] == pytest.approx(m.grid.origin)
     scale = read_map_yaml(tmp_path / "ros_scale.yaml")
     assert np.allclose(scale.occupancy_probability[m.observed], m.probability[m.observed], atol=1 / 255)
+
+
+@pytest.mark.parametrize("mode", ["standard", "adaptive"])
+def test_map_opens_its_log_twice_at_most(corridor_door_log, tmp_path, monkeypatch, mode):
+    """``aogm map`` reads its log once to check its seal and hash it for provenance, and opens it
+    once as HDF5: two opens, whatever the mode (it was five)."""
+    import builtins
+
+    opened = []
+    real_open, real_h5 = builtins.open, h5py.File.__init__
+
+    def counting_open(file, *args, **kwargs):
+        if str(file) == str(corridor_door_log):
+            opened.append("open")
+        return real_open(file, *args, **kwargs)
+
+    def counting_h5(self, name, *args, **kwargs):
+        if str(name) == str(corridor_door_log):
+            opened.append("h5py")
+        return real_h5(self, name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "open", counting_open)
+    monkeypatch.setattr(h5py.File, "__init__", counting_h5)
+    out = tmp_path / "m.h5"
+    result = run("map", corridor_door_log, "--mode", mode, "-o", out, "-q")
+    assert result.exit_code == 0, result.output
+    assert sorted(opened) == ["h5py", "open"], opened
+    with h5py.File(out) as f:
+        record = json.loads(f.attrs["provenance"])
+    from aogm_cli.io.provenance import file_sha256
+
+    assert record["inputs"][0] == {"path": str(corridor_door_log), "sha256": file_sha256(corridor_door_log)}

@@ -12,13 +12,13 @@ import pytest
 import yaml
 from click.testing import CliRunner
 
+from aogm_cli import map_files
 from aogm_cli.cli import main
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.evaluation.metrics import map_metrics, run_checks
 from aogm_cli.evaluation.planner import planner_metrics
 from aogm_cli.io.logfile import read_log, write_log
 from aogm_cli.io.mapfile import read_map_file
-from aogm_cli.report import map_run
 from aogm_cli.simulation.sonar import simulate
 from aogm_cli.world.loader import parse_world
 
@@ -136,7 +136,7 @@ def test_map_files_give_the_same_numbers_without_mapping(logs, compared, monkeyp
     def no_mapping(*args, **kwargs):
         raise AssertionError("a map was computed again")
 
-    monkeypatch.setattr(map_run, "map_file", no_mapping)
+    monkeypatch.setattr(map_files, "map_file", no_mapping)
     maps = sorted((out / "maps").glob("*.h5"))
     assert len(maps) == 4
     result = run("compare", *maps, "--json", tmp_path / "again.json", "-q")  # modes from the map files
@@ -199,7 +199,7 @@ def test_malformed_gates_exit_2_before_mapping(logs, tmp_path, monkeypatch, args
     def no_mapping(*a, **k):
         raise AssertionError("mapping started")
 
-    monkeypatch.setattr(map_run, "map_file", no_mapping)
+    monkeypatch.setattr(map_files, "map_file", no_mapping)
     result = run("compare", logs[0], *args, "--json", tmp_path / "r.json", "-q")
     assert result.exit_code == 2, result.output
     assert words in result.output and "Traceback" not in result.output
@@ -267,8 +267,8 @@ def test_adaptive_mode_takes_the_detector_and_draws_clusters(logs, tmp_path):
 
 def test_results_are_small_records_unless_a_figure_or_maps_dir_needs_the_maps(logs, tmp_path):
     """Each task maps and evaluates where it runs; its map comes back only when asked for."""
+    from aogm_cli.map_files import resolve_params
     from aogm_cli.report import compare as lib
-    from aogm_cli.report.map_run import resolve_params
     from aogm_cli.report.scoring import CompareJob
 
     entries = lib.collect_inputs([str(logs[0])])

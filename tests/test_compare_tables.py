@@ -11,9 +11,10 @@ import pytest
 import yaml
 from click.testing import CliRunner
 
+from aogm_cli import map_files
 from aogm_cli.cli import main
 from aogm_cli.io.logfile import read_log, write_log
-from aogm_cli.report import map_run, scoring
+from aogm_cli.report import scoring
 from aogm_cli.simulation.sonar import simulate
 from aogm_cli.world.loader import parse_world
 
@@ -95,7 +96,7 @@ def no_mapping(monkeypatch):
     def refuse(*args, **kwargs):
         raise AssertionError("a map was computed")
 
-    monkeypatch.setattr(map_run, "map_file", refuse)
+    monkeypatch.setattr(map_files, "map_file", refuse)
     monkeypatch.setattr(scoring, "map_one", refuse)
 
 

@@ -230,16 +230,16 @@ def test_train_reads_a_folder_and_a_glob(tmp_path):
 
 
 def test_a_lost_local_worker_fails_its_task_only(logs, tmp_path, monkeypatch):
-    from aogm_cli.report import map_run
+    from aogm_cli import map_files
 
-    mapper = map_run.map_file
+    mapper = map_files.map_file
 
     def dies_on_the_room(path, *args, **kwargs):
         if "room" in str(path):
             os._exit(9)  # the worker is lost (killed, out of memory)
         return mapper(path, *args, **kwargs)
 
-    monkeypatch.setattr(map_run, "map_file", dies_on_the_room)  # forked workers inherit it
+    monkeypatch.setattr(map_files, "map_file", dies_on_the_room)  # forked workers inherit it
     result = run("compare", *logs, "--modes", "standard", "--jobs", 2, "--json", tmp_path / "r.json", "-q")
     assert result.exit_code == 1, result.output  # not bad input
     assert f"aogm: failed: {logs[1]} (standard): BrokenProcessPool" in result.output

@@ -484,7 +484,7 @@ def test_train_learns_the_sensor_model_each_sensor_carries(tiny_logs, tmp_path):
     assert model_for(models, sensor, simulated=False) is None  # a real ring with the same mounts is not the simulator's
     assert 0 < models[0]["model"]["sigma"] < 1 and models[0]["learned_from"]
     # one training log here (the other validates): its median is that log's own calibration
-    from aogm_cli.report.map_run import map_file, resolve_params
+    from aogm_cli.map_files import map_file, resolve_params
 
     own = map_file(tiny_logs[0], "em", resolve_params(overrides={"calibration": {"carried": False}}))
     assert models[0]["learned_from"] == [tiny_logs[0].name]

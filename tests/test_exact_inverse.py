@@ -160,7 +160,7 @@ def test_the_standard_mode_takes_the_exact_model():
 def test_thinning_frees_what_the_exact_model_holds_free(corridor_door_log, tmp_path):
     # the map file records the section; the thinned map frees cells of the Elfes map's walls'
     # thickness and keeps its walls (a cell the exact model is unsure of keeps Elfes' value)
-    from aogm_cli.report.map_run import map_file, resolve_params
+    from aogm_cli.map_files import map_file, resolve_params
 
     params = tmp_path / "p.yaml"
     params.write_text("exact: {thin: true}\n")

@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
+from aogm_cli import map_files
 from aogm_cli.cli import main
 from aogm_cli.io import outputs
 from aogm_cli.io.detectorfile import default_detector_path
 from aogm_cli.mapping.params import MapParams
-from aogm_cli.report import map_run
 
 WORLD = """
 name: tiny_room
@@ -141,7 +141,7 @@ def no_mapping(monkeypatch):
     def fail(*args, **kwargs):
         raise AssertionError("mapping started")
 
-    monkeypatch.setattr(map_run, "map_file", fail)
+    monkeypatch.setattr(map_files, "map_file", fail)
 
 
 @pytest.mark.parametrize("case", list(REFUSALS))

@@ -32,8 +32,8 @@ def sonar():
 
 def warm_em(folder: str) -> None:
     from aogm_cli.io.logfile import LogReader
+    from aogm_cli.map_files import resolve_params
     from aogm_cli.mapping.modes import map_in_mode, warm_up
-    from aogm_cli.report.map_run import resolve_params
 
     warm_up(sonar(), resolve_params(), "adaptive")
     path = handed(folder, "corridor_door")  # simulated by the other process (the simulator compiled once)
@@ -51,8 +51,8 @@ def warm_standard(path: Path) -> None:
     from aogm_cli.evaluation.consistency import map_consistency
     from aogm_cli.evaluation.holdout import HoldoutSplit, holdout_scores, split_log
     from aogm_cli.io.logfile import LogReader
+    from aogm_cli.map_files import resolve_params
     from aogm_cli.mapping.modes import map_source
-    from aogm_cli.report.map_run import resolve_params
 
     params = resolve_params()
     thin = dataclasses.replace(params, exact=dataclasses.replace(params.exact, thin=True))
@@ -89,8 +89,8 @@ def handed(folder: str, world: str, wait: float = 600.0) -> Path:
 
 def warm_rest(folder: str) -> None:
     from aogm_cli.core.log import SensorSpec
+    from aogm_cli.map_files import resolve_params
     from aogm_cli.mapping.modes import map_in_mode, tiny_log
-    from aogm_cli.report.map_run import resolve_params
 
     door = simulated(folder, "corridor_door")  # first: the other process maps it with EM
     params = resolve_params()

@@ -177,8 +177,8 @@ def compare(inputs, modes_text, detector, params_file, forward_model, json_out, 
 
     from aogm_cli.evaluation.holdout import HoldoutSplit
     from aogm_cli.io.provenance import provenance
+    from aogm_cli.map_files import resolve_params
     from aogm_cli.report import compare as lib
-    from aogm_cli.report.map_run import resolve_params
     from aogm_cli.report.scoring import CompareJob
     from aogm_cli.report.table import log_labels, print_table
 
@@ -270,17 +270,19 @@ def _check_outputs(inputs, entries, modes, files, outputs, maps_dir) -> list[str
 
 def _check_budget(entries, modes, job, params_file: str | None) -> None:
     """Refuse (exit 2) before any work a map to make whose grid or estimate exceeds ``job.limits``."""
-    from aogm_cli.report.map_run import check_logs
+    from aogm_cli.map_files import check_logs
 
     to_map = [(e.path, mode) for e in entries for mode in modes if mode not in e.maps]
     refuse_huge_grids(list(dict.fromkeys(path for path, _ in to_map)), job.params, params_file, False,
                       job.limits.max_memory)
     check_logs(to_map, job.params, job.limits)
     if job.forward_model:  # a model of another sensor than a log's is refused before any map is made
-        from aogm_cli.report.map_run import given_model
+        from aogm_cli.io.logfile import LogReader
+        from aogm_cli.map_files import given_model
 
         for path in dict.fromkeys(path for path, mode in to_map if mode != "standard"):
-            given_model(job.forward_model, path)
+            with LogReader(path) as reader:
+                given_model(job.forward_model, reader.sensor, path)
 
 
 # options that only mapping uses: refused with --from-json (parameter name -> option)

@@ -17,7 +17,7 @@ from aogm_cli.cli.options import (
     png_option,
     progress_bar,
     quiet_option,
-    refuse_huge_grids,
+    refuse_huge_grid,
     resolution_option,
     threads_option,
 )
@@ -114,21 +114,25 @@ def map_log(log_file, mode, output, png, detector, params_file, forward_model, r
     """
     inputs = (log_file, params_file, detector_file(detector, (mode,)), forward_model)
     resolve_outputs(inputs, [("-o", output), ("--png", png)])  # before loading the mappers
+    import hashlib
+
     from aogm_cli.io.atomic import write_files_atomically
+    from aogm_cli.io.logfile import LogReader
     from aogm_cli.io.mapfile import map_bytes
     from aogm_cli.io.provenance import provenance
-    from aogm_cli.report.map_run import calibration_notice, given_model, map_file, resolve_params
+    from aogm_cli.map_files import calibration_notice, map_file, resolve_params
 
-    record = provenance(inputs)  # the inputs as read, the time the run starts
     params = resolve_params(params_file, parameter_overrides(resolution, calibrate, options))
-    given = given_model(forward_model, log_file) if forward_model and mode != "standard" else None
-    refuse_huge_grids([log_file], params, params_file, resolution is not None, max_memory)
-    with progress_bar(params.em.max_sweeps, f"map ({mode})", quiet, unit="sweep") as advance:
-        def progress(phase, done, total):
-            advance(1)
+    digest = hashlib.sha256()
+    with LogReader(log_file, digest) as reader:  # one read of the log checks its seal and hashes it
+        record = provenance(inputs, hashed={log_file: digest.hexdigest()})  # the inputs as read, the run's start
+        refuse_huge_grid(reader, params, params_file, resolution is not None, max_memory)
+        with progress_bar(params.em.max_sweeps, f"map ({mode})", quiet, unit="sweep") as advance:
+            def progress(phase, done, total):
+                advance(1)
 
-        result = map_file(log_file, mode, params, detector, progress, limits=limits_of(max_memory, max_work, threads),
-                          given=given)
+            result = map_file(log_file, mode, params, detector, progress, limits=limits_of(max_memory, max_work, threads),
+                              model=forward_model, source=reader)
     outputs = [(output, map_bytes(result, record))]
     if png:
         from aogm_cli.report.picture import map_png

@@ -118,35 +118,41 @@ calibrate_option = click.option(
 
 
 def refuse_huge_grids(log_files, params, params_file: str | None, resolution_given: bool, max_memory: float) -> None:
-    """Refuse (InputError) the first log without truth whose grid alone, at the run's resolution,
-    would take more than ``max_memory``, naming what set the resolution: ``--resolution``, else the
-    params file's ``resolution``, else the log (poses or max range in the wrong unit?). Before the
-    budget's estimate, which would otherwise overflow on an absurd grid."""
+    """``refuse_huge_grid`` for each of ``log_files`` (paths), opened in turn."""
+    from aogm_cli.io.logfile import LogReader
+
+    for path in log_files:
+        with LogReader(path) as reader:
+            refuse_huge_grid(reader, params, params_file, resolution_given, max_memory)
+
+
+def refuse_huge_grid(reader, params, params_file: str | None, resolution_given: bool, max_memory: float) -> None:
+    """Refuse (InputError) the open log ``reader`` when it has no truth and its grid alone, at the
+    run's resolution, would take more than ``max_memory``, naming what set the resolution:
+    ``--resolution``, else the params file's ``resolution``, else the log (poses or max range in the
+    wrong unit?). Before the budget's estimate, which would otherwise overflow on an absurd grid."""
     from aogm_cli.core.budget import format_bytes
     from aogm_cli.core.errors import InputError
-    from aogm_cli.io.logfile import LogReader
     from aogm_cli.mapping.map_cost import BYTES_PER_CELL
     from aogm_cli.report.log_check import grid_need
 
-    res = params.resolution
-    for path in log_files:
-        with LogReader(path) as reader:
-            if reader.has_truth:  # mapped on its truth grid: no resolution makes it larger
-                continue
-            grid = grid_need(reader, res)
-        need = grid.get("cells", 0.0) * BYTES_PER_CELL
-        if not need > max_memory:
-            continue
-        what = (f"would be {grid['height']:.3g} x {grid['width']:.3g} cells at {res:g} m, about "
-                f"{format_bytes(need)} of memory (limit {format_bytes(max_memory)}) for the grid alone")
-        if resolution_given:
-            raise InputError(f"{res:g} m is too fine for {path}: its grid (the poses plus the sensor's reach) {what}; "
-                             "expected a coarser resolution", key="--resolution")
-        if params_file and res != MapParams().resolution:
-            raise InputError(f"{res:g} m is too fine for {path}: its grid {what}; expected a coarser resolution",
-                             file=params_file, key="resolution")
-        raise InputError(f"the grid covering the poses plus the sensor's reach (max range {reader.sensor.max_range:g} "
-                         f"m) {what}: poses or max range in the wrong unit? (or a coarser --resolution)", file=path)
+    res, path = params.resolution, reader.path
+    if reader.has_truth:  # mapped on its truth grid: no resolution makes it larger
+        return
+    grid = grid_need(reader, res)
+    need = grid.get("cells", 0.0) * BYTES_PER_CELL
+    if not need > max_memory:
+        return
+    what = (f"would be {grid['height']:.3g} x {grid['width']:.3g} cells at {res:g} m, about "
+            f"{format_bytes(need)} of memory (limit {format_bytes(max_memory)}) for the grid alone")
+    if resolution_given:
+        raise InputError(f"{res:g} m is too fine for {path}: its grid (the poses plus the sensor's reach) {what}; "
+                         "expected a coarser resolution", key="--resolution")
+    if params_file and res != MapParams().resolution:
+        raise InputError(f"{res:g} m is too fine for {path}: its grid {what}; expected a coarser resolution",
+                         file=params_file, key="resolution")
+    raise InputError(f"the grid covering the poses plus the sensor's reach (max range {reader.sensor.max_range:g} "
+                     f"m) {what}: poses or max range in the wrong unit? (or a coarser --resolution)", file=path)
 
 
 def jobs_option(help_text: str):

@@ -89,8 +89,8 @@ def train(log_files, output, seed, validation_logs, hidden, activation, beta, ri
     from aogm_cli.io.detectorfile import save_detector
     from aogm_cli.io.logfile import read_log
     from aogm_cli.io.provenance import provenance
+    from aogm_cli.map_files import learn_sensor_models, resolve_params
     from aogm_cli.mapping.standard import truth_grid_map
-    from aogm_cli.report.map_run import learn_sensor_models, resolve_params
     from aogm_cli.training.fit import split_by_world, train_detector
     from aogm_cli.training.labels import LabelDefinition
 

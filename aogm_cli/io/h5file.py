@@ -53,18 +53,27 @@ def hdf5_bytes(fill: Callable[[h5py.File], None]) -> bytes:
     return bytes(data)
 
 
-def is_sealed_intact(file: str) -> bool:
-    """True when ``file`` carries aogm's seal and its length and checksum agree with its contents."""
+def is_sealed_intact(file: str, digest=None) -> bool:
+    """True when ``file`` carries aogm's seal and its length and checksum agree with its contents;
+    with ``digest`` (a ``hashlib`` hash) every byte of the file is fed to it in the same read."""
     with open(file, "rb") as fh:
-        head = fh.read(len(SEAL_MAGIC) + _SEAL.size)
-        if len(head) < len(SEAL_MAGIC) + _SEAL.size or not head.startswith(SEAL_MAGIC):
+        block = fh.read(USER_BLOCK)  # the user block, which holds the seal
+        head = block[:len(SEAL_MAGIC) + _SEAL.size]
+        sealed = len(head) == len(SEAL_MAGIC) + _SEAL.size and head.startswith(SEAL_MAGIC)
+        if not sealed and digest is None:
             return False  # not sealed, or cut inside the seal (then the header walk refuses it)
-        length, crc = _SEAL.unpack(head[len(SEAL_MAGIC):])
-        fh.seek(USER_BLOCK)
         found, size = 0, 0
-        while block := fh.read(_CHUNK):
+        while True:
+            if digest is not None:
+                digest.update(block)
+            block = fh.read(_CHUNK)
+            if not block:
+                break
             found = zlib.crc32(block, found)
             size += len(block)
+    if not sealed:
+        return False
+    length, crc = _SEAL.unpack(head[len(SEAL_MAGIC):])
     return size == length and found == crc
 
 
@@ -246,11 +255,12 @@ def json_attr(obj, name: str, file: str, key: str, kind: type, required: bool = 
     return value
 
 
-def _open_checked(file: str, expected: str) -> h5py.File:
+def _open_checked(file: str, expected: str, digest=None) -> h5py.File:
     """The HDF5 file ``file``, open for reading, after checking its seal (or, without an intact
-    seal, walking its headers); InputError saying it is not HDF5 and that ``expected`` was."""
+    seal, walking its headers; ``digest``: see ``is_sealed_intact``); InputError saying it is not
+    HDF5 and that ``expected`` was."""
     try:
-        if not is_sealed_intact(file):
+        if not is_sealed_intact(file, digest):
             check_structure(file)
         return h5py.File(file, "r")
     except FileNotFoundError:
@@ -272,11 +282,11 @@ def file_format(path: str | Path, expected: str, read: Callable[[h5py.File], obj
         return fmt if read is None else (fmt, read(f))
 
 
-def open_input(path: str | Path, fmt: str, version: int) -> h5py.File:
-    """The HDF5 file at ``path``, open for reading, after checking its seal and that it is
-    ``fmt`` ``version``."""
+def open_input(path: str | Path, fmt: str, version: int, digest=None) -> h5py.File:
+    """The HDF5 file at ``path``, open for reading, after checking its seal (``digest``: a hash
+    fed every byte of the file on that read) and that it is ``fmt`` ``version``."""
     file = str(path)
-    f = _open_checked(file, repr(fmt))
+    f = _open_checked(file, repr(fmt), digest)
     try:
         with reading(file, "format"):
             raw = f.attrs.get("format")

@@ -81,9 +81,11 @@ class LogReader:
     Use as a context manager: ``with LogReader(path) as log: for chunk in log.chunks(): ...``
     """
 
-    def __init__(self, path: str | Path):
+    def __init__(self, path: str | Path, digest=None):
+        """``digest``: a ``hashlib`` hash fed every byte of the file in the read that checks its
+        seal (``aogm map`` reads its log once for both)."""
         self.path = str(path)
-        self._f = open_input(self.path, FORMAT, FORMAT_VERSION)
+        self._f = open_input(self.path, FORMAT, FORMAT_VERSION, digest)
         try:
             self._check()
         except BaseException:

@@ -38,7 +38,7 @@ def file_sha256(path: str | Path) -> str | None:
     return digest.hexdigest()
 
 
-def provenance(inputs, argv: list[str] | None = None) -> dict:
+def provenance(inputs, argv: list[str] | None = None, hashed: dict | None = None) -> dict:
     """What makes an output from ``inputs`` (paths; None entries are skipped, a folder stands for
     the files in it) by the command line ``argv`` (default ``sys.argv``, as run): a JSON-able dict
 
@@ -46,10 +46,12 @@ def provenance(inputs, argv: list[str] | None = None) -> dict:
     (absent outside a checkout; "-dirty" appended when the checkout has changes),
     "libraries": {name: version or None}, "platform", "python", "time" (now, UTC, ISO 8601)}``.
     Call it before the work starts: the hashes are of the inputs as read, the time the start.
+    ``hashed``: the sha256 of inputs read already (path -> hex), not read again.
     """
+    hashed = {str(p): h for p, h in (hashed or {}).items()}
     record = {
         "command": [str(a) for a in (sys.argv if argv is None else argv)],
-        "inputs": [{"path": str(p), "sha256": file_sha256(p)} for p in _files(inputs)],
+        "inputs": [{"path": str(p), "sha256": hashed.get(str(p)) or file_sha256(p)} for p in _files(inputs)],
         "aogm_version": __version__,
     }
     commit = git_commit()

@@ -10,8 +10,8 @@ from aogm_cli.core.log import Log
 from aogm_cli.mapping.cluster import grown, label_clusters, near_occupied, readings_near_clusters
 from aogm_cli.mapping.em import EMProblem, ProblemFor, em_problem, em_readings, find_root
 from aogm_cli.mapping.params import EMConfig, MapParams
+from aogm_cli.mapping.plan import CONE, Plan
 from aogm_cli.mapping.standard import occupied_evidence
-from aogm_cli.sensor_models.ray import is_narrow_beam
 from aogm_cli.sensor_models.readings import LaidOutReadings, cone_bands
 
 BAND_BELOW = 0.2  # m: a flagged reading's band starts this far before its range
@@ -50,11 +50,11 @@ def contested_cells(log: Log, grid, params: MapParams, log_odds: np.ndarray,
     return (occupied_evidence(log, grid, params, cuts) >= params.adaptive.contested) & (log_odds <= 0)
 
 
-def find_clusters(run: LaidOutReadings, flags: np.ndarray, standard, params: MapParams, outside: str,
+def find_clusters(run: LaidOutReadings, flags: np.ndarray, standard, params: MapParams, plan: Plan,
                   log: Log | None = None) -> tuple[np.ndarray, int]:
     """(cluster ids (H, W), count): a flagged cone's band near its range, z - BAND_BELOW ..
-    z + alpha, where the map ``standard`` (``stages.StandardMap``) holds cells occupied (the
-    walls EM may thin or open, a doorway), and as ``outside`` (``stages.outside``) says:
+    z + alpha, where the map ``standard`` (``state.StandardMap``) holds cells occupied (the
+    walls EM may thin or open, a doorway), and as ``plan.outside`` says:
 
     * "thinned" (the thinned map outside, its free cells no reading holds free unknown): the cells
       the thinned map holds free but the exact inverse model holds occupied by ``adaptive.contested``
@@ -65,15 +65,15 @@ def find_clusters(run: LaidOutReadings, flags: np.ndarray, standard, params: Map
     * "elfes" (Elfes' map outside the clusters): the ``contested`` cells (``contested_cells``,
       one more standard pass over ``log``) and the ``weak`` ones, whose log-odds lie within
       ``adaptive.weak`` of the prior (space behind a wall that one random reading crossed), all
-      grown by ``adaptive.grow`` cells (8-connected; sonar cones only: on the intel laser log
-      growing cost adaptive's held-out AUC 0.9863 -> 0.9737)."""
+      grown by ``adaptive.grow`` cells (8-connected; sonar cones only: growing cost the intel laser
+      log's held-out AUC, docs/algorithms.md)."""
     log_odds, observed, config = standard.log_odds, standard.observed, params.adaptive
     region, _ = cone_bands(run.grid, run.templates, tuple(a[flags] for a in run.cones),
                            BAND_BELOW, params.inverse_model.alpha)
     region &= observed & (log_odds > params.inverse_model.clamp_min)
     region &= near_occupied(log_odds, NEAR_OCCUPIED)
     grow = 0
-    if outside == "thinned":
+    if plan.outside == "thinned":
         if config.contested > 0 and standard.evidence is not None:
             region |= observed & (log_odds <= 0) & (standard.evidence >= config.contested)
         if standard.elfes is not None:  # the inner layers: EM, not the exact model, thins a wall it works on
@@ -83,7 +83,7 @@ def find_clusters(run: LaidOutReadings, flags: np.ndarray, standard, params: Map
             region |= contested_cells(log, run.grid, params, log_odds, run.shadow) & observed
         if config.weak > 0:
             region |= observed & (np.abs(log_odds - params.inverse_model.l0) < config.weak)
-        grow = 0 if is_narrow_beam(run.sensor, run.grid.resolution) else config.grow
+        grow = config.grow if plan.sensor == CONE else 0
     return label_clusters(observed & grown(region, grow))
 
 

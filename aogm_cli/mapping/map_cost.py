@@ -1,6 +1,6 @@
 """What mapping a log in a mode would cost (``map_estimate``): grid cells with the standard mapper's
 padding, cone templates and readings (EM keeps a few scalars per reading, not its cones' cells), from
-the header, the poses and a sample of ranges; ``report.map_run.check_logs`` refuses a run over the budget."""
+the header, the poses and a sample of ranges; ``report.map_files.check_logs`` refuses a run over the budget."""
 
 from __future__ import annotations
 

@@ -27,48 +27,68 @@ from aogm_cli.mapping.state import State
 __all__ = ["ALL", "Flagger", "map_in_mode", "map_source", "mode_stages", "planned", "state_before", "warm_up"]
 
 
+# Every stage once: its name (the map's phase), its function, the state's fields it reads and writes.
+SET_UP_CONES = Stage("set_up", S.set_up_cones, timed=False)
+STANDARD_STREAMED = Stage("standard", S.standard_streamed, writes=("standard",))
+THINNING_STREAMED = Stage("thinning", S.thinning_streamed, ("standard",), ("standard",))
+STANDARD_VIEW = Stage("view", S.standard_view, ("standard",), ("view",), timed=False)
+READ = Stage("read", S.read, writes=("whole",), timed=False)
+SET_UP = Stage("set_up", S.set_up_em, ("whole",), timed=False)
+READINGS = Stage("readings", S.readings, ("whole",), ("readings",), when=lacks("readings"))
+STANDARD = Stage("standard", S.standard, ("whole", "readings"), ("standard",), when=lacks("standard"))
+OPENING = Stage("opening", S.opening, ("whole", "readings", "standard"), ("learned", "whole", "readings", "standard"))
+DEFLECTIONS = Stage("deflections", S.deflections, ("readings", "standard"), ("learned", "readings", "standard"))
+RATES = Stage("rates", S.rates, ("whole", "readings", "standard"), ("learned",))
+THINNING = Stage("thinning", S.thinning, ("whole", "readings", "standard"), ("standard",))
+WHOLE_LOG = Stage("region", S.whole_log, ("readings",), ("region",), timed=False)
+DETECTOR = Stage("detector", S.detect, ("whole",), ("flags",))
+CLUSTERS = Stage("clusters", S.clusters, ("whole", "readings", "standard", "flags"), ("clusters", "region"))
+START = Stage("start", S.start, ("standard", "clusters?"), ("occupied",), timed=False)
+CALIBRATION = Stage("calibration", S.calibration, ("readings", "occupied", "region"), ("learned",), when=has("region"))
+INDEX = Stage("index", S.index, ("region", "occupied"), ("problem", "candidates"), when=has("region"))
+SWEEPS = Stage("sweeps", S.sweeps, ("problem", "candidates", "occupied"), ("em",), when=has("region"))
+DECIDED = Stage("decided", S.final_evidence, ("readings", "occupied"), ("final_evidence",))
+EM_VIEW = Stage("view", S.em_mode_view, ("whole", "standard", "em"), ("view",))
+ADAPTIVE_VIEW = Stage("view", S.adaptive_view, ("whole", "standard", "clusters", "em?", "final_evidence?"), ("view",))
+
+
 def mode_stages(plan: Plan) -> tuple[Stage, ...]:
-    """The stages of ``plan.mode``, one line each, as the plan has them: the standard map; em over
-    every cell some cone holds; adaptive over the clusters of the readings the detector flags."""
+    """The stages of ``plan.mode`` as its plan has them, one line each (an entry the plan leaves out
+    is False): the standard map; em over every cell some cone holds; adaptive over the clusters of
+    the readings the detector flags. ``READINGS`` and ``STANDARD`` run again only after a stage
+    took them away: a beam narrowed to the learned opening, beams deflected by a surface."""
+    opening, incidence = plan.learns_opening, plan.incidence
+    thinned = plan.thinning is not None
     if plan.mode == "standard":
-        stages = (
-            Stage("set_up", S.set_up_cones, timed=False),
-            Stage("standard", S.standard_streamed, writes=("standard",)),
-            plan.thinning is not None and Stage("thinning", S.thinning_streamed, ("standard",), ("standard",)),
-            Stage("view", S.standard_view, ("standard",), ("view",), timed=False),
-        )
-        return tuple(stage for stage in stages if stage)
-    adaptive = plan.mode == "adaptive"
-    em_runs = has("region")
-    stages = (
-        Stage("read", S.read, writes=("whole",), timed=False),
-        Stage("set_up", S.set_up_em, ("whole",), timed=False),
-        Stage("readings", S.readings, ("whole",), ("readings",)),
-        Stage("standard", S.standard, ("whole", "readings"), ("standard",)),
-        plan.learns_opening and Stage("opening", S.opening, ("whole", "readings", "standard"),
-                                      ("learned", "whole", "readings", "standard")),
-        plan.learns_opening and Stage("readings", S.readings, ("whole",), ("readings",), when=lacks("readings")),
-        plan.learns_opening and Stage("standard", S.standard, ("whole", "readings"), ("standard",),
-                                      when=lacks("standard")),
-        plan.incidence and Stage("deflections", S.deflections, ("readings", "standard"),
-                                 ("learned", "readings", "standard")),
-        plan.incidence and Stage("standard", S.standard, ("whole", "readings"), ("standard",), when=lacks("standard")),
-        plan.fits_rates and Stage("rates", S.rates, ("whole", "readings", "standard"), ("learned",)),
-        plan.thinning is not None and Stage("thinning", S.thinning, ("whole", "readings", "standard"), ("standard",)),
-        not adaptive and Stage("region", S.whole_log, ("readings",), ("region",), timed=False),
-        adaptive and Stage("detector", S.detect, ("whole",), ("flags",)),
-        adaptive and Stage("clusters", S.clusters, ("whole", "readings", "standard", "flags"), ("clusters", "region")),
-        Stage("start", S.start, ("standard", "clusters?"), ("occupied",), timed=False),
-        plan.calibrates and Stage("calibration", S.calibration, ("readings", "occupied", "region"), ("learned",),
-                                  when=em_runs),
-        Stage("index", S.index, ("region", "occupied"), ("problem", "candidates"), when=em_runs),
-        Stage("sweeps", S.sweeps, ("problem", "candidates", "occupied"), ("em",), when=em_runs),
-        plan.decides and Stage("decided", S.decided, ("readings", "occupied"), ("final_evidence",)),
-        not adaptive and Stage("view", S.em_mode_view, ("whole", "standard", "em"), ("view",)),
-        adaptive and Stage("view", S.adaptive_view, ("whole", "standard", "clusters", "em?", "final_evidence?"),
-                           ("view",)),
-    )
-    return tuple(stage for stage in stages if stage)  # a stage the plan leaves out is False
+        stages = (SET_UP_CONES,
+                  STANDARD_STREAMED,
+                  thinned and THINNING_STREAMED,
+                  STANDARD_VIEW)
+    else:
+        prepared = (READ, SET_UP, READINGS, STANDARD,  # the em and adaptive modes alike
+                    opening and OPENING, opening and READINGS, opening and STANDARD,
+                    incidence and DEFLECTIONS, incidence and STANDARD,
+                    plan.fits_rates and RATES,
+                    thinned and THINNING)
+    if plan.mode == "em":
+        stages = (*prepared,
+                  WHOLE_LOG,
+                  START,
+                  plan.calibrates and CALIBRATION,
+                  INDEX,
+                  SWEEPS,
+                  EM_VIEW)
+    elif plan.mode == "adaptive":
+        stages = (*prepared,
+                  DETECTOR,
+                  CLUSTERS,
+                  START,
+                  plan.calibrates and CALIBRATION,
+                  INDEX,
+                  SWEEPS,
+                  plan.decides and DECIDED,
+                  ADAPTIVE_VIEW)
+    return tuple(stage for stage in stages if stage)
 
 
 class Flagger(NamedTuple):

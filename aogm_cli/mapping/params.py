@@ -124,7 +124,7 @@ class CalibrationConfig:
     and opening_deg once, before them), in at most ``rounds`` EM runs alternated with closed-form
     fits, ended when no parameter moves by more than ``tolerance`` (sigma relative, the
     probabilities absolute). With ``carried`` (the default) a simulated log of a sensor the
-    detector carries a model of (``report.map_run.carried_model``: learned once, on its training
+    detector carries a model of (``report.map_files.carried_model``: learned once, on its training
     logs) takes it instead, and only the building's part is learned from the log (the specular
     angle; p_max at its standard map, ``stages.rates``). How the rounds work inside is
     ``calibration.TUNING``."""

@@ -16,7 +16,7 @@ from aogm_cli.sensor_models.ray import is_narrow_beam
 CONE, NARROW_BEAM = "cone", "narrow beam"  # ``Plan.sensor``: a sonar's cone, or a ray (``ray.is_narrow_beam``)
 # log-odds below the exact model's prior at which adaptive's thinning frees a cell when the thinned map
 # stands outside the clusters: any (the ``decided`` stage then checks each free cell against the
-# readings; docs/algorithms.md, "The thinned map outside the clusters"); elsewhere ``MARGIN``
+# readings; docs/algorithms.md, "Adaptive with the thinned map outside its clusters"); elsewhere ``MARGIN``
 OUTSIDE_MARGIN = 0.0
 
 
@@ -53,7 +53,7 @@ class Plan:
     @property
     def decides(self) -> bool:
         """Adaptive keeps the thinned map outside its clusters, whose free cells the readings must
-        hold free (``stages.decided``)."""
+        hold free (``stages.final_evidence``)."""
         return self.outside == "thinned" and self.thinning is not None
 
     def as_dict(self) -> dict:

@@ -163,7 +163,7 @@ def detect(s: State) -> State:
 def clusters(s: State) -> State:
     """The clusters of the flagged readings, with the contested and weak cells
     (``adaptive.find_clusters``), and EM's region there: none when there is no cluster."""
-    ids, count = A.find_clusters(s.readings, s.flags, s.standard, s.in_use, s.plan.outside, s.whole)
+    ids, count = A.find_clusters(s.readings, s.flags, s.standard, s.in_use, s.plan, s.whole)
     region = None
     if count > 0:
         near = functools.partial(A.near_clusters, s.readings, ids, s.in_use.em.forward)
@@ -216,7 +216,7 @@ def sweeps(s: State) -> State:
     return s.but(em=E.EMOutcome(config, result, s.problem))
 
 
-def decided(s: State) -> State:
+def final_evidence(s: State) -> State:
     """Each cell's evidence at the map adaptive leaves (the thinned map outside the clusters, EM's
     inside), as EM scores a candidate (``exact.map_evidence``); ``adaptive_view`` reads it."""
     return s.but(final_evidence=map_evidence(s.readings, s.in_use.em.forward, s.occupied))

@@ -16,7 +16,7 @@ from aogm_cli.sensor_models.ray import axis_counts
 
 # a candidate EM leaves free is decided by the data when occupancy would lower the data
 # log-likelihood by more than ``standard.HIDDEN_GAIN`` (log-odds); the others are the hidden cells
-# of ``em.hidden``
+# of the setting ``em.hidden``
 
 
 def decided(result: EMResult, config: EMConfig) -> np.ndarray:
@@ -105,10 +105,10 @@ SIDE = 1e-3  # a cell the scale would move across 0.5 stops this far short of it
 
 def joined_view(log_odds: np.ndarray, observed: np.ndarray, outcome: EMOutcome | None, clusters: np.ndarray,
                 whole: Log, grid, params: MapParams, evidence: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(probability, observed) (H, W) of an adaptive map: ``em.em_view``'s (EM's residuals in the
+    """(probability, observed) (H, W) of an adaptive map: ``em_view``'s (EM's residuals in the
     clusters, the standard map's elsewhere, what a planner sees), its observed cells outside the
     clusters put on EM's scale, unless ``adaptive.scale`` is "mixed": with each cell's
-    ``evidence`` at the final map (the thinned map outside the clusters: ``stages.decided``), EM's
+    ``evidence`` at the final map (the thinned map outside the clusters: ``stages.final_evidence``), EM's
     residual there (``residual_scale``), else by the hit rates of the log's echoes (``one_scale``)."""
     robot = footprint(grid, whole.pose, whole.sensor) if outcome is not None or evidence is not None else None
     probability, observed = em_view(log_odds, observed, outcome, grid, whole.pose, whole.sensor, params, robot)
@@ -127,11 +127,10 @@ def joined_view(log_odds: np.ndarray, observed: np.ndarray, outcome: EMOutcome |
 
 def residual_scale(probability: np.ndarray, cells: np.ndarray, evidence: np.ndarray, l_prior: float) -> np.ndarray:
     """``probability`` (H, W) with ``cells`` given EM's residual occupancy logistic(evidence +
-    l_prior), as EM gives its own candidates (``em.decided``), each kept on its side of 0.5 (``SIDE``
+    l_prior), as EM gives its own candidates (``decided``), each kept on its side of 0.5 (``SIDE``
     short of it): what the map believes is unchanged, and the cells outside the clusters rank on
-    the scale of those inside. On corridor_door_real and office_doors_real (seed 1, ``aogm compare
-    --holdout 0.1 --seed 1``) the held-out band AUC is 0.9942 and 0.9952 (the standard map 0.9933,
-    0.9890; EM 0.9941, 0.9955); the hit rates' scale gave the first 0.9907 (docs/algorithms.md)."""
+    the scale of those inside (its held-out scores against the hit rates' scale: docs/algorithms.md,
+    "Adaptive with the thinned map outside its clusters")."""
     residual = 1.0 / (1.0 + np.exp(-(np.asarray(evidence, dtype=np.float64) + l_prior)))
     p = probability[cells]
     side = np.where(p > 0.5, np.maximum(residual[cells], 0.5 + SIDE), np.minimum(residual[cells], 0.5 - SIDE))

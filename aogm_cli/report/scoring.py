@@ -9,6 +9,7 @@ import dataclasses
 import json
 from dataclasses import dataclass, field
 
+from aogm_cli import map_files
 from aogm_cli.core.budget import Limits
 from aogm_cli.core.errors import InputError
 from aogm_cli.core.log import Truth
@@ -22,7 +23,6 @@ from aogm_cli.io.logfile import LogReader
 from aogm_cli.io.results import ModeResult
 from aogm_cli.mapping.learned import Learned
 from aogm_cli.mapping.params import MapParams
-from aogm_cli.report import map_run
 
 
 @dataclass(frozen=True)
@@ -54,15 +54,14 @@ class ScoredLog:
 
 
 def map_one(job: CompareJob, path: str, mode: str, given: Learned | None = None) -> OccupancyMap:
-    """Map the log at ``path`` in ``mode`` as ``job`` says (``given``: a forward model to use
-    instead of learning one): from the scans its holdout split keeps when it has one, refused
-    before any work beyond its limits. The mapper measures ``runtime_s`` around the mapping work
-    only, inside the process that maps."""
-    if given is None and job.forward_model and mode != "standard":
-        given = map_run.given_model(job.forward_model, path)
+    """Map the log at ``path`` in ``mode`` as ``job`` says (``given``: a forward model another map
+    of the log learned; else ``job.forward_model``'s: ``map_files.sensor_model``): from the scans
+    its holdout split keeps when it has one, refused before any work beyond its limits. The mapper
+    measures ``runtime_s`` around the mapping work only, inside the process that maps."""
     if job.holdout is not None:
         return map_kept_scans(job, path, mode, given)
-    return map_run.map_file(path, mode, job.params, job.detector, limits=job.limits, given=given)
+    return map_files.map_file(path, mode, job.params, job.detector, limits=job.limits,
+                              model=given or job.forward_model)
 
 
 def map_kept_scans(job: CompareJob, path: str, mode: str, given: Learned | None = None) -> OccupancyMap:
@@ -71,8 +70,9 @@ def map_kept_scans(job: CompareJob, path: str, mode: str, given: Learned | None 
     timing). The map names the log as its source and records the split in ``params["holdout"]``."""
     with LogReader(path) as reader:
         kept, _held = split_log(reader, job.holdout)
-    source = map_run.NamedSource(kept, str(path), {"holdout": job.holdout.as_dict()})
-    return map_run.map_file(path, mode, job.params, job.detector, limits=job.limits, given=given, source=source)
+    source = map_files.NamedSource(kept, str(path), {"holdout": job.holdout.as_dict()})
+    return map_files.map_file(path, mode, job.params, job.detector, limits=job.limits,
+                              model=given or job.forward_model, source=source)
 
 
 def map_and_score(job: CompareJob, path: str, world: str, mode: str, identity: dict | None,

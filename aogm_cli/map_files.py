@@ -1,6 +1,7 @@
-"""Mapping a log file, at the edge where files are opened: the ``--params`` YAML, the detector file,
-the sensor model file and the log itself are read here and handed to the mappers as values
-(``mapping.modes.map_source``), which open no file."""
+"""The library's entry for mapping log files (``map_file``), which the commands, ``aogm_cli.api`` and
+``aogm compare`` call: the ``--params`` YAML, the detector file, the sensor model file and the log are
+read here, where the forward model a map uses is chosen (``sensor_model``), and handed to the mappers
+as values (``mapping.modes.map_source``), which open no file."""
 
 from __future__ import annotations
 
@@ -27,7 +28,7 @@ from aogm_cli.mapping.plan import CONE
 from aogm_cli.sensor_models import cone
 
 __all__ = ["BASELINE_DETECTORS", "NamedSource", "calibration_notice", "carried_model", "check_logs", "given_model",
-           "learn_sensor_models", "map_file", "resolve_detector", "resolve_params"]
+           "learn_sensor_models", "map_file", "resolve_detector", "resolve_params", "sensor_model"]
 
 
 def resolve_params(params_file: str | Path | None = None, overrides: dict[str, dict[str, Any]] | None = None) -> MapParams:
@@ -50,12 +51,12 @@ def resolve_detector(spec: str | None):
 
 
 def map_file(path: str | Path, mode: str, params: MapParams, detector: str | None = None,
-             progress: Progress | None = None, limits: Limits | None = None, given: Learned | None = None,
+             progress: Progress | None = None, limits: Limits | None = None, model: Learned | str | Path | None = None,
              source=None) -> OccupancyMap:
-    """Map the log at ``path`` in ``mode`` (``detector``: see ``resolve_detector``; ``given``: a
-    forward model to use instead of learning one; else, with ``calibration.carried``, the one the
-    detector carries for the log's sensor, ``carried_model``), or the log source ``source`` (the scans a
-    held-out split keeps) named by ``path``; refused (``InputError``) before any work when its
+    """Map the log at ``path`` in ``mode``, or the log source ``source`` named by ``path`` (the log
+    open already, or the scans a held-out split keeps), with the forward model ``sensor_model``
+    chooses (``model``: one another map of the same log learned, or a model file's path;
+    ``detector``: see ``resolve_detector``); refused (``InputError``) before any work when its
     estimate exceeds ``limits`` (``mapping.modes.map_source``)."""
     from aogm_cli.mapping.modes import ALL, Flagger, map_source
 
@@ -63,15 +64,32 @@ def map_file(path: str | Path, mode: str, params: MapParams, detector: str | Non
     flagger = Flagger(*resolve_detector(detector)) if mode == "adaptive" else ALL
 
     def run(log):
-        model = given
-        if model is None and mode != "standard" and params.calibration.enabled and params.calibration.carried:
-            model = carried_model(detector, log.sensor, log.truth_grid() is not None, flagger.detector)
-        return map_source(log, mode, params, flagger, progress, limits, str(path), model)
+        given = sensor_model(mode, params, log, str(path), model, detector, flagger.detector)
+        return map_source(log, mode, params, flagger, progress, limits, str(path), given)
 
     if source is not None:
         return run(source)
     with LogReader(path) as reader:
         return run(reader)
+
+
+def sensor_model(mode: str, params: MapParams, log, name: str, model: Learned | str | Path | None = None,
+                 detector: str | None = None, loaded=None) -> Learned | None:
+    """Where the forward model of a ``mode`` map of ``log`` (a log source named ``name``) comes
+    from, decided here only: none for the standard mode; ``model``, learned by another map of the
+    same log, or the model file at that path (``given_model``); else, with ``calibration.carried``,
+    the one ``detector`` carries for the log's sensor (``carried_model``; ``loaded``: that detector
+    as the adaptive mode read it); else none (the map learns it from the log, or takes the
+    configured values: ``mapping.plan``)."""
+    if mode == "standard":
+        return None
+    if isinstance(model, Learned):
+        return model
+    if model:
+        return given_model(model, log.sensor, name)
+    if params.calibration.enabled and params.calibration.carried:
+        return carried_model(detector, log.sensor, log.truth_grid() is not None, loaded)
+    return None
 
 
 def carried_model(detector: str | None, sensor, simulated: bool, loaded=None) -> Learned | None:
@@ -126,13 +144,12 @@ def learn_sensor_models(paths, params: MapParams, advance=None) -> tuple[dict, .
                   "learned_from": names} for record, values, names in groups.values())
 
 
-def given_model(path: str | Path, log: str | Path) -> Learned:
-    """The sensor model file at ``path`` (``aogm calibrate -o``) as a map of the log file ``log``
-    takes it: refused (``InputError`` naming the model file and what differs) when it was learned
-    for another sensor."""
+def given_model(path: str | Path, sensor, log: str | Path) -> Learned:
+    """The sensor model file at ``path`` (``aogm calibrate -o``) as a map of the log ``log``, of
+    ``sensor``, takes it: refused (``InputError`` naming the model file and what differs) when it
+    was learned for another sensor."""
     values, record = read_model(path)
-    with LogReader(log) as reader:
-        check_sensor(record, reader.sensor, str(path), str(log))
+    check_sensor(record, sensor, str(path), str(log))
     return Learned(sensor=SensorModel(**values), origin=f"file {path}", opening_deg=values["opening_deg"])
 
 
