@@ -14,7 +14,6 @@ from aogm_cli.sensor_models.cone import (
     heading_bins_for,
     range_search,
     reading_geometry,
-    sensor_cells,
 )
 
 BEAM = math.radians(30.0)
@@ -126,12 +125,12 @@ def test_cone_cells_kernel_matches_the_wrapper():
     np.testing.assert_array_equal(out_r[:n], rng)
 
 
-def test_sensor_cells_compose_pose_and_mount():
+def test_reading_geometry_composes_pose_and_mount():
     grid = GridSpec(0.0, 0.0, 0.1, 30, 30)
     tpl = build_cone_templates(0.1, BEAM, 1.0, n_bins=64)
     sensor = SensorSpec(mount=np.array([[0.2, 0.0, 0.0], [0.0, 0.0, math.pi / 2]]))
     pose = np.array([[1.05, 1.05, math.pi / 2], [np.nan, 1.0, 0.0]])
-    rows, cols, bins, valid = sensor_cells(pose, sensor, grid, tpl)
+    rows, cols, bins, valid, _ = reading_geometry(pose, sensor, grid, tpl)
     assert rows.shape == (2, 2)
     # sensor 0 sits 0.2 m ahead of the robot, which faces +y: at (1.05, 1.25), pointing +y
     assert (rows[0, 0], cols[0, 0], bins[0, 0]) == (12, 10, 16)
@@ -153,7 +152,7 @@ def test_far_away_sensors_do_not_overflow():
     grid = GridSpec(0.0, 0.0, 0.1, 10, 10)
     tpl = build_cone_templates(0.1, BEAM, 1.0, n_bins=64)
     sensor = SensorSpec(mount=np.zeros((1, 3)))
-    rows, cols, _, valid = sensor_cells(np.array([[1e300, -1e300, 0.0]]), sensor, grid, tpl)
+    rows, cols, _, valid, _ = reading_geometry(np.array([[1e300, -1e300, 0.0]]), sensor, grid, tpl)
     assert valid.all()
     assert rows[0, 0] < -tpl.extent and cols[0, 0] > 10 + tpl.extent
 

@@ -145,58 +145,38 @@ def arc_status(
     return status.reshape(z.shape)
 
 
-# _nrt=False (a private numba option, as em_kernels._sweep): the kernel allocates nothing, and
-# without reference counting its tuples' arrays cost nothing per reading
-@numba.njit(cache=True, _nrt=False)
+@numba.njit(cache=True, _nrt=False)  # allocates nothing: as ``standard._standard_kernel``
 def _arc_kernel(maps, readings, tpl, half_alpha, max_range, status):
     """Each reading's arc status into ``status``; ``maps`` is an ``ArcMaps``, ``readings``
     ``cone.ConeReadings`` and ``tpl`` ``ConeTemplates.kernel_arrays``."""
-    occupied = maps.occupied
-    free = maps.free
-    contradicted = maps.contradicted
     height = maps.height
     width = maps.width
-    rows = readings.rows
-    cols = readings.cols
-    bins = readings.bins
-    z = readings.z
-    offset = readings.offset
-    offsets = tpl.offsets
-    dcol = tpl.dcol
-    drow = tpl.drow
-    ranges = tpl.ranges
-    base_bin = tpl.base_bin
-    transform = tpl.transform
-    range_index = tpl.range_index
-    resolution = tpl.resolution
-    for t in range(z.size):
-        zt = z[t]
+    free = maps.free
+    for t in range(readings.z.size):
+        zt = readings.z[t]
         if not zt >= 0.0:
             status[t] = -1
             continue
-        k = bins[t]
-        b = base_bin[k]
-        s = offsets[b]
-        r = ranges[s : offsets[b + 1]]
-        shift = offset[t]
+        k = readings.bins[t]
+        b = tpl.base_bin[k]
+        s = tpl.offsets[b]
+        r = tpl.ranges[s : tpl.offsets[b + 1]]
+        shift = readings.offset[t]
         arc_start, arc_end = occupied_arc(zt, half_alpha, max_range)
-        f1 = range_search(r, range_index[b], resolution, arc_start + shift, False)
-        m = range_search(r, range_index[b], resolution, arc_end + shift, True)
-        ta = transform[k, 0]
-        tb = transform[k, 1]
-        tc = transform[k, 2]
-        td = transform[k, 3]
+        f1 = range_search(r, tpl.range_index[b], tpl.resolution, arc_start + shift, False)
+        m = range_search(r, tpl.range_index[b], tpl.resolution, arc_end + shift, True)
+        ta, tb, tc, td = tpl.transform[k, 0], tpl.transform[k, 1], tpl.transform[k, 2], tpl.transform[k, 3]
         agree = False
         all_free = True
         for j in range(f1, m):
-            dc = np.int64(dcol[s + j])
-            dr = np.int64(drow[s + j])
-            row = rows[t] + tc * dc + td * dr
-            col = cols[t] + ta * dc + tb * dr
+            dc = np.int64(tpl.dcol[s + j])
+            dr = np.int64(tpl.drow[s + j])
+            row = readings.rows[t] + tc * dc + td * dr
+            col = readings.cols[t] + ta * dc + tb * dr
             if row < 0 or row >= height or col < 0 or col >= width:
                 continue
             i = row * width + col
-            if occupied[i]:
+            if maps.occupied[i]:
                 agree = True
                 break
             if not free[i]:
@@ -206,12 +186,12 @@ def _arc_kernel(maps, readings, tpl, half_alpha, max_range, status):
             continue
         status[t] = 1 if all_free and m > f1 else 0
         for j in range(f1, m):
-            dc = np.int64(dcol[s + j])
-            dr = np.int64(drow[s + j])
-            row = rows[t] + tc * dc + td * dr
-            col = cols[t] + ta * dc + tb * dr
+            dc = np.int64(tpl.dcol[s + j])
+            dr = np.int64(tpl.drow[s + j])
+            row = readings.rows[t] + tc * dc + td * dr
+            col = readings.cols[t] + ta * dc + tb * dr
             if 0 <= row < height and 0 <= col < width and free[row * width + col]:
-                contradicted[row * width + col] = True
+                maps.contradicted[row * width + col] = True
 
 
 def summarize(status, status_8, contradicted: np.ndarray, free: np.ndarray, method: str) -> dict:

@@ -17,20 +17,8 @@ import numpy as np
 from aogm_cli.core.errors import InputError
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import CAUSE_ECHO, CAUSE_SPECULAR, CHECK_KINDS, Log, SensorSpec, Truth
+from aogm_cli.io import h5file
 from aogm_cli.io.atomic import write_files_atomically
-from aogm_cli.io.h5file import (
-    attribute,
-    dataset,
-    hdf5_bytes,
-    json_attr,
-    number_attr,
-    open_input,
-    read_dataset,
-    reading,
-    text,
-    text_attr,
-    vector_attr,
-)
 from aogm_cli.io.provenance import write_header, write_provenance
 
 FORMAT = "aogm-log"
@@ -67,7 +55,7 @@ def log_bytes(log: Log, provenance: dict | None = None) -> bytes:
             g.attrs["world"] = t.world
             g.attrs["checks"] = json.dumps(list(t.checks))
 
-    return hdf5_bytes(fill)
+    return h5file.hdf5_bytes(fill)
 
 
 def write_log(path: str | Path, log: Log, provenance: dict | None = None) -> None:
@@ -85,7 +73,7 @@ class LogReader:
         """``digest``: a ``hashlib`` hash fed every byte of the file in the read that checks its
         seal (``aogm map`` reads its log once for both)."""
         self.path = str(path)
-        self._f = open_input(self.path, FORMAT, FORMAT_VERSION, digest)
+        self._f = h5file.open_input(self.path, FORMAT, FORMAT_VERSION, digest)
         try:
             self._check()
         except BaseException:
@@ -100,16 +88,16 @@ class LogReader:
         are read, chunk by chunk); the sensor and the truth are read and kept."""
         f, file, dims = self._f, self.path, {}
         numbers = "numbers (integer or float)"
-        dataset(f, "scans/time", file, ("T",), "iuf", numbers, dims)
-        dataset(f, "scans/pose", file, ("T", 3), "iuf", numbers, dims)
-        dataset(f, "sensors/mount", file, ("S", 3), "iuf", numbers, dims)
-        dataset(f, "scans/ranges", file, ("T", "S"), "f", "float ranges (m)", dims)
+        h5file.dataset(f, "scans/time", file, ("T",), "iuf", numbers, dims)
+        h5file.dataset(f, "scans/pose", file, ("T", 3), "iuf", numbers, dims)
+        h5file.dataset(f, "sensors/mount", file, ("S", 3), "iuf", numbers, dims)
+        h5file.dataset(f, "scans/ranges", file, ("T", "S"), "f", "float ranges (m)", dims)
         self._sensor = self._read_sensor()
-        seed = attribute(f, "seed", file, "seed", required=False)
+        seed = h5file.attribute(f, "seed", file, "seed", required=False)
         if seed is not None and (isinstance(seed, (bool, np.bool_)) or not isinstance(seed, (int, np.integer))):
             raise self._error("seed", f"expected a whole number, got {seed!r}")
         self._truth = None
-        with reading(file, "/truth"):
+        with h5file.reading(file, "/truth"):
             has_truth = "truth" in f
         if has_truth:
             self._truth = self._read_truth(dims)
@@ -121,9 +109,9 @@ class LogReader:
         def key(k):
             return f"/sensors.{k}"
 
-        kind = text_attr(a, "kind", file, key("kind"))
-        values = {k: number_attr(a, k, file, key(k)) for k in ("beam_width", "min_range", "max_range", "noise_sigma")}
-        mount = read_dataset(f, "sensors/mount", file).astype(np.float64, copy=False)
+        kind = h5file.text_attr(a, "kind", file, key("kind"))
+        values = {k: h5file.number_attr(a, k, file, key(k)) for k in ("beam_width", "min_range", "max_range", "noise_sigma")}
+        mount = h5file.read_dataset(f, "sensors/mount", file).astype(np.float64, copy=False)
         try:
             return SensorSpec(mount=mount, kind=kind, **values).validate()
         except InputError as exc:
@@ -133,31 +121,31 @@ class LogReader:
         """The truth, checked: occupancy (H, W) 0/1, cause (T, S) 0..3, ideal_range (T, S)
         >= 0 or +inf, resolution > 0, origin (x, y), checks a JSON list of passable/blocked checks."""
         f, file = self._f, self.path
-        with reading(file, "/truth"):
+        with h5file.reading(file, "/truth"):
             g = f["truth"]
             if not isinstance(g, h5py.Group):
                 raise self._error("/truth", "expected a group")
-        dataset(f, "truth/occupancy", file, ("H", "W"), "iub", "integers 0/1", dims)
-        dataset(f, "truth/cause", file, ("T", "S"), "iu", "integers 0..3", dims)
-        dataset(f, "truth/ideal_range", file, ("T", "S"), "f", "float ranges (m)", dims)
+        h5file.dataset(f, "truth/occupancy", file, ("H", "W"), "iub", "integers 0/1", dims)
+        h5file.dataset(f, "truth/cause", file, ("T", "S"), "iu", "integers 0..3", dims)
+        h5file.dataset(f, "truth/ideal_range", file, ("T", "S"), "f", "float ranges (m)", dims)
         if dims["H"] < 1 or dims["W"] < 1:
             raise self._error("/truth/occupancy", f"expected a non-empty grid, got shape ({dims['H']}, {dims['W']})")
-        occupancy = read_dataset(f, "truth/occupancy", file)
+        occupancy = h5file.read_dataset(f, "truth/occupancy", file)
         if not np.all((occupancy == 0) | (occupancy == 1)):
             raise self._error("/truth/occupancy", "expected 0 (free) or 1 (occupied) in every cell")
-        cause = read_dataset(f, "truth/cause", file)
+        cause = h5file.read_dataset(f, "truth/cause", file)
         if cause.size and not (cause.min() >= CAUSE_ECHO and cause.max() <= CAUSE_SPECULAR):
             raise self._error("/truth/cause", f"expected causes {CAUSE_ECHO}..{CAUSE_SPECULAR}, got {cause.min()}..{cause.max()}")
-        ideal = read_dataset(f, "truth/ideal_range", file)
+        ideal = h5file.read_dataset(f, "truth/ideal_range", file)
         if not np.all(ideal >= 0):  # NaN and negative fail
             raise self._error("/truth/ideal_range", "expected ranges >= 0 (m) or +inf (no surface), got NaN or a negative one")
-        resolution = number_attr(g, "resolution", file, "/truth.resolution")
+        resolution = h5file.number_attr(g, "resolution", file, "/truth.resolution")
         if resolution <= 0:
             raise self._error("/truth.resolution", f"expected a positive resolution (m per cell), got {resolution}")
-        ox, oy = vector_attr(g, "origin", file, "/truth.origin", 2)
-        raw_checks = json_attr(g, "checks", file, "/truth.checks", list, required=False)
+        ox, oy = h5file.vector_attr(g, "origin", file, "/truth.origin", 2)
+        raw_checks = h5file.json_attr(g, "checks", file, "/truth.checks", list, required=False)
         checks = tuple(_check_checks([] if raw_checks is None else raw_checks, file))
-        world = text_attr(g, "world", file, "/truth.world", required=False) or ""
+        world = h5file.text_attr(g, "world", file, "/truth.world", required=False) or ""
         grid = GridSpec(ox, oy, resolution, int(dims["H"]), int(dims["W"]))
         return Truth(grid=grid, occupancy=occupancy, cause=cause, ideal_range=ideal, world=world, checks=checks)
 
@@ -176,8 +164,8 @@ class LogReader:
 
     @property
     def source(self) -> str:
-        with reading(self.path, "source"):
-            return text(self._f.attrs.get("source", ""))
+        with h5file.reading(self.path, "source"):
+            return h5file.text(self._f.attrs.get("source", ""))
 
     @property
     def seed(self) -> int | None:
@@ -200,7 +188,7 @@ class LogReader:
         return self._truth
 
     def poses(self) -> np.ndarray:
-        return read_dataset(self._f, "scans/pose", self.path)
+        return h5file.read_dataset(self._f, "scans/pose", self.path)
 
     def scan_ranges(self, start: int, stop: int) -> np.ndarray:
         """Ranges of scans start:stop, checked (a log source's interface, ``mapping.pipeline``)."""
@@ -208,7 +196,7 @@ class LogReader:
 
     def _ranges(self, start: int, stop: int) -> np.ndarray:
         """Ranges of scans start:stop as float32, checked: >= 0, +inf or NaN."""
-        r = read_dataset(self._f, "scans/ranges", self.path, slice(start, stop)).astype(np.float32, copy=False)
+        r = h5file.read_dataset(self._f, "scans/ranges", self.path, slice(start, stop)).astype(np.float32, copy=False)
         with np.errstate(invalid="ignore"):
             negative = r < 0
         if negative.any():
@@ -223,13 +211,13 @@ class LogReader:
         for start in range(0, n, size):
             stop = min(n, start + size)
             rows = slice(start, stop)
-            yield (start, read_dataset(self._f, "scans/time", self.path, rows),
-                   read_dataset(self._f, "scans/pose", self.path, rows), self._ranges(start, stop))
+            yield (start, h5file.read_dataset(self._f, "scans/time", self.path, rows),
+                   h5file.read_dataset(self._f, "scans/pose", self.path, rows), self._ranges(start, stop))
 
     def read(self) -> Log:
         """The whole log in memory."""
         return Log(
-            time=read_dataset(self._f, "scans/time", self.path),
+            time=h5file.read_dataset(self._f, "scans/time", self.path),
             pose=self.poses(),
             ranges=self._ranges(0, self.n_scans),
             sensor=self.sensor,

@@ -12,7 +12,14 @@ import numpy as np
 from aogm_cli.core.frames import sensor_poses
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import SensorSpec
-from aogm_cli.sensor_models.inverse_model import InverseModelConfig, inverse_update, occupied_arc
+from aogm_cli.sensor_models.inverse_model import (
+    UNOBSERVED,
+    InverseModelConfig,
+    float32_update,
+    inverse_update,
+    observed_log_odds,
+    occupied_arc,
+)
 from aogm_cli.sensor_models.ray import TOUCH, next_cell, ray_start
 
 
@@ -61,15 +68,13 @@ class BeamMapper:
     the last scan whose hit band covered it (for hit precedence within a scan).
     """
 
-    UNOBSERVED = np.float32(-np.inf)
-
     def __init__(self, sensor: SensorSpec, grid: GridSpec, config: InverseModelConfig):
         config.validate()
         self.sensor = sensor
         self.grid = grid
         self.config = config
         self.update_constants = inverse_update(config, sensor, grid.resolution)
-        self.state = np.full(grid.shape, self.UNOBSERVED, dtype=np.float32)
+        self.state = np.full(grid.shape, UNOBSERVED, dtype=np.float32)
         self._grid = BeamGrid(self.state.reshape(-1), np.full(grid.height * grid.width, -1, dtype=np.int32),
                               grid.height, grid.width)
         self.scans_done = 0
@@ -93,14 +98,9 @@ class BeamMapper:
 
     def result(self) -> tuple[np.ndarray, np.ndarray]:
         """(log_odds float32 (H, W), observed bool (H, W)); unobserved cells hold the prior l0."""
-        log_odds = self.state.copy()
-        observed = log_odds != self.UNOBSERVED
-        log_odds[~observed] = np.float32(self.config.l0)
-        return log_odds, observed
+        return observed_log_odds(self.state, self.config.l0)
 
 
-# _nrt=False (a private numba option, as em_kernels._sweep): the kernel allocates nothing, and
-# without reference counting its tuples' arrays cost nothing per reading
 @numba.njit(cache=True, _nrt=False)
 def _beam_kernel(grid, rays, update, n_beams, first_scan):
     """Compiled log-odds update of the ``Rays`` in order, scan by scan (``n_beams`` readings
@@ -123,10 +123,7 @@ def _beam_kernel(grid, rays, update, n_beams, first_scan):
     min_range = update.min_range
     max_range = update.max_range
     c_free = np.float32(update.l_free_minus_l0)
-    c_occ = np.float32(update.l_occ_minus_l0)
-    lo = np.float32(update.clamp_min)
-    hi = np.float32(update.clamp_max)
-    l0 = np.float32(update.l0)
+    c_occ, lo, hi, l0 = float32_update(update)
     res = update.resolution
     tiny = TOUCH * res
     for k in range(z.size // n_beams):

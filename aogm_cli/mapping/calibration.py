@@ -74,17 +74,23 @@ def sample_readings(run: LaidOutReadings, max_readings: int, select: np.ndarray 
                                  run.bins[keep].astype(np.int64), z, limit)
 
 
+def _cones(run: LaidOutReadings) -> tuple:
+    """(kernel arrays, flat offsets, grid shape): ``run``'s cone templates as the kernels take them."""
+    return run.templates.kernel_arrays, flat_offsets(run.templates, run.grid.width), run.grid.shape
+
+
+def _flat_bool(occupied: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(occupied, dtype=np.bool_)
+
+
 def expectations(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: np.ndarray,
                  forward: F.ForwardModelConfig, obstacles: F.Obstacles | None = None) -> tuple[np.ndarray, F.Obstacles]:
     """The summed expectations (``forward_model.expectation_sums``, E_SIZE,) of ``readings``
     under the flat binary map ``occupied`` and the model ``forward``, and the cones' obstacles
     they were taken from (pass them back while the map stands: ``fit_at_map``)."""
     out = np.zeros(F.E_SIZE)
-    templates = run.templates
-    model = (float(forward.p_rand), float(forward.p_max), float(forward.p_hit), float(forward.sigma),
-             float(forward.window), float(run.sensor.max_range))
-    obstacles = F.expectation_sums(templates.kernel_arrays, flat_offsets(templates, run.grid.width), run.grid.shape,
-                                   readings, np.ascontiguousarray(occupied, dtype=np.bool_), model, out, obstacles)
+    obstacles = F.expectation_sums(*_cones(run), readings, _flat_bool(occupied), forward.kernel_model(run.sensor.max_range),
+                                   out, obstacles)
     return out, obstacles
 
 
@@ -137,11 +143,8 @@ def fit_at_map(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: 
     iterations = 0
     # the cones' obstacles found once, at twice the starting sigma, serve every iteration whose
     # sigma stays below (found again if it grows beyond): the same sums, one cone walk
-    templates = run.templates
-    obstacles = F.find_obstacles(templates.kernel_arrays, flat_offsets(templates, run.grid.width), run.grid.shape,
-                                 readings, np.ascontiguousarray(occupied, dtype=np.bool_),
-                                 min(2.0 * forward.sigma, tuning.sigma_max), float(forward.window),
-                                 float(run.sensor.max_range))
+    obstacles = F.find_obstacles(*_cones(run), readings, _flat_bool(occupied), min(2.0 * forward.sigma, tuning.sigma_max),
+                                 float(forward.window), float(run.sensor.max_range))
     while iterations < tuning.fit_iterations:
         iterations += 1
         sums, obstacles = expectations(run, readings, occupied, forward, obstacles)
@@ -165,10 +168,7 @@ def incidence_at(run: LaidOutReadings, readings: F.ExpectationReadings, occupied
     (``surface.incidence_counts``, surfaces ``normals``), and where the echo rate falls to half
     (``specular_angle``)."""
     counts = np.zeros((2, INCIDENCE_BINS))
-    templates = run.templates
-    incidence_counts(templates.kernel_arrays, flat_offsets(templates, run.grid.width), run.grid.shape,
-                     (readings.rows, readings.cols, readings.bins, readings.z),
-                     np.ascontiguousarray(occupied, dtype=np.bool_), normals,
+    incidence_counts(*_cones(run), (readings.rows, readings.cols, readings.bins, readings.z), _flat_bool(occupied), normals,
                      (float(forward.sigma), float(forward.window), float(run.sensor.max_range), tuning.pass_margin), counts)
     return {"echoes": counts[0].astype(int).tolist(), "passes": counts[1].astype(int).tolist(),
             "specular_deg": specular_angle(counts, tuning.specular_rate)}
@@ -182,13 +182,12 @@ def opening_at(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: 
     (the nearest occupied cell within the opening lies within the Gaussian window of the range)
     for each opening, per degree off the axis (``lobe.opening_matches``), and the opening
     learned from that curve (``lobe.learned_opening``)."""
-    templates = run.templates
+    tpl, flat, shape = _cones(run)
     matches = np.zeros(lobe_bins(run.sensor.beam_width))
     z_max = float(run.sensor.max_range)
-    opening_matches(templates.kernel_arrays, flat_offsets(templates, run.grid.width), templates.bearings,
-                    run.grid.shape, (readings.rows, readings.cols, readings.bins, readings.z),
-                    np.ascontiguousarray(occupied, dtype=np.bool_),
-                    (float(forward.window * forward.sigma), z_max, math.radians(LOBE_BIN_DEG)), matches)
+    opening_matches(tpl, flat, run.templates.bearings, shape, (readings.rows, readings.cols, readings.bins, readings.z),
+                    _flat_bool(occupied), (float(forward.window * forward.sigma), z_max, math.radians(LOBE_BIN_DEG)),
+                    matches)
     echoes = int(np.sum(readings.z < z_max))
     return {"echoes": echoes, "explained": matches.astype(int).tolist(), "bin_deg": LOBE_BIN_DEG,
             "cone_deg": cone_deg(run.sensor.beam_width),

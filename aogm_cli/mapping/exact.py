@@ -43,7 +43,7 @@ class ExactMapper:
         self.sensor, self.grid, self.config = sensor, grid, config
         self.templates = forward_templates(grid, sensor) if templates is None else templates
         self.flat = flat_offsets(self.templates, grid.width)
-        self.model = _model(forward, sensor.max_range)
+        self.model = forward.kernel_model(sensor.max_range)
         self.bounds = (_sigmoid(-BOUND), _sigmoid(BOUND), float(config.prior))
         self.scratch = cone_scratch(self.templates)
         n = grid.height * grid.width
@@ -72,12 +72,6 @@ class ExactMapper:
         return np.log(p / (1.0 - p)).astype(np.float32), observed
 
 
-def _model(forward: ForwardModelConfig, z_max: float) -> tuple:
-    """The kernels' ``model``: (p_rand, p_max, p_hit, sigma, window, z_max)."""
-    return (float(forward.p_rand), float(forward.p_max), float(forward.p_hit), float(forward.sigma),
-            float(forward.window), float(z_max))
-
-
 def map_evidence(run: LaidOutReadings, forward: ForwardModelConfig, occupied: np.ndarray) -> np.ndarray:
     """(H, W) float64: each cell's evidence at the binary map ``occupied`` (flat or (H, W) bool),
     log p(Z | m, cell occupied) - log p(Z | m, cell free) over every reading of ``run`` (its
@@ -90,7 +84,7 @@ def map_evidence(run: LaidOutReadings, forward: ForwardModelConfig, occupied: np
     occupancy[:n] = np.asarray(occupied, dtype=bool).reshape(-1)
     z, limit = deflect(run.z, run.shadow, run.sensor.max_range)
     readings = ExpectationReadings(run.rows, run.cols, run.bins, z, limit)
-    model, flat = _model(forward, run.sensor.max_range), flat_offsets(templates, grid.width)
+    model, flat = forward.kernel_model(run.sensor.max_range), flat_offsets(templates, grid.width)
     scratch = [cone_scratch(templates) for _ in range(READING_PARTS)]
     total = np.zeros(n)
     summed_in_parts(z.size, total, lambda k, part, span: map_evidence_sums(

@@ -38,7 +38,7 @@ BYTES_PER_HELD_READING = 56
 SAMPLE_BLOCKS, BLOCK_SCANS = 32, 64  # ranges read to estimate the cones' mean size
 
 
-def cone_cells(reach_cells: np.ndarray, beam_width: float) -> np.ndarray:
+def cone_area_cells(reach_cells: np.ndarray, beam_width: float) -> np.ndarray:
     """Cells of a cone of ``reach_cells`` cells' radius: its area, at least a ray's length."""
     return np.maximum(0.5 * beam_width * reach_cells**2, reach_cells) + 1.0
 
@@ -71,7 +71,7 @@ def map_estimate(reader, mode: str, params: MapParams) -> Estimate:
     pad = 0.0 if narrow and mode == "standard" else math.floor(reach_cells)
     padded = (grid.height + 2 * pad) * (grid.width + 2 * pad) if mode != "em" else 0.0
     templates = 0.0 if narrow and mode == "standard" else (2 * pad + 1) ** 2
-    per_reading = float(cone_cells(np.array(mean_reach(reader, params, res) / res), sensor.beam_width))
+    per_reading = float(cone_area_cells(np.array(mean_reach(reader, params, res) / res), sensor.beam_width))
     entries = readings * per_reading
     grid_bytes = cells * BYTES_PER_CELL + padded * BYTES_PER_PADDED_CELL + templates * BYTES_PER_TEMPLATE_CELL
     reading_bytes = 0.0

@@ -32,9 +32,12 @@ from aogm_cli.sensor_models.cone import (
 from aogm_cli.sensor_models.exact_inverse import MARGIN, ExactModelConfig
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig
 from aogm_cli.sensor_models.inverse_model import (
+    UNOBSERVED,
     InverseModelConfig,
     angular_profile,
+    float32_update,
     inverse_update,
+    observed_log_odds,
     occupied_arc,
 )
 from aogm_cli.sensor_models.ray import is_narrow_beam
@@ -111,8 +114,6 @@ class StandardMapper:
     bounds checks; only sensors outside the grid take the kernel's checked path.
     """
 
-    UNOBSERVED = np.float32(-np.inf)
-
     def __init__(
         self,
         sensor: SensorSpec,
@@ -144,7 +145,7 @@ class StandardMapper:
         size = int(np.diff(templates.offsets).max())
         # spare cells after the grid absorb the updates of cone cells outside it
         hp, wp = self.padded_shape
-        flat = np.full(hp * wp + SPARE_MASK + 1, self.UNOBSERVED, dtype=np.float32)
+        flat = np.full(hp * wp + SPARE_MASK + 1, UNOBSERVED, dtype=np.float32)
         self._grid = PaddedGrid(flat, hp, wp, np.empty(size, dtype=np.int32), np.empty(size, dtype=np.float32))
         padded = flat[: hp * wp].reshape(hp, wp)
         self.state = padded[self.pad : self.pad + grid.height, self.pad : self.pad + grid.width]
@@ -164,10 +165,7 @@ class StandardMapper:
 
     def result(self) -> tuple[np.ndarray, np.ndarray]:
         """(log_odds float32 (H, W), observed bool (H, W)); unobserved cells hold the prior l0."""
-        log_odds = self.state.copy()
-        observed = log_odds != self.UNOBSERVED
-        log_odds[~observed] = np.float32(self.config.l0)
-        return log_odds, observed
+        return observed_log_odds(self.state, self.config.l0)
 
 
 def _mapper_for(sensor: SensorSpec, grid: GridSpec, config: InverseModelConfig, templates: ConeTemplates | None,
@@ -200,9 +198,8 @@ def standard_map(
     ``chunks`` yields (start, time, pose (T, 3), ranges (T, S)) with ranges as logged, like
     ``LogReader.chunks()``; the range convention is applied here: cones take
     ``readings.echo_ranges``, narrow beams (rays) the logged range, whose hit is the cell
-    holding the endpoint (OctoMap's convention; on the intel log 0.892 of endpoints land on
-    occupied cells this way, 0.819 with the half-cell shift). Memory is the grid, the
-    templates and one chunk. Unobserved cells hold the prior l0. ``templates`` defaults to
+    holding the endpoint (OctoMap's convention, which puts more endpoints on occupied cells than
+    the half-cell shift: docs/algorithms.md, "Where the defaults come from"). Memory is the grid, the templates and one chunk. Unobserved cells hold the prior l0. ``templates`` defaults to
     ``readings.cone_templates(grid, sensor)``; rays need none. ``narrow`` is
     ``ray.is_narrow_beam(sensor, grid.resolution)``, decided here unless the caller has.
     ``cuts`` ((scans, sensors) template ranges, cones only) stops deflected beams
@@ -313,22 +310,15 @@ def truth_grid_map(log: Log) -> tuple[np.ndarray, np.ndarray]:
 
 
 # Speed (``bench/bench_standard.py`` compares the kernel with a plain compiled scatter-add over the
-# same cells):
+# same cells; the grid's padding and "observed" inside it: ``StandardMapper``):
 # * no transcendental function per cell: per template entry the kernel reads a precomputed angular
 #   weight a (E_a, or 1 for the constant model), the range d and a flat index offset; the free
 #   increment is a (c_free - B u^2) with u = d - Rmin and B = c_free / span^2 per reading (Elfes'
 #   E_r), the occupied one c_occ a;
 # * a reading's region boundaries are short table-assisted binary searches in its template's sorted
-#   ranges (``cone.range_search``);
-# * increments and flat indices are computed in vectorised passes (loops over slices from 0, so that
-#   numba drops its negative-index checks; flat offsets precomputed per grid width, so no integer
-#   multiplies), leaving a scalar read-modify-write loop as lean as the scatter-add's;
-# * the kernel runs without numba's reference counting (``_nrt=False``): its inputs come as named
-#   tuples, whose arrays' reference counts would otherwise be updated per reading;
-# * "observed" lives in the log-odds grid itself (-inf until first seen), and the grid is padded by the
-#   cone's reach, so that there is no second scattered write and no bounds check for sensors inside.
-# _nrt=False (a private numba option, as em_kernels._sweep): the kernel allocates nothing, and
-# without reference counting its tuples' arrays cost nothing per reading
+#   ranges (``cone.range_search``); flat offsets are precomputed per grid width (no multiplies);
+# * ``_nrt=False`` (a private numba option, as every kernel that allocates nothing): without
+#   reference counting, the arrays of its named-tuple inputs cost nothing per reading.
 @numba.njit(cache=True, _nrt=False)
 def _standard_kernel(grid, readings, tpl, flat, entries, update, span):
     """Compiled log-odds update of readings t = span[0], span[0] + 1, ... < span[1] in order on
@@ -341,9 +331,9 @@ def _standard_kernel(grid, readings, tpl, flat, entries, update, span):
     at the end that absorb the updates of cone cells outside it. Per reading, entries
     [0, f0) of its template are the blind zone (observed only), [f0, f1) get free evidence
     and [f1, m) occupied evidence; every update is clamped. Vectorised passes write the increments to
-    ``inc_buf`` and the cells' flat indices to ``idx_buf``; then a scalar pass does the
-    read-modify-write of the grid. Loops run over slices from 0 so that numba drops its
-    negative-index checks, which would otherwise stop vectorisation.
+    ``inc_buf`` and the cells' flat indices to ``idx_buf``; then a scalar pass, as lean as a
+    scatter-add, does the read-modify-write of the grid. Loops run over slices from 0 so that
+    numba drops its negative-index checks, which would otherwise stop vectorisation.
     """
     state = grid.state
     height = grid.height
@@ -367,10 +357,7 @@ def _standard_kernel(grid, readings, tpl, flat, entries, update, span):
     min_range = update.min_range
     max_range = update.max_range
     c_free = update.l_free_minus_l0
-    c_occ = np.float32(update.l_occ_minus_l0)
-    lo = np.float32(update.clamp_min)
-    hi = np.float32(update.clamp_max)
-    l0 = np.float32(update.l0)
+    c_occ, lo, hi, l0 = float32_update(update)
     elfes = update.elfes
     zero = np.float32(0.0)
     for t in range(span[0], span[1]):

@@ -245,24 +245,17 @@ def cone_cells(tpl, height, width, row, col, k, limit, out_index, out_range, low
     return n
 
 
-def sensor_cells(pose: np.ndarray, sensor, grid: GridSpec, templates: ConeTemplates):
-    """Each reading's sensor cell and heading bin: (rows, cols, bins, valid), each (T, S).
+def reading_geometry(pose: np.ndarray, sensor, grid: GridSpec, templates: ConeTemplates):
+    """Each reading's sensor cell, heading bin, validity and axis offset: (rows, cols, bins,
+    valid, offset), each (T, S).
 
-    ``pose`` is (T, 3) robot x, y, yaw; ``sensor`` a ``logfile.SensorSpec`` whose mounts (S, 3)
+    ``pose`` is (T, 3) robot x, y, yaw; ``sensor`` a ``core.log.SensorSpec`` whose mounts (S, 3)
     are composed with each pose (``frames.sensor_poses``). A reading whose pose is not finite
     is marked invalid. Sensor positions far outside the grid are pulled in to just beyond the
-    templates' reach (they still see no cell), so that cell indices never overflow.
-    """
-    rows, cols, bins, valid, _ = reading_geometry(pose, sensor, grid, templates)
-    return rows, cols, bins, valid
-
-
-def reading_geometry(pose: np.ndarray, sensor, grid: GridSpec, templates: ConeTemplates):
-    """``sensor_cells`` plus each reading's ``axis_offset`` (T, S): the sensor's offset from
-    its cell's centre along the beam axis (m, |offset| <= res / sqrt 2; 0 when invalid).
-
-    A cell at template range d lies about d - axis_offset from the real sensor, so a reading
-    z compares with template ranges at z + axis_offset.
+    templates' reach (they still see no cell), so that cell indices never overflow. ``offset``
+    is the sensor's offset from its cell's centre along the beam axis (m, |offset| <= res /
+    sqrt 2; 0 when invalid): a cell at template range d lies about d - offset from the real
+    sensor, so a reading z compares with template ranges at z + offset.
     """
     sp = sensor_poses(np.asarray(pose, dtype=np.float64).reshape(-1, 3), sensor.mount)
     xs, ys, yaws = sp[..., 0], sp[..., 1], sp[..., 2]

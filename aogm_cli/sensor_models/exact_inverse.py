@@ -1,6 +1,6 @@
 """The exact inverse sensor model of Thrun's forward model (Kaufman et al. 2016, for cones): each
 cell's posterior given one reading and the map so far, cells independent, in time linear in the
-cone's cells (``cone_log_ratios``), and the sequential log-odds update of a log's readings with it.
+cone's cells (``cone_ratios``), and the sequential log-odds update of a log's readings with it.
 """
 
 from __future__ import annotations
@@ -26,16 +26,10 @@ NEGLIGIBLE = 1e-9
 @dataclass(frozen=True)
 class ExactModelConfig:
     """The exact inverse model's own settings (section ``exact:``): where it starts, how far it
-    may go, and whether it thins the standard map.
-
-    Measured on the 13 bundled worlds without a Pioneer (seed 1, standard mode; the exact map
-    alone, and the Elfes map thinned by it): from a prior of 0.5 the exact map learns nothing
-    (a beam's chance to reach a cell is the product of 1 - p_hit P over the cone's cells before
-    it: 0.65 per cell at 0.5, so the far cells of a cone stay unknown; Brier 0.25, block 1.0);
-    a prior of 0.1 (log-odds -2.2) and bounds of +-7 let it work. Alone it has thin walls with
-    holes (accuracy 0.84-0.96 against Elfes' 0.76-0.89, block 0.002-0.06 against 0.13-0.42,
-    but leak 0.06-0.48): each reading that passes a wall cell counts against it, and a wall
-    already believed explains the next echo, which then adds little (explaining away).
+    may go, and whether it thins the standard map. From a prior of 0.5 the exact map learns
+    nothing (a beam's chance to reach a cell is the product of 1 - p_hit P over the cone's cells
+    before it), hence 0.1; what it gives alone and as thinning: docs/algorithms.md, "The exact
+    inverse model".
     """
 
     prior: float = 0.1  # the occupancy each cell starts at
@@ -76,29 +70,23 @@ class ExactModelConfig:
 # by a_j: a cell believed occupied (a_j -> 1 - p_hit) costs nothing extra; and the map is kept as
 # probabilities, so that a cell's update is a few multiplications (no exp or log per cell).
 #
-# Speed (the thinned map's pass; its ratios within a relative 3e-15 of the plain three passes above,
-# every map of bench/map_fingerprints.py bit for bit as theirs):
+# Speed (the thinned map's pass; docs/algorithms.md, "The exact inverse model", has the measures
+# and the tests that bound the rounding):
 # * most of a cone lies before the Gaussian window (g = 0, ``gaussian_at``): there U_j = 0 and the
 #   terms in g vanish exactly (0 + x = x), and A_j R_j is P R_w / a_j, P the product of every a_i
-#   before the window and R_w the backward sum at it; the ratio (C + w q P R_w / a_j) /
-#   (C + w P R_w / a_j) is (C a_j + w q P R_w) / (C a_j + w P R_w): one product (in four
-#   independent chains, whose latencies overlap) and a loop without dependencies or divisions;
-#   within the window one exp per distinct range (a template holds cells of equal range next to
-#   each other);
-# * the ratios leave the kernel as numerator and denominator (``cone_terms``): the update of a
-#   cell's odds by N / D, back to a probability, is p N / (p N + (1 - p) D), one division per cell
-#   where there were three; the loops are vectorised (numba's "numpy" error model: no zero test
-#   per division; no denominator here is 0: C > 0, a_j >= q > 0), with unsigned indices in the
-#   window (no test for a negative index). Corridor_door's exact pass 7.2-7.8 -> 6.3 ms, against
-#   the standard map's 1.5 ms (``bench/bench_seed_adaptive.py``'s standard:thin row);
-# * a reading whose every w S_j is below half an ulp of C (p(z | m) = C whatever the map: the beam
-#   cannot have come back through the cells before the window, say a max-range reading across
-#   unknown cells) has every ratio exactly 1: it changes no observed cell and marks the others
-#   observed at the prior. When the product P is below that bound the reading is passed over
-#   (``cone_terms``' ``floor``). Bounds, g_max the largest of G0 and the window's g: S_j <= P R / q
-#   before the window whatever j (A_j R_j is prod_{l != j} a_l times R at the window, and a_j >= q),
-#   S_j <= P (n_window + 2) g_max within it (R_j is an expectation of g values); their rounding (a
-#   relative 1e-12 over a cone) is covered four times over.
+#   before the window and R_w the backward sum at it, so the ratio there is (C a_j + w q P R_w) /
+#   (C a_j + w P R_w): one product and a loop without dependencies or divisions; within the window
+#   one exp per distinct range (a template holds cells of equal range next to each other);
+# * the ratios leave the kernel as numerator and denominator (``cone_terms``): one division per
+#   cell, in vectorised loops (numba's "numpy" error model: no zero test; no denominator here is 0:
+#   C > 0, a_j >= q > 0), with unsigned indices in the window (no test for a negative index);
+# * a reading whose every w S_j is below half an ulp of C (p(z | m) = C whatever the map, say a
+#   max-range reading across unknown cells) has every ratio exactly 1: it changes no observed cell
+#   and marks the others observed at the prior. When the product P is below that bound the reading
+#   is passed over (``cone_terms``' ``floor``). Bounds, g_max the largest of G0 and the window's g:
+#   S_j <= P R / q before the window whatever j (A_j R_j is prod_{l != j} a_l times R at the window,
+#   and a_j >= q), S_j <= P (n_window + 2) g_max within it (R_j is an expectation of g values);
+#   their rounding (a relative 1e-12 over a cone) is covered four times over.
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")

@@ -74,6 +74,11 @@ class ForwardModelConfig:
     def as_dict(self) -> dict:
         return asdict(self)
 
+    def kernel_model(self, z_max: float) -> tuple:
+        """The compiled kernels' ``model``: (p_rand, p_max, p_hit, sigma, window, z_max)."""
+        return (float(self.p_rand), float(self.p_max), float(self.p_hit), float(self.sigma), float(self.window),
+                float(z_max))
+
 
 class ForwardArrays(NamedTuple):
     """A ``ForwardIndex`` as compiled kernels take it (``ForwardIndex.kernel_arrays``)."""
@@ -114,14 +119,15 @@ class ForwardIndex:
         return ForwardArrays(self.ptr, self.cell, self.g, self.g0, self.const, float(self.w))
 
 
-class ForwardReadings(NamedTuple):
-    """``_fill_index``'s readings: flat arrays of one length."""
+class ExpectationReadings(NamedTuple):
+    """Readings as the forward model's kernels take them (``expectation_sums``, ``_fill_index``, the
+    exact model's): flat arrays of one length, NaN readings left out."""
 
     rows: np.ndarray  # the sensor's cell (int64; may lie outside the grid)
     cols: np.ndarray
     bins: np.ndarray  # heading bin (int64)
-    z: np.ndarray  # float64 range in template ranges (max-range readings: z_max)
-    limit: np.ndarray  # float64 template range up to which the cone counts
+    z: np.ndarray  # float64 range in template ranges; +inf (or >= z_max): a max-range reading
+    limit: np.ndarray  # float64 template range beyond which the cone holds no cell (``cone_limits``; +inf: none)
 
 
 class IndexGrid(NamedTuple):
@@ -204,16 +210,11 @@ def _reading_sum(ptr, cell, g, g0, p_hit, occupied, t):
 @numba.njit(cache=True)
 def reading_log_likelihoods(index, p_hit, occupied):
     """log p(z_t | m) for every reading of ``index`` (``ForwardArrays``)."""
-    ptr = index.ptr
-    cell = index.cell
-    g = index.g
-    g0 = index.g0
-    const = index.const
-    w = index.w
-    n = ptr.shape[0] - 1
+    n = index.ptr.shape[0] - 1
     out = np.empty(n)
     for t in range(n):
-        out[t] = math.log(const[t] + w * _reading_sum(ptr, cell, g, g0, p_hit, occupied, t))
+        s = _reading_sum(index.ptr, index.cell, index.g, index.g0, p_hit, occupied, t)
+        out[t] = math.log(index.const[t] + index.w * s)
     return out
 
 
@@ -222,51 +223,37 @@ def log_likelihoods(index: ForwardIndex, occupied_flat: np.ndarray) -> np.ndarra
     return reading_log_likelihoods(index.kernel_arrays, index.p_hit, np.ascontiguousarray(occupied_flat, dtype=np.bool_))
 
 
-# _nrt=False (a private numba option, as em_kernels._sweep): the kernel allocates nothing (its scratch comes in ``out``), and
-# without reference counting its tuples' arrays cost nothing per reading
-@numba.njit(cache=True, _nrt=False)
+@numba.njit(cache=True, _nrt=False)  # allocates nothing: as ``standard._standard_kernel``
 def _fill_index(tpl, flat, grid, readings, sigma, window, out):
     """Cone cells (flat ids) and Gaussians of every reading, packed reading after reading.
 
     ``tpl`` is ``ConeTemplates.kernel_arrays``, ``flat`` its ``cone.FlatOffsets`` for the
-    grid's width, ``grid`` an ``IndexGrid``, ``readings`` ``ForwardReadings`` and ``out``
-    ``IndexBuffers``; returns the number of entries written.
+    grid's width, ``grid`` an ``IndexGrid``, ``readings`` ``ExpectationReadings`` (each cone's
+    ``limit`` set) and ``out`` ``IndexBuffers``; returns the number of entries written.
     Each cone is the template's entries up to the reading's limit, in range order, with the
     cells outside the grid left out (``cone.cone_flat_cells``, as the standard mapper walks
     them). With a non-empty ``mask`` (flat bool), a reading none of whose cells is in the
     mask gets no entries. With a non-empty ``held_free``, the cells it marks are left out.
     """
-    offsets = tpl.offsets
-    ranges = tpl.ranges
-    base_bin = tpl.base_bin
-    ext = tpl.extent
     height = grid.height
     width = grid.width
-    mask = grid.mask
-    held_free = grid.held_free
-    rows = readings.rows
-    cols = readings.cols
-    bins = readings.bins
-    z = readings.z
-    limits = readings.limit
-    out_cell = out.cell
-    out_g = out.g
-    counts = out.counts
-    ib = out.scratch
+    ext = tpl.extent
     n_cells = height * width
-    use_mask = mask.shape[0] > 0
-    drop = held_free.shape[0] > 0
+    use_mask = grid.mask.shape[0] > 0
+    drop = grid.held_free.shape[0] > 0
+    ib = out.scratch
     pos = 0
-    for t in range(rows.shape[0]):
-        row0 = rows[t]
-        col0 = cols[t]
-        counts[t] = 0
+    for t in range(readings.z.shape[0]):
+        row0 = readings.rows[t]
+        col0 = readings.cols[t]
+        out.counts[t] = 0
         if row0 + ext < 0 or row0 - ext >= height or col0 + ext < 0 or col0 - ext >= width:
             continue  # the cone cannot touch the grid
-        k = bins[t]
-        b = base_bin[k]
-        r = ranges[offsets[b] : offsets[b + 1]]
-        m = cone_entries(r, z[t], limits[t], sigma, window)
+        k = readings.bins[t]
+        b = tpl.base_bin[k]
+        r = tpl.ranges[tpl.offsets[b] : tpl.offsets[b + 1]]
+        z = readings.z[t]
+        m = cone_entries(r, z, readings.limit[t], sigma, window)
         cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width)
         touches = not use_mask
         n = 0
@@ -274,15 +261,15 @@ def _fill_index(tpl, flat, grid, readings, sigma, window, out):
             c = np.int64(ib[j])
             if c >= n_cells:  # outside the grid
                 continue
-            if use_mask and mask[c]:
+            if use_mask and grid.mask[c]:
                 touches = True
-            if drop and held_free[c]:
+            if drop and grid.held_free[c]:
                 continue
-            out_cell[pos + n] = c
-            out_g[pos + n] = gaussian_at(z[t], r[j], sigma, window)
+            out.cell[pos + n] = c
+            out.g[pos + n] = gaussian_at(z, r[j], sigma, window)
             n += 1
         if touches:  # else none of its cells is in the mask: the reading keeps no entry
-            counts[t] = n
+            out.counts[t] = n
             pos += n
     return pos
 
@@ -330,7 +317,7 @@ def build_forward_index(
     shadow: np.ndarray | None = None,
 ) -> ForwardIndex:
     """The forward model's index for ``cones`` = (rows, cols, bins, z): readings z taken from
-    sensor cells (rows, cols) with heading bins ``bins`` (as ``cone.sensor_cells`` gives them;
+    sensor cells (rows, cols) with heading bins ``bins`` (as ``cone.reading_geometry`` gives them;
     flat arrays of one length).
 
     NaN readings are dropped; +inf is a max-range reading (cone up to z_max). Other cones end
@@ -364,7 +351,7 @@ def build_forward_index(
     mask, held_free = (np.zeros(0, dtype=np.bool_) if a is None else np.ascontiguousarray(a, dtype=np.bool_).reshape(-1)
                        for a in masks)
     n = _fill_index(templates.kernel_arrays, flat_offsets(templates, grid.width),
-                    IndexGrid(grid.height, grid.width, mask, held_free), ForwardReadings(rows, cols, bins, z_eff, limits),
+                    IndexGrid(grid.height, grid.width, mask, held_free), ExpectationReadings(rows, cols, bins, z_eff, limits),
                     float(config.sigma), float(config.window), IndexBuffers(out_cell, out_g, counts, scratch))
     ptr = np.zeros(len(z) + 1, dtype=np.int64)
     np.cumsum(counts, out=ptr[1:])
@@ -374,16 +361,6 @@ def build_forward_index(
 
 # The E-step's sufficient statistics (``expectation_sums``), slots of its output array
 E_READINGS, E_LOGLIK, E_RANDOM, E_DROPOUT, E_DETECTED, E_EXAMINED, E_SQUARED, E_MISSED, E_SIZE = range(9)
-
-
-class ExpectationReadings(NamedTuple):
-    """``expectation_sums``' readings: flat arrays of one length (NaN readings left out)."""
-
-    rows: np.ndarray  # the sensor's cell (int64; may lie outside the grid)
-    cols: np.ndarray
-    bins: np.ndarray  # heading bin (int64)
-    z: np.ndarray  # float64 range in template ranges; +inf (or >= z_max): a max-range reading
-    limit: np.ndarray  # float64 where a shadow cuts the cone (``cone_limits``; +inf: none)
 
 
 @numba.njit(cache=True)

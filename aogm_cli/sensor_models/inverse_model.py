@@ -159,6 +159,18 @@ class InverseUpdate(NamedTuple):
     resolution: float  # the grid's cell size (m)
 
 
+UNOBSERVED = np.float32(-np.inf)  # a cell of the mappers' log-odds state that no reading reached yet
+
+
+def observed_log_odds(state: np.ndarray, l0: float) -> tuple[np.ndarray, np.ndarray]:
+    """(log_odds float32, observed bool) of a mapper's float32 log-odds ``state``: cells still
+    ``UNOBSERVED`` are not observed and hold the prior ``l0``."""
+    log_odds = state.copy()
+    observed = log_odds != UNOBSERVED
+    log_odds[~observed] = np.float32(l0)
+    return log_odds, observed
+
+
 def inverse_update(config: InverseModelConfig, sensor, resolution: float) -> InverseUpdate:
     """The ``InverseUpdate`` of ``config`` for ``sensor`` (its min and max range) on a grid of
     ``resolution`` metres."""
@@ -174,6 +186,14 @@ def inverse_update(config: InverseModelConfig, sensor, resolution: float) -> Inv
         elfes=config.model == "elfes",
         resolution=float(resolution),
     )
+
+
+@numba.njit(cache=True, inline="always")
+def float32_update(update):
+    """(c_occ, lo, hi, l0) of an ``InverseUpdate`` as float32, as the compiled mappers add and
+    compare them: the occupied increment, the clamps and the prior."""
+    return (np.float32(update.l_occ_minus_l0), np.float32(update.clamp_min), np.float32(update.clamp_max),
+            np.float32(update.l0))
 
 
 @numba.njit(cache=True, inline="always")

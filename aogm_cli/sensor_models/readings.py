@@ -165,28 +165,18 @@ class BandGrid(NamedTuple):
 def _band(tpl, grid, readings, counts, span):
     """Mark the band of each reading span[0] <= t < span[1] in ``grid.swept`` and count its
     cells of ``grid.cell_mask`` into ``counts``; ``tpl`` is ``ConeTemplates.kernel_arrays``."""
-    height = grid.height
-    width = grid.width
-    cell_mask = grid.cell_mask
-    swept = grid.swept
-    rows = readings.rows
-    cols = readings.cols
-    bins = readings.bins
-    lower = readings.lower
-    upper = readings.upper
-    offsets = tpl.offsets
-    scratch_cell = np.empty(offsets[-1], dtype=np.int64)
-    scratch_range = np.empty(offsets[-1], dtype=np.float64)
+    scratch_cell = np.empty(tpl.offsets[-1], dtype=np.int64)
+    scratch_range = np.empty(tpl.offsets[-1], dtype=np.float64)
     for t in range(span[0], span[1]):
-        if not upper[t] >= 0.0:  # no band (max-range or invalid reading)
+        if not readings.upper[t] >= 0.0:  # no band (max-range or invalid reading)
             continue
-        n = cone_cells(tpl, height, width, rows[t], cols[t], bins[t], upper[t], scratch_cell, scratch_range,
-                       lower[t])
+        n = cone_cells(tpl, grid.height, grid.width, readings.rows[t], readings.cols[t], readings.bins[t],
+                       readings.upper[t], scratch_cell, scratch_range, readings.lower[t])
         count = 0
         for i in range(n):
             cell = scratch_cell[i]
-            swept[cell] = True
-            if cell_mask[cell]:
+            grid.swept[cell] = True
+            if grid.cell_mask[cell]:
                 count += 1
         counts[t] = count
 

@@ -108,6 +108,14 @@ def _dda_start(ox, oy, dx, dy, tmax, gx0, gy0, cell, nx, ny):
     return t0, t1, tx_in >= ty_in, ix, iy, sx, sy, tx, ty, tdx, tdy
 
 
+@numba.njit(cache=True, inline="always")
+def _dda_step(i, step, t_next, t_delta, n):
+    """One traversal step along one axis: (the next cell's index, the t of the edge after it,
+    whether it lies in [0, n))."""
+    i += step
+    return i, t_next + t_delta, 0 <= i < n
+
+
 @numba.njit(cache=True, inline="always", _nrt=False)
 def _cast_shapes(ox, oy, dx, dy, tmax, geo):
     """First hit of the ray o + t d (d unit, 0 < t <= tmax) on segments and circles.
@@ -173,15 +181,11 @@ def _cast_shapes(ox, oy, dx, dy, tmax, geo):
         if best <= t_next or t_next > t1:
             break
         if tx < ty:
-            ix += sx
-            tx += tdx
-            if ix < 0 or ix >= nbx:
-                break
+            ix, tx, inside = _dda_step(ix, sx, tx, tdx, nbx)
         else:
-            iy += sy
-            ty += tdy
-            if iy < 0 or iy >= nby:
-                break
+            iy, ty, inside = _dda_step(iy, sy, ty, tdy, nby)
+        if not inside:
+            break
     if best_kind == 0:
         ex = seg[best_k, 2]
         ey = seg[best_k, 3]
@@ -219,21 +223,14 @@ def _cast_bitmap(ox, oy, dx, dy, tmax, bitmap, gx0, gy0, res):
                 return t_in, abs(dx), -float(sx), 0.0
             return t_in, abs(dy), 0.0, -float(sy)
         test = True
-        if tx < ty:
+        x_face = tx < ty
+        if x_face:
             t_in = tx
-            ix += sx
-            tx += tdx
-            x_face = True
-            if ix < 0 or ix >= w:
-                break
+            ix, tx, inside = _dda_step(ix, sx, tx, tdx, w)
         else:
             t_in = ty
-            iy += sy
-            ty += tdy
-            x_face = False
-            if iy < 0 or iy >= h:
-                break
-        if t_in > t1:
+            iy, ty, inside = _dda_step(iy, sy, ty, tdy, h)
+        if not inside or t_in > t1:
             break
     return np.inf, 0.0, 0.0, 0.0
 
