@@ -25,7 +25,7 @@ from aogm_cli.mapping.map_cost import map_estimate
 from aogm_cli.mapping.params import MapParams, params_from
 from aogm_cli.mapping.pipeline import Progress
 from aogm_cli.mapping.plan import CONE
-from aogm_cli.sensor_models import cone
+from aogm_cli.sensor_models import cone_build
 
 __all__ = ["BASELINE_DETECTORS", "NamedSource", "calibration_notice", "carried_model", "check_logs", "given_model",
            "learn_sensor_models", "map_file", "resolve_detector", "resolve_params", "sensor_model"]
@@ -60,7 +60,7 @@ def map_file(path: str | Path, mode: str, params: MapParams, detector: str | Non
     estimate exceeds ``limits`` (``mapping.modes.map_source``)."""
     from aogm_cli.mapping.modes import ALL, Flagger, map_source
 
-    cone.use_store(template_store.STORE)  # cone templates kept on disk, in a Dask worker too
+    cone_build.use_store(template_store.STORE)  # cone templates kept on disk, in a Dask worker too
     flagger = Flagger(*resolve_detector(detector)) if mode == "adaptive" else ALL
 
     def run(log):

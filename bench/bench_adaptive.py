@@ -11,12 +11,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from seed_logs import for_each_seed_log
+from seed_logs import for_each_seed_log, standard_pass
 
 from aogm_cli.io.logfile import LogReader
 from aogm_cli.map_files import map_file, resolve_params
 from aogm_cli.mapping.pipeline import log_grid
-from aogm_cli.mapping.standard import standard_pass
 
 
 def bench(world_name: str, log_path: Path) -> None:

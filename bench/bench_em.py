@@ -14,12 +14,11 @@ import time
 from pathlib import Path
 
 import numpy as np
-from seed_logs import em_inputs, for_each_seed_log
+from seed_logs import em_inputs, for_each_seed_log, standard_pass
 
 from aogm_cli.io.logfile import LogReader
 from aogm_cli.map_files import resolve_params
 from aogm_cli.mapping import em as E
-from aogm_cli.mapping.standard import standard_pass
 
 
 def one_run(inputs):

@@ -2,7 +2,7 @@
 
 Run as ``python bench/bench_seed_adaptive.py [--runs 5] [--json OUT]`` (part of ``make
 bench-scale``). Simulates corridor_door and corridor_specular (seed 1) and maps each log in this
-one process with ``aogm_cli.mapping.modes.map_file`` (which compiles every kernel first, outside
+one process with ``aogm_cli.map_files.map_file`` (which compiles every kernel first, outside
 ``runtime_s``): standard, em, adaptive with the packaged detector, and adaptive with
 ``--detector all`` and ``--detector none``, and with Elfes' map outside its clusters
 (``adaptive:elfes``, the design before the thinned map became the default for these logs), ``--runs`` rounds of every mode, keeping each

@@ -2,7 +2,7 @@
 
 Run as ``python bench/compare_maps.py LOGS_DIR MAPS_DIR`` where MAPS_DIR holds the earlier
 ``<logstem>_<mode>.h5`` of every ``LOGS_DIR/*.h5`` (``aogm compare ... --maps-dir MAPS_DIR`` at
-the earlier commit). Maps each log in em and adaptive with ``mapping.modes.map_file`` and prints a
+the earlier commit). Maps each log in em and adaptive with ``map_files.map_file`` and prints a
 Markdown table: accuracy before and after (``evaluation.metrics.evaluate`` against the log's
 truth), whether ``map/probability`` and ``map/occupied`` are identical, EM's objective at
 convergence before and after, and both runtimes.

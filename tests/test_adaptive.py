@@ -21,7 +21,7 @@ from aogm_cli.mapping.adaptive import coupled_groups, find_clusters
 from aogm_cli.mapping.cluster import label_clusters
 from aogm_cli.mapping.em import em_problem, em_readings, find_root
 from aogm_cli.mapping.view import footprint, hit_rate_curve, one_scale, pool_adjacent_violators
-from aogm_cli.sensor_models.cone import build_cone_templates
+from aogm_cli.sensor_models.cone_build import build_cone_templates
 
 
 def detector_with_threshold(tmp_path, threshold):

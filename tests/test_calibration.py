@@ -16,7 +16,8 @@ from aogm_cli.io.mapfile import read_map_file
 from aogm_cli.mapping import calibration as C
 from aogm_cli.mapping.params import CalibrationConfig
 from aogm_cli.sensor_models import forward_model as F
-from aogm_cli.sensor_models.cone import build_cone_templates, flat_offsets
+from aogm_cli.sensor_models.cone import flat_offsets
+from aogm_cli.sensor_models.cone_build import build_cone_templates
 
 WORLDS = Path(__file__).resolve().parents[1] / "worlds"
 GRID = GridSpec(0.0, 0.0, 0.05, 60, 80)

@@ -8,13 +8,8 @@ import pytest
 from aogm_cli.core.errors import InputError
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import SensorSpec
-from aogm_cli.sensor_models.cone import (
-    build_cone_templates,
-    cone_cells,
-    heading_bins_for,
-    range_search,
-    reading_geometry,
-)
+from aogm_cli.sensor_models.cone import cone_cells, range_search, reading_geometry
+from aogm_cli.sensor_models.cone_build import build_cone_templates, heading_bins_for
 
 BEAM = math.radians(30.0)
 
@@ -193,7 +188,7 @@ def test_a_narrow_beams_cone_holds_every_cell_its_ray_crosses():
     import math
 
     from aogm_cli.core.grid import GridSpec
-    from aogm_cli.sensor_models.cone import build_cone_templates
+    from aogm_cli.sensor_models.cone_build import build_cone_templates
     from aogm_cli.sensor_models.ray import ray_cells
 
     grid = GridSpec(-10.0, -10.0, 0.05, 400, 400)
@@ -219,32 +214,32 @@ def test_a_template_store_gives_back_the_templates_bit_identical(tmp_path):
     from pathlib import Path
 
     from aogm_cli.io.template_store import STORE, TemplateStore
-    from aogm_cli.sensor_models import cone
+    from aogm_cli.sensor_models import cone_build
 
-    assert Path(cone.__file__).samefile(STORE.source)  # the digest is of cone.py, kept beside its numba cache
-    source = tmp_path / "cone.py"
-    source.write_bytes(Path(cone.__file__).read_bytes())
+    assert Path(cone_build.__file__).samefile(STORE.source)  # the digest is of the module that builds them
+    source = tmp_path / "cone_build.py"
+    source.write_bytes(Path(cone_build.__file__).read_bytes())
     store = TemplateStore(source)
     args = (0.05, BEAM, 5.0, 1264, False)  # a 5 m sonar at 0.05 m: 416,374 entries
-    built = cone._template_arrays(*args)
-    assert store.load(args, cone._TEMPLATE_ARRAYS) is None
+    built = cone_build._template_arrays(*args)
+    assert store.load(args, cone_build._TEMPLATE_ARRAYS) is None
     store.save(args, built)
     assert [p.name for p in (tmp_path / "__pycache__").iterdir()] == [store.paths(args)[0].name]
-    back = store.load(args, cone._TEMPLATE_ARRAYS)
+    back = store.load(args, cone_build._TEMPLATE_ARRAYS)
     assert back.keys() == built.keys()
     for name, a in built.items():
         assert back[name].dtype == a.dtype and back[name].tobytes() == a.tobytes(), name
     source.write_bytes(source.read_bytes() + b"\n")  # another source: another name, built anew
-    assert store.load(args, cone._TEMPLATE_ARRAYS) is None
+    assert store.load(args, cone_build._TEMPLATE_ARRAYS) is None
     small = (0.1, BEAM, 1.0, 64, False)
-    store.save(small, cone._template_arrays(*small))
+    store.save(small, cone_build._template_arrays(*small))
     assert len(list((tmp_path / "__pycache__").iterdir())) == 1
 
 
 def test_the_cone_module_takes_its_store_and_builds_without_one(monkeypatch):
-    """sensor_models.cone reads and writes no file: a store installed with ``use_store`` is asked
+    """sensor_models.cone_build reads and writes no file: a store installed with ``use_store`` is asked
     first and given what is built; with none, templates are built (and kept in memory only)."""
-    from aogm_cli.sensor_models import cone
+    from aogm_cli.sensor_models import cone_build
 
     class Store:
         def __init__(self):
@@ -258,11 +253,11 @@ def test_the_cone_module_takes_its_store_and_builds_without_one(monkeypatch):
             self.calls.append(("save", args, arrays["ranges"].size))
 
     store = Store()
-    monkeypatch.setattr(cone, "_STORE", store)
+    monkeypatch.setattr(cone_build, "_STORE", store)
     tpl = build_cone_templates(0.1, BEAM, 1.3, n_bins=72)  # arguments no other test uses: not cached yet
     args = (0.1, BEAM, 1.3, 72, False)
     assert store.calls == [("load", args), ("save", args, tpl.ranges.size)]
-    cone.use_store(None)
-    assert cone._STORE is None
+    cone_build.use_store(None)
+    assert cone_build._STORE is None
     again = build_cone_templates(0.1, BEAM, 1.4, n_bins=72)
     assert again.ranges.size > tpl.ranges.size and len(store.calls) == 2

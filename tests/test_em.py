@@ -9,8 +9,9 @@ import pytest
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.mapping.em import em_problem, em_readings, run_em
 from aogm_cli.mapping.params import EMConfig
-from aogm_cli.sensor_models.cone import build_cone_templates
-from aogm_cli.sensor_models.forward_model import ForwardModelConfig, IndexMasks, build_forward_index, log_likelihoods
+from aogm_cli.sensor_models.cone_build import build_cone_templates
+from aogm_cli.sensor_models.forward_index import IndexMasks, build_forward_index, log_likelihoods
+from aogm_cli.sensor_models.forward_model import ForwardModelConfig
 
 GRID = GridSpec(0.0, 0.0, 0.1, 21, 41)
 FORWARD = ForwardModelConfig(sigma=0.05, p_rand=0.05, p_hit=0.4, p_max=0.0)

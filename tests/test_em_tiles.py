@@ -22,8 +22,9 @@ from aogm_cli.mapping import sweeps as S
 from aogm_cli.mapping.em import em_problem, em_readings, find_root, run_em
 from aogm_cli.mapping.params import EMConfig
 from aogm_cli.sensor_models import readings as laid_out
-from aogm_cli.sensor_models.cone import build_cone_templates
-from aogm_cli.sensor_models.forward_model import ForwardModelConfig, build_forward_index, log_likelihoods
+from aogm_cli.sensor_models.cone_build import build_cone_templates
+from aogm_cli.sensor_models.forward_index import build_forward_index, log_likelihoods
+from aogm_cli.sensor_models.forward_model import ForwardModelConfig
 
 GRID = GridSpec(0.0, 0.0, 0.1, 30, 70)
 Z_MAX = 2.5

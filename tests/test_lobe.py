@@ -9,7 +9,8 @@ import pytest
 import yaml
 
 from aogm_cli.core.grid import GridSpec
-from aogm_cli.sensor_models.cone import build_cone_templates, flat_offsets
+from aogm_cli.sensor_models.cone import flat_offsets
+from aogm_cli.sensor_models.cone_build import build_cone_templates
 from aogm_cli.sensor_models.lobe import learned_opening, lobe_bins, opening_matches
 
 GRID = GridSpec(0.0, 0.0, 0.05, 120, 160)

@@ -8,7 +8,7 @@ import pytest
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import SensorSpec
 from aogm_cli.mapping.standard import StandardMapper, flat_offsets, probability_from_log_odds, standard_map
-from aogm_cli.sensor_models.cone import build_cone_templates
+from aogm_cli.sensor_models.cone_build import build_cone_templates
 from aogm_cli.sensor_models.inverse_model import InverseModelConfig, inverse_model
 from aogm_cli.sensor_models.readings import cone_templates as standard_templates
 

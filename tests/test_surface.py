@@ -10,7 +10,8 @@ from aogm_cli.core.errors import InputError
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import SensorSpec
 from aogm_cli.map_files import resolve_params
-from aogm_cli.sensor_models.cone import build_cone_templates, flat_offsets
+from aogm_cli.sensor_models.cone import flat_offsets
+from aogm_cli.sensor_models.cone_build import build_cone_templates
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig, cone_limits, deflect
 from aogm_cli.sensor_models.readings import LaidOutReadings
 from aogm_cli.sensor_models.surface import (

@@ -112,9 +112,9 @@ def keep_cone_templates() -> None:
     """Cone templates that take a while to build are kept on disk for the next run
     (``io.template_store``; the sensor models take the store, they write no file)."""
     from aogm_cli.io import template_store
-    from aogm_cli.sensor_models import cone
+    from aogm_cli.sensor_models import cone_build
 
-    cone.use_store(template_store.STORE)
+    cone_build.use_store(template_store.STORE)
 
 
 # each subcommand's module and object, imported when the command runs (or --help lists them):

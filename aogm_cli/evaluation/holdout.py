@@ -26,7 +26,8 @@ from aogm_cli.sensor_models.cone import (
     range_search,
     reading_geometry,
 )
-from aogm_cli.sensor_models.forward_model import ForwardModelConfig, IndexMasks, build_forward_index, log_likelihoods
+from aogm_cli.sensor_models.forward_index import IndexMasks, build_forward_index, log_likelihoods
+from aogm_cli.sensor_models.forward_model import ForwardModelConfig
 from aogm_cli.sensor_models.inverse_model import occupied_arc
 from aogm_cli.sensor_models.ray import AXIS_SHORT, axis_counts, is_narrow_beam, ray_cells
 from aogm_cli.sensor_models.readings import cone_templates, echo_ranges, lay_out_readings

@@ -1,4 +1,4 @@
-"""Cone templates kept on disk for the next process (``sensor_models.cone.use_store``): which files,
+"""Cone templates kept on disk for the next process (``sensor_models.cone_build.use_store``): which files,
 where (beside numba's cache of cone.py, else ~/.cache/aogm), written atomically and pruned to a few."""
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ STORE_FILES = 8
 
 @dataclass(frozen=True)
 class TemplateStore:
-    """Templates built by the module at ``source`` (``sensor_models/cone.py``), kept as
+    """Templates built by the module at ``source`` (``sensor_models/cone_build.py``), kept as
     ``cone_templates-<digest>.npz`` in its package's ``__pycache__`` or the user's cache folder."""
 
     source: Path
@@ -74,6 +74,6 @@ class TemplateStore:
             return
 
 
-# aogm's store: ``cone.use_store(STORE)`` at the edges (the commands, the Python API, a compare task).
-# The path is cone.py's as its own ``__file__`` gives it (io does not import the sensor models)
-STORE = TemplateStore(Path(__file__).parent.parent / "sensor_models" / "cone.py")
+# aogm's store: ``cone_build.use_store(STORE)`` at the edges (the commands, the Python API, a compare
+# task). The path is cone_build.py's as its own ``__file__`` gives it (io does not import the sensor models)
+STORE = TemplateStore(Path(__file__).parent.parent / "sensor_models" / "cone_build.py")

@@ -75,7 +75,7 @@ class ExactMapper:
 def map_evidence(run: LaidOutReadings, forward: ForwardModelConfig, occupied: np.ndarray) -> np.ndarray:
     """(H, W) float64: each cell's evidence at the binary map ``occupied`` (flat or (H, W) bool),
     log p(Z | m, cell occupied) - log p(Z | m, cell free) over every reading of ``run`` (its
-    deflected beams cut), as EM scores a candidate (``em.decided``), in one pass over the cones
+    deflected beams cut), as EM scores a candidate (``view.decided``), in one pass over the cones
     (``exact_inverse.map_evidence_sums``), its parts summed on threads (``readings.summed_in_parts``:
     the same evidence for any thread count): where it is near 0 no reading decides the cell."""
     grid, templates = run.grid, run.templates

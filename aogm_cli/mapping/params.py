@@ -43,7 +43,7 @@ class EMConfig:
     max_sweeps: int = 20
     start: str = "standard"  # "standard": the thresholded standard map; "empty": all free
     # What EM reports at the cells it leaves free although no reading objects to an obstacle
-    # there (occupancy would lower the data log-likelihood by at most em.HIDDEN_GAIN: a wall's far
+    # there (occupancy would lower the data log-likelihood by at most view.HIDDEN_GAIN: a wall's far
     # layers, the space behind a wall, a gap in a wall that the prior alone keeps open): "prior"
     # (Thrun's residual, the prior 0.3, which a planner reads as free), "standard" (the standard
     # map's estimate) or "unobserved" (the standard map's estimate where it is above 0.5, else

@@ -19,7 +19,6 @@ from aogm_cli.mapping.learned import FROM_LOG, Learned, SensorModel
 from aogm_cli.mapping.pipeline import params_json
 from aogm_cli.mapping.plan import CONE
 from aogm_cli.mapping.standard import (
-    decided_free,
     occupied_evidence,
     probability_from_log_odds,
     set_up,
@@ -27,7 +26,7 @@ from aogm_cli.mapping.standard import (
     thin_pass,
 )
 from aogm_cli.mapping.state import Clusters, EMRegion, StandardMap, State, View
-from aogm_cli.mapping.view import em_view, joined_view
+from aogm_cli.mapping.view import decided_free, em_view, joined_view
 from aogm_cli.sensor_models.readings import LaidOutReadings, lay_out_readings
 
 # log-odds of occupied evidence alone that put a cell the map holds free among the walls the

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import time
 from collections.abc import Iterable
 from typing import NamedTuple
 
@@ -18,7 +17,6 @@ from aogm_cli.core.log import Log, SensorSpec
 from aogm_cli.mapping.beam import BeamMapper
 from aogm_cli.mapping.exact import ExactMapper, thinned
 from aogm_cli.mapping.params import MapParams
-from aogm_cli.mapping.pipeline import TimedSource
 from aogm_cli.sensor_models.cone import (
     NO_CUT,
     SPARE_MASK,
@@ -239,16 +237,6 @@ def standard_log_odds(log, grid: GridSpec, params: MapParams, cuts=None, chunk: 
                         narrow=narrow, cuts=cuts, models=(params.em.forward, params.exact))
 
 
-def standard_pass(log, grid: GridSpec, params: MapParams, cuts=None):
-    """(log_odds, observed, seconds of mapping work) of ``standard_log_odds``, its set-up
-    (``set_up``) and reading the log left out of the seconds: what the benchmarks time."""
-    set_up(log.sensor, grid, params)
-    timed = TimedSource(log)
-    t0 = time.perf_counter()
-    log_odds, observed = standard_log_odds(timed, grid, params, cuts)
-    return log_odds, observed, time.perf_counter() - t0 - timed.io_seconds
-
-
 def occupied_evidence(log, grid: GridSpec, params: MapParams, cuts=None) -> np.ndarray:
     """(H, W) float32: the log-odds the readings' occupied arcs alone give each cell (one more
     standard pass with no free evidence; Elfes' arcs whatever model the map uses, as the exact
@@ -259,24 +247,6 @@ def occupied_evidence(log, grid: GridSpec, params: MapParams, cuts=None) -> np.n
                                   model="elfes" if params.inverse_model.model == "exact" else params.inverse_model.model)
     hits, _ = standard_log_odds(log, grid, dataclasses.replace(params, inverse_model=inverse), cuts=cuts)
     return hits - np.float32(params.inverse_model.l0)
-
-
-def thins(sensor: SensorSpec, grid: GridSpec, params: MapParams, always: bool = False) -> bool:
-    """Whether the map is thinned by the exact inverse model (``thin_pass``): ``exact.thin`` on
-    (or ``always``: adaptive with ``outside: thinned``) for a map not made by that model, of a cone. A
-    narrow beam's map (rays, which draw walls one cell thick) is not thinned (docs/algorithms.md,
-    "The exact inverse model")."""
-    return ((always or params.exact.thin) and params.inverse_model.model != "exact"
-            and not is_narrow_beam(sensor, grid.resolution))
-
-
-HIDDEN_GAIN = 0.05  # log-odds: the evidence that decides a cell free (EM's ``em.decided``, adaptive's ``stages.decided``)
-
-
-def decided_free(evidence: np.ndarray) -> np.ndarray:
-    """Where ``evidence`` (log p(Z | occupied) - log p(Z | free)) decides a cell free: its
-    occupancy would lower the readings' likelihood by more than ``HIDDEN_GAIN``."""
-    return evidence < -HIDDEN_GAIN
 
 
 class Thinned(NamedTuple):

@@ -11,11 +11,20 @@ import numpy as np
 from aogm_cli.core.log import Log
 from aogm_cli.mapping.em import EMOutcome, EMResult
 from aogm_cli.mapping.params import EMConfig, MapParams
-from aogm_cli.mapping.standard import decided_free, probability_from_log_odds
+from aogm_cli.mapping.standard import probability_from_log_odds
 from aogm_cli.sensor_models.ray import axis_counts
 
+HIDDEN_GAIN = 0.05  # log-odds: the evidence that decides a cell free (EM's ``decided``, adaptive's ``stages.adaptive_view``)
+
+
+def decided_free(evidence: np.ndarray) -> np.ndarray:
+    """Where ``evidence`` (log p(Z | occupied) - log p(Z | free)) decides a cell free: its
+    occupancy would lower the readings' likelihood by more than ``HIDDEN_GAIN``."""
+    return evidence < -HIDDEN_GAIN
+
+
 # a candidate EM leaves free is decided by the data when occupancy would lower the data
-# log-likelihood by more than ``standard.HIDDEN_GAIN`` (log-odds); the others are the hidden cells
+# log-likelihood by more than ``HIDDEN_GAIN`` (log-odds); the others are the hidden cells
 # of the setting ``em.hidden``
 
 

@@ -266,7 +266,7 @@ def map_evidence_sums(tpl, flat, shape, readings, occupancy, model, scratch, spa
     """Add to the flat float64 ``evidence`` (height * width) each reading's log p(z | m_j = 1) -
     log p(z | m_j = 0) for the cells j of its cone, every other cell as the fixed binary map
     ``occupancy`` (flat float32 0 / 1, then SPARE_MASK + 1 spare cells of 0) has it: summed over
-    the readings, EM's evidence of each cell at that map (``em.decided``). A cone's ratio for cell
+    the readings, EM's evidence of each cell at that map (``mapping.view.decided``). A cone's ratio for cell
     j does not read cell j itself, so no cell is changed. Arguments as ``exact_inverse_updates``'.
 
     Over a binary map the cells before the Gaussian window take one of two ratios: with K of them

@@ -14,7 +14,8 @@ import numpy as np
 from aogm_cli.core.budget import in_parts
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import SensorSpec
-from aogm_cli.sensor_models.cone import ConeTemplates, build_cone_templates, cone_cells, flat_offsets, reading_geometry
+from aogm_cli.sensor_models.cone import ConeTemplates, cone_cells, flat_offsets, reading_geometry
+from aogm_cli.sensor_models.cone_build import build_cone_templates
 from aogm_cli.sensor_models.ray import is_narrow_beam
 
 # readings per call of the kernels that walk every reading's cone once (``reading_spans``)

@@ -1,0 +1,222 @@
+"""The forward model as an index (Thrun 2003): every reading's cone, in range order, as CSR arrays
+(``build_forward_index``), and each reading's log-likelihood under a binary map (``log_likelihoods``): the
+reference that EM's tests and the held-out scores (``evaluation.holdout``) compute with."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numba
+import numpy as np
+
+from aogm_cli.sensor_models.cone import cone_flat_cells, flat_offsets
+from aogm_cli.sensor_models.forward_model import (
+    ExpectationReadings,
+    ForwardModelConfig,
+    cone_entries,
+    cone_limits,
+    gaussian_at,
+    reading_constants,
+)
+
+
+class ForwardArrays(NamedTuple):
+    """A ``ForwardIndex`` as compiled kernels take it (``ForwardIndex.kernel_arrays``)."""
+
+    ptr: np.ndarray  # (R+1,) int64: reading t's entries are ptr[t]:ptr[t+1]
+    cell: np.ndarray  # (E,) int64 flat grid index of each entry
+    g: np.ndarray  # (E,) float64 N(z_t; d, sigma^2) of each entry (0 beyond the window)
+    g0: np.ndarray  # (R,) float64 G0_t
+    const: np.ndarray  # (R,) float64 C_t
+    w: float  # 1 - p_rand - p_max
+
+
+@dataclass(frozen=True)
+class ForwardIndex:
+    """Readings and the cells of their (truncated) cones, in range order, as CSR arrays.
+
+    ``ptr`` (R+1,) delimits reading t's entries ``ptr[t]:ptr[t+1]``; ``cell`` holds flat grid
+    indices (row * W + col) and ``g`` the Gaussian N(z_t; d, sigma^2) of each entry's range d.
+    ``const`` (R,) is C_t, ``g0`` (R,) is G0_t. ``reading`` (R,) maps back to the caller's ids.
+    """
+
+    ptr: np.ndarray
+    cell: np.ndarray
+    g: np.ndarray
+    g0: np.ndarray
+    const: np.ndarray
+    reading: np.ndarray
+    w: float
+    p_hit: float
+
+    @property
+    def n_readings(self) -> int:
+        return int(self.ptr.shape[0] - 1)
+
+    @property
+    def kernel_arrays(self) -> ForwardArrays:
+        """The index as compiled kernels take it (``p_hit`` apart)."""
+        return ForwardArrays(self.ptr, self.cell, self.g, self.g0, self.const, float(self.w))
+
+
+class IndexGrid(NamedTuple):
+    """``_fill_index``'s grid: its shape and two optional flat bool masks (empty: none)."""
+
+    height: int
+    width: int
+    mask: np.ndarray  # readings none of whose cells is in it get no entries
+    held_free: np.ndarray  # cells left out of every cone
+
+
+class IndexBuffers(NamedTuple):
+    """``_fill_index``'s outputs."""
+
+    cell: np.ndarray  # (upper bound of the entries,) int64
+    g: np.ndarray  # (same,) float64
+    counts: np.ndarray  # (readings,) int64: entries of each reading
+    scratch: np.ndarray  # (entries of the largest template,) int32: one cone's flat cells
+
+
+@numba.njit(cache=True)
+def _reading_sum(ptr, cell, g, g0, p_hit, occupied, t):
+    """S_t for reading t (arrays of ``ForwardArrays``) under the binary map ``occupied`` (flat bool)."""
+    q = 1.0 - p_hit
+    qk = 1.0
+    s = 0.0
+    for e in range(ptr[t], ptr[t + 1]):
+        if occupied[cell[e]]:
+            s += qk * p_hit * g[e]
+            qk *= q
+    return s + qk * g0[t]
+
+
+@numba.njit(cache=True)
+def reading_log_likelihoods(index, p_hit, occupied):
+    """log p(z_t | m) for every reading of ``index`` (``ForwardArrays``)."""
+    n = index.ptr.shape[0] - 1
+    out = np.empty(n)
+    for t in range(n):
+        s = _reading_sum(index.ptr, index.cell, index.g, index.g0, p_hit, occupied, t)
+        out[t] = math.log(index.const[t] + index.w * s)
+    return out
+
+
+def log_likelihoods(index: ForwardIndex, occupied_flat: np.ndarray) -> np.ndarray:
+    """log p(z_t | m) per reading of ``index`` for the flat binary map ``occupied_flat``."""
+    return reading_log_likelihoods(index.kernel_arrays, index.p_hit, np.ascontiguousarray(occupied_flat, dtype=np.bool_))
+
+
+@numba.njit(cache=True, _nrt=False)  # allocates nothing: as ``standard._standard_kernel``
+def _fill_index(tpl, flat, grid, readings, sigma, window, out):
+    """Cone cells (flat ids) and Gaussians of every reading, packed reading after reading.
+
+    ``tpl`` is ``ConeTemplates.kernel_arrays``, ``flat`` its ``cone.FlatOffsets`` for the
+    grid's width, ``grid`` an ``IndexGrid``, ``readings`` ``ExpectationReadings`` (each cone's
+    ``limit`` set) and ``out`` ``IndexBuffers``; returns the number of entries written.
+    Each cone is the template's entries up to the reading's limit, in range order, with the
+    cells outside the grid left out (``cone.cone_flat_cells``, as the standard mapper walks
+    them). With a non-empty ``mask`` (flat bool), a reading none of whose cells is in the
+    mask gets no entries. With a non-empty ``held_free``, the cells it marks are left out.
+    """
+    height = grid.height
+    width = grid.width
+    ext = tpl.extent
+    n_cells = height * width
+    use_mask = grid.mask.shape[0] > 0
+    drop = grid.held_free.shape[0] > 0
+    ib = out.scratch
+    pos = 0
+    for t in range(readings.z.shape[0]):
+        row0 = readings.rows[t]
+        col0 = readings.cols[t]
+        out.counts[t] = 0
+        if row0 + ext < 0 or row0 - ext >= height or col0 + ext < 0 or col0 - ext >= width:
+            continue  # the cone cannot touch the grid
+        k = readings.bins[t]
+        b = tpl.base_bin[k]
+        r = tpl.ranges[tpl.offsets[b] : tpl.offsets[b + 1]]
+        z = readings.z[t]
+        m = cone_entries(r, z, readings.limit[t], sigma, window)
+        cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width)
+        touches = not use_mask
+        n = 0
+        for j in range(m):
+            c = np.int64(ib[j])
+            if c >= n_cells:  # outside the grid
+                continue
+            if use_mask and grid.mask[c]:
+                touches = True
+            if drop and grid.held_free[c]:
+                continue
+            out.cell[pos + n] = c
+            out.g[pos + n] = gaussian_at(z, r[j], sigma, window)
+            n += 1
+        if touches:  # else none of its cells is in the mask: the reading keeps no entry
+            out.counts[t] = n
+            pos += n
+    return pos
+
+
+class IndexMasks(NamedTuple):
+    """``build_forward_index``'s two optional flat bool masks over the grid (None: none)."""
+
+    mask: np.ndarray | None = None  # only the readings whose cones touch it get entries
+    held_free: np.ndarray | None = None  # cells free while the index is used: left out of every cone
+
+
+NO_MASKS = IndexMasks()
+
+
+def build_forward_index(
+    cones: tuple,
+    grid,
+    templates,
+    z_max: float,
+    config: ForwardModelConfig,
+    reading_ids: np.ndarray | None = None,
+    masks: IndexMasks = NO_MASKS,
+    shadow: np.ndarray | None = None,
+) -> ForwardIndex:
+    """The forward model's index for ``cones`` = (rows, cols, bins, z): readings z taken from
+    sensor cells (rows, cols) with heading bins ``bins`` (as ``cone.reading_geometry`` gives them;
+    flat arrays of one length).
+
+    NaN readings are dropped; +inf is a max-range reading (cone up to z_max). Other cones end
+    ``config.window`` sigmas beyond z. ``reading_ids`` name the readings (default 0..N-1).
+    With ``masks.mask`` (flat bool over the grid), only the readings whose cones touch it get
+    entries; the others stay in the index with none. ``masks.held_free`` (flat bool) marks cells
+    that are free and stay free while the index is used (neither candidates of EM nor
+    occupied): a free cell adds nothing to any S_t, so leaving its entries out changes no
+    likelihood, and the index of a small cluster holds little more than the cluster's cells.
+    ``shadow`` (per reading, ``surface.reading_shadows``) cuts readings short (``cone_limits``).
+    """
+    rows, cols, bins, z = cones
+    z = np.asarray(z, dtype=np.float64).reshape(-1)
+    ids = np.arange(len(z)) if reading_ids is None else np.asarray(reading_ids).reshape(-1)
+    keep = ~np.isnan(z)
+    rows, cols, bins = (np.asarray(a, dtype=np.int64).reshape(-1)[keep] for a in (rows, cols, bins))
+    z, ids = z[keep], ids[keep]
+    z, limits = cone_limits(z, z_max, config, None if shadow is None else np.asarray(shadow).reshape(-1)[keep])
+    z_eff = np.where(np.isfinite(z), np.minimum(z, z_max), z_max)
+    # an upper bound of each reading's entry count: template entries within its limit
+    base = templates.base_bin[bins]
+    upper = 0
+    for b in np.unique(base):
+        sel = base == b
+        s, e = templates.offsets[b], templates.offsets[b + 1]
+        upper += int(np.searchsorted(templates.ranges[s:e], limits[sel], side="right").sum())
+    out_cell = np.empty(upper, dtype=np.int64)
+    out_g = np.empty(upper, dtype=np.float64)
+    counts = np.zeros(len(z), dtype=np.int64)
+    scratch = np.empty(int(np.diff(templates.offsets).max()), dtype=np.int32)
+    mask, held_free = (np.zeros(0, dtype=np.bool_) if a is None else np.ascontiguousarray(a, dtype=np.bool_).reshape(-1)
+                       for a in masks)
+    n = _fill_index(templates.kernel_arrays, flat_offsets(templates, grid.width),
+                    IndexGrid(grid.height, grid.width, mask, held_free), ExpectationReadings(rows, cols, bins, z_eff, limits),
+                    float(config.sigma), float(config.window), IndexBuffers(out_cell, out_g, counts, scratch))
+    ptr = np.zeros(len(z) + 1, dtype=np.int64)
+    np.cumsum(counts, out=ptr[1:])
+    g0, const, w = reading_constants(z, z_max, config)
+    return ForwardIndex(ptr, out_cell[:n], out_g[:n], g0, const, ids, w, config.p_hit)  # views: no copy
