@@ -284,6 +284,166 @@ def _row_unchanged(rd, cand, state, work, r):
     return True
 
 
+@numba.njit(cache=True, inline="always")
+def _tile_clean(cand, state, work, r, sg, list_lo, list_hi, c_start, c_stop):
+    """True (and the candidates c_start..c_stop - 1 stamped as scored now) when none of the
+    listed readings list_lo..list_hi - 1 of tile (r, sg) changed since its last visit: nothing
+    its candidates see changed, and each keeps its gain."""
+    since = cand.tile_clock[r, sg]
+    if since < 0:
+        return False
+    for i in range(list_lo, list_hi):
+        if state.stamp[work.spans[work.seg_list[i]].t] > since:
+            return False
+    now = work.ctl[0].clock
+    for c in range(c_start, c_stop):
+        cand.stamp[c] = now
+    cand.tile_clock[r, sg] = now
+    return True
+
+
+@numba.njit(cache=True, inline="always")
+def _count_pairs(tpl, groups, rd, model, cand, state, work, r, c0, c1, c_start, list_lo, list_hi, nc):
+    """The tile's listing (readings list_lo..list_hi - 1, candidates from c_start, columns [c0,
+    c1) of row r): each reading's far run into the sums of log far ratios (``far_sum``), its
+    window pairs counted per candidate (``count``, cumulative); (pairs, the arena entries of
+    the windows not built yet)."""
+    cnt = work.count
+    for i in range(nc + 1):
+        cnt[i] = 0
+    for k in range(SEGMENT + 1):
+        work.far_sum[0, k] = 0.0
+        work.far_sum[1, k] = 0.0
+    room = 0
+    n_pairs = 0
+    for i in range(list_lo, list_hi):
+        span = _span_at(work, work.seg_list[i])
+        t = work.spans[work.seg_list[i]].t
+        li = i - list_lo
+        work.tile_t[li] = t
+        work.far_lo[li] = 1
+        work.far_hi[li] = 0
+        if span.o_hi < span.o_lo:
+            continue
+        f_lo, f_hi = _o_range(span, rd.col0[t], c0, c1, span.f_lo, span.f_hi)
+        if f_lo <= f_hi:
+            col0 = rd.col0[t]
+            a, b = (col0 + f_lo, col0 + f_hi) if span.sign > 0 else (col0 - f_hi, col0 - f_lo)
+            work.far_lo[li] = a - c0
+            work.far_hi[li] = b - c0
+            work.far_sum[0, a - c0] += state.far_log[t, 0]
+            work.far_sum[0, b - c0 + 1] -= state.far_log[t, 0]
+            work.far_sum[1, a - c0] += state.far_log[t, 1]
+            work.far_sum[1, b - c0 + 1] -= state.far_log[t, 1]
+        k = _window_pairs(li, t, span, r, c0, c1, c_start, False, tpl, groups, rd, model, cand, work)
+        n_pairs += k
+        if k > 0 and state.slot[t] < 0:
+            room += _room(rd, t)
+    for i in range(1, nc + 1):
+        cnt[i] += cnt[i - 1]
+    return n_pairs, room
+
+
+@numba.njit(cache=True, inline="always")
+def _write_pairs(tpl, groups, rd, model, cand, work, r, c0, c1, c_start, list_lo, list_hi):
+    """The tile's window pairs (counted by ``_count_pairs``), each candidate's in reading order."""
+    for i in range(list_lo, list_hi):
+        span = _span_at(work, work.seg_list[i])
+        t = work.spans[work.seg_list[i]].t
+        if span.o_hi >= span.o_lo:
+            _window_pairs(i - list_lo, t, span, r, c0, c1, c_start, True, tpl, groups, rd, model, cand, work)
+
+
+@numba.njit(cache=True, inline="always")
+def _flip(c, x, lo_pair, hi_pair, n_list, rd, model, cand, state, work):
+    """Flip candidate c (tile column x, pairs lo_pair..hi_pair - 1) and update the tile's
+    readings (``n_list`` listed) that hold it, before their windows and inside them."""
+    ctl = work.ctl[0]
+    occupied = cand.occupied
+    cell = cand.cell[c]
+    occupied[cell] = not occupied[cell]
+    cand.last_gain[c] = -cand.last_gain[c]  # flipping back undoes exactly this gain
+    ctl.flips += 1
+    ctl.clock += 1
+    ctl.budget -= n_list + hi_pair - lo_pair
+    adding = occupied[cell]
+    now = ctl.clock
+    for i in range(n_list):  # the readings that hold the cell before their windows
+        if work.far_lo[i] <= x <= work.far_hi[i]:
+            t = work.tile_t[i]
+            old_add, old_rem = state.far_log[t, 0], state.far_log[t, 1]
+            state.nfar[t] += 1 if adding else -1
+            _set_sum(t, rd, model, state)
+            _far_changed(i, t, x, old_add, old_rem, state, work)
+            state.stamp[t] = now
+    for p in range(lo_pair, hi_pair):  # ... and inside them
+        i = work.pair_pos[p]
+        t = work.tile_t[i]
+        old_add, old_rem = state.far_log[t, 0], state.far_log[t, 1]
+        _update_reading(t, work.pair_j[p], work.pair_g[p], adding, model, rd, state, work)
+        _far_changed(i, t, x, old_add, old_rem, state, work)
+        state.stamp[t] = now
+
+
+@numba.njit(cache=True, inline="always")
+def _visit(c, x, lo_pair, hi_pair, n_list, mode, tpl, flat, rd, model, cand, state, work):
+    """Score candidate c (tile column x) over its pairs lo_pair..hi_pair - 1, building the
+    windows they need, into ``last_gain``; in SWEEP mode flip it when that raises the objective."""
+    ctl = work.ctl[0]
+    for p in range(lo_pair, hi_pair):  # the window obstacles the score needs
+        t = work.tile_t[work.pair_pos[p]]
+        if work.pair_g[p] != 0.0 and state.slot[t] < 0:
+            _build_window(t, tpl, flat, rd, model, cand, state, work)
+            ctl.budget -= _room(rd, t)
+    ctl.scored += 1
+    d = _flip_gain(c, x, lo_pair, hi_pair, rd, model, cand, state, work)
+    cand.last_gain[c] = d
+    if mode != SWEEP:
+        return
+    d += -model.l_prior if cand.occupied[cand.cell[c]] else model.l_prior
+    if d > 1e-9:
+        _flip(c, x, lo_pair, hi_pair, n_list, rd, model, cand, state, work)
+    cand.stamp[c] = ctl.clock
+
+
+@numba.njit(cache=True, inline="always")
+def _tile(r, sg, c_start, c_stop, tpl, flat, groups, rd, model, cand, state, work):
+    """Tile (r, sg): its candidates c_start..c_stop - 1 scored (and flipped, ``_visit``) over the
+    pairs of the readings listed in segment sg; skipped when none of them changed since its last
+    visit (SWEEP). False, before any change, when the scratch is too small."""
+    ctl = work.ctl[0]
+    mode = ctl.mode
+    width = cand.of_cell.shape[0] // cand.tile_clock.shape[0]
+    c0 = sg * SEGMENT
+    c1 = min(c0 + SEGMENT, width)
+    list_lo = work.seg_ptr[sg]
+    list_hi = work.seg_ptr[sg + 1]
+    ctl.budget -= list_hi - list_lo
+    clock0 = ctl.clock
+    if mode == SWEEP and _tile_clean(cand, state, work, r, sg, list_lo, list_hi, c_start, c_stop):
+        return True
+    nc = c_stop - c_start
+    n_list = list_hi - list_lo
+    if n_list > work.far_lo.shape[0]:
+        ctl.need_list = max(ctl.need_list, n_list)
+        return False
+    n_pairs, room = _count_pairs(tpl, groups, rd, model, cand, state, work, r, c0, c1, c_start, list_lo, list_hi, nc)
+    if n_pairs > work.pair_pos.shape[0] or not _make_room(rd, state, work, room):
+        ctl.need_pairs = n_pairs
+        return False
+    ctl.pairs += n_pairs
+    ctl.budget -= n_pairs + 8 * nc
+    _write_pairs(tpl, groups, rd, model, cand, work, r, c0, c1, c_start, list_lo, list_hi)
+    cnt = work.count
+    for c in range(c_start, c_stop):
+        li = c - c_start
+        _visit(c, cand.cell[c] - r * width - c0, 0 if li == 0 else cnt[li - 1], cnt[li], n_list, mode, tpl, flat, rd,
+               model, cand, state, work)
+    if mode == SWEEP:
+        cand.tile_clock[r, sg] = clock0
+    return True
+
+
 # _nrt=False: the sweep allocates nothing (its scratch comes in ``work``), and without numba's
 # reference-counting runtime the arrays it hands to the inlined helpers cost nothing per call
 @numba.njit(cache=True, _nrt=False, nogil=True)
@@ -312,10 +472,6 @@ def _sweep_tiles(tpl, flat, groups, readings, model, cand, work):
     ctl = work.ctl[0]
     height, n_seg = cand.tile_clock.shape
     width = cand.of_cell.shape[0] // height
-    mode = ctl.mode
-    occupied = cand.occupied
-    seg_list = work.seg_list
-    cnt = work.count
     fresh = True  # nothing done yet in this call: no pause
     for r in range(ctl.row, height):
         ca = cand.row_first[r]
@@ -327,7 +483,7 @@ def _sweep_tiles(tpl, flat, groups, readings, model, cand, work):
             return PAUSED
         ctl.row = r
         _advance(readings.extent, rd, state, work, r)
-        if mode == SWEEP and ctl.seg == 0:
+        if ctl.mode == SWEEP and ctl.seg == 0:
             ctl.budget -= _active_words(work)
             if _row_unchanged(rd, cand, state, work, r):
                 fresh = False
@@ -346,123 +502,14 @@ def _sweep_tiles(tpl, flat, groups, readings, model, cand, work):
             c_start = c_pos
             while c_pos < cb and cand.cell[c_pos] < row_base + c1:
                 c_pos += 1
-            c_stop = c_pos
-            if c_start == c_stop:
+            if c_start == c_pos:
                 continue
             if ctl.budget <= 0 and not fresh:
                 ctl.seg = sg
                 return PAUSED
             fresh = False
-            list_lo = work.seg_ptr[sg]
-            list_hi = work.seg_ptr[sg + 1]
-            ctl.budget -= list_hi - list_lo
-            clock0 = ctl.clock
-            if mode == SWEEP:
-                since = cand.tile_clock[r, sg]
-                dirty = since < 0
-                if not dirty:
-                    for i in range(list_lo, list_hi):
-                        if state.stamp[work.spans[seg_list[i]].t] > since:
-                            dirty = True
-                            break
-                if not dirty:  # nothing the tile's candidates see changed: each keeps its gain
-                    for c in range(c_start, c_stop):
-                        cand.stamp[c] = clock0
-                    cand.tile_clock[r, sg] = clock0
-                    continue
-            # the tile: each listed reading's far run (into the sums of log far ratios) and
-            # window pairs (counted per candidate, then written in reading order)
-            nc = c_stop - c_start
-            n_list = list_hi - list_lo
-            if n_list > work.far_lo.shape[0]:
-                ctl.need_list = max(ctl.need_list, n_list)
+            if not _tile(r, sg, c_start, c_pos, tpl, flat, groups, rd, model, cand, state, work):
                 ctl.seg = sg
                 return NEED_BUFFERS
-            for i in range(nc + 1):
-                cnt[i] = 0
-            for k in range(SEGMENT + 1):
-                work.far_sum[0, k] = 0.0
-                work.far_sum[1, k] = 0.0
-            room = 0
-            n_pairs = 0
-            for i in range(list_lo, list_hi):
-                span = _span_at(work, seg_list[i])
-                t = work.spans[seg_list[i]].t
-                li = i - list_lo
-                work.tile_t[li] = t
-                work.far_lo[li] = 1
-                work.far_hi[li] = 0
-                if span.o_hi < span.o_lo:
-                    continue
-                f_lo, f_hi = _o_range(span, rd.col0[t], c0, c1, span.f_lo, span.f_hi)
-                if f_lo <= f_hi:
-                    col0 = rd.col0[t]
-                    a, b = (col0 + f_lo, col0 + f_hi) if span.sign > 0 else (col0 - f_hi, col0 - f_lo)
-                    work.far_lo[li] = a - c0
-                    work.far_hi[li] = b - c0
-                    work.far_sum[0, a - c0] += state.far_log[t, 0]
-                    work.far_sum[0, b - c0 + 1] -= state.far_log[t, 0]
-                    work.far_sum[1, a - c0] += state.far_log[t, 1]
-                    work.far_sum[1, b - c0 + 1] -= state.far_log[t, 1]
-                k = _window_pairs(li, t, span, r, c0, c1, c_start, False, tpl, groups, rd, model, cand, work)
-                n_pairs += k
-                if k > 0 and state.slot[t] < 0:
-                    room += _room(rd, t)
-            for i in range(1, nc + 1):
-                cnt[i] += cnt[i - 1]
-            if n_pairs > work.pair_pos.shape[0] or not _make_room(rd, state, work, room):
-                ctl.need_pairs = n_pairs
-                ctl.seg = sg
-                return NEED_BUFFERS
-            ctl.pairs += n_pairs
-            ctl.budget -= n_pairs + 8 * nc
-            for i in range(list_lo, list_hi):
-                span = _span_at(work, seg_list[i])
-                t = work.spans[seg_list[i]].t
-                if span.o_hi >= span.o_lo:
-                    _window_pairs(i - list_lo, t, span, r, c0, c1, c_start, True, tpl, groups, rd, model, cand, work)
-            for c in range(c_start, c_stop):
-                li = c - c_start
-                lo_pair = 0 if li == 0 else cnt[li - 1]
-                hi_pair = cnt[li]
-                x = cand.cell[c] - row_base - c0  # the tile column
-                for p in range(lo_pair, hi_pair):  # the window obstacles the score needs
-                    t = work.tile_t[work.pair_pos[p]]
-                    if work.pair_g[p] != 0.0 and state.slot[t] < 0:
-                        _build_window(t, tpl, flat, rd, model, cand, state, work)
-                        ctl.budget -= _room(rd, t)
-                ctl.scored += 1
-                d = _flip_gain(c, x, lo_pair, hi_pair, rd, model, cand, state, work)
-                cand.last_gain[c] = d
-                if mode != SWEEP:
-                    continue
-                cell = cand.cell[c]
-                d += -model.l_prior if occupied[cell] else model.l_prior
-                if d > 1e-9:
-                    occupied[cell] = not occupied[cell]
-                    cand.last_gain[c] = -cand.last_gain[c]  # flipping back undoes exactly this gain
-                    ctl.flips += 1
-                    ctl.clock += 1
-                    ctl.budget -= n_list + hi_pair - lo_pair
-                    adding = occupied[cell]
-                    now = ctl.clock
-                    for i in range(n_list):  # the readings that hold the cell before their windows
-                        if work.far_lo[i] <= x <= work.far_hi[i]:
-                            t = work.tile_t[i]
-                            old_add, old_rem = state.far_log[t, 0], state.far_log[t, 1]
-                            state.nfar[t] += 1 if adding else -1
-                            _set_sum(t, rd, model, state)
-                            _far_changed(i, t, x, old_add, old_rem, state, work)
-                            state.stamp[t] = now
-                    for p in range(lo_pair, hi_pair):  # ... and inside them
-                        i = work.pair_pos[p]
-                        t = work.tile_t[i]
-                        old_add, old_rem = state.far_log[t, 0], state.far_log[t, 1]
-                        _update_reading(t, work.pair_j[p], work.pair_g[p], adding, model, rd, state, work)
-                        _far_changed(i, t, x, old_add, old_rem, state, work)
-                        state.stamp[t] = now
-                cand.stamp[c] = ctl.clock
-            if mode == SWEEP:
-                cand.tile_clock[r, sg] = clock0
         ctl.seg = 0
     return DONE
