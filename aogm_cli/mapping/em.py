@@ -22,18 +22,7 @@ from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import Log
 from aogm_cli.mapping import em_kernels as K
 from aogm_cli.mapping.calibration import MAX_READINGS, incidence_at, opening_at, sample_readings
-from aogm_cli.mapping.em_kernels.layout import (
-    READING_FLOATS,
-    READING_INTS,
-    SCORE,
-    SEGMENT,
-    SWEEP,
-    Candidates,
-    EMModel,
-    EMReadings,
-    em_state,
-    row_groups,
-)
+from aogm_cli.mapping.em_kernels import layout as L
 from aogm_cli.mapping.em_kernels.likelihood import _init_state, _join_parents, _objective, _residual_from_gains
 from aogm_cli.mapping.em_kernels.readings import _box_of_cells, _far_gains, _reading_extent, _window_cells, _window_rows
 from aogm_cli.mapping.params import EMConfig, MapParams
@@ -130,7 +119,7 @@ def planner_view(probability: np.ndarray, observed: np.ndarray, unseen: np.ndarr
 
 
 def em_readings(cones, templates, grid, z_max: float, config: ForwardModelConfig,
-                select: np.ndarray | None = None, shadow: np.ndarray | None = None) -> EMReadings:
+                select: np.ndarray | None = None, shadow: np.ndarray | None = None) -> L.EMReadings:
     """The readings ``cones`` (sensor cells, heading bins, template ranges: flat arrays of one
     length, as ``sensor_models.readings.LaidOutReadings.cones`` has them) as EM's kernels take them, or those ``select`` picks (a
     bool mask or positions; taken one column at a time, without a copy of every array). NaN
@@ -144,7 +133,7 @@ def em_readings(cones, templates, grid, z_max: float, config: ForwardModelConfig
         raise ValueError("NaN readings must be left out of EM's readings")
     z, limits = cone_limits(z, z_max, config, None if shadow is None else pick(shadow))
     n = z.shape[0]
-    ints, floats = np.zeros(n, dtype=READING_INTS), np.zeros(n, dtype=READING_FLOATS)
+    ints, floats = np.zeros(n, dtype=L.READING_INTS), np.zeros(n, dtype=L.READING_FLOATS)
     for name, a in (("row0", rows), ("col0", cols), ("bin", bins)):
         ints[name] = pick(a)
     z_eff = floats["z"]
@@ -152,9 +141,9 @@ def em_readings(cones, templates, grid, z_max: float, config: ForwardModelConfig
     # entries before this range are beyond the Gaussian's window (a margin against rounding)
     lower = z_eff - config.window * config.sigma - 1e-9
     no_order = np.zeros(0, dtype=np.int32)
-    rd = EMReadings(ints=ints, floats=floats, extent=np.zeros((0, 4), dtype=np.int32), enter=no_order, leave=no_order,
-                    window_leave=no_order)  # the extents and orders are not needed yet
-    groups, gauss = row_groups(templates), (float(config.sigma), float(config.window))
+    rd = L.EMReadings(ints=ints, floats=floats, extent=np.zeros((0, 4), dtype=np.int32), enter=no_order, leave=no_order,
+                      window_leave=no_order)  # the extents and orders are not needed yet
+    groups, gauss = L.row_groups(templates), (float(config.sigma), float(config.window))
     reading_parts(n, lambda _, span: _reading_extent(templates.kernel_arrays, groups, rd, (limits, lower), gauss,
                                                      grid.shape, span))
     g0, const, _ = reading_constants(z, z_max, config)
@@ -165,7 +154,7 @@ def em_readings(cones, templates, grid, z_max: float, config: ForwardModelConfig
     return _with_extent(rd, np.ascontiguousarray(ints["box"]))._replace(window_leave=_order(ints["window_hi"]))
 
 
-def _with_extent(rd: EMReadings, extent: np.ndarray) -> EMReadings:
+def _with_extent(rd: L.EMReadings, extent: np.ndarray) -> L.EMReadings:
     """``rd`` active over ``extent`` ((R, 4) int32, ``EMReadings.extent``), with its orders."""
     return rd._replace(extent=extent, enter=_order(extent[:, 0]), leave=_order(extent[:, 1]))
 
@@ -188,7 +177,7 @@ class EMProblem:
     parent: np.ndarray | None  # union-find over cluster ids (with labels): clusters sharing a reading
 
 
-def em_problem(rd: EMReadings, templates, shape: tuple[int, int], occupied: np.ndarray, config: EMConfig,
+def em_problem(rd: L.EMReadings, templates, shape: tuple[int, int], occupied: np.ndarray, config: EMConfig,
                labels: np.ndarray | None = None) -> EMProblem:
     """Every reading's likelihood state under the flat binary map ``occupied`` (one walk of its
     cone), the cells the cones hold, and with ``labels`` (flat cluster ids, 0 outside; EM's
@@ -199,9 +188,9 @@ def em_problem(rd: EMReadings, templates, shape: tuple[int, int], occupied: np.n
     p_hit = float(fwd.p_hit)
     n = rd.ints.shape[0]
     top = int(rd.ints["m"].max()) if n else 0
-    model = EMModel(p_hit=p_hit, l_prior=float(config.l_prior),
-                    qpow=(1.0 - p_hit) ** np.arange(top + 1, dtype=np.float64), w=1.0 - fwd.p_rand - fwd.p_max,
-                    sigma=float(fwd.sigma), window=float(fwd.window))
+    model = L.EMModel(p_hit=p_hit, l_prior=float(config.l_prior),
+                      qpow=(1.0 - p_hit) ** np.arange(top + 1, dtype=np.float64), w=1.0 - fwd.p_rand - fwd.p_max,
+                      sigma=float(fwd.sigma), window=float(fwd.window))
     seen = np.zeros(shape[0] * shape[1], dtype=np.bool_)
     if labels is None:
         marks = [(seen, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 4), dtype=np.int32))]
@@ -222,7 +211,7 @@ def em_problem(rd: EMReadings, templates, shape: tuple[int, int], occupied: np.n
         for other in marks[1:]:
             _join_parents(parent, other[2])
         rd = _with_extent(rd, box)
-    return EMProblem(rd, model, em_state(rd), templates, shape, seen, parent)
+    return EMProblem(rd, model, L.em_state(rd), templates, shape, seen, parent)
 
 
 def find_root(parent: np.ndarray, x: int) -> int:
@@ -236,7 +225,7 @@ def _flat_bool(a: np.ndarray) -> np.ndarray:
     return a
 
 
-def _candidates(cells: np.ndarray, shape: tuple[int, int]) -> Candidates:
+def _candidates(cells: np.ndarray, shape: tuple[int, int]) -> L.Candidates:
     height, width = shape
     cells = np.ascontiguousarray(cells, dtype=np.int64)
     if cells.size > 1 and not np.all(cells[1:] > cells[:-1]):
@@ -244,10 +233,10 @@ def _candidates(cells: np.ndarray, shape: tuple[int, int]) -> Candidates:
     of_cell = np.full(height * width, -1, dtype=np.int32)
     of_cell[cells] = np.arange(cells.size, dtype=np.int32)
     row_first = np.searchsorted(cells, np.arange(height + 1, dtype=np.int64) * width)
-    n_seg = -(-width // SEGMENT)
-    return Candidates(cell=cells, of_cell=of_cell, row_first=row_first, occupied=np.zeros(0, dtype=np.bool_),
-                      stamp=np.full(cells.size, -1, dtype=np.int64), last_gain=np.zeros(cells.size),
-                      tile_clock=np.full((n_seg, height), -1, dtype=np.int64).T)  # a segment's clocks in one run
+    n_seg = -(-width // L.SEGMENT)
+    return L.Candidates(cell=cells, of_cell=of_cell, row_first=row_first, occupied=np.zeros(0, dtype=np.bool_),
+                        stamp=np.full(cells.size, -1, dtype=np.int64), last_gain=np.zeros(cells.size),
+                        tile_clock=np.full((n_seg, height), -1, dtype=np.int64).T)  # a segment's clocks in one run
     # of memory: two bands' threads write apart
 
 
@@ -276,7 +265,7 @@ def run_em(problem: EMProblem, occupied: np.ndarray, candidates: np.ndarray, con
     objective = [_objective(tables, model, occupied, cand.cell)]
     with sweeps:
         for sweep in range(1, config.max_sweeps + 1):
-            n_flips, n_scored, n_pairs = sweeps.one_pass(SWEEP)
+            n_flips, n_scored, n_pairs = sweeps.one_pass(L.SWEEP)
             flips.append(n_flips)
             scored.append(n_scored)
             pairs.append(n_pairs)
@@ -286,7 +275,7 @@ def run_em(problem: EMProblem, occupied: np.ndarray, candidates: np.ndarray, con
             if n_flips == 0:
                 break
         if final and not (flips and flips[-1] == 0):  # stopped by max_sweeps: score every candidate once more
-            sweeps.one_pass(SCORE)
+            sweeps.one_pass(L.SCORE)
     peak = sweeps.peak
     gain = np.empty(every.size)
     gain[np.searchsorted(every, cand.cell)] = cand.last_gain

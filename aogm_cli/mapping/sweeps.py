@@ -40,7 +40,7 @@ def _work(readings: L.EMReadings, n_seg: int) -> L.TileWork:
         pair_pos=np.empty(pairs, dtype=np.int64), pair_j=np.empty(pairs, dtype=np.int64), pair_g=np.empty(pairs),
         obs_j=np.empty(room, dtype=np.int64), obs_g=np.empty(room), pre=np.empty(room), seg_fill=_apart(n_seg),
         tile_t=_apart(1024), far_lo=_apart(1024), far_hi=_apart(1024), far_sum=_apart((2, L.SEGMENT + 1), np.float64),
-        spans=np.empty(listed, dtype=L.SPAN), seg_mask=_apart(n_seg), members=none, enter=none, leave=none,
+        spans=np.empty(listed, dtype=tiles.SPAN), seg_mask=_apart(n_seg), members=none, enter=none, leave=none,
         window_leave=none)
 
 
@@ -119,7 +119,7 @@ def _grown(work: L.TileWork) -> L.TileWork:
     if ctl["need_list"] > work.seg_list.shape[0]:
         grow["seg_list"] = np.empty(int(ctl["need_list"] * 1.5) + 1, dtype=np.int64)
     if ctl["need_list"] > work.spans.shape[0]:
-        grow["spans"] = np.empty(int(ctl["need_list"] * 1.5) + 1, dtype=L.SPAN)
+        grow["spans"] = np.empty(int(ctl["need_list"] * 1.5) + 1, dtype=tiles.SPAN)
     if ctl["need_list"] > work.far_lo.shape[0]:
         size = int(ctl["need_list"] * 1.5) + 1
         grow |= {name: np.empty(size, dtype=np.int64) for name in ("tile_t", "far_lo", "far_hi")}

@@ -61,10 +61,6 @@ DONE, NEED_BUFFERS, PAUSED = 0, 1, 2
 # call took 0.04 s (median; 0.1 s at the 99th percentile, 0.2 s at most: a tile is not divided)
 PAUSE_WORK = 1 << 21
 
-# TileWork.spans: a listed reading's ``tiles.RowSpan`` in the row (kind .. f_hi), the reading (t)
-# and the columns lo..hi it is listed for
-SPAN = np.dtype([(name, np.int64) for name in ("kind", "first", "o_first", "sign", "o_lo", "o_hi", "f_lo", "f_hi",
-                                               "t", "lo", "hi")], align=True)
 
 class RowGroups(NamedTuple):
     """Each stored template bin's entries grouped by one offset coordinate and sorted by the
@@ -157,10 +153,11 @@ def em_state(rd: EMReadings) -> EMState:
 def _columns(rd):
     """Compiled: the ``Columns`` and ``EMState`` of ``rd`` (``EMReadings``), views of its tables."""
     ints, floats = rd.ints, rd.floats
-    columns = Columns(ints.row0, ints.col0, ints.bin, floats.z, floats.g0, floats.const, ints.m, ints.jlo, ints.box.T,
-                      ints.reach2.T, ints.inside, ints.window_hi)
-    state = EMState(floats.s, floats.wsum, ints.nobs, ints.nfar, floats.far_ratio, floats.far_log, ints.stamp,
-                    ints.slot)
+    columns = Columns(row0=ints.row0, col0=ints.col0, bin=ints.bin, z=floats.z, g0=floats.g0, const=floats.const,
+                      m=ints.m, jlo=ints.jlo, box=ints.box.T, reach2=ints.reach2.T, inside=ints.inside,
+                      window_hi=ints.window_hi)
+    state = EMState(s=floats.s, wsum=floats.wsum, nobs=ints.nobs, nfar=ints.nfar, far_ratio=floats.far_ratio,
+                    far_log=floats.far_log, stamp=ints.stamp, slot=ints.slot)
     return columns, state
 
 
@@ -195,7 +192,7 @@ class TileWork(NamedTuple):
     far_lo: np.ndarray  # int64 per listing: the tile columns where the cone's cells lie before its window
     far_hi: np.ndarray  # (far_hi < far_lo: none)
     far_sum: np.ndarray  # (2, SEGMENT + 1) float64 differences of sum_t log far ratio along the tile (add, remove)
-    spans: np.ndarray  # SPAN the row's listed readings (seg_list points into it)
+    spans: np.ndarray  # tiles.SPAN the row's listed readings (seg_list points into it)
     seg_mask: np.ndarray  # (n_seg,) int64 bit k of segment s: column s * SEGMENT + k holds a candidate
     # the band's readings (``mapping.sweeps``): those whose cones reach its columns, by position i;
     # ``active`` is a bit set of positions

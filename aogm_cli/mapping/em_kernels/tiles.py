@@ -54,6 +54,10 @@ class RowSpan(NamedTuple):
     f_hi: int
 
 
+# TileWork.spans: a listed reading's RowSpan in the row, the reading t and the columns lo..hi it is listed for
+SPAN = np.dtype([(name, np.int64) for name in (*RowSpan._fields, "t", "lo", "hi")], align=True)
+
+
 @numba.njit(cache=True, inline="always")
 def _row_span(tpl, groups, rd, t, r):
     """``RowSpan`` of reading t's cone in grid row r (o_hi < o_lo: none there)."""
