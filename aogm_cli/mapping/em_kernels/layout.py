@@ -1,7 +1,6 @@
-"""The layout of EM's kernels' arrays: the records of a reading, of a sweep's control words and of
-a listed reading's row span, the named tuples the kernels take (``EMReadings``, ``RowGroups``,
-``EMModel``, ``Candidates``, ``TileWork``) and take apart (``Columns``, ``EMState``), and the
-templates grouped by row."""
+"""The layout of EM's kernels' arrays: a reading's records, a sweep's control words, the named tuples
+the kernels take (``EMReadings``, ``RowGroups``, ``EMModel``, ``Candidates``, ``TileWork``) and take
+apart (``Columns``, ``EMState``), and the templates grouped by row."""
 
 from __future__ import annotations
 
