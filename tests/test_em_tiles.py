@@ -20,6 +20,9 @@ from aogm_cli.core.grid import GridSpec
 from aogm_cli.mapping import em as E
 from aogm_cli.mapping import sweeps as S
 from aogm_cli.mapping.em import em_problem, em_readings, find_root, run_em
+from aogm_cli.mapping.em_kernels import extents as kernel_readings
+from aogm_cli.mapping.em_kernels import layout as L
+from aogm_cli.mapping.em_kernels import likelihood, tiles
 from aogm_cli.mapping.params import EMConfig
 from aogm_cli.sensor_models import readings as laid_out
 from aogm_cli.sensor_models.cone_build import build_cone_templates
@@ -212,7 +215,7 @@ def band_order(case, phases):
     by flat id (rows, then columns within the band)."""
     cells = np.unique(case.candidates)
     cols = cells % case.grid.width
-    return np.concatenate([cells[(cols >= band.seg_lo * E.K.SEGMENT) & (cols < band.seg_hi * E.K.SEGMENT)]
+    return np.concatenate([cells[(cols >= band.seg_lo * L.SEGMENT) & (cols < band.seg_hi * L.SEGMENT)]
                            for bands in phases for band in bands])
 
 
@@ -227,16 +230,17 @@ def test_banded_sweeps_climb_as_the_reference_in_band_order(seed, monkeypatch):
     problem = case.problem(occupied)
     phases, order = S.sweep_bands(problem.readings, WIDE.width)
     assert len(phases) >= 2 and sum(len(bands) for bands in phases) > len(phases) and order is not None
-    readings_before = problem.readings.ints[:, :E.K.I_NOBS].copy()
+    fixed = [name for name in L.READING_INTS.names if name not in L.EMState._fields]  # all but the state
+    readings_before = problem.readings.ints[fixed].copy()
     result = run_em(problem, occupied, case.candidates, case.config)
     assert sum(result.flips) > 0
     check_against_reference(case, result, occupied, problem, band_order(case, phases))
     # the readings are back in their order, their state that of the final map (as a fresh problem's)
-    assert np.array_equal(problem.readings.ints[:, :E.K.I_NOBS], readings_before)
+    assert np.array_equal(problem.readings.ints[fixed], readings_before)
     fresh = case.problem(occupied.copy())
-    for column in (E.K.I_NOBS, E.K.I_NFAR):
-        assert np.array_equal(problem.readings.ints[:, column], fresh.readings.ints[:, column])
-    assert np.allclose(problem.readings.floats[:, E.K.F_S], fresh.readings.floats[:, E.K.F_S], rtol=1e-9, atol=1e-12)
+    for name in ("nobs", "nfar"):
+        assert np.array_equal(problem.readings.ints[name], fresh.readings.ints[name])
+    assert np.allclose(problem.readings.floats["s"], fresh.readings.floats["s"], rtol=1e-9, atol=1e-12)
 
 
 @pytest.mark.parametrize("seed", [30, 33])
@@ -385,8 +389,8 @@ def tiny_work(rd, n_seg):
     """EM's tile scratch with every growable buffer one element long: every tile asks for more."""
     work = ORIGINAL_WORK(rd, n_seg)
     one = {name: np.empty(1, dtype=getattr(work, name).dtype)
-           for name in ("seg_list", "far_lo", "far_hi", "pair_pos", "pair_j", "pair_g", "obs_j", "obs_g", "pre")}
-    return work._replace(spans=np.empty((work.spans.shape[0], 1), dtype=np.int64), **one)
+           for name in ("seg_list", "far_lo", "far_hi", "pair_pos", "pair_j", "pair_g", "obs_j", "obs_g", "pre", "spans")}
+    return work._replace(**one)
 
 
 ORIGINAL_WORK, ORIGINAL_GROWN = S._work, S._grown
@@ -415,15 +419,15 @@ def test_sweeps_paused_before_every_tile_give_the_same_run(seed, tiny, monkeypat
     # the scratch grows mid-sweep too
     case = random_case(seed, n_readings=(30, 80))
     expected, expected_map, _ = run_case(case)
-    statuses, sweep = [], E.K._sweep_tiles
-    monkeypatch.setattr(E.K, "PAUSE_WORK", 1)
+    statuses, sweep = [], tiles._sweep_tiles
+    monkeypatch.setattr(L, "PAUSE_WORK", 1)
     monkeypatch.setattr(laid_out, "READINGS_PER_CALL", 3)
-    monkeypatch.setattr(E.K, "_sweep_tiles", lambda *args: statuses.append(sweep(*args)) or statuses[-1])
+    monkeypatch.setattr(tiles, "_sweep_tiles", lambda *args: statuses.append(sweep(*args)) or statuses[-1])
     if tiny:
         monkeypatch.setattr(S, "_work", tiny_work)
     result, occupied, problem = run_case(case)
-    assert statuses.count(E.K.PAUSED) >= 10 * (result.sweeps + 1)
-    assert (E.K.NEED_BUFFERS in statuses) == tiny
+    assert statuses.count(L.PAUSED) >= 10 * (result.sweeps + 1)
+    assert (L.NEED_BUFFERS in statuses) == tiny
     assert np.array_equal(occupied, expected_map) and result.flips == expected.flips
     assert result.objective == expected.objective
     assert np.array_equal(result.residual, expected.residual)
@@ -477,7 +481,8 @@ def test_one_reading_takes_the_kernels_compiled_for_many():
     # numpy calls a column of a one-row table contiguous (a strided one for many rows): the kernels
     # take the tables and their columns themselves, so that a problem of one reading (a cluster that
     # one reading reaches) runs the kernels compiled for many (modes.warm_up compiles no other)
-    kernels = (E.K._reading_extent, E.K._window_rows, E.K._init_state, E.K._objective, E.K._sweep_tiles)
+    kernels = (kernel_readings._reading_extent, kernel_readings._window_rows, likelihood._init_state, likelihood._objective,
+               tiles._sweep_tiles)
     run_case(random_case(3))
     compiled = [list(kernel.signatures) for kernel in kernels]
     forward = ForwardModelConfig(sigma=0.05, p_rand=0.05, p_hit=0.4, p_max=0.0)

@@ -17,7 +17,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aogm_cli.mapping import em_kernels as K
+from aogm_cli.mapping.em_kernels import layout as L
+from aogm_cli.mapping.em_kernels.extents import _box_of_cells, _far_gains, _reading_extent, _window_cells, _window_rows
+from aogm_cli.mapping.em_kernels.likelihood import _find, _init_state, _join_parents, _objective, _residual_from_gains
 from aogm_cli.mapping.params import EMConfig
 from aogm_cli.mapping.sweeps import Sweeps
 from aogm_cli.sensor_models.cone import flat_offsets
@@ -50,7 +52,7 @@ class EMResult:
 
 
 def em_readings(cones, templates, grid, z_max: float, config: ForwardModelConfig,
-                select: np.ndarray | None = None, shadow: np.ndarray | None = None) -> K.EMReadings:
+                select: np.ndarray | None = None, shadow: np.ndarray | None = None) -> L.EMReadings:
     """The readings ``cones`` (sensor cells, heading bins, template ranges: flat arrays of one
     length, as ``sensor_models.readings.LaidOutReadings.cones`` has them) as EM's kernels take them, or those ``select`` picks (a
     bool mask or positions; taken one column at a time, without a copy of every array). NaN
@@ -64,31 +66,30 @@ def em_readings(cones, templates, grid, z_max: float, config: ForwardModelConfig
         raise ValueError("NaN readings must be left out of EM's readings")
     z, limits = cone_limits(z, z_max, config, None if shadow is None else pick(shadow))
     n = z.shape[0]
-    ints = np.zeros((n, K.INTS), dtype=np.int32)  # every integer of a reading fits (see em_kernels.EMReadings)
-    floats = np.zeros((n, K.FLOATS))
-    for col, a in ((K.I_ROW0, rows), (K.I_COL0, cols), (K.I_BIN, bins)):
-        ints[:, col] = pick(a)
-    rows, cols, bins = ints[:, K.I_ROW0], ints[:, K.I_COL0], ints[:, K.I_BIN]
-    z_eff = floats[:, K.F_Z]
+    ints, floats = np.zeros(n, dtype=L.READING_INTS), np.zeros(n, dtype=L.READING_FLOATS)
+    for name, a in (("row0", rows), ("col0", cols), ("bin", bins)):
+        ints[name] = pick(a)
+    z_eff = floats["z"]
     z_eff[:] = np.where(np.isfinite(z), np.minimum(z, z_max), z_max)
     # entries before this range are beyond the Gaussian's window (a margin against rounding)
     lower = z_eff - config.window * config.sigma - 1e-9
     no_order = np.zeros(0, dtype=np.int32)
-    tables = K.ReadingTables(ints, floats, no_order, no_order, no_order)  # the orders are not needed yet
-    groups, gauss = K.row_groups(templates), (float(config.sigma), float(config.window))
-    reading_parts(n, lambda _, span: K._reading_extent(templates.kernel_arrays, groups, tables,
-                                                                        (limits, lower), gauss, grid.shape, span))
+    rd = L.EMReadings(ints=ints, floats=floats, extent=np.zeros((0, 4), dtype=np.int32), enter=no_order, leave=no_order,
+                      window_leave=no_order)  # the extents and orders are not needed yet
+    groups, gauss = L.row_groups(templates), (float(config.sigma), float(config.window))
+    reading_parts(n, lambda _, span: _reading_extent(templates.kernel_arrays, groups, rd, (limits, lower), gauss,
+                                                     grid.shape, span))
     g0, const, _ = reading_constants(z, z_max, config)
-    floats[:, K.F_G0] = g0
-    floats[:, K.F_CONST] = const
-    box = ints[:, K.I_BOX:K.I_BOX + 4].T
-    window_hi = ints[:, K.I_WINDOW_HI]
-    rd = K.EMReadings(rows, cols, bins, z_eff, floats[:, K.F_G0], floats[:, K.F_CONST], ints[:, K.I_M],
-                      ints[:, K.I_JLO], box, ints[:, K.I_REACH2:K.I_REACH2 + 2].T, ints[:, K.I_INSIDE], window_hi,
-                      _order(box[0]), _order(box[1]), no_order, ints, floats)
-    # needs the columns above only
-    reading_parts(n, lambda _, span: K._window_rows(templates.kernel_arrays, tables, grid.height, span))
-    return rd._replace(window_leave=_order(window_hi))
+    floats["g0"] = g0
+    floats["const"] = const
+    # needs the fields above only
+    reading_parts(n, lambda _, span: _window_rows(templates.kernel_arrays, rd, grid.height, span))
+    return _with_extent(rd, np.ascontiguousarray(ints["box"]))._replace(window_leave=_order(ints["window_hi"]))
+
+
+def _with_extent(rd: L.EMReadings, extent: np.ndarray) -> L.EMReadings:
+    """``rd`` active over ``extent`` ((R, 4) int32, ``EMReadings.extent``), with its orders."""
+    return rd._replace(extent=extent, enter=_order(extent[:, 0]), leave=_order(extent[:, 1]))
 
 
 def _order(key: np.ndarray) -> np.ndarray:
@@ -100,60 +101,55 @@ def _order(key: np.ndarray) -> np.ndarray:
 class EMProblem:
     """EM's readings under a map, with their state (``em_problem``)."""
 
-    readings: K.EMReadings
-    model: K.EMModel
-    state: K.EMState
+    readings: L.EMReadings
+    model: L.EMModel
+    state: L.EMState
     templates: object
     shape: tuple[int, int]
     seen: np.ndarray  # flat bool: cells some cone holds
     parent: np.ndarray | None  # union-find over cluster ids (with labels): clusters sharing a reading
 
 
-def em_problem(rd: K.EMReadings, templates, shape: tuple[int, int], occupied: np.ndarray, config: EMConfig,
+def em_problem(rd: L.EMReadings, templates, shape: tuple[int, int], occupied: np.ndarray, config: EMConfig,
                labels: np.ndarray | None = None) -> EMProblem:
     """Every reading's likelihood state under the flat binary map ``occupied`` (one walk of its
     cone), the cells the cones hold, and with ``labels`` (flat cluster ids, 0 outside; EM's
     candidates are then the cluster cells) which clusters share a reading, each reading's
-    extent narrowed to its cluster cells. The state is written into ``rd``'s own tables (and,
-    with ``labels``, the narrowed extents): build one problem per ``em_readings`` result."""
+    extent narrowed to its cluster cells (a new ``EMReadings.extent``). The state is written into
+    ``rd``'s own tables: build one problem per ``em_readings`` result."""
     fwd = config.forward
     p_hit = float(fwd.p_hit)
-    top = int(rd.m.max()) if rd.m.size else 0
-    model = K.EMModel(p_hit, float(config.l_prior), (1.0 - p_hit) ** np.arange(top + 1, dtype=np.float64),
-                      1.0 - fwd.p_rand - fwd.p_max, float(fwd.sigma), float(fwd.window))
-    n = rd.z.shape[0]
-    ints, floats = rd.ints, rd.floats
-    state = K.EMState(floats[:, K.F_S], floats[:, K.F_WSUM], ints[:, K.I_NOBS], ints[:, K.I_NFAR],
-                      floats[:, K.F_RATIO:K.F_RATIO + 2], floats[:, K.F_LOG:K.F_LOG + 2], ints[:, K.I_STAMP])
+    n = rd.ints.shape[0]
+    top = int(rd.ints["m"].max()) if n else 0
+    model = L.EMModel(p_hit=p_hit, l_prior=float(config.l_prior),
+                      qpow=(1.0 - p_hit) ** np.arange(top + 1, dtype=np.float64), w=1.0 - fwd.p_rand - fwd.p_max,
+                      sigma=float(fwd.sigma), window=float(fwd.window))
     seen = np.zeros(shape[0] * shape[1], dtype=np.bool_)
     if labels is None:
-        marks = [(seen, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((4, 0), dtype=np.int64))]
+        marks = [(seen, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 4), dtype=np.int32))]
         marks *= READING_PARTS
     else:
         labels = np.ascontiguousarray(labels, dtype=np.int64).reshape(-1)
-        box = np.empty((4, n), dtype=np.int64)
+        box = np.empty((n, 4), dtype=np.int32)
         # a union-find over the cluster ids per part (each reading joins the clusters its cone holds),
         # joined after: the same clusters share a root, the least id, for any thread count
         marks = [(seen, labels, np.arange(int(labels.max(initial=0)) + 1, dtype=np.int64), box)
                  for _ in range(READING_PARTS)]
     flat, occupied = flat_offsets(templates, shape[1]), _flat_bool(occupied)
-    tables = K.reading_tables(rd)
-    reading_parts(n, lambda k, span: K._init_state(templates.kernel_arrays, flat, tables, model, occupied,
-                                                                  shape, marks[k], span))  # into state
+    reading_parts(n, lambda k, span: _init_state(templates.kernel_arrays, flat, rd, model, occupied, shape, marks[k],
+                                                 span))  # into state
     parent = None
     if labels is not None:
         parent = marks[0][2]
         for other in marks[1:]:
-            K._join_parents(parent, other[2])
-        box_in = rd.ints[:, K.I_BOX:K.I_BOX + 4].T
-        box_in[:] = box
-        rd = rd._replace(box=box_in, enter=_order(box_in[0]), leave=_order(box_in[1]))
-    return EMProblem(rd, model, state, templates, shape, seen, parent)
+            _join_parents(parent, other[2])
+        rd = _with_extent(rd, box)
+    return EMProblem(rd, model, L.em_state(rd), templates, shape, seen, parent)
 
 
 def find_root(parent: np.ndarray, x: int) -> int:
     """The union-find root of x in ``EMProblem.parent`` (the kernels' own ``_find``)."""
-    return int(K._find(parent, x))
+    return int(_find(parent, x))
 
 
 def _flat_bool(a: np.ndarray) -> np.ndarray:
@@ -162,7 +158,7 @@ def _flat_bool(a: np.ndarray) -> np.ndarray:
     return a
 
 
-def _candidates(cells: np.ndarray, shape: tuple[int, int]) -> K.Candidates:
+def _candidates(cells: np.ndarray, shape: tuple[int, int]) -> L.Candidates:
     height, width = shape
     cells = np.ascontiguousarray(cells, dtype=np.int64)
     if cells.size > 1 and not np.all(cells[1:] > cells[:-1]):
@@ -170,10 +166,11 @@ def _candidates(cells: np.ndarray, shape: tuple[int, int]) -> K.Candidates:
     of_cell = np.full(height * width, -1, dtype=np.int32)
     of_cell[cells] = np.arange(cells.size, dtype=np.int32)
     row_first = np.searchsorted(cells, np.arange(height + 1, dtype=np.int64) * width)
-    n_seg = -(-width // K.SEGMENT)
-    return K.Candidates(cells, of_cell, row_first, np.zeros(0, dtype=np.bool_), np.full(cells.size, -1, dtype=np.int64),
-                        np.zeros(cells.size), np.full((n_seg, height), -1, dtype=np.int64).T)  # a segment's clocks
-    # in one run of memory: two bands' threads write apart
+    n_seg = -(-width // L.SEGMENT)
+    return L.Candidates(cell=cells, of_cell=of_cell, row_first=row_first, occupied=np.zeros(0, dtype=np.bool_),
+                        stamp=np.full(cells.size, -1, dtype=np.int64), last_gain=np.zeros(cells.size),
+                        tile_clock=np.full((n_seg, height), -1, dtype=np.int64).T)  # a segment's clocks in one run
+    # of memory: two bands' threads write apart
 
 
 # the share of the candidates that must be held free (``_flippable``) for EM to leave them out of
@@ -195,35 +192,29 @@ def run_em(problem: EMProblem, occupied: np.ndarray, candidates: np.ndarray, con
     every = _candidates(candidates, problem.shape).cell
     swept, held_free = _flippable(problem, occupied, every)
     cand = _candidates(swept, problem.shape)._replace(occupied=occupied)
-    box = problem.readings.ints[:, K.I_BOX:K.I_BOX + 4]
-    whole_box = box.copy() if held_free.size else None
     flips, scored, pairs = [], [], []
-    try:
-        sweeps = Sweeps(_narrowed(problem, swept) if held_free.size else problem, cand)
-        model, tables = problem.model, sweeps.tables
-        objective = [K._objective(tables, model, occupied, cand.cell)]
-        with sweeps:
-            for sweep in range(1, config.max_sweeps + 1):
-                n_flips, n_scored, n_pairs = sweeps.one_pass(K.SWEEP)
-                flips.append(n_flips)
-                scored.append(n_scored)
-                pairs.append(n_pairs)
-                objective.append(K._objective(tables, model, occupied, cand.cell))
-                if progress:
-                    progress(sweep, n_flips, objective[-1])
-                if n_flips == 0:
-                    break
-            if final and not (flips and flips[-1] == 0):  # stopped by max_sweeps: score every candidate once more
-                sweeps.one_pass(K.SCORE)
-    finally:
-        if whole_box is not None:
-            box[:] = whole_box  # the problem's readings as they were
+    sweeps = Sweeps(_narrowed(problem, swept) if held_free.size else problem, cand)
+    model, tables = problem.model, sweeps.tables
+    objective = [_objective(tables, model, occupied, cand.cell)]
+    with sweeps:
+        for sweep in range(1, config.max_sweeps + 1):
+            n_flips, n_scored, n_pairs = sweeps.one_pass(L.SWEEP)
+            flips.append(n_flips)
+            scored.append(n_scored)
+            pairs.append(n_pairs)
+            objective.append(_objective(tables, model, occupied, cand.cell))
+            if progress:
+                progress(sweep, n_flips, objective[-1])
+            if n_flips == 0:
+                break
+        if final and not (flips and flips[-1] == 0):  # stopped by max_sweeps: score every candidate once more
+            sweeps.one_pass(L.SCORE)
     peak = sweeps.peak
     gain = np.empty(every.size)
     gain[np.searchsorted(every, cand.cell)] = cand.last_gain
     if held_free.size:
         gain[np.searchsorted(every, held_free)] = _held_free_gains(problem, held_free)
-    residual = K._residual_from_gains(every, occupied, gain, model.l_prior)
+    residual = _residual_from_gains(every, occupied, gain, model.l_prior)
     return EMResult(len(flips), flips, [float(v) for v in objective], every, residual, scored, pairs,
                     int(peak[0]), int(peak[1]), sweeps.threads, sweeps.band_seconds)
 
@@ -240,10 +231,10 @@ def _flippable(problem: EMProblem, occupied: np.ndarray, cells: np.ndarray) -> t
     free) gained nothing measurable (docs/algorithms.md, the intel log's sweep)."""
     if problem.model.l_prior >= 0.0 or cells.size == 0 or problem.parent is not None:
         return cells, cells[:0]
-    tables = K.reading_tables(problem.readings)
+    rd = problem.readings
     window = np.zeros(problem.shape[0] * problem.shape[1], dtype=np.bool_)
     tpl = problem.templates.kernel_arrays
-    reading_parts(problem.readings.z.shape[0], lambda _, span: K._window_cells(tpl, tables, problem.shape, span, window))
+    reading_parts(rd.ints.shape[0], lambda _, span: _window_cells(tpl, rd, problem.shape, span, window))
     swept = window[cells] | occupied[cells]
     if np.count_nonzero(~swept) < HELD_FREE_SHARE * cells.size:
         return cells, cells[:0]
@@ -251,18 +242,16 @@ def _flippable(problem: EMProblem, occupied: np.ndarray, cells: np.ndarray) -> t
 
 
 def _narrowed(problem: EMProblem, swept: np.ndarray) -> EMProblem:
-    """``problem`` with each reading's extent narrowed to the cells of ``swept`` its cone holds
-    (written into its readings' table, as a cluster problem's are: ``em_problem``), the only
-    rows and columns a sweep over them needs it at; ``run_em`` puts the extents back."""
+    """``problem`` with each reading's extent narrowed to the cells of ``swept`` its cone holds (a
+    new ``EMReadings.extent``, as a cluster problem's are: ``em_problem``), the only rows and
+    columns a sweep over them needs it at; the same tables, with their state."""
     rd = problem.readings
-    tables = K.reading_tables(rd)
     mask = np.zeros(problem.shape[0] * problem.shape[1], dtype=np.bool_)
     mask[swept] = True
-    box = np.empty((4, rd.z.shape[0]), dtype=np.int64)
+    box = np.empty((rd.ints.shape[0], 4), dtype=np.int32)
     tpl = problem.templates.kernel_arrays
-    reading_parts(rd.z.shape[0], lambda _, span: K._box_of_cells(tpl, tables, problem.shape, mask, span, box))
-    rd.box[:] = box
-    return dataclasses.replace(problem, readings=rd._replace(enter=_order(rd.box[0]), leave=_order(rd.box[1])))
+    reading_parts(rd.ints.shape[0], lambda _, span: _box_of_cells(tpl, rd, problem.shape, mask, span, box))
+    return dataclasses.replace(problem, readings=_with_extent(rd, box))
 
 
 def _held_free_gains(problem: EMProblem, cells: np.ndarray) -> np.ndarray:
@@ -271,11 +260,10 @@ def _held_free_gains(problem: EMProblem, cells: np.ndarray) -> np.ndarray:
     before their windows, summed in the readings' fixed parts (the same for any thread count)."""
     of_cell = np.full(problem.shape[0] * problem.shape[1], -1, dtype=np.int32)
     of_cell[cells] = np.arange(cells.size, dtype=np.int32)
-    tables = K.reading_tables(problem.readings)
+    rd = problem.readings
     tpl = problem.templates.kernel_arrays
     out = np.zeros(cells.size)
-    summed_in_parts(problem.readings.z.shape[0], out,
-                    lambda _, part, span: K._far_gains(tpl, tables, problem.shape, of_cell, span, part))
+    summed_in_parts(rd.ints.shape[0], out, lambda _, part, span: _far_gains(tpl, rd, problem.shape, of_cell, span, part))
     return out
 
 
@@ -337,5 +325,5 @@ def prepared_templates(grid, sensor):
     """The forward templates of ``grid`` with their row groups, built or loaded before any clock
     starts: a one-time set-up, cached."""
     templates = forward_templates(grid, sensor)
-    K.row_groups(templates)
+    L.row_groups(templates)
     return templates

@@ -176,7 +176,7 @@ def warm_up(sensor: SensorSpec, params: MapParams, mode: str) -> None:
     """Compile (or load from numba's cache) the kernels ``mode`` runs, by running the mode's
     own pipeline on ``tiny_log(sensor)``, so that ``runtime_s`` leaves compilation out. EM
     modes run twice (to convergence and stopped by the sweep limit: each ends in its own kernel);
-    EM's kernels take the same types whatever the number of readings (``em_kernels.ReadingTables``),
+    EM's kernels take the same types whatever the number of readings (``em_kernels.layout.EMReadings``),
     so that these serve a cluster of one reading too.
     Cached kernels are loaded without numba's full start-up (``core.jit_cache``)."""
     jit_cache.load_lean()

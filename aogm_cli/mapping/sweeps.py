@@ -1,6 +1,6 @@
 """EM's sweeps as ``run_em`` runs them: the grid's column bands (``sweep_bands``), colour by colour,
 the bands of one colour at once on threads (``Sweeps``), each band a call of the tile kernel
-(``em_kernels._sweep_tiles``) resumed after every pause and every growth of its scratch."""
+(``em_kernels.tiles._sweep_tiles``) resumed after every pause and every growth of its scratch."""
 
 from __future__ import annotations
 
@@ -12,7 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from aogm_cli.core.budget import active_limits, in_parts
-from aogm_cli.mapping import em_kernels as K
+from aogm_cli.mapping.em_kernels import layout as L
+from aogm_cli.mapping.em_kernels import listing, tiles
 from aogm_cli.sensor_models.cone import flat_offsets
 
 # bytes of slack on either side of a scratch's small arrays: two threads' control words and tile
@@ -25,24 +26,22 @@ SLACK = 128
 
 def _apart(shape, dtype=np.int64) -> np.ndarray:
     """Zeros of ``shape`` (C-contiguous) with SLACK bytes of their own before and after."""
-    n = int(np.prod(shape))
-    pad = SLACK // np.dtype(dtype).itemsize
-    return np.zeros(n + 2 * pad, dtype=dtype)[pad:pad + n].reshape(shape)
+    n, size = int(np.prod(shape)), np.dtype(dtype).itemsize
+    return np.zeros(n * size + 2 * SLACK, dtype=np.uint8)[SLACK:SLACK + n * size].view(dtype).reshape(shape)
 
 
-def _work(tables: K.ReadingTables, n_seg: int) -> K.TileWork:
-    n_readings = tables.ints.shape[0]
-    pairs = 1 << 16
-    room = 1 << 14
+def _work(readings: L.EMReadings, n_seg: int) -> L.TileWork:
+    n_readings = readings.ints.shape[0]
+    pairs, room, listed = 1 << 16, 1 << 14, max(1024, n_readings // 8)
     none = np.zeros(0, dtype=np.int64)  # the band's readings, set per band (``Sweeps._band``)
-    return K.TileWork(_apart(K.CTL_SIZE), _apart(n_readings // 64 + 1, np.uint64),
-                      _apart(n_seg + 1), np.empty(max(1024, n_readings // 8), dtype=np.int64),
-                      _apart(K.SEGMENT + 1), np.empty(pairs, dtype=np.int64),
-                      np.empty(pairs, dtype=np.int64), np.empty(pairs), tables.ints[:, K.I_SLOT],
-                      np.empty(room, dtype=np.int64), np.empty(room), np.empty(room), _apart(n_seg),
-                      _apart(1024), _apart(1024), _apart(1024), _apart((2, K.SEGMENT + 1), np.float64),
-                      np.empty((11, max(1024, n_readings // 8)), dtype=np.int64), _apart(n_seg),
-                      none, none, none, none)
+    return L.TileWork(
+        ctl=_apart(1, L.CONTROL), active=_apart(n_readings // 64 + 1, np.uint64), seg_ptr=_apart(n_seg + 1),
+        seg_list=np.empty(listed, dtype=np.int64), count=_apart(L.SEGMENT + 1),
+        pair_pos=np.empty(pairs, dtype=np.int64), pair_j=np.empty(pairs, dtype=np.int64), pair_g=np.empty(pairs),
+        obs_j=np.empty(room, dtype=np.int64), obs_g=np.empty(room), pre=np.empty(room), seg_fill=_apart(n_seg),
+        tile_t=_apart(1024), far_lo=_apart(1024), far_hi=_apart(1024), far_sum=_apart((2, L.SEGMENT + 1), np.float64),
+        spans=np.empty(listed, dtype=listing.SPAN), seg_mask=_apart(n_seg), members=none, enter=none, leave=none,
+        window_leave=none)
 
 
 # A sweep visits column bands of the grid, colour by colour (``sweep_bands``): two bands of one colour
@@ -69,7 +68,7 @@ class Band:
     window_leave: np.ndarray  # ... by window_hi
 
 
-def sweep_bands(rd: K.EMReadings, width: int) -> tuple[list[list[Band]], np.ndarray | None]:
+def sweep_bands(rd: L.EMReadings, width: int) -> tuple[list[list[Band]], np.ndarray | None]:
     """The bands of one sweep, by colour, and the order of the readings they are numbered in
     (None: as they are). Bands are ``w`` segments wide (the last takes the rest), w * SEGMENT at
     least half the widest cone's columns, so that the colour-1 bands between two bands of one
@@ -77,93 +76,89 @@ def sweep_bands(rd: K.EMReadings, width: int) -> tuple[list[list[Band]], np.ndar
     no more bands than colours. The readings are ordered by the band of their cones' middle
     column, so that two threads seldom write one cache line of the readings' tables, and then by
     their first row, so that those a band's sweep holds at a row lie together."""
-    n_read = rd.z.shape[0]
-    n_seg = -(-width // K.SEGMENT)
-    box = rd.box
+    n_read = rd.ints.shape[0]
+    n_seg = -(-width // L.SEGMENT)
+    box = rd.extent.T
     live = box[0] <= box[1]
     whole = [[Band(0, n_seg, np.arange(n_read, dtype=np.int64), rd.enter.astype(np.int64),
                    rd.leave.astype(np.int64), rd.window_leave.astype(np.int64))]]
     if n_read < BAND_READINGS or not live.any():
         return whole, None
     span = int((box[3] - box[2] + 1)[live].max())
-    w = -(-span // (2 * K.SEGMENT))
-    colours = 1 + -(-span // (w * K.SEGMENT))
+    w = -(-span // (2 * L.SEGMENT))
+    colours = 1 + -(-span // (w * L.SEGMENT))
     n_bands = n_seg // w
     if n_bands <= colours:
         return whole, None
     # by the band of the middle column, then by first row: a band's readings active at a row lie
     # together in the tables, its own part of them
-    middle = np.where(live, (box[2].astype(np.int64) + box[3]) // (2 * w * K.SEGMENT), -1)
+    middle = np.where(live, (box[2].astype(np.int64) + box[3]) // (2 * w * L.SEGMENT), -1)
     order = np.lexsort((box[0], middle))
-    box, live, window_hi = box[:, order], live[order], rd.window_hi[order]
+    box, live, window_hi = box[:, order], live[order], rd.ints["window_hi"][order]
     edges = [i * w for i in range(n_bands)] + [n_seg]
     bands = []
     for lo, hi in zip(edges[:-1], edges[1:], strict=True):
-        members = np.flatnonzero(live & (box[2] < hi * K.SEGMENT) & (box[3] >= lo * K.SEGMENT)).astype(np.int64)
+        members = np.flatnonzero(live & (box[2] < hi * L.SEGMENT) & (box[3] >= lo * L.SEGMENT)).astype(np.int64)
         orders = (np.argsort(key[members], kind="stable").astype(np.int64) for key in (box[0], box[1], window_hi))
         bands.append(Band(lo, hi, members, *orders))
     return [bands[c::colours] for c in range(colours)], order
 
 
-def _permuted(rd: K.EMReadings, order: np.ndarray) -> K.ReadingTables:
-    """The tables of ``rd``'s readings (and their state) in ``order``: copies. The sweep takes no
-    order of them (a band has its own)."""
+def _permuted(rd: L.EMReadings, order: np.ndarray) -> L.EMReadings:
+    """``rd``'s readings (their tables, with their state, and extents) in ``order``: copies. The
+    sweep takes no order of them (a band has its own)."""
     none = rd.enter[:0]
-    return K.ReadingTables(rd.ints[order], rd.floats[order], none, none, none)
+    return L.EMReadings(ints=rd.ints[order], floats=rd.floats[order], extent=rd.extent[order], enter=none, leave=none,
+                        window_leave=none)
 
 
-def _grown(work: K.TileWork) -> K.TileWork:
-    """``work`` with every buffer the kernel asked for (ctl's NEED_* sizes) half as large again."""
-    ctl = work.ctl
+def _grown(work: L.TileWork) -> L.TileWork:
+    """``work`` with every buffer the kernel asked for (ctl's need_* sizes) half as large again."""
+    ctl = work.ctl[0]
     grow = {}
-    if ctl[K.CTL_NEED_LIST] > work.seg_list.shape[0]:
-        grow["seg_list"] = np.empty(int(ctl[K.CTL_NEED_LIST] * 1.5) + 1, dtype=np.int64)
-    if ctl[K.CTL_NEED_LIST] > work.spans.shape[1]:
-        grow["spans"] = np.empty((11, int(ctl[K.CTL_NEED_LIST] * 1.5) + 1), dtype=np.int64)
-    if ctl[K.CTL_NEED_LIST] > work.far_lo.shape[0]:
-        size = int(ctl[K.CTL_NEED_LIST] * 1.5) + 1
+    if ctl["need_list"] > work.seg_list.shape[0]:
+        grow["seg_list"] = np.empty(int(ctl["need_list"] * 1.5) + 1, dtype=np.int64)
+    if ctl["need_list"] > work.spans.shape[0]:
+        grow["spans"] = np.empty(int(ctl["need_list"] * 1.5) + 1, dtype=listing.SPAN)
+    if ctl["need_list"] > work.far_lo.shape[0]:
+        size = int(ctl["need_list"] * 1.5) + 1
         grow |= {name: np.empty(size, dtype=np.int64) for name in ("tile_t", "far_lo", "far_hi")}
-    if ctl[K.CTL_NEED_PAIRS] > work.pair_pos.shape[0]:
-        size = int(ctl[K.CTL_NEED_PAIRS] * 1.5) + 1
+    if ctl["need_pairs"] > work.pair_pos.shape[0]:
+        size = int(ctl["need_pairs"] * 1.5) + 1
         grow |= {"pair_pos": np.empty(size, dtype=np.int64), "pair_j": np.empty(size, dtype=np.int64),
                  "pair_g": np.empty(size)}
-    if ctl[K.CTL_NEED_ROOM] > work.obs_j.shape[0]:
-        need = int(ctl[K.CTL_NEED_ROOM])
-        size = max(need, min(int(need * 1.5) + 1, K.ARENA_ENTRIES))
-        used = int(ctl[K.CTL_BUMP])  # live slots keep their places
+    if ctl["need_room"] > work.obs_j.shape[0]:
+        need = int(ctl["need_room"])
+        size = max(need, min(int(need * 1.5) + 1, L.ARENA_ENTRIES))
+        used = int(ctl["bump"])  # live slots keep their places
         for name in ("obs_j", "obs_g", "pre"):
             old = getattr(work, name)
             grow[name] = np.empty(size, dtype=old.dtype)
             grow[name][:used] = old[:used]
-    ctl[K.CTL_NEED_LIST] = ctl[K.CTL_NEED_PAIRS] = ctl[K.CTL_NEED_ROOM] = 0
-    ctl[K.CTL_LISTED] = -1  # the row is listed again (into the new buffers)
+    ctl["need_list"] = ctl["need_pairs"] = ctl["need_room"] = 0
+    ctl["listed"] = -1  # the row is listed again (into the new buffers)
     return work._replace(**grow)
 
 
-# the sweep's stand-in for TileWork.slot: it takes the column from the readings' table itself
-# (``em_kernels.ReadingTables``), the one layout whatever the readings
-NO_SLOT = np.zeros(0, dtype=np.int32)
-
-
-def _scratch_bytes(work: K.TileWork) -> int:
+def _scratch_bytes(work: L.TileWork) -> int:
     return int(sum(a.nbytes for a in work))
 
 
 class Sweeps:
-    """The sweeps of one run of EM over ``cand`` (``em_kernels.Candidates``): ``one_pass(mode)``
+    """The sweeps of one run of EM over ``cand`` (``em_kernels.layout.Candidates``): ``one_pass(mode)``
     visits every band, colour by colour, the bands of a colour on up to ``Limits.threads``
     threads (``core.budget.in_parts``), one scratch each. Use as a context manager: on leaving,
     the readings' tables hold their state in the problem's order again."""
 
-    def __init__(self, problem, cand: K.Candidates):  # problem: an em.EMProblem (the layer above)
+    def __init__(self, problem, cand: L.Candidates):  # problem: an em.EMProblem (the layer above)
         rd = problem.readings
         self.problem, self.cand, self.model = problem, cand, problem.model
         self.kernel_args = (problem.templates.kernel_arrays, flat_offsets(problem.templates, problem.shape[1]),
-                            K.row_groups(problem.templates))
+                            L.row_groups(problem.templates))
         self.phases, self.order = sweep_bands(rd, problem.shape[1])
         # the readings and their state as the kernels take them: by column while the bands sweep
         # (put back on leaving)
-        self.tables = K.reading_tables(rd) if self.order is None else _permuted(rd, self.order)
+        self.tables = rd if self.order is None else _permuted(rd, self.order)
         self.threads = min(active_limits().thread_count(), max(len(bands) for bands in self.phases))
         self.works = queue.SimpleQueue()  # one scratch per thread
         for _ in range(self.threads):
@@ -184,7 +179,7 @@ class Sweeps:
             self.problem.readings.floats[self.order] = self.tables.floats
 
     def one_pass(self, mode: int) -> tuple[int, int, int]:
-        """One sweep (``mode`` em_kernels.SWEEP) or scoring pass (SCORE): (flips, candidates
+        """One sweep (``mode`` em_kernels.layout.SWEEP) or scoring pass (SCORE): (flips, candidates
         scored, pairs generated)."""
         totals = [0, 0, 0]
         for bands in self.phases:
@@ -203,26 +198,25 @@ class Sweeps:
         work = self.works.get()
         t0 = time.perf_counter()
         try:
-            ctl = work.ctl
-            ctl[:] = 0
-            ctl[K.CTL_MODE], ctl[K.CTL_CLOCK] = mode, self.clock
-            ctl[K.CTL_SG_LO], ctl[K.CTL_SG_HI], ctl[K.CTL_LISTED] = band.seg_lo, band.seg_hi, -1
+            work.ctl.fill(0)
+            ctl = work.ctl[0]
+            ctl["mode"], ctl["clock"] = mode, self.clock
+            ctl["sg_lo"], ctl["sg_hi"], ctl["listed"] = band.seg_lo, band.seg_hi, -1
             work = work._replace(members=band.members, enter=band.enter, leave=band.leave,
                                  window_leave=band.window_leave)
             work.active.fill(0)
             self.peak[1] = max(self.peak[1], _scratch_bytes(work))
             while not stop.is_set():
-                ctl[K.CTL_BUDGET] = K.PAUSE_WORK
-                status = K._sweep_tiles(*self.kernel_args, self.tables, self.model,
-                                        self.cand, work._replace(slot=NO_SLOT))
-                if status == K.DONE:
+                ctl["budget"] = L.PAUSE_WORK
+                status = tiles._sweep_tiles(*self.kernel_args, self.tables, self.model, self.cand, work)
+                if status == L.DONE:
                     break
-                if status == K.NEED_BUFFERS:
+                if status == L.NEED_BUFFERS:
                     work = _grown(work)
                     self.peak[1] = max(self.peak[1], _scratch_bytes(work))
                 # PAUSED: back in Python, where a pending signal's handler runs (core.interrupts); resume
             self.peak[0] = max(self.peak[0], work.pair_pos.shape[0])
-            return tuple(int(ctl[i]) for i in (K.CTL_FLIPS, K.CTL_SCORED, K.CTL_PAIRS, K.CTL_CLOCK))
+            return tuple(int(ctl[name]) for name in ("flips", "scored", "pairs", "clock"))
         finally:
             self.seconds[band.seg_lo] = time.perf_counter() - t0
             self.works.put(work)

@@ -1,7 +1,6 @@
-"""The layout of EM's kernels' arrays: the readings' int and float columns, the control
-words of a sweep, the named tuples the kernels take (``RowGroups``, ``ReadingTables``, ``EMModel``,
-``Candidates``, ``TileWork``) and those they take apart (``EMReadings``, ``EMState``), and the
-templates grouped by row."""
+"""The layout of EM's kernels' arrays: a reading's records, a sweep's control words, the named tuples
+the kernels take (``EMReadings``, ``RowGroups``, ``EMModel``, ``Candidates``, ``TileWork``) and take
+apart (``Columns``, ``EMState``), and the templates grouped by row."""
 
 from __future__ import annotations
 
@@ -14,41 +13,53 @@ from llvmlite import ir
 from numba import types
 from numba.extending import intrinsic
 
-__all__ = [  # what the package re-exports: the layout every caller of the kernels needs
-    "ARENA_ENTRIES", "CTL_BUDGET", "CTL_BUMP", "CTL_CLOCK", "CTL_ENTER", "CTL_FLIPS", "CTL_LEAVE",
-    "CTL_LISTED", "CTL_MODE", "CTL_NEED_LIST", "CTL_NEED_PAIRS", "CTL_NEED_ROOM", "CTL_PAIRS", "CTL_ROW",
-    "CTL_SCORED", "CTL_SEG", "CTL_SG_HI", "CTL_SG_LO", "CTL_SIZE", "CTL_WINDOW_LEAVE", "Candidates", "DONE", "EMModel", "EMReadings",
-    "EMState", "FLOATS", "F_CONST", "F_G0", "F_LOG", "F_RATIO", "F_S", "F_WSUM", "F_Z", "INTS", "I_BIN",
-    "I_BOX", "I_COL0", "I_INSIDE", "I_JLO", "I_M", "I_NFAR", "I_NOBS", "I_REACH2", "I_ROW0", "I_SLOT",
-    "I_STAMP", "I_WINDOW_HI", "NEED_BUFFERS", "PAUSED", "PAUSE_WORK", "ReadingTables", "RowGroups", "SCORE",
-    "SEGMENT", "SWEEP", "TileWork", "reading_tables", "row_groups",
-]
-
-SWEEP = 0  # TileWork.ctl[CTL_MODE]: flip candidates that raise the objective
+SWEEP = 0  # TileWork.ctl's mode: flip candidates that raise the objective
 SCORE = 1  # score every candidate once (the residual pass), flip none
 SEGMENT = 32  # columns per tile
 # the window arena's largest size (entries of 24 bytes: 96 MB); beyond it slots are dropped
 # and rebuilt (a slot lives while the sweep crosses its reading's window rows)
 ARENA_ENTRIES = 1 << 22
 
-# columns of EMReadings.ints and .floats (the readings, then their EMState and arena slot)
-I_ROW0, I_COL0, I_BIN, I_M, I_JLO, I_REACH2, I_BOX, I_NOBS, I_NFAR, I_STAMP, I_SLOT, I_INSIDE, I_WINDOW_HI, INTS = (
-    0, 1, 2, 3, 4, 5, 7, 11, 12, 13, 14, 15, 16, 17)
-F_Z, F_G0, F_CONST, F_S, F_WSUM, F_RATIO, F_LOG, FLOATS = 0, 1, 2, 3, 4, 5, 7, 9
+# A reading's integers and reals, one record each (``EMReadings.ints``, ``.floats``): what the tiles
+# need of one reading shares a cache line or two, whichever pass of the robot it came from. Every
+# integer fits an int32: cells, bins, template entries (< 2^31 for any template), counts, arena slots
+# (< ARENA_ENTRIES but for one huge tile) and the clock of stamps (accepted flips, < 2^31).
+READING_INTS = np.dtype([
+    ("row0", np.int32), ("col0", np.int32),  # sensor cell (may lie outside the grid)
+    ("bin", np.int32),  # heading bin
+    ("m", np.int32),  # template entries of the (truncated) cone
+    ("jlo", np.int32),  # first entry that may lie inside the Gaussian window
+    ("reach2", np.int32, (2,)),  # the cone's cells have dr^2 + dc^2 <= reach2[0], those before the window <= reach2[1]
+    ("box", np.int32, (4,)),  # row_lo, row_hi, col_lo, col_hi of the cone in the grid (row_lo > row_hi: none)
+    ("nobs", np.int32), ("nfar", np.int32), ("stamp", np.int32), ("slot", np.int32),  # its EMState
+    ("inside", np.int32),  # 1 when every cell of the cone lies inside the grid (flat offsets serve)
+    ("window_hi", np.int32),  # the last grid row of the cone's window cells (-1: none)
+], align=True)
+READING_FLOATS = np.dtype([
+    ("z", np.float64),  # range in template ranges (max-range readings: z_max)
+    ("g0", np.float64), ("const", np.float64),  # G0_t, C_t
+    ("s", np.float64), ("wsum", np.float64), ("far_ratio", np.float64, (2,)), ("far_log", np.float64, (2,)),  # EMState
+], align=True)
 
-# TileWork.ctl slots
-CTL_MODE, CTL_ROW, CTL_SEG = 0, 1, 2
-CTL_NEED_LIST, CTL_NEED_PAIRS, CTL_NEED_ROOM = 3, 4, 5
-CTL_ENTER, CTL_LEAVE, CTL_CLOCK, CTL_FLIPS, CTL_SCORED, CTL_PAIRS = 6, 7, 8, 9, 10, 11
-CTL_BUMP, CTL_WINDOW_LEAVE = 12, 13
-CTL_BUDGET, CTL_LISTED = 14, 15
-CTL_SG_LO, CTL_SG_HI = 16, 17  # the band's segments: the sweep visits tiles sg_lo <= sg < sg_hi
-CTL_SIZE = 18
+# TileWork.ctl: one record of a sweep's control words
+CONTROL = np.dtype([(name, np.int64) for name in (
+    "mode",  # SWEEP or SCORE
+    "row", "seg",  # where the pass resumes
+    "need_list", "need_pairs", "need_room",  # the sizes the scratch must grow to (NEED_BUFFERS)
+    "enter", "leave",  # the band's readings entered and left so far (positions in its orders)
+    "clock", "flips", "scored", "pairs",  # accepted flips' clock, and the pass's counts
+    "bump",  # the window arena's top
+    "window_leave",  # the band's readings whose window rows the sweep is past
+    "budget",  # the work left before a pause (in window pairs: see _sweep_tiles)
+    "listed",  # the row whose readings are listed (-1: none)
+    "sg_lo", "sg_hi",  # the band's segments: the sweep visits tiles sg_lo <= sg < sg_hi
+)], align=True)
 DONE, NEED_BUFFERS, PAUSED = 0, 1, 2
 # the work (in window pairs: see _sweep_tiles) after which a sweep pauses, so that the caller is
 # back in Python, where a signal's handler runs, many times a second: on the 50k-scan office a
 # call took 0.04 s (median; 0.1 s at the 99th percentile, 0.2 s at most: a tile is not divided)
 PAUSE_WORK = 1 << 21
+
 
 class RowGroups(NamedTuple):
     """Each stored template bin's entries grouped by one offset coordinate and sorted by the
@@ -66,32 +77,42 @@ class RowGroups(NamedTuple):
 
 
 class EMReadings(NamedTuple):
-    """The readings of an EM problem (arrays of one length, ``em.em_readings``).
+    """The readings of an EM problem (``em.em_readings``), and their ``EMState``: a record per
+    reading in each table (their fields name them: ``READING_INTS``, ``READING_FLOATS``).
 
-    Every field is a column of two row-per-reading tables, ``ints`` and ``floats``, which
-    also hold each reading's ``EMState``: what the tiles need of one reading shares a cache
-    line or two, whichever pass of the robot it came from.
-    """
+    The kernels take the tables whole (a table's column is strided, unless the table has one row
+    or none, which numba would compile every kernel again for: a cluster that one reading
+    reaches) and their fields in compiled code (``_columns``)."""
 
-    row0: np.ndarray  # int32 sensor cell (may lie outside the grid)
-    col0: np.ndarray
-    bin: np.ndarray  # int32 heading bin
-    z: np.ndarray  # float64 range in template ranges (max-range readings: z_max)
-    g0: np.ndarray  # float64 G0_t
-    const: np.ndarray  # float64 C_t
-    m: np.ndarray  # int32 template entries of the (truncated) cone
-    jlo: np.ndarray  # int32 first entry that may lie inside the Gaussian window
-    box: np.ndarray  # (4, R) int32 row_lo, row_hi, col_lo, col_hi of the cone in the grid (row_lo > row_hi: none)
-    reach2: np.ndarray  # (2, R) int32 the cone's cells have dr^2 + dc^2 <= reach2[0], those before the window <= reach2[1]
-    inside: np.ndarray  # int32 1 when every cell of the cone lies inside the grid (flat offsets serve)
-    window_hi: np.ndarray  # int32 the last grid row of the cone's window cells (-1: none)
-    enter: np.ndarray  # int32 readings by row_lo (stable)
-    leave: np.ndarray  # int32 readings by row_hi (stable)
+    ints: np.ndarray  # (R,) READING_INTS
+    floats: np.ndarray  # (R,) READING_FLOATS
+    extent: np.ndarray  # (R, 4) int32 row_lo, row_hi, col_lo, col_hi: where a sweep needs each reading
+    # (row_lo > row_hi: nowhere): its cone's box, or the part of it that holds the cells swept
+    enter: np.ndarray  # int32 readings by extent row_lo (stable)
+    leave: np.ndarray  # int32 readings by extent row_hi (stable)
     window_leave: np.ndarray  # int32 readings by window_hi (stable): their window slots are dropped past it
-    ints: np.ndarray  # (R, INTS) int32 the table of the integer columns (I_*): cells, bins, template entries
-    # (< 2^31 for any template), counts, arena slots (< ARENA_ENTRIES but for one huge tile) and
-    # the clock of stamps (accepted flips, < 2^31)
-    floats: np.ndarray  # (R, FLOATS) float64 the table of the real ones (F_*)
+
+    @property
+    def z(self) -> np.ndarray:
+        return self.floats["z"]
+
+
+class Columns(NamedTuple):
+    """Compiled: the fields of ``EMReadings``' tables but its state, as arrays over the readings
+    (``_columns``; see ``READING_INTS`` and ``READING_FLOATS``)."""
+
+    row0: np.ndarray
+    col0: np.ndarray
+    bin: np.ndarray
+    z: np.ndarray
+    g0: np.ndarray
+    const: np.ndarray
+    m: np.ndarray
+    jlo: np.ndarray
+    box: np.ndarray  # (4, R)
+    reach2: np.ndarray  # (2, R)
+    inside: np.ndarray
+    window_hi: np.ndarray
 
 
 class EMModel(NamedTuple):
@@ -106,7 +127,7 @@ class EMModel(NamedTuple):
 
 
 class EMState(NamedTuple):
-    """What every reading t keeps under the current map.
+    """What every reading t keeps under the current map (fields of ``EMReadings``' tables).
 
     Far obstacles (g = 0, before the window) come before the window's in range order, so
     S_t = q^nfar (wsum + q^nobs G0), wsum being the window obstacles' sum of
@@ -119,53 +140,24 @@ class EMState(NamedTuple):
     far_ratio: np.ndarray  # (R, 2) float64 likelihood ratios of adding / removing a far obstacle
     far_log: np.ndarray  # (R, 2) float64 their logs
     stamp: np.ndarray  # (R,) int32 the clock when the reading last changed
+    slot: np.ndarray  # (R,) int32 where its window obstacles are in a sweep's arena (-1: none)
 
 
-class ReadingTables(NamedTuple):
-    """What the kernels take of an ``EMReadings`` (``reading_tables``): its two tables and its
-    orders, from which they take the columns (``_columns``).
-
-    A column of a table is strided, unless the table has one row (or none): numpy calls such a
-    column contiguous and numba would compile every kernel again for it (for a cluster that one
-    reading reaches). A table is contiguous whatever its rows, so the kernels have one signature,
-    and their columns, taken in compiled code, are the strided arrays they were compiled for.
-    """
-
-    ints: np.ndarray  # (R, INTS) int32
-    floats: np.ndarray  # (R, FLOATS) float64
-    enter: np.ndarray  # int32 EMReadings' orders
-    leave: np.ndarray
-    window_leave: np.ndarray
-
-
-def reading_tables(rd: EMReadings) -> ReadingTables:
-    """The ``ReadingTables`` of ``rd`` (its columns must be those of its tables, as
-    ``em.em_readings`` and ``em.em_problem`` make them)."""
-    return ReadingTables(rd.ints, rd.floats, rd.enter, rd.leave, rd.window_leave)
+def em_state(rd: EMReadings) -> EMState:
+    """The ``EMState`` of ``rd``: views of its tables' fields."""
+    return EMState(**{name: (rd.ints if name in READING_INTS.names else rd.floats)[name] for name in EMState._fields})
 
 
 @numba.njit(cache=True, inline="always")
-def _columns(tables):
-    """Compiled: the ``EMReadings`` and ``EMState`` of ``tables`` (``ReadingTables``), views of
-    its columns."""
-    ints, floats = tables.ints, tables.floats
-    rd = EMReadings(ints[:, I_ROW0], ints[:, I_COL0], ints[:, I_BIN], floats[:, F_Z], floats[:, F_G0],
-                    floats[:, F_CONST], ints[:, I_M], ints[:, I_JLO], ints[:, I_BOX:I_BOX + 4].T,
-                    ints[:, I_REACH2:I_REACH2 + 2].T, ints[:, I_INSIDE], ints[:, I_WINDOW_HI], tables.enter,
-                    tables.leave, tables.window_leave, ints, floats)
-    state = EMState(floats[:, F_S], floats[:, F_WSUM], ints[:, I_NOBS], ints[:, I_NFAR],
-                    floats[:, F_RATIO:F_RATIO + 2], floats[:, F_LOG:F_LOG + 2], ints[:, I_STAMP])
-    return rd, state
-
-
-@numba.njit(cache=True, inline="always")
-def _tile_work(scratch, slot):
-    """Compiled: ``scratch`` (a ``TileWork`` whose ``slot`` is a stand-in) with ``slot``, the
-    column of the readings' int table (``ReadingTables``) that holds their arena slots."""
-    s = scratch
-    return TileWork(s.ctl, s.active, s.seg_ptr, s.seg_list, s.count, s.pair_pos, s.pair_j, s.pair_g, slot, s.obs_j,
-                    s.obs_g, s.pre, s.seg_fill, s.tile_t, s.far_lo, s.far_hi, s.far_sum, s.spans, s.seg_mask, s.members,
-                    s.enter, s.leave, s.window_leave)
+def _columns(rd):
+    """Compiled: the ``Columns`` and ``EMState`` of ``rd`` (``EMReadings``), views of its tables."""
+    ints, floats = rd.ints, rd.floats
+    columns = Columns(row0=ints.row0, col0=ints.col0, bin=ints.bin, z=floats.z, g0=floats.g0, const=floats.const,
+                      m=ints.m, jlo=ints.jlo, box=ints.box.T, reach2=ints.reach2.T, inside=ints.inside,
+                      window_hi=ints.window_hi)
+    state = EMState(s=floats.s, wsum=floats.wsum, nobs=ints.nobs, nfar=ints.nfar, far_ratio=floats.far_ratio,
+                    far_log=floats.far_log, stamp=ints.stamp, slot=ints.slot)
+    return columns, state
 
 
 class Candidates(NamedTuple):
@@ -181,9 +173,9 @@ class Candidates(NamedTuple):
 
 
 class TileWork(NamedTuple):
-    """The tiles' scratch; ``ctl`` holds the control words (CTL_*), the rest grows on demand."""
+    """The tiles' scratch; ``ctl`` holds the control words, the rest grows on demand."""
 
-    ctl: np.ndarray  # (CTL_SIZE,) int64
+    ctl: np.ndarray  # (1,) CONTROL
     active: np.ndarray  # (R / 64 + 1,) uint64 bit set of the band's readings (positions) active at the row
     seg_ptr: np.ndarray  # (n_seg + 1,) int64
     seg_list: np.ndarray  # int64 readings of each segment, ascending
@@ -191,8 +183,6 @@ class TileWork(NamedTuple):
     pair_pos: np.ndarray  # int64 listing (position in the tile's reading list) of each window pair
     pair_j: np.ndarray  # int64 template entry
     pair_g: np.ndarray  # float64 its Gaussian (0 before the window)
-    slot: np.ndarray  # (R,) int32 where each active reading's window obstacles are in the arena (-1: none);
-    # a column of the readings' int table (I_SLOT), which the sweep takes itself (``_tile_work``)
     obs_j: np.ndarray  # int64 arena: per slot its reading (header), then a bit per window entry (occupied or not)
     obs_g: np.ndarray  # float64 arena: the window obstacles' Gaussians, in range order
     pre: np.ndarray  # float64 arena: their prefix sums (one more than obstacles)
@@ -201,12 +191,12 @@ class TileWork(NamedTuple):
     far_lo: np.ndarray  # int64 per listing: the tile columns where the cone's cells lie before its window
     far_hi: np.ndarray  # (far_hi < far_lo: none)
     far_sum: np.ndarray  # (2, SEGMENT + 1) float64 differences of sum_t log far ratio along the tile (add, remove)
-    spans: np.ndarray  # (11, n) int64 the row's active readings' ``RowSpan``s, readings and columns (seg_list points into it)
+    spans: np.ndarray  # listing.SPAN the row's listed readings (seg_list points into it)
     seg_mask: np.ndarray  # (n_seg,) int64 bit k of segment s: column s * SEGMENT + k holds a candidate
     # the band's readings (``mapping.sweeps``): those whose cones reach its columns, by position i;
     # ``active`` is a bit set of positions
     members: np.ndarray  # int64 position -> reading
-    enter: np.ndarray  # int64 positions by their readings' row_lo (stable; ``EMReadings.enter`` for all)
+    enter: np.ndarray  # int64 positions by their readings' extent row_lo (stable; ``EMReadings.enter`` for all)
     leave: np.ndarray  # by row_hi
     window_leave: np.ndarray  # by window_hi
 

@@ -9,8 +9,8 @@ import math
 import numba
 import numpy as np
 
+from aogm_cli.mapping.em_kernels.extents import _bin_transform, _entry_cell, _extend_box
 from aogm_cli.mapping.em_kernels.layout import _columns
-from aogm_cli.mapping.em_kernels.readings import _bin_transform, _entry_cell, _extend_box
 from aogm_cli.mapping.em_kernels.windows import _rank
 from aogm_cli.sensor_models.forward_model import gaussian_at
 
@@ -60,17 +60,17 @@ def _join_parents(parent, other):
 # reference counting its tuples' arrays cost nothing per reading; nogil: parts of the readings
 # run on threads (``em.em_problem``)
 @numba.njit(cache=True, _nrt=False, nogil=True)
-def _init_state(tpl, flat, tables, model, occupied, grid_shape, marks, span):
-    """The ``EMState`` (in ``tables``, ``ReadingTables``) of each reading span[0] <= t < span[1]
+def _init_state(tpl, flat, readings, model, occupied, grid_shape, marks, span):
+    """The ``EMState`` (in ``readings``, ``EMReadings``) of each reading span[0] <= t < span[1]
     under ``occupied`` (one walk of its cone, nearest first).
 
     ``marks`` = (seen, labels, parent, box): with a non-empty ``seen`` (flat bool) every
     cone cell is marked in it; with non-empty ``labels`` (flat int, 0 outside every cluster)
-    clusters that share a reading are joined in the union-find ``parent``, and ``box`` (4, R)
+    clusters that share a reading are joined in the union-find ``parent``, and ``box`` (R, 4)
     gets the rows and columns of each reading's cluster cells (row_lo > row_hi: none), the
-    only ones EM may flip: the reading need only be active there.
+    only ones EM may flip: the reading need only be active there (``EMReadings.extent``).
     """
-    rd, state = _columns(tables)
+    rd, state = _columns(readings)
     seen, labels, parent, box = marks
     height, width = grid_shape
     qpow = model.qpow
@@ -86,10 +86,10 @@ def _init_state(tpl, flat, tables, model, occupied, grid_shape, marks, span):
         first = 0
         last = 0  # the cluster of the cone's last cluster cell: the next is mostly in it too
         if join:
-            box[0, t] = height
-            box[1, t] = -1
-            box[2, t] = width
-            box[3, t] = -1
+            box[t, 0] = height
+            box[t, 1] = -1
+            box[t, 2] = width
+            box[t, 3] = -1
         if rd.box[0, t] <= rd.box[1, t]:
             k_bin = rd.bin[t]
             s0 = tpl.offsets[tpl.base_bin[k_bin]]
@@ -161,7 +161,7 @@ def _flip_gain(c, x, lo_pair, hi_pair, rd, model, cand, state, work):
         if pair_g[p] == 0.0:  # a window entry whose Gaussian underflows: as a far one
             ratio *= state.far_ratio[t, far]
             continue
-        base = work.slot[t]
+        base = state.slot[t]
         r = _rank(work.obs_j, base, pair_j[p] - rd.jlo[t])
         qf = qpow[state.nfar[t]]
         a = qf * work.pre[base + r]
@@ -212,7 +212,7 @@ def _update_reading(t, j, g, adding, model, rd, state, work):
     obs_j = work.obs_j
     obs_g = work.obs_g
     pre = work.pre
-    base = work.slot[t]
+    base = state.slot[t]
     n = state.nobs[t]
     q = j - rd.jlo[t]
     r = _rank(obs_j, base, q)
@@ -240,10 +240,10 @@ def _update_reading(t, j, g, adding, model, rd, state, work):
 
 
 @numba.njit(cache=True)
-def _objective(tables, model, occupied, cand_cell):
+def _objective(readings, model, occupied, cand_cell):
     """sum_t log p(z_t | m) plus l_prior per occupied candidate (the readings and their state in
-    ``tables``, ``ReadingTables``)."""
-    rd, state = _columns(tables)
+    ``readings``, ``EMReadings``)."""
+    rd, state = _columns(readings)
     const = rd.const
     w = model.w
     s = state.s

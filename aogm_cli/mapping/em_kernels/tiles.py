@@ -15,99 +15,20 @@ each flip kept when it raises the objective (``_sweep_tiles``)."""
 
 from __future__ import annotations
 
-import math
-from typing import NamedTuple
-
 import numba
-import numpy as np
 
-from aogm_cli.mapping.em_kernels.layout import (
-    CTL_BUDGET,
-    CTL_CLOCK,
-    CTL_ENTER,
-    CTL_FLIPS,
-    CTL_LEAVE,
-    CTL_LISTED,
-    CTL_MODE,
-    CTL_NEED_LIST,
-    CTL_NEED_PAIRS,
-    CTL_PAIRS,
-    CTL_ROW,
-    CTL_SCORED,
-    CTL_SEG,
-    CTL_SG_HI,
-    CTL_SG_LO,
-    CTL_WINDOW_LEAVE,
-    DONE,
-    I_SLOT,
-    NEED_BUFFERS,
-    PAUSED,
-    SEGMENT,
-    SWEEP,
-    _columns,
-    _tile_work,
-    _trailing_zeros,
-)
+from aogm_cli.mapping.em_kernels.layout import DONE, NEED_BUFFERS, PAUSED, SEGMENT, SWEEP, _columns
 from aogm_cli.mapping.em_kernels.likelihood import _far_changed, _flip_gain, _set_sum, _update_reading
-from aogm_cli.mapping.em_kernels.windows import _build_window, _make_room, _room, _row_group
+from aogm_cli.mapping.em_kernels.listing import (
+    _active_words,
+    _advance,
+    _list_segments,
+    _o_range,
+    _row_unchanged,
+    _span_at,
+)
+from aogm_cli.mapping.em_kernels.windows import _build_window, _make_room, _room
 from aogm_cli.sensor_models.forward_model import gaussian_at
-
-
-@numba.njit(cache=True, inline="always")
-def _isqrt(n):
-    """The largest o >= 0 with o * o <= n (-1 for n < 0), exactly."""
-    if n < 0:
-        return np.int64(-1)
-    o = np.int64(math.sqrt(float(n)))
-    while o * o > n:
-        o -= 1
-    while (o + 1) * (o + 1) <= n:
-        o += 1
-    return o
-
-
-class RowSpan(NamedTuple):
-    """One reading's cone in one grid row, as runs of the other offset o (``_row_span``): the
-    cell at o has column col0 + sign * o and template entry j[kind, first + o - o_first]."""
-
-    kind: int
-    first: int
-    o_first: int
-    sign: int
-    o_lo: int  # the cone's cells: o_lo <= o <= o_hi
-    o_hi: int
-    f_lo: int  # those before the window: f_lo <= o <= f_hi (f_hi < f_lo: none)
-    f_hi: int
-
-
-@numba.njit(cache=True, inline="always")
-def _row_span(tpl, groups, rd, t, r):
-    """``RowSpan`` of reading t's cone in grid row r (o_hi < o_lo: none there)."""
-    kind, b, gv, sign = _row_group(tpl, groups, rd.bin[t], r - rd.row0[t])
-    ext = tpl.extent
-    if gv < -ext or gv > ext or rd.m[t] == 0:
-        return RowSpan(0, 0, 0, 1, 1, 0, 1, 0)
-    rows, at = groups.rows, gv + ext
-    if rows[kind, b, at, 1] == 0:
-        return RowSpan(0, 0, 0, 1, 1, 0, 1, 0)
-    first = np.int64(rows[kind, b, at, 0])
-    o_first = np.int64(rows[kind, b, at, 2])
-    o_last = np.int64(rows[kind, b, at, 3])
-    # a template entry's range is resolution * sqrt(dr^2 + dc^2): entries < m (or < jlo) are
-    # the cells of the row with o^2 <= reach2 - gv^2, exactly, in integers
-    v = _isqrt(rd.reach2[0, t] - gv * gv)
-    if v < 0:
-        return RowSpan(0, 0, 0, 1, 1, 0, 1, 0)
-    f = min(_isqrt(rd.reach2[1, t] - gv * gv), v)
-    return RowSpan(kind, first, o_first, sign, max(o_first, -v), min(o_last, v), max(o_first, -f), min(o_last, f))
-
-
-@numba.njit(cache=True, inline="always")
-def _o_range(span, col0, c0, c1, lo, hi):
-    """The o of [lo, hi] whose columns lie in [c0, c1)."""
-    if span.sign > 0:
-        return max(lo, c0 - col0), min(hi, c1 - 1 - col0)
-    return max(lo, col0 - c1 + 1), min(hi, col0 - c0)
 
 
 @numba.njit(cache=True, inline="always")
@@ -149,219 +70,216 @@ def _window_pairs(i, t, span, r, c0, c1, c_start, fill, tpl, groups, rd, model, 
 
 
 @numba.njit(cache=True, inline="always")
-def _advance(rd, work, r):
-    """The active bit set at row r: the band's readings whose cone rows reach r (repeatable).
-    A reading's arena slot is dropped when it enters (a slot another band's sweep left points
-    into that sweep's arena), when it leaves and when the sweep is past its window."""
-    ctl = work.ctl
-    active = work.active
-    members = work.members
-    n_read = members.shape[0]
-    e = ctl[CTL_ENTER]
-    while e < n_read and rd.box[0, members[work.enter[e]]] <= r:
-        i = work.enter[e]
-        active[i >> 6] |= np.uint64(1) << np.uint64(i & 63)
-        work.slot[members[i]] = -1
-        e += 1
-    ctl[CTL_ENTER] = e
-    k = ctl[CTL_LEAVE]
-    while k < n_read and rd.box[1, members[work.leave[k]]] < r:
-        i = work.leave[k]
-        active[i >> 6] &= ~(np.uint64(1) << np.uint64(i & 63))
-        work.slot[members[i]] = -1  # its arena slot (if any) is dead
-        k += 1
-    ctl[CTL_LEAVE] = k
-    k = ctl[CTL_WINDOW_LEAVE]
-    while k < n_read and rd.window_hi[members[work.window_leave[k]]] < r:
-        work.slot[members[work.window_leave[k]]] = -1  # the sweep is past its window: no tile needs the slot again
-        k += 1
-    ctl[CTL_WINDOW_LEAVE] = k
-
-
-@numba.njit(cache=True, inline="always")
-def _active_words(work):
-    """The words of the active bit set the band's readings use (the set is sized for all)."""
-    return (work.members.shape[0] + 63) >> 6
-
-
-@numba.njit(cache=True, inline="always")
-def _span_at(work, k):
-    """The ``RowSpan`` stored at ``work.spans[:, k]`` (its reading is spans[8, k])."""
-    sp = work.spans
-    return RowSpan(sp[0, k], sp[1, k], sp[2, k], sp[3, k], sp[4, k], sp[5, k], sp[6, k], sp[7, k])
-
-
-@numba.njit(cache=True, inline="always")
-def _span_mask(lo, hi, s):
-    """Bits of columns lo..hi within segment s (bit k: column s * SEGMENT + k)."""
-    a = max(lo - s * SEGMENT, 0)
-    b = min(hi - s * SEGMENT, SEGMENT - 1)
-    if a > b:
-        return np.int64(0)
-    return ((np.int64(1) << np.int64(b - a + 1)) - 1) << np.int64(a)
-
-
-@numba.njit(cache=True, inline="always")
-def _list_segments(tpl, groups, rd, cand, work, r, n_seg):
-    """The row's active readings with their ``RowSpan`` in ``spans`` (one each), and each
-    segment's (ascending) in seg_ptr / seg_list, as positions in ``spans``: a reading is
-    listed where its cone holds a candidate of the row in the band's columns (``seg_mask``).
-    False (with the size needed in ctl) when a buffer is too small."""
-    active = work.active
-    members = work.members
-    seg_ptr = work.seg_ptr
-    fill = work.seg_fill
-    sp = work.spans
-    mask = work.seg_mask
-    width = cand.of_cell.shape[0] // cand.tile_clock.shape[0]
-    for s in range(n_seg + 1):
-        seg_ptr[s] = 0
-    for s in range(n_seg):
-        mask[s] = 0
-    c_lo, c_hi = _band_columns(work, width)
-    for c in range(cand.row_first[r], cand.row_first[r + 1]):
-        col = cand.cell[c] - r * width
-        if c_lo <= col < c_hi:
-            mask[col // SEGMENT] |= np.int64(1) << np.int64(col % SEGMENT)
-    n = 0
-    visited = 0
-    for wi in range(_active_words(work)):
-        word = active[wi]
-        while word != np.uint64(0):
-            t = members[(wi << 6) + np.int64(_trailing_zeros(word))]
-            word &= word - np.uint64(1)  # the lowest set bit off
-            visited += 1
-            span = _row_span(tpl, groups, rd, t, r)
-            if span.o_hi >= span.o_lo:
-                col0 = rd.col0[t]
-                if span.sign > 0:
-                    lo, hi = col0 + span.o_lo, col0 + span.o_hi
-                else:
-                    lo, hi = col0 - span.o_hi, col0 - span.o_lo
-                lo, hi = max(lo, rd.box[2, t], c_lo), min(hi, rd.box[3, t], c_hi - 1)
-                if lo <= hi:
-                    if n >= sp.shape[1]:
-                        work.ctl[CTL_NEED_LIST] = max(work.ctl[CTL_NEED_LIST], 2 * sp.shape[1])
-                        return False
-                    sp[0, n], sp[1, n], sp[2, n], sp[3, n] = span.kind, span.first, span.o_first, span.sign
-                    sp[4, n], sp[5, n], sp[6, n], sp[7, n] = span.o_lo, span.o_hi, span.f_lo, span.f_hi
-                    sp[8, n] = t
-                    sp[9, n], sp[10, n] = lo, hi
-                    listed = False
-                    for s in range(lo // SEGMENT, hi // SEGMENT + 1):
-                        if _span_mask(lo, hi, s) & mask[s]:
-                            seg_ptr[s + 1] += 1
-                            listed = True
-                    if listed:
-                        n += 1
-    work.ctl[CTL_BUDGET] -= _active_words(work) + 2 * visited  # a listed reading costs about two window pairs
-    for s in range(n_seg):
-        seg_ptr[s + 1] += seg_ptr[s]
-        fill[s] = seg_ptr[s]
-    if seg_ptr[n_seg] > work.seg_list.shape[0]:
-        work.ctl[CTL_NEED_LIST] = max(work.ctl[CTL_NEED_LIST], seg_ptr[n_seg])
-        return False
-    for k in range(n):
-        lo, hi = sp[9, k], sp[10, k]
-        for s in range(lo // SEGMENT, hi // SEGMENT + 1):
-            if _span_mask(lo, hi, s) & mask[s]:
-                work.seg_list[fill[s]] = k
-                fill[s] += 1
-    return True
-
-
-@numba.njit(cache=True, inline="always")
-def _band_columns(work, width):
-    """The columns [c_lo, c_hi) of the band's tiles (ctl's CTL_SG_LO, CTL_SG_HI)."""
-    return work.ctl[CTL_SG_LO] * SEGMENT, min(work.ctl[CTL_SG_HI] * SEGMENT, width)
-
-
-@numba.njit(cache=True, inline="always")
-def _row_unchanged(rd, cand, state, work, r):
-    """True (and every candidate of row r in the band stamped as scored now) when no active
-    reading changed since the row's tiles were last visited: a check of one stamp per reading
-    instead of listing them (late sweeps change few readings)."""
-    sg_lo, sg_hi = work.ctl[CTL_SG_LO], work.ctl[CTL_SG_HI]
-    since = cand.tile_clock[r, sg_lo]
-    for s in range(sg_lo + 1, sg_hi):
-        since = min(since, cand.tile_clock[r, s])
+def _tile_clean(cand, state, work, r, sg, list_lo, list_hi, c_start, c_stop):
+    """True (and the candidates c_start..c_stop - 1 stamped as scored now) when none of the
+    listed readings list_lo..list_hi - 1 of tile (r, sg) changed since its last visit: nothing
+    its candidates see changed, and each keeps its gain."""
+    since = cand.tile_clock[r, sg]
     if since < 0:
         return False
-    active = work.active
-    for wi in range(_active_words(work)):
-        word = active[wi]
-        while word != np.uint64(0):
-            t = work.members[(wi << 6) + np.int64(_trailing_zeros(word))]
-            word &= word - np.uint64(1)
-            if state.stamp[t] > since:
-                return False
-    now = work.ctl[CTL_CLOCK]
-    width = cand.of_cell.shape[0] // cand.tile_clock.shape[0]
-    c_lo, c_hi = _band_columns(work, width)
-    for c in range(cand.row_first[r], cand.row_first[r + 1]):
-        if c_lo <= cand.cell[c] - r * width < c_hi:
-            cand.stamp[c] = now
-    for s in range(sg_lo, sg_hi):
-        cand.tile_clock[r, s] = now
+    for i in range(list_lo, list_hi):
+        if state.stamp[work.spans[work.seg_list[i]].t] > since:
+            return False
+    now = work.ctl[0].clock
+    for c in range(c_start, c_stop):
+        cand.stamp[c] = now
+    cand.tile_clock[r, sg] = now
     return True
 
 
-# _nrt=False: the sweep allocates nothing (its scratch comes in ``scratch``), and without numba's
+@numba.njit(cache=True, inline="always")
+def _count_pairs(tpl, groups, rd, model, cand, state, work, r, c0, c1, c_start, list_lo, list_hi, nc):
+    """The tile's listing (readings list_lo..list_hi - 1, candidates from c_start, columns [c0,
+    c1) of row r): each reading's far run into the sums of log far ratios (``far_sum``), its
+    window pairs counted per candidate (``count``, cumulative); (pairs, the arena entries of
+    the windows not built yet)."""
+    cnt = work.count
+    for i in range(nc + 1):
+        cnt[i] = 0
+    for k in range(SEGMENT + 1):
+        work.far_sum[0, k] = 0.0
+        work.far_sum[1, k] = 0.0
+    room = 0
+    n_pairs = 0
+    for i in range(list_lo, list_hi):
+        span = _span_at(work, work.seg_list[i])
+        t = work.spans[work.seg_list[i]].t
+        li = i - list_lo
+        work.tile_t[li] = t
+        work.far_lo[li] = 1
+        work.far_hi[li] = 0
+        if span.o_hi < span.o_lo:
+            continue
+        f_lo, f_hi = _o_range(span, rd.col0[t], c0, c1, span.f_lo, span.f_hi)
+        if f_lo <= f_hi:
+            col0 = rd.col0[t]
+            a, b = (col0 + f_lo, col0 + f_hi) if span.sign > 0 else (col0 - f_hi, col0 - f_lo)
+            work.far_lo[li] = a - c0
+            work.far_hi[li] = b - c0
+            work.far_sum[0, a - c0] += state.far_log[t, 0]
+            work.far_sum[0, b - c0 + 1] -= state.far_log[t, 0]
+            work.far_sum[1, a - c0] += state.far_log[t, 1]
+            work.far_sum[1, b - c0 + 1] -= state.far_log[t, 1]
+        k = _window_pairs(li, t, span, r, c0, c1, c_start, False, tpl, groups, rd, model, cand, work)
+        n_pairs += k
+        if k > 0 and state.slot[t] < 0:
+            room += _room(rd, t)
+    for i in range(1, nc + 1):
+        cnt[i] += cnt[i - 1]
+    return n_pairs, room
+
+
+@numba.njit(cache=True, inline="always")
+def _write_pairs(tpl, groups, rd, model, cand, work, r, c0, c1, c_start, list_lo, list_hi):
+    """The tile's window pairs (counted by ``_count_pairs``), each candidate's in reading order."""
+    for i in range(list_lo, list_hi):
+        span = _span_at(work, work.seg_list[i])
+        t = work.spans[work.seg_list[i]].t
+        if span.o_hi >= span.o_lo:
+            _window_pairs(i - list_lo, t, span, r, c0, c1, c_start, True, tpl, groups, rd, model, cand, work)
+
+
+@numba.njit(cache=True, inline="always")
+def _flip(c, x, lo_pair, hi_pair, n_list, rd, model, cand, state, work):
+    """Flip candidate c (tile column x, pairs lo_pair..hi_pair - 1) and update the tile's
+    readings (``n_list`` listed) that hold it, before their windows and inside them."""
+    ctl = work.ctl[0]
+    occupied = cand.occupied
+    cell = cand.cell[c]
+    occupied[cell] = not occupied[cell]
+    cand.last_gain[c] = -cand.last_gain[c]  # flipping back undoes exactly this gain
+    ctl.flips += 1
+    ctl.clock += 1
+    ctl.budget -= n_list + hi_pair - lo_pair
+    adding = occupied[cell]
+    now = ctl.clock
+    for i in range(n_list):  # the readings that hold the cell before their windows
+        if work.far_lo[i] <= x <= work.far_hi[i]:
+            t = work.tile_t[i]
+            old_add, old_rem = state.far_log[t, 0], state.far_log[t, 1]
+            state.nfar[t] += 1 if adding else -1
+            _set_sum(t, rd, model, state)
+            _far_changed(i, t, x, old_add, old_rem, state, work)
+            state.stamp[t] = now
+    for p in range(lo_pair, hi_pair):  # ... and inside them
+        i = work.pair_pos[p]
+        t = work.tile_t[i]
+        old_add, old_rem = state.far_log[t, 0], state.far_log[t, 1]
+        _update_reading(t, work.pair_j[p], work.pair_g[p], adding, model, rd, state, work)
+        _far_changed(i, t, x, old_add, old_rem, state, work)
+        state.stamp[t] = now
+
+
+@numba.njit(cache=True, inline="always")
+def _visit(c, x, lo_pair, hi_pair, n_list, mode, tpl, flat, rd, model, cand, state, work):
+    """Score candidate c (tile column x) over its pairs lo_pair..hi_pair - 1, building the
+    windows they need, into ``last_gain``; in SWEEP mode flip it when that raises the objective."""
+    ctl = work.ctl[0]
+    for p in range(lo_pair, hi_pair):  # the window obstacles the score needs
+        t = work.tile_t[work.pair_pos[p]]
+        if work.pair_g[p] != 0.0 and state.slot[t] < 0:
+            _build_window(t, tpl, flat, rd, model, cand, state, work)
+            ctl.budget -= _room(rd, t)
+    ctl.scored += 1
+    d = _flip_gain(c, x, lo_pair, hi_pair, rd, model, cand, state, work)
+    cand.last_gain[c] = d
+    if mode != SWEEP:
+        return
+    d += -model.l_prior if cand.occupied[cand.cell[c]] else model.l_prior
+    if d > 1e-9:
+        _flip(c, x, lo_pair, hi_pair, n_list, rd, model, cand, state, work)
+    cand.stamp[c] = ctl.clock
+
+
+@numba.njit(cache=True, inline="always")
+def _tile(r, sg, c_start, c_stop, tpl, flat, groups, rd, model, cand, state, work):
+    """Tile (r, sg): its candidates c_start..c_stop - 1 scored (and flipped, ``_visit``) over the
+    pairs of the readings listed in segment sg; skipped when none of them changed since its last
+    visit (SWEEP). False, before any change, when the scratch is too small."""
+    ctl = work.ctl[0]
+    mode = ctl.mode
+    width = cand.of_cell.shape[0] // cand.tile_clock.shape[0]
+    c0 = sg * SEGMENT
+    c1 = min(c0 + SEGMENT, width)
+    list_lo = work.seg_ptr[sg]
+    list_hi = work.seg_ptr[sg + 1]
+    ctl.budget -= list_hi - list_lo
+    clock0 = ctl.clock
+    if mode == SWEEP and _tile_clean(cand, state, work, r, sg, list_lo, list_hi, c_start, c_stop):
+        return True
+    nc = c_stop - c_start
+    n_list = list_hi - list_lo
+    if n_list > work.far_lo.shape[0]:
+        ctl.need_list = max(ctl.need_list, n_list)
+        return False
+    n_pairs, room = _count_pairs(tpl, groups, rd, model, cand, state, work, r, c0, c1, c_start, list_lo, list_hi, nc)
+    if n_pairs > work.pair_pos.shape[0] or not _make_room(rd, state, work, room):
+        ctl.need_pairs = n_pairs
+        return False
+    ctl.pairs += n_pairs
+    ctl.budget -= n_pairs + 8 * nc
+    _write_pairs(tpl, groups, rd, model, cand, work, r, c0, c1, c_start, list_lo, list_hi)
+    cnt = work.count
+    for c in range(c_start, c_stop):
+        li = c - c_start
+        _visit(c, cand.cell[c] - r * width - c0, 0 if li == 0 else cnt[li - 1], cnt[li], n_list, mode, tpl, flat, rd,
+               model, cand, state, work)
+    if mode == SWEEP:
+        cand.tile_clock[r, sg] = clock0
+    return True
+
+
+# _nrt=False: the sweep allocates nothing (its scratch comes in ``work``), and without numba's
 # reference-counting runtime the arrays it hands to the inlined helpers cost nothing per call
 @numba.njit(cache=True, _nrt=False, nogil=True)
-def _sweep_tiles(tpl, flat, groups, tables, model, cand, scratch):
-    """One pass over the candidates of a band (the tiles of segments ctl[CTL_SG_LO] to
-    ctl[CTL_SG_HI], the readings ``scratch.members``) in flat-id order, tile by tile (see the
-    module docstring), of the readings and their state in ``tables`` (``ReadingTables``), with
-    ``scratch`` (a ``TileWork``, its ``slot`` a stand-in: the tables' column is taken here,
-    ``_tile_work``). Bands no reading joins may be swept at once, on threads (``mapping.sweeps``):
-    ctl[CTL_MODE] SWEEP keeps each flip that raises the objective, SCORE scores every
+def _sweep_tiles(tpl, flat, groups, readings, model, cand, work):
+    """One pass over the candidates of a band (the tiles of segments ctl.sg_lo to
+    ctl.sg_hi, the readings ``work.members``) in flat-id order, tile by tile (see the module
+    docstring), of the readings and their state in ``readings`` (``EMReadings``, each active
+    over its ``extent``), with ``work`` (a ``TileWork``, ``ctl`` its control words). Bands no
+    reading joins may be swept at once, on threads (``mapping.sweeps``):
+    ctl.mode SWEEP keeps each flip that raises the objective, SCORE scores every
     candidate into ``last_gain`` and flips none.
 
     A candidate none of whose readings changed since it was last scored keeps its (non-
     improving) gain and is skipped, and so is a whole tile none of whose readings changed
     since the tile's last visit: the result equals a full sweep's. The clock counts accepted
-    flips. Starts at (ctl[CTL_ROW], ctl[CTL_SEG]); returns NEED_BUFFERS, with the sizes
+    flips. Starts at (ctl.row, ctl.seg); returns NEED_BUFFERS, with the sizes
     needed in ctl, before a tile's first change when the scratch is too small (grow it and
     call again: the pass resumes there), PAUSED before a row or a tile once the work done in
-    this call (subtracted from ctl[CTL_BUDGET], in window pairs: a listed reading counts 2, a
+    this call (subtracted from ctl.budget, in window pairs: a listed reading counts 2, a
     scored candidate 8, a window built its entries, a flip the tile's readings and the cell's
     pairs) exhausts the budget the caller set (set it again and call again: the pass resumes
-    there, with the row's listing kept, ctl[CTL_LISTED]), else DONE. Every call does at least
+    there, with the row's listing kept, ctl.listed), else DONE. Every call does at least
     one tile or row before it pauses; where it pauses changes nothing computed.
     """
-    rd, state = _columns(tables)
-    work = _tile_work(scratch, rd.ints[:, I_SLOT])
-    ctl = work.ctl
+    rd, state = _columns(readings)
+    ctl = work.ctl[0]
     height, n_seg = cand.tile_clock.shape
     width = cand.of_cell.shape[0] // height
-    mode = ctl[CTL_MODE]
-    occupied = cand.occupied
-    seg_list = work.seg_list
-    cnt = work.count
     fresh = True  # nothing done yet in this call: no pause
-    for r in range(ctl[CTL_ROW], height):
+    for r in range(ctl.row, height):
         ca = cand.row_first[r]
         cb = cand.row_first[r + 1]
         if ca == cb:
             continue
-        if ctl[CTL_SEG] == 0 and ctl[CTL_BUDGET] <= 0 and not fresh:
-            ctl[CTL_ROW] = r
+        if ctl.seg == 0 and ctl.budget <= 0 and not fresh:
+            ctl.row = r
             return PAUSED
-        ctl[CTL_ROW] = r
-        _advance(rd, work, r)
-        if mode == SWEEP and ctl[CTL_SEG] == 0:
-            ctl[CTL_BUDGET] -= _active_words(work)
+        ctl.row = r
+        _advance(readings.extent, rd, state, work, r)
+        if ctl.mode == SWEEP and ctl.seg == 0:
+            ctl.budget -= _active_words(work)
             if _row_unchanged(rd, cand, state, work, r):
                 fresh = False
                 continue  # no reading whose cone crosses the row changed since its last visit
-        if ctl[CTL_LISTED] != r:  # else listed before a pause, and still so
-            if not _list_segments(tpl, groups, rd, cand, work, r, n_seg):
+        if ctl.listed != r:  # else listed before a pause, and still so
+            if not _list_segments(tpl, groups, readings.extent, rd, cand, work, r, n_seg):
                 return NEED_BUFFERS
-            ctl[CTL_LISTED] = r
+            ctl.listed = r
         c_pos = ca
         row_base = r * width
-        for sg in range(max(ctl[CTL_SEG], ctl[CTL_SG_LO]), ctl[CTL_SG_HI]):
+        for sg in range(max(ctl.seg, ctl.sg_lo), ctl.sg_hi):
             c0 = sg * SEGMENT
             c1 = min(c0 + SEGMENT, width)
             while c_pos < cb and cand.cell[c_pos] < row_base + c0:
@@ -369,123 +287,14 @@ def _sweep_tiles(tpl, flat, groups, tables, model, cand, scratch):
             c_start = c_pos
             while c_pos < cb and cand.cell[c_pos] < row_base + c1:
                 c_pos += 1
-            c_stop = c_pos
-            if c_start == c_stop:
+            if c_start == c_pos:
                 continue
-            if ctl[CTL_BUDGET] <= 0 and not fresh:
-                ctl[CTL_SEG] = sg
+            if ctl.budget <= 0 and not fresh:
+                ctl.seg = sg
                 return PAUSED
             fresh = False
-            list_lo = work.seg_ptr[sg]
-            list_hi = work.seg_ptr[sg + 1]
-            ctl[CTL_BUDGET] -= list_hi - list_lo
-            clock0 = ctl[CTL_CLOCK]
-            if mode == SWEEP:
-                since = cand.tile_clock[r, sg]
-                dirty = since < 0
-                if not dirty:
-                    for i in range(list_lo, list_hi):
-                        if state.stamp[work.spans[8, seg_list[i]]] > since:
-                            dirty = True
-                            break
-                if not dirty:  # nothing the tile's candidates see changed: each keeps its gain
-                    for c in range(c_start, c_stop):
-                        cand.stamp[c] = clock0
-                    cand.tile_clock[r, sg] = clock0
-                    continue
-            # the tile: each listed reading's far run (into the sums of log far ratios) and
-            # window pairs (counted per candidate, then written in reading order)
-            nc = c_stop - c_start
-            n_list = list_hi - list_lo
-            if n_list > work.far_lo.shape[0]:
-                ctl[CTL_NEED_LIST] = max(ctl[CTL_NEED_LIST], n_list)
-                ctl[CTL_SEG] = sg
+            if not _tile(r, sg, c_start, c_pos, tpl, flat, groups, rd, model, cand, state, work):
+                ctl.seg = sg
                 return NEED_BUFFERS
-            for i in range(nc + 1):
-                cnt[i] = 0
-            for k in range(SEGMENT + 1):
-                work.far_sum[0, k] = 0.0
-                work.far_sum[1, k] = 0.0
-            room = 0
-            n_pairs = 0
-            for i in range(list_lo, list_hi):
-                span = _span_at(work, seg_list[i])
-                t = work.spans[8, seg_list[i]]
-                li = i - list_lo
-                work.tile_t[li] = t
-                work.far_lo[li] = 1
-                work.far_hi[li] = 0
-                if span.o_hi < span.o_lo:
-                    continue
-                f_lo, f_hi = _o_range(span, rd.col0[t], c0, c1, span.f_lo, span.f_hi)
-                if f_lo <= f_hi:
-                    col0 = rd.col0[t]
-                    a, b = (col0 + f_lo, col0 + f_hi) if span.sign > 0 else (col0 - f_hi, col0 - f_lo)
-                    work.far_lo[li] = a - c0
-                    work.far_hi[li] = b - c0
-                    work.far_sum[0, a - c0] += state.far_log[t, 0]
-                    work.far_sum[0, b - c0 + 1] -= state.far_log[t, 0]
-                    work.far_sum[1, a - c0] += state.far_log[t, 1]
-                    work.far_sum[1, b - c0 + 1] -= state.far_log[t, 1]
-                k = _window_pairs(li, t, span, r, c0, c1, c_start, False, tpl, groups, rd, model, cand, work)
-                n_pairs += k
-                if k > 0 and work.slot[t] < 0:
-                    room += _room(rd, t)
-            for i in range(1, nc + 1):
-                cnt[i] += cnt[i - 1]
-            if n_pairs > work.pair_pos.shape[0] or not _make_room(rd, work, room):
-                ctl[CTL_NEED_PAIRS] = n_pairs
-                ctl[CTL_SEG] = sg
-                return NEED_BUFFERS
-            ctl[CTL_PAIRS] += n_pairs
-            ctl[CTL_BUDGET] -= n_pairs + 8 * nc
-            for i in range(list_lo, list_hi):
-                span = _span_at(work, seg_list[i])
-                t = work.spans[8, seg_list[i]]
-                if span.o_hi >= span.o_lo:
-                    _window_pairs(i - list_lo, t, span, r, c0, c1, c_start, True, tpl, groups, rd, model, cand, work)
-            for c in range(c_start, c_stop):
-                li = c - c_start
-                lo_pair = 0 if li == 0 else cnt[li - 1]
-                hi_pair = cnt[li]
-                x = cand.cell[c] - row_base - c0  # the tile column
-                for p in range(lo_pair, hi_pair):  # the window obstacles the score needs
-                    t = work.tile_t[work.pair_pos[p]]
-                    if work.pair_g[p] != 0.0 and work.slot[t] < 0:
-                        _build_window(t, tpl, flat, rd, model, cand, work)
-                        ctl[CTL_BUDGET] -= _room(rd, t)
-                ctl[CTL_SCORED] += 1
-                d = _flip_gain(c, x, lo_pair, hi_pair, rd, model, cand, state, work)
-                cand.last_gain[c] = d
-                if mode != SWEEP:
-                    continue
-                cell = cand.cell[c]
-                d += -model.l_prior if occupied[cell] else model.l_prior
-                if d > 1e-9:
-                    occupied[cell] = not occupied[cell]
-                    cand.last_gain[c] = -cand.last_gain[c]  # flipping back undoes exactly this gain
-                    ctl[CTL_FLIPS] += 1
-                    ctl[CTL_CLOCK] += 1
-                    ctl[CTL_BUDGET] -= n_list + hi_pair - lo_pair
-                    adding = occupied[cell]
-                    now = ctl[CTL_CLOCK]
-                    for i in range(n_list):  # the readings that hold the cell before their windows
-                        if work.far_lo[i] <= x <= work.far_hi[i]:
-                            t = work.tile_t[i]
-                            old_add, old_rem = state.far_log[t, 0], state.far_log[t, 1]
-                            state.nfar[t] += 1 if adding else -1
-                            _set_sum(t, rd, model, state)
-                            _far_changed(i, t, x, old_add, old_rem, state, work)
-                            state.stamp[t] = now
-                    for p in range(lo_pair, hi_pair):  # ... and inside them
-                        i = work.pair_pos[p]
-                        t = work.tile_t[i]
-                        old_add, old_rem = state.far_log[t, 0], state.far_log[t, 1]
-                        _update_reading(t, work.pair_j[p], work.pair_g[p], adding, model, rd, state, work)
-                        _far_changed(i, t, x, old_add, old_rem, state, work)
-                        state.stamp[t] = now
-                cand.stamp[c] = ctl[CTL_CLOCK]
-            if mode == SWEEP:
-                cand.tile_clock[r, sg] = clock0
-        ctl[CTL_SEG] = 0
+        ctl.seg = 0
     return DONE

@@ -6,8 +6,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from aogm_cli.mapping.em_kernels.layout import ARENA_ENTRIES, CTL_BUMP, CTL_NEED_ROOM
-from aogm_cli.mapping.em_kernels.readings import _bin_transform, _entry_cell
+from aogm_cli.mapping.em_kernels.extents import _bin_transform, _entry_cell
+from aogm_cli.mapping.em_kernels.layout import ARENA_ENTRIES
 from aogm_cli.sensor_models.forward_model import gaussian_at
 
 
@@ -27,7 +27,7 @@ def _room(rd, t):
 
 
 @numba.njit(cache=True, inline="always")
-def _build_window(t, tpl, flat, rd, model, cand, work):
+def _build_window(t, tpl, flat, rd, model, cand, state, work):
     """Reading t's window obstacles (entries ascending), their Gaussians and prefix sums into a
     new arena slot, from the map (the arena must have room: ``_make_room``)."""
     height = cand.tile_clock.shape[0]
@@ -36,11 +36,12 @@ def _build_window(t, tpl, flat, rd, model, cand, work):
     p_hit = model.p_hit
     k_bin = rd.bin[t]
     s0 = tpl.offsets[tpl.base_bin[k_bin]]
-    head = work.ctl[CTL_BUMP]
-    work.ctl[CTL_BUMP] = head + _room(rd, t)
+    ctl = work.ctl[0]
+    head = ctl.bump
+    ctl.bump = head + _room(rd, t)
     work.obs_j[head] = t
     base = head + 1
-    work.slot[t] = base
+    state.slot[t] = base
     work.pre[base] = 0.0
     jlo = rd.jlo[t]
     for k in range((rd.m[t] - jlo + 63) >> 6):
@@ -70,13 +71,13 @@ def _build_window(t, tpl, flat, rd, model, cand, work):
 
 
 @numba.njit(cache=True, inline="always")
-def _make_room(rd, work, need):
+def _make_room(rd, state, work, need):
     """Slide the live slots of the arena down over the dead ones (readings that left, in
     address order) when fewer than ``need`` entries are free. Past ARENA_ENTRIES the arena
     does not grow: every slot is dropped instead (called before a tile builds any, so none is
     in use; they are rebuilt from the map when needed). False when it must grow."""
-    ctl = work.ctl
-    top = ctl[CTL_BUMP]
+    ctl = work.ctl[0]
+    top = ctl.bump
     if top + need <= work.obs_j.shape[0]:
         return True
     a = 0
@@ -84,32 +85,32 @@ def _make_room(rd, work, need):
     while a < top:
         t = work.obs_j[a]
         size = _room(rd, t)
-        if work.slot[t] == a + 1:  # live
+        if state.slot[t] == a + 1:  # live
             if out != a:
                 for k in range(size):
                     work.obs_j[out + k] = work.obs_j[a + k]
                     work.obs_g[out + k] = work.obs_g[a + k]
                     work.pre[out + k] = work.pre[a + k]
-                work.slot[t] = out + 1
+                state.slot[t] = out + 1
             out += size
         a += size
-    ctl[CTL_BUMP] = out
+    ctl.bump = out
     size = work.obs_j.shape[0]
     if 2 * (out + need) <= size:  # half free at least, or compactions come too often
         return True
     if size < ARENA_ENTRIES:
-        ctl[CTL_NEED_ROOM] = min(2 * (out + need), ARENA_ENTRIES)
-        if ctl[CTL_NEED_ROOM] > size:
+        ctl.need_room = min(2 * (out + need), ARENA_ENTRIES)
+        if ctl.need_room > size:
             return False
     a = 0  # the arena is as large as it gets: drop every slot
     while a < out:
         t = work.obs_j[a]
-        work.slot[t] = -1
+        state.slot[t] = -1
         a += _room(rd, t)
-    ctl[CTL_BUMP] = 0
+    ctl.bump = 0
     if need <= size:
         return True
-    ctl[CTL_NEED_ROOM] = need  # one tile needs more than the cap
+    ctl.need_room = need  # one tile needs more than the cap
     return False
 
 

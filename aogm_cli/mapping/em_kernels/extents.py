@@ -31,11 +31,11 @@ def _entry_cell(tpl, s, tr, j, row0, col0, height, width):
 
 @numba.njit(cache=True, inline="always")
 def _extend_box(box, t, r, c):
-    """Reading t's box (``box`` (4, R): row_lo, row_hi, col_lo, col_hi) grown to hold cell (r, c)."""
-    box[0, t] = min(box[0, t], r)
-    box[1, t] = max(box[1, t], r)
-    box[2, t] = min(box[2, t], c)
-    box[3, t] = max(box[3, t], c)
+    """Reading t's box (``box`` (R, 4): row_lo, row_hi, col_lo, col_hi) grown to hold cell (r, c)."""
+    box[t, 0] = min(box[t, 0], r)
+    box[t, 1] = max(box[t, 1], r)
+    box[t, 2] = min(box[t, 2], c)
+    box[t, 3] = max(box[t, 3], c)
 
 
 @numba.njit(cache=True, inline="always")
@@ -46,14 +46,14 @@ def _bin_transform(tpl, k):
 
 
 @numba.njit(cache=True, nogil=True)
-def _reading_extent(tpl, groups, tables, bounds, gauss, grid_shape, span):
-    """Per reading span[0] <= t < span[1] of ``tables`` (``ReadingTables``: its cells, bins and
+def _reading_extent(tpl, groups, readings, bounds, gauss, grid_shape, span):
+    """Per reading span[0] <= t < span[1] of ``readings`` (``EMReadings``: its cells, bins and
     z), with ``bounds`` = (limits, lower): the entries of its cone (m: up to ``limits``, and
     beyond z only while the Gaussian, ``gauss`` = (sigma, window), is not 0, as
     ``forward_model.cone_entries``), the first entry at range >= ``lower`` (jlo), the grid rows
     and columns its cone spans (row_lo > row_hi: none) and the squared offsets (cells) of entries
-    m - 1 and jlo - 1 (``EMReadings.reach2``), into the tables' columns."""
-    rd, _ = _columns(tables)
+    m - 1 and jlo - 1 (``reach2``), into its fields."""
+    rd, _ = _columns(readings)
     rows, cols, bins, z = rd.row0, rd.col0, rd.bin, rd.z
     limits, lower = bounds
     sigma, window = gauss
@@ -103,10 +103,10 @@ def _reading_extent(tpl, groups, tables, bounds, gauss, grid_shape, span):
 
 
 @numba.njit(cache=True, nogil=True)
-def _window_rows(tpl, tables, height, span):
+def _window_rows(tpl, readings, height, span):
     """The last grid row of the window cells (entries jlo .. m - 1; -1: none) of each reading
-    span[0] <= t < span[1] of ``tables`` (``ReadingTables``), into its column ``window_hi``."""
-    rd, _ = _columns(tables)
+    span[0] <= t < span[1] of ``readings`` (``EMReadings``), into its field ``window_hi``."""
+    rd, _ = _columns(readings)
     out = rd.window_hi
     for t in range(span[0], span[1]):
         k = rd.bin[t]
@@ -119,11 +119,11 @@ def _window_rows(tpl, tables, height, span):
 
 
 @numba.njit(cache=True, nogil=True)
-def _window_cells(tpl, tables, grid_shape, span, out):
+def _window_cells(tpl, readings, grid_shape, span, out):
     """Mark in ``out`` (flat bool over the grid) the window cells (entries jlo .. m - 1: where
-    the Gaussian may be above 0) of each reading span[0] <= t < span[1] of ``tables``
-    (``ReadingTables``). Only True is written: parts may mark one array on threads."""
-    rd, _ = _columns(tables)
+    the Gaussian may be above 0) of each reading span[0] <= t < span[1] of ``readings``
+    (``EMReadings``). Only True is written: parts may mark one array on threads."""
+    rd, _ = _columns(readings)
     height, width = grid_shape
     for t in range(span[0], span[1]):
         k = rd.bin[t]
@@ -136,12 +136,12 @@ def _window_cells(tpl, tables, grid_shape, span, out):
 
 
 @numba.njit(cache=True, nogil=True)
-def _far_gains(tpl, tables, grid_shape, of_cell, span, out):
+def _far_gains(tpl, readings, grid_shape, of_cell, span, out):
     """Add each reading's log ratio of an obstacle added before its window (its state's
     ``far_log[t, 0]``) into ``out[i]`` for every cell of its far run (entries 0 .. min(jlo, m)
     - 1) with ``of_cell[cell] = i >= 0``: a free cell's gain of flipping, from the readings that
-    hold it before their windows (readings span[0] <= t < span[1] of ``tables``)."""
-    rd, state = _columns(tables)
+    hold it before their windows (readings span[0] <= t < span[1] of ``readings``)."""
+    rd, state = _columns(readings)
     height, width = grid_shape
     for t in range(span[0], span[1]):
         far = min(rd.jlo[t], rd.m[t])
@@ -158,17 +158,17 @@ def _far_gains(tpl, tables, grid_shape, of_cell, span, out):
 
 
 @numba.njit(cache=True, nogil=True)
-def _box_of_cells(tpl, tables, grid_shape, mask, span, box):
-    """Into ``box`` (4, R): the rows and columns of the cone cells of each reading span[0] <= t
-    < span[1] of ``tables`` that ``mask`` (flat bool) marks (row_lo > row_hi: none), the only
-    ones a sweep over those cells needs the reading at."""
-    rd, _ = _columns(tables)
+def _box_of_cells(tpl, readings, grid_shape, mask, span, box):
+    """Into ``box`` (R, 4): the rows and columns of the cone cells of each reading span[0] <= t
+    < span[1] of ``readings`` that ``mask`` (flat bool) marks (row_lo > row_hi: none), the only
+    ones a sweep over those cells needs the reading at (``EMReadings.extent``)."""
+    rd, _ = _columns(readings)
     height, width = grid_shape
     for t in range(span[0], span[1]):
-        box[0, t] = height
-        box[1, t] = -1
-        box[2, t] = width
-        box[3, t] = -1
+        box[t, 0] = height
+        box[t, 1] = -1
+        box[t, 2] = width
+        box[t, 3] = -1
         if rd.box[0, t] > rd.box[1, t]:
             continue
         k = rd.bin[t]
