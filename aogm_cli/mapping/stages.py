@@ -255,7 +255,7 @@ def finished(s: State, phases: dict) -> OccupancyMap:
     return OccupancyMap(grid=grid, probability=view.probability, observed=view.observed, mode=mode, params=params,
                         runtime_s=sum(phases.values()), source_log=s.source.path,
                         log_odds=None if mode == "em" else s.standard.log_odds, occupied=occupied if em else None,
-                        clusters=None if s.clusters is None else s.clusters.ids,
+                        clusters=s.clusters.ids if mode == "adaptive" else None,
                         stats=map_stats(s, phases, em), learned=s.learned.as_dict(), plan=s.plan.as_dict())
 
 

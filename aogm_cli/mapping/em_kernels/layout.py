@@ -148,15 +148,29 @@ def em_state(rd: EMReadings) -> EMState:
     return EMState(**{name: (rd.ints if name in READING_INTS.names else rd.floats)[name] for name in EMState._fields})
 
 
+# Each field's word in a table seen as a plain (R, words) array: numba reads a record array's field
+# views slower than the columns of such an array (docs/algorithms.md, "EM's kernel tables"), so the
+# kernels take their columns from it, at the offsets the record types give by name
+_INT_WORDS, _FLOAT_WORDS = READING_INTS.itemsize // 4, READING_FLOATS.itemsize // 8
+_ROW0, _COL0, _BIN, _M, _JLO, _REACH2, _BOX, _NOBS, _NFAR, _STAMP, _SLOT, _INSIDE, _WINDOW_HI = (
+    READING_INTS.fields[name][1] // 4 for name in ("row0", "col0", "bin", "m", "jlo", "reach2", "box", "nobs", "nfar",
+                                                   "stamp", "slot", "inside", "window_hi"))
+_Z, _G0, _CONST, _S, _WSUM, _FAR_RATIO, _FAR_LOG = (
+    READING_FLOATS.fields[name][1] // 8 for name in ("z", "g0", "const", "s", "wsum", "far_ratio", "far_log"))
+
+
 @numba.njit(cache=True, inline="always")
 def _columns(rd):
     """Compiled: the ``Columns`` and ``EMState`` of ``rd`` (``EMReadings``), views of its tables."""
-    ints, floats = rd.ints, rd.floats
-    columns = Columns(row0=ints.row0, col0=ints.col0, bin=ints.bin, z=floats.z, g0=floats.g0, const=floats.const,
-                      m=ints.m, jlo=ints.jlo, box=ints.box.T, reach2=ints.reach2.T, inside=ints.inside,
-                      window_hi=ints.window_hi)
-    state = EMState(s=floats.s, wsum=floats.wsum, nobs=ints.nobs, nfar=ints.nfar, far_ratio=floats.far_ratio,
-                    far_log=floats.far_log, stamp=ints.stamp, slot=ints.slot)
+    n = rd.ints.shape[0]
+    ints = rd.ints.view(np.int32).reshape((n, _INT_WORDS))
+    floats = rd.floats.view(np.float64).reshape((n, _FLOAT_WORDS))
+    columns = Columns(row0=ints[:, _ROW0], col0=ints[:, _COL0], bin=ints[:, _BIN], z=floats[:, _Z], g0=floats[:, _G0],
+                      const=floats[:, _CONST], m=ints[:, _M], jlo=ints[:, _JLO], box=ints[:, _BOX:_BOX + 4].T,
+                      reach2=ints[:, _REACH2:_REACH2 + 2].T, inside=ints[:, _INSIDE], window_hi=ints[:, _WINDOW_HI])
+    state = EMState(s=floats[:, _S], wsum=floats[:, _WSUM], nobs=ints[:, _NOBS], nfar=ints[:, _NFAR],
+                    far_ratio=floats[:, _FAR_RATIO:_FAR_RATIO + 2], far_log=floats[:, _FAR_LOG:_FAR_LOG + 2],
+                    stamp=ints[:, _STAMP], slot=ints[:, _SLOT])
     return columns, state
 
 

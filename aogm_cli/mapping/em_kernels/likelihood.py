@@ -99,6 +99,7 @@ def _init_state(tpl, flat, readings, model, occupied, grid_shape, marks, span):
             row0, col0 = np.int64(rd.row0[t]), np.int64(rd.col0[t])
             at = row0 * width + col0
             tr = _bin_transform(tpl, k_bin)
+            jlo, z = rd.jlo[t], rd.z[t]  # loaded once: the loop's stores (seen, parent) might alias them
             for j in range(rd.m[t]):
                 cell = at + sign * np.int64(x_off[s0 + j]) if inside else _entry_cell(tpl, s0, tr, j, row0, col0,
                                                                                       height, width)
@@ -123,7 +124,7 @@ def _init_state(tpl, flat, readings, model, occupied, grid_shape, marks, span):
                     last = labels[cell]
                 if not occupied[cell]:
                     continue
-                g = 0.0 if j < rd.jlo[t] else gaussian_at(rd.z[t], tpl.ranges[s0 + j], model.sigma, model.window)
+                g = 0.0 if j < jlo else gaussian_at(z, tpl.ranges[s0 + j], model.sigma, model.window)
                 if g == 0.0:
                     far += 1
                     continue
