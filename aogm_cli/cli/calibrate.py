@@ -72,7 +72,7 @@ def calibrate(log_file, mode, output, detector, params_file, resolution, quiet, 
     from aogm_cli.io.modelfile import model_bytes
     from aogm_cli.io.provenance import provenance
     from aogm_cli.map_files import map_file, resolve_params
-    from aogm_cli.mapping.calibration import calibration_table
+    from aogm_cli.report.calibration_table import calibration_table
 
     made = provenance(inputs) if output else None  # the inputs as read, the time the run starts
     params = resolve_params(params_file, parameter_overrides(resolution, True, options))

@@ -81,7 +81,7 @@ def _log_lines(s: dict) -> list[str]:
 
 
 def _map_lines(s: dict) -> list[str]:
-    from aogm_cli.mapping.calibration import calibration_table
+    from aogm_cli.report.calibration_table import calibration_table
 
     h, w = s["shape"]["height"], s["shape"]["width"]
     lines = [

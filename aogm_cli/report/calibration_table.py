@@ -1,0 +1,39 @@
+"""The record of a calibration (``mapping.calibration.calibration_rounds``, in a map's
+``stats["calibration"]``) as ``aogm calibrate`` and ``aogm info`` print it: one line per round, then
+what was learned and from how many readings."""
+
+from __future__ import annotations
+
+from aogm_cli.mapping.calibration import LEARNED
+from aogm_cli.mapping.learned import ONCE
+
+
+def calibration_table(record: dict) -> str:
+    """The record of ``calibration_rounds`` (and the final map) as a plain-text table, one line per round, then the model."""
+    lines = [f"{'round':>5} {'sigma':>8} {'p_rand':>8} {'p_hit':>8} {'p_max':>8} {'loglik/rd':>10} {'EM objective':>14}"
+             f" {'sweeps':>6}"]
+    for r in record["rounds"]:
+        loglik = f"{r['loglik_per_reading']:10.4f}" if "loglik_per_reading" in r else f"{'-':>10}"
+        objective = f"{r['em_objective']:14.2f}" if "em_objective" in r else f"{'(final map)':>14}"
+        sweeps = f"{r['em_sweeps']:6d}" if "em_sweeps" in r else f"{'-':>6}"
+        lines.append(f"{r['round']:>5} {r['sigma']:8.4f} {r['p_rand']:8.4f} {r['p_hit']:8.4f} {r['p_max']:8.4f}"
+                     f" {loglik} {objective} {sweeps}")
+    final = record["final"]
+    if "final_em" in record:
+        lines.append(f"final map, every scan with the last fit: EM objective {record['final_em']['em_objective']:.2f}, "
+                     f"{record['final_em']['em_sweeps']} sweeps (the rounds' maps: {record['fitted_at']})")
+    if "incidence" in record:
+        inc = record["incidence"]
+        lines.append("echo rate by angle of incidence at the standard map's surfaces (10-degree bins): "
+                     + " ".join(f"{e / (e + p):.2f}" if e + p else "-" for e, p in zip(inc["echoes"], inc["passes"],
+                                                                                      strict=True))
+                     + f" -> specular_deg {inc['specular_deg']:.1f}")
+    if "opening" in record:
+        op = record["opening"]
+        lines.append(f"echoes the thinned standard map explains by the beam's opening ({op['echoes']} echoes; "
+                     f"{2 * op['bin_deg']:g}, {4 * op['bin_deg']:g}, ... {op['cone_deg']:.0f} degrees): "
+                     + " ".join(f"{e / max(op['echoes'], 1):.2f}" for e in op["explained"])
+                     + f" -> opening_deg {op['opening_deg']:.1f}")
+    lines.append(f"learned from {record['readings_used']} readings: "
+                 + ", ".join(f"{k} {final[k]:.4g}" for k in (*LEARNED, *ONCE) if k in final))
+    return "\n".join(lines)
