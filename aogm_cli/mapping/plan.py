@@ -48,7 +48,7 @@ class Plan:
 
     @property
     def learns_opening(self) -> bool:
-        return "opening_deg" in self.learns and self.sensor == CONE
+        return "opening_deg" in self.learns
 
     @property
     def decides(self) -> bool:
@@ -86,11 +86,13 @@ def plan_map(mode: str, params: MapParams, sensor: SensorSpec, resolution: float
     if mode == "standard":
         return Plan(mode, kind, CONFIGURED, (), False, False, False, None,
                     MARGIN if thinnable and params.exact.thin else None, None)
-    learns = learned_keys(params, given)
+    incidence = params.surface.enabled and kind == CONE
+    # what this log can teach: no specular angle without surfaces, no opening of a ray
+    learns = tuple(k for k in learned_keys(params, given)
+                   if (k != "specular_deg" or incidence) and (k != "opening_deg" or kind == CONE))
     calibrates = params.calibration.enabled and given is None
     robots = given is not None and given.made_by is None and given.sensor is not None
     model = given.origin if given is not None else FROM_LOG if calibrates else CONFIGURED
-    incidence = params.surface.enabled and kind == CONE
     if mode == "em":
         thinning = MARGIN if thinnable and params.exact.thin else None
         start = "standard" if params.em.start == "standard" else "empty"

@@ -75,7 +75,7 @@ def read(s: State) -> State:
     """The scans in memory (EM needs every reading), the sensor narrowed to the beam's opening as
     configured or given, unless it is learned (``opening``)."""
     whole = s.source.read()
-    if "opening_deg" not in s.plan.learns and s.plan.sensor == CONE:
+    if not s.plan.learns_opening and s.plan.sensor == CONE:
         whole = B.with_opening(whole, s.in_use.em.forward.opening_deg)
     return s.but(whole=whole)
 
