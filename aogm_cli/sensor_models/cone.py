@@ -57,16 +57,8 @@ class ConeReadings(NamedTuple):
 
 @dataclass(frozen=True, eq=False)
 class ConeTemplates:
-    """Cone templates in CSR form for the stored bins (0 .. n_bins/8), plus a per-bin symmetry.
-
-    Entries of stored bin b are ``offsets[b]:offsets[b+1]``, sorted by range (ties by bearing,
-    then offset). ``dcol``, ``drow`` are the offsets in the stored bin's frame, ``ranges`` (m)
-    and ``bearings`` (rad, signed, from the stored bin's axis) describe each entry.
-    ``base_bin[k]`` is the stored bin that heading bin k uses and ``transform[k]`` the lattice
-    symmetry applied to it (see the comment at the top). ``extent`` bounds |drow| and |dcol|.
-    ``range_index[b, q]`` counts stored bin b's entries with range < q * resolution, so that
-    ``range_search`` finds a range's place with a table look-up and a short search.
-    """
+    """Cone templates in CSR form for the stored bins (0 .. n_bins/8), plus a per-bin symmetry:
+    entries sorted by range (fields as ``ConeArrays``; quantisation: ``cone_build``)."""
 
     resolution: float
     beam_width: float
@@ -102,10 +94,7 @@ class ConeTemplates:
         return np.asarray(k, dtype=np.float64) * self.bin_width
 
     def cells(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(drow, dcol, range, bearing) of every cell of heading bin ``k``'s cone, in range order.
-
-        ``bearing`` is signed, from the bin's axis, counter-clockwise positive.
-        """
+        """(drow, dcol, range, bearing) of every cell of heading bin ``k``'s cone, in range order."""
         k = int(k) % self.n_bins
         b = int(self.base_bin[k])
         a, bb, c, d = (int(v) for v in self.transform[k])
@@ -115,11 +104,7 @@ class ConeTemplates:
         return (c * dc + d * dr, a * dc + bb * dr, self.ranges[s:e].copy(), det * self.bearings[s:e])
 
     def reading_cells(self, grid: GridSpec, row: int, col: int, k: int, limit: float) -> tuple[np.ndarray, np.ndarray]:
-        """Cells of one reading's cone inside ``grid``, up to ``limit`` metres, in range order.
-
-        ``row``, ``col`` is the sensor's cell (it may lie outside the grid) and ``k`` its heading
-        bin. Returns (flat cell index row * W + col as int64, range in m as float64).
-        """
+        """Cells (flat index, range) of one reading's cone inside ``grid``, up to ``limit`` metres."""
         if grid.resolution != self.resolution:
             raise ValueError(f"templates are for resolution {self.resolution}, grid has {grid.resolution}")
         k = int(k) % self.n_bins
@@ -135,9 +120,7 @@ class ConeTemplates:
 
 @numba.njit(cache=True)
 def range_search(r, index_row, resolution, v, right):
-    """Compiled ``np.searchsorted(r, v, side="right" if right else "left")`` for one stored
-    bin's sorted ranges ``r``, narrowed first by its ``range_index`` row (bin width = resolution).
-    """
+    """Compiled ``np.searchsorted(r, v, side="right" if right else "left")``, narrowed by ``range_index``."""
     if not v >= 0.0:  # also NaN
         return 0
     # v lies in shell [qi, qi + 1) up to rounding: search shells qi - 1 .. qi + 1 to be safe
@@ -145,7 +128,6 @@ def range_search(r, index_row, resolution, v, right):
     qi = int(min(v / resolution, float(last)))
     lo = index_row[max(qi - 1, 0)]
     hi = index_row[qi + 2] if qi + 2 <= last else r.size
-    # invariant: r[:lo] precede v, r[hi:] follow it
     while lo < hi:
         mid = (lo + hi) >> 1
         if r[mid] < v or (right and r[mid] == v):
@@ -157,14 +139,9 @@ def range_search(r, index_row, resolution, v, right):
 
 @numba.njit(cache=True)
 def cone_cells(tpl, height, width, row, col, k, limit, out_index, out_range, lower=-1.0):
-    """Compiled: write the grid cells of bin ``k``'s cone from cell (row, col), with range
-    from ``lower`` (default: all) up to ``limit``.
-
-    ``tpl`` is ``ConeTemplates.kernel_arrays``. Cells are written in increasing range as flat
-    indices (row * width + col) to ``out_index`` with their ranges to ``out_range``; cells
-    outside the grid are left out. Returns how many were written. The outputs must hold the
-    stored bin's entry count.
-    """
+    """Compiled: write the grid cells of bin ``k``'s cone from cell (row, col), range from ``lower``
+    (default: all) to ``limit``, in range order, as flat indices to ``out_index`` and ranges to
+    ``out_range`` (sized for the stored bin), cells off the grid left out. Returns how many."""
     offsets = tpl.offsets
     transform = tpl.transform
     b = tpl.base_bin[k]
@@ -203,16 +180,10 @@ def cone_cells(tpl, height, width, row, col, k, limit, out_index, out_range, low
 
 
 def reading_geometry(pose: np.ndarray, sensor, grid: GridSpec, templates: ConeTemplates):
-    """Each reading's sensor cell, heading bin, validity and axis offset: (rows, cols, bins,
-    valid, offset), each (T, S).
-
-    ``pose`` is (T, 3) robot x, y, yaw; ``sensor`` a ``core.log.SensorSpec`` whose mounts (S, 3)
-    are composed with each pose (``frames.sensor_poses``). A reading whose pose is not finite
-    is marked invalid. Sensor positions far outside the grid are pulled in to just beyond the
-    templates' reach (they still see no cell), so that cell indices never overflow. ``offset``
-    is the sensor's offset from its cell's centre along the beam axis (m, |offset| <= res /
-    sqrt 2; 0 when invalid): a cell at template range d lies about d - offset from the real
-    sensor, so a reading z compares with template ranges at z + offset.
+    """Each reading's sensor cell, heading bin, validity and axis offset, each (T, S). A pose that is
+    not finite is invalid. Positions far off the grid are pulled in to just beyond the reach (they
+    see no cell), so that indices never overflow. ``offset`` is the sensor's offset from its cell's
+    centre along the beam (m; 0 when invalid): a reading z compares with template ranges at z + offset.
     """
     sp = sensor_poses(np.asarray(pose, dtype=np.float64).reshape(-1, 3), sensor.mount)
     xs, ys, yaws = sp[..., 0], sp[..., 1], sp[..., 2]
@@ -231,12 +202,7 @@ def reading_geometry(pose: np.ndarray, sensor, grid: GridSpec, templates: ConeTe
 
 @functools.lru_cache(maxsize=8)
 def flat_offsets(templates: ConeTemplates, width: int) -> FlatOffsets:
-    """Template offsets as flat index offsets on a grid ``width`` cells wide, without multiplies.
-
-    Every lattice symmetry maps a stored offset (dc, dr) to +/- one of dr W + dc, dr W - dc,
-    dc W + dr, dc W - dr. Returns those four (4, E) int32 arrays and, per heading bin, which
-    one and the sign: (n_bins, 2) int64, as ``FlatOffsets``. Cached per (templates, width).
-    """
+    """Template offsets as flat index offsets on a grid ``width`` cells wide, without multiplies."""
     dc, dr = templates.dcol, templates.drow
     offs = np.empty((4, dc.size), dtype=np.int32)  # in int32 arithmetic: wraps as a cast from int64 would
     for i, (a, b) in enumerate(((dr, dc), (dc, dr))):
@@ -254,20 +220,16 @@ def flat_offsets(templates: ConeTemplates, width: int) -> FlatOffsets:
     return FlatOffsets(offs, sel)
 
 
-# Cone cells outside the grid are sent to SPARE_MASK + 1 spare cells after it, in turn, so
-# that their dummy updates do not form one long chain through a single memory cell.
+# cone cells off the grid go to SPARE_MASK + 1 spare cells after it, in turn: their dummy updates
+# form no long chain through one memory cell
 SPARE_MASK = 255
 
 
 @numba.njit(cache=True, inline="always")
 def cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width):
-    """Compiled: the flat indices (row * width + col, int32) of the first ``m`` template
-    entries of heading bin ``k``'s cone from cell (row0, col0) into ``ib``, in template order.
-
-    ``tpl`` is ``ConeTemplates.kernel_arrays`` and ``flat`` is ``flat_offsets(templates,
-    width)``. A cell outside the height x width grid gets height * width + (j & SPARE_MASK):
-    one of SPARE_MASK + 1 spare cells after the grid.
-    """
+    """Compiled: the flat indices (int32) of the first ``m`` entries of heading bin ``k``'s cone
+    from cell (row0, col0) into ``ib``, in template order; a cell off the grid gets a spare cell,
+    height * width + (j & SPARE_MASK)."""
     ext = tpl.extent
     transform = tpl.transform
     s = tpl.offsets[tpl.base_bin[k]]
@@ -281,9 +243,7 @@ def cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width):
         else:
             for j in range(m):
                 ib[j] = np.int32(base - x_off[j])
-    else:  # near the border: cells outside the grid go to the spare cells
-        # the grid's bounds as bounds on the stored offsets (dc, dr): the transform
-        # (a, b, c, d) takes drow from c dc or d dr and dcol from a dc or b dr
+    else:  # near the border: the grid's bounds as bounds on the stored offsets (dc, dr)
         spare = height * width
         r_lo, r_hi = -row0, height - 1 - row0
         c_lo, c_hi = -col0, width - 1 - col0

@@ -13,29 +13,17 @@ import numpy as np
 from aogm_cli.core.errors import InputError
 from aogm_cli.sensor_models.cone import TWO_PI, ConeTemplates
 
-# Quantisation (documented choices):
-# * The sensor is snapped to the centre of the cell that contains it. A template lists cells as
-#   (drow, dcol) offsets from that cell, with the range and bearing of each offset cell's centre seen
-#   from the sensor cell's centre. The position error is at most res/sqrt(2).
-# * Headings are quantised into ``n_bins`` bins; bin k is centred on yaw k * 2 pi / n_bins. A cell is
-#   in bin k's cone when |bearing offset from the bin's axis| <= beam_width / 2 and its range <= reach
-#   (= max_range + margin). The sensor's own cell (range 0) is always included.
-# * ``heading_bins_for`` picks n_bins so that the worst heading error (pi / n_bins) moves a point at
-#   the reach sideways by at most a quarter of a cell: n_bins >= 4 pi reach / res, rounded up to a
-#   multiple of 8 (at least 64). For a 5 m sonar on a 0.05 m grid that is 1264 bins (0.14 degrees).
-# * Only the bins of the first octant (headings 0..45 degrees, bins 0..n_bins/8) are stored. Every
-#   other bin is one of the eight symmetries of the square lattice (quarter turns and mirrors) applied
-#   to a stored bin: ``transform[k] = (a, b, c, d)`` maps a stored offset (dc, dr) to dcol = a dc + b dr,
-#   drow = c dc + d dr. Ranges are unchanged and bearings keep or flip sign (mirrors), so range order is
-#   preserved. This keeps the templates 8x smaller (about 430,000 entries, 10 MB, for a 5 m, 30 degree
-#   sonar at 0.05 m instead of 3.4 million).
-# * ``reading_geometry`` also gives each reading's axis offset, the sensor's offset from its cell's
-#   centre along the beam: a mapper can compare a reading z with template ranges at z + offset, which
-#   removes the along-axis part of the snapping error.
+# Quantisation:
+# * the sensor is snapped to its cell's centre (error <= res / sqrt 2); ``reading_geometry``'s axis
+#   offset removes the along-beam part of that error;
+# * bin k of ``n_bins`` is centred on yaw k 2 pi / n_bins; a cell is in its cone when its bearing is
+#   within beam_width / 2 of the axis and its range <= reach (the sensor's own cell always);
+# * ``heading_bins_for``: the worst heading error moves a point at the reach by at most a quarter cell;
+# * only the first octant's bins (0..n_bins/8) are stored, 8x smaller (docs/algorithms.md); the others
+#   are lattice symmetries of them (``transform``), which keep ranges and so range order.
 _TOL = 1e-9  # slack of the inclusion tests, so that cells exactly on the cone's edge are kept
 
-# (a, b, c, d) per octant of the heading: dcol = a*dc + b*dr, drow = c*dc + d*dr, where
-# (dc, dr) is a stored offset of the mirrored/rotated first-octant bin.
+# (a, b, c, d) per octant of the heading: dcol = a*dc + b*dr, drow = c*dc + d*dr
 _OCTANT_TRANSFORM = np.array(
     [
         (1, 0, 0, 1),  # [0, 45) deg: identity
@@ -66,14 +54,8 @@ def build_cone_templates(
     resolution: float, beam_width: float, max_range: float, *, margin: float = 0.0, n_bins: int | None = None,
     ray: bool = False,
 ) -> ConeTemplates:
-    """Cone templates for a grid ``resolution`` (m), a ``beam_width`` (rad) and ranges up to
-    ``max_range + margin`` (m). ``n_bins`` defaults to ``heading_bins_for`` and must be a
-    multiple of 8. With ``ray``, a cone also holds every cell its axis crosses (the cells of a
-    grid traversal of the ray: centre within resolution/2 (|cos a| + |sin a|) of the axis, a its
-    angle to the grid), so that a beam narrower than a cell leaves no gap along its ray.
-    Cached: equal arguments return the same (read-only) object; with a store installed
-    (``use_store``), templates are also looked for there and kept there for the next process.
-    """
+    """Cone templates for ranges up to ``max_range + margin`` (m); with ``ray``, a cone also holds every
+    cell its axis crosses (no gap for a beam narrower than a cell). Cached, and kept in the store."""
     if not (math.isfinite(resolution) and resolution > 0):
         raise InputError(f"expected a positive resolution, got {resolution}", key="resolution")
     if not (math.isfinite(beam_width) and 0 < beam_width <= TWO_PI):
@@ -103,18 +85,15 @@ def _build(resolution: float, beam_width: float, reach: float, n_bins: int, ray:
     return ConeTemplates(resolution, beam_width, reach, n_bins, extent=extent, **arrays)
 
 
-# the arrays of a ConeTemplates, and their dtypes
 _TEMPLATE_ARRAYS = {"offsets": np.int64, "dcol": np.int32, "drow": np.int32, "ranges": np.float64,
                     "bearings": np.float64, "base_bin": np.int64, "transform": np.int64, "range_index": np.int64}
 
 
 class TemplateStore(Protocol):
-    """Where built templates are kept for the next process (``use_store``): aogm's keeps them
-    on disk (``aogm_cli.io.template_store.STORE``); this module reads and writes no file."""
+    """Where built templates are kept for the next process (``use_store``); this module writes no file."""
 
     def load(self, args: tuple, dtypes: dict) -> dict | None:
-        """The arrays kept for the arguments ``args`` of ``_build``, each of ``dtypes``'
-        names and dtype, or None."""
+        """The arrays kept for ``_build``'s ``args``, as ``dtypes`` names them, or None."""
 
     def save(self, args: tuple, arrays: dict) -> None:
         """Keep the arrays built for ``args`` (or not: the store decides)."""
@@ -124,8 +103,7 @@ _STORE: TemplateStore | None = None  # None: templates are built anew in each pr
 
 
 def use_store(store: TemplateStore | None) -> None:
-    """Keep the templates built from now on in ``store``, and look for them there first (None:
-    build them in every process). The commands and the Python API install aogm's disk store."""
+    """Keep the templates built from now on in ``store``, and look for them there first (None: none)."""
     global _STORE
     _STORE = store
 
@@ -135,7 +113,7 @@ def _template_arrays(resolution: float, beam_width: float, reach: float, n_bins:
     q = n_bins // 8
     half = 0.5 * beam_width
     ext = int(math.floor(reach / resolution + _TOL))
-    # every cell of the disc of radius `reach`, with integer squared range (exact ties)
+    # the disc of radius `reach`, with integer squared range (exact ties)
     dr, dc = np.mgrid[-ext : ext + 1, -ext : ext + 1]
     dr = dr.ravel()
     dc = dc.ravel()
@@ -144,14 +122,13 @@ def _template_arrays(resolution: float, beam_width: float, reach: float, n_bins:
     keep = rng <= reach + _TOL * resolution
     dr, dc, r2, rng = dr[keep], dc[keep], r2[keep], rng[keep]
     ang = np.arctan2(dr.astype(np.float64), dc.astype(np.float64))
-    # stored bins have axes in [0, 45] deg: pre-select the cells that any of them can see
+    # pre-select the cells that a stored bin (axis in [0, 45] deg) can see
     lo, hi = -half - 1e-6, math.pi / 4 + half + 1e-6
     # with ``ray``, a cell up to resolution / sqrt 2 off an axis is on its ray: widen by its angle
     slack = np.arcsin(np.minimum(1.0, resolution / np.sqrt(2.0) / np.maximum(rng, 1e-12))) if ray else 0.0
     if beam_width < 1.5 * math.pi:
         near = ((ang - lo + slack) % TWO_PI <= hi - lo + 2 * slack) | (r2 == 0)
         dr, dc, r2, rng, ang = dr[near], dc[near], r2[near], rng[near], ang[near]
-
     offsets = np.zeros(q + 2, dtype=np.int64)
     parts_dc, parts_dr, parts_r, parts_b = [], [], [], []
     for b in range(q + 1):
@@ -168,7 +145,6 @@ def _template_arrays(resolution: float, beam_width: float, reach: float, n_bins:
         parts_r.append(rng[sel][order])
         parts_b.append(off[sel][order])
         offsets[b + 1] = offsets[b] + order.size
-
     k = np.arange(n_bins)
     octant = k // q
     base_bin = np.where(octant % 2 == 0, k - octant * q, (octant + 1) * q - k).astype(np.int64)

@@ -17,30 +17,25 @@ from aogm_cli.sensor_models.forward_model import cone_entries, cone_reach, gauss
 
 BOUND = 7.0  # the exact model's log-odds stay within +-BOUND (the standard map's clamps starve it)
 MARGIN = 0.5  # log-odds below the prior at which the thinning frees a cell
-# the evidence at a map (``map_evidence_sums``) passes over the cells of a reading whose ratios lie
-# within this of 1 (each log ratio below 1e-9: a million readings through one cell add less than
-# 0.001 to its evidence, against HIDDEN_GAIN's 0.05)
+# ``map_evidence_sums`` skips a reading whose ratios lie within this of 1 (a million such readings
+# add < 0.001 to a cell's evidence, against HIDDEN_GAIN's 0.05)
 NEGLIGIBLE = 1e-9
 
 
 @dataclass(frozen=True)
 class ExactModelConfig:
-    """The exact inverse model's own settings (section ``exact:``): where it starts, how far it
-    may go, and whether it thins the standard map. From a prior of 0.5 the exact map learns
-    nothing (a beam's chance to reach a cell is the product of 1 - p_hit P over the cone's cells
-    before it), hence 0.1; what it gives alone and as thinning: docs/algorithms.md, "The exact
-    inverse model".
+    """The exact inverse model's own settings (section ``exact:``). From a prior of 0.5 the exact
+    map learns nothing (a beam's chance to reach a cell is the product of 1 - p_hit P before it),
+    hence 0.1 (docs/algorithms.md, "The exact inverse model").
     """
 
     prior: float = 0.1  # the occupancy each cell starts at
-    # thin: the standard map's cells that the exact model holds free, more than MARGIN (log-odds)
-    # below its prior, are set free (to inverse_model.clamp_min): the thickness of walls towards the
-    # robot, the arcs that smear a doorway, go; walls stay where Elfes' model keeps them
+    # thin: the standard map's cells that the exact model holds MARGIN below its prior are set free
+    # (clamp_min): wall thickness towards the robot and arcs across doorways go
     thin: bool = False
 
     def validate(self) -> ExactModelConfig:
-        """Return self, or raise ``InputError(key=<field>)`` for an impossible value (the fields'
-        types are checked where the parameters are read: ``mapping.params.check_field_types``)."""
+        """Return self, or raise ``InputError(key=<field>)`` for an impossible value."""
         if not 0 < self.prior < 1:
             raise InputError(f"expected a probability in (0, 1), got {self.prior:g}", key="prior")
         if not BOUND > abs(self.l0):
@@ -56,49 +51,28 @@ class ExactModelConfig:
         return asdict(self)
 
 
-# Under the forward model (the comment above ``forward_model.ForwardModelConfig``) a reading z whose
-# cone holds cells 1..n in range order, each occupied with probability P_i independently, has
-#
+# Under the forward model, a cone of cells 1..n (range order) each occupied with probability P_i has
 #     p(z | m_j = x) = C + w S_j(x),   a_i = 1 - p_hit P_i (the expectation of q^[m_i]),
 #     S_j(1) = U_j + A_j (p_hit g_j + q R_j),   S_j(0) = U_j + A_j R_j,
 #     A_j = prod_{i<j} a_i,   U_j = sum_{i<j} P_i p_hit g_i A_i,
 #     R_j = sum_{i>j} P_i p_hit g_i prod_{j<l<i} a_l + G0 prod_{l>j} a_l,
-#
-# one pass forward (A, U) and one backward (R). The reading multiplies cell j's odds by
-# p(z | m_j = 1) / p(z | m_j = 0): below 1 before the echo (the more so the likelier the beam got
-# that far), above at it, near 1 behind a likely obstacle, which the beam did not reach. No division
-# by a_j: a cell believed occupied (a_j -> 1 - p_hit) costs nothing extra; and the map is kept as
-# probabilities, so that a cell's update is a few multiplications (no exp or log per cell).
-#
-# Speed (the thinned map's pass; docs/algorithms.md, "The exact inverse model", has the measures
-# and the tests that bound the rounding):
-# * most of a cone lies before the Gaussian window (g = 0, ``gaussian_at``): there U_j = 0 and the
-#   terms in g vanish exactly (0 + x = x), and A_j R_j is P R_w / a_j, P the product of every a_i
-#   before the window and R_w the backward sum at it, so the ratio there is (C a_j + w q P R_w) /
-#   (C a_j + w P R_w): one product and a loop without dependencies or divisions; within the window
-#   one exp per distinct range (a template holds cells of equal range next to each other);
-# * the ratios leave the kernel as numerator and denominator (``cone_terms``): one division per
-#   cell, in vectorised loops (numba's "numpy" error model: no zero test; no denominator here is 0:
-#   C > 0, a_j >= q > 0), with unsigned indices in the window (no test for a negative index);
-# * a reading whose every w S_j is below half an ulp of C (p(z | m) = C whatever the map, say a
-#   max-range reading across unknown cells) has every ratio exactly 1: it changes no observed cell
-#   and marks the others observed at the prior. When the product P is below that bound the reading
-#   is passed over (``cone_terms``' ``floor``). Bounds, g_max the largest of G0 and the window's g:
-#   S_j <= P R / q before the window whatever j (A_j R_j is prod_{l != j} a_l times R at the window,
-#   and a_j >= q), S_j <= P (n_window + 2) g_max within it (R_j is an expectation of g values);
-#   their rounding (a relative 1e-12 over a cone) is covered four times over.
+# one pass forward (A, U), one backward (R); cell j's odds are multiplied by p(z | m_j = 1) / p(z | m_j = 0).
+# No division by a_j; the map is kept as probabilities (no exp or log per cell).
+# Speed (measures and rounding tests: docs/algorithms.md, "The exact inverse model"):
+# * before the Gaussian window (g = 0) U_j = 0 and A_j R_j = P R_w / a_j (P the product of the a_i
+#   there, R_w the backward sum at the window): the ratio is (C a_j + w q P R_w) / (C a_j + w P R_w);
+# * ratios leave ``cone_terms`` as numerator and denominator: one division per cell, vectorised (no
+#   denominator is 0: C > 0, a_j >= q > 0);
+# * a reading whose every w S_j is below half an ulp of C has every ratio exactly 1 and is passed over
+#   (``cone_terms``' ``floor``), bounding S_j <= P R / q before the window and P (n_window + 2) g_max
+#   within it (g_max the largest of G0 and the window's g).
 
 
 @numba.njit(cache=True, error_model="numpy", inline="always")
 def cone_terms(p, g, j0, g0, p_hit, const, w, n, a, u, r, na, out):
-    """The ratios p(z | m_j = 1) / p(z | m_j = 0) of the first ``n`` cells of one cone as a
-    numerator in out[j] and a denominator in na[j] (so that a caller divides once per cell, and
-    the cells before the window need no division here): ``p`` their occupancy, ``g`` their
-    Gaussians N(z; d_j, sigma^2), of which the first ``j0`` (the cells before the Gaussian
-    window) are 0 and not read, ``g0`` G0 = N(z; z_max), ``const`` C and ``w`` of the reading (see
-    the comment above). ``a``, ``u``, ``r``, ``na`` are scratch of at least ``n`` entries. Returns
-    False, leaving ``out`` unset, when every ratio is exactly 1 (the reading explains nothing about
-    these cells; the comment above)."""
+    """The ratios p(z | m_j = 1) / p(z | m_j = 0) of the first ``n`` cells of one cone, numerators
+    in out[j], denominators in na[j] (``g``'s first ``j0``, before the window, not read; ``a``, ``u``,
+    ``r`` scratch). Returns False, ``out`` unset, when every ratio is exactly 1."""
     q = 1.0 - p_hit
     for j in range(n):
         na[j] = 1.0 - p_hit * p[j]
@@ -111,9 +85,7 @@ def cone_terms(p, g, j0, g0, p_hit, const, w, n, a, u, r, na, out):
         tail = p[j] * p_hit * g[j] + na[j] * tail
         top = max(top, g[j])
     floor = const * 2.0**-56 / (w * top * (n - j0 + 2) / q)
-    # before the window A_j R_j = P R_w / a_j, P the product of every a_i there and R_w the backward
-    # sum at the window: the ratio (C + w q P R_w / a_j) / (C + w P R_w / a_j) is (C a_j + w q P R_w)
-    # / (C a_j + w P R_w); P is one product (four independent chains)
+    # P before the window (the comment above), in four independent chains
     p0 = p1 = p2 = p3 = 1.0
     i = 0
     while i + 4 <= j0:
@@ -149,9 +121,7 @@ def cone_terms(p, g, j0, g0, p_hit, const, w, n, a, u, r, na, out):
 
 @numba.njit(cache=True, error_model="numpy")
 def cone_ratios(p, g, j0, g0, p_hit, const, w, n, a, u, r, na, out):
-    """out[j] = p(z | m_j = 1) / p(z | m_j = 0) for the first ``n`` cells of one cone
-    (``cone_terms``, whose arguments these are; ``na`` is left holding the denominators). Returns
-    False, leaving ``out`` unset, when every ratio is exactly 1."""
+    """out[j] = p(z | m_j = 1) / p(z | m_j = 0) for the first ``n`` cells of one cone (``cone_terms``)."""
     if not cone_terms(p, g, j0, g0, p_hit, const, w, n, a, u, r, na, out):
         return False
     for j in range(n):
@@ -161,10 +131,8 @@ def cone_ratios(p, g, j0, g0, p_hit, const, w, n, a, u, r, na, out):
 
 @numba.njit(cache=True, _nrt=False, error_model="numpy")
 def _reading_cone(tpl, flat, shape, readings, t, state, prior, model, ib, fl):
-    """Reading t's cone under the flat occupancy ``state`` (negative: ``prior``): its cells' flat
-    ids in ``ib``, their occupancy in ``fl[0]``, their Gaussians in ``fl[1]`` (from the window
-    on). Returns (m, j0, g0, C): the number of cone cells (0 for no reading or a cone off the
-    grid), the first in the Gaussian window, G0 and the reading's constant (the comment above)."""
+    """Reading t's cone under ``state`` (negative: ``prior``): flat ids in ``ib``, occupancy in
+    ``fl[0]``, Gaussians in ``fl[1]``. Returns (m, j0, g0, C); m = 0 for no reading or a cone off the grid."""
     p_rand, p_max, p_hit, sigma, window, z_max = model
     height, width = shape
     ext = tpl.extent
@@ -181,8 +149,7 @@ def _reading_cone(tpl, flat, shape, readings, t, state, prior, model, ib, fl):
     rk = tpl.ranges[tpl.offsets[b] : tpl.offsets[b + 1]]
     m = cone_entries(rk, z, limit, sigma, window)
     cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width)
-    # the cells before the Gaussian window (g = 0): the slack keeps any cell whose g might
-    # not round to 0 in the window
+    # the slack keeps in the window any cell whose g might not round to 0
     j0 = min(range_search(rk, tpl.range_index[b], tpl.resolution, z - window * sigma - 1e-9, False), m)
     p = fl[0]
     g = fl[1]
@@ -203,10 +170,8 @@ def _reading_cone(tpl, flat, shape, readings, t, state, prior, model, ib, fl):
 
 @numba.njit(cache=True, _nrt=False, error_model="numpy")
 def _reading_terms(tpl, flat, shape, readings, t, state, prior, model, ib, fl):
-    """``_reading_cone``, then the cone's ``cone_terms``: the ratios' numerators in ``fl[6]``, their
-    denominators in ``fl[5]``. Returns the number m of cone cells, negated when every ratio is
-    exactly 1 (``fl[5]``, ``fl[6]`` unset), 0 for no reading or a cone off the grid (the
-    arguments as ``exact_inverse_updates``')."""
+    """``_reading_cone``, then ``cone_terms`` (numerators in ``fl[6]``, denominators in ``fl[5]``).
+    Returns m, negated when every ratio is exactly 1, 0 for no reading or a cone off the grid."""
     p_rand, p_max, p_hit = model[0], model[1], model[2]
     m, j0, g0, const = _reading_cone(tpl, flat, shape, readings, t, state, prior, model, ib, fl)
     if m == 0:
@@ -220,24 +185,12 @@ def _reading_terms(tpl, flat, shape, readings, t, state, prior, model, ib, fl):
 # _nrt=False (as the standard kernel): nothing is allocated per reading; the scratch comes in
 @numba.njit(cache=True, _nrt=False, error_model="numpy")
 def exact_inverse_updates(tpl, flat, shape, readings, state, model, bounds, scratch, span):
-    """Apply readings t = span[0] .. span[1] - 1 in order to the flat float32 occupancy ``state``
-    (negative: not yet observed, taken as ``bounds[2]``, the prior): each cell of the reading's
-    cone has its odds multiplied by its ``cone_ratios`` under the map as it stands, its
-    probability then clamped to [bounds[0], bounds[1]].
-
-    ``tpl``, ``flat``: the forward templates and their ``cone.FlatOffsets`` for the grid's width;
-    ``shape`` (height, width) of the grid; ``state`` holds its height * width cells and then
-    SPARE_MASK + 1 spare cells of 0, where ``cone_flat_cells`` sends cone cells outside the grid:
-    occupancy 0 leaves every product and sum unchanged to the last bit (a = 1, no term), so they
-    need no test until the write, which skips them; ``readings`` is
-    ``forward_model.ExpectationReadings`` (template ranges; +inf a max-range reading; ``limit``
-    cuts a deflected beam); ``model`` (p_rand, p_max, p_hit, sigma, window, z_max); ``scratch``
-    (``cone_scratch``): (int32 (longest template,), float64 (7, same): p, g, a, u, r, 1 - p_hit p,
-    out)."""
+    """Apply readings in ``span`` in order to the occupancy ``state`` (negative: the prior ``bounds[2]``):
+    each cone cell's odds times its ratio, clamped. The spare cells (occupancy 0) after the grid leave
+    every product and sum unchanged to the last bit, so they need no test until the write."""
     p_min, p_max_clamp, prior = bounds
     n_cells = np.uint64(shape[0] * shape[1])  # unsigned as the cell ids: compared as integers
-    # what a reading whose ratios are all 1 leaves in an unobserved cell: the prior, as the
-    # update below computes it
+    # what a reading whose ratios are all 1 leaves in an unobserved cell
     kept_prior = np.float32(min(max(prior / (prior + 1.0 - prior), p_min), p_max_clamp))
     ib = scratch[0]
     fl = scratch[1]
@@ -252,7 +205,7 @@ def exact_inverse_updates(tpl, flat, shape, readings, state, model, bounds, scra
         pm = fl[0][:m]
         den = fl[5][:m]
         om = fl[6][:m]
-        for j in range(m):  # odds times the ratio N / D, back to a probability: p N / (p N + (1 - p) D)
+        for j in range(m):  # p N / (p N + (1 - p) D)
             pn = pm[j] * om[j]
             om[j] = min(max(pn / (pn + (1.0 - pm[j]) * den[j]), p_min), p_max_clamp)
         for j in range(m):
@@ -263,17 +216,11 @@ def exact_inverse_updates(tpl, flat, shape, readings, state, model, bounds, scra
 
 @numba.njit(cache=True, _nrt=False, error_model="numpy", nogil=True)
 def map_evidence_sums(tpl, flat, shape, readings, occupancy, model, scratch, span, evidence):
-    """Add to the flat float64 ``evidence`` (height * width) each reading's log p(z | m_j = 1) -
-    log p(z | m_j = 0) for the cells j of its cone, every other cell as the fixed binary map
-    ``occupancy`` (flat float32 0 / 1, then SPARE_MASK + 1 spare cells of 0) has it: summed over
-    the readings, EM's evidence of each cell at that map (``mapping.view.decided``). A cone's ratio for cell
-    j does not read cell j itself, so no cell is changed. Arguments as ``exact_inverse_updates``'.
+    """Add to ``evidence`` each reading's log ratio log p(z | m_j = 1) - log p(z | m_j = 0) for its
+    cone's cells under the fixed binary map ``occupancy``: EM's evidence at that map.
 
-    Over a binary map the cells before the Gaussian window take one of two ratios: with K of them
-    occupied and R the backward sum at the window, A_j R_j is q^K R for a free cell and q^(K - 1) R
-    for an occupied one (the comment above), so the ratios are (C + w q^(K+1) R) / (C + w q^K R)
-    and (C + w q^K R) / (C + w q^(K-1) R); the window's cells are ``cone_ratios`` with w q^K. A
-    reading whose ratios are all within ``NEGLIGIBLE`` of 1 adds nothing."""
+    Before the window, with K occupied cells and R the backward sum at it, A_j R_j is q^K R (free
+    cell) or q^(K - 1) R (occupied): two ratios; the window's cells are ``cone_ratios`` with w q^K."""
     p_rand, p_max, p_hit = model[0], model[1], model[2]
     w = 1.0 - p_rand - p_max
     q = 1.0 - p_hit
@@ -296,7 +243,7 @@ def map_evidence_sums(tpl, flat, shape, readings, occupancy, model, scratch, spa
         for j in range(m - 1, j0 - 1, -1):
             tail = p[j] * p_hit * g[j] + (1.0 - p_hit * p[j]) * tail
         n = m - j0
-        if n > 0:  # the window's cells (with none before them, cone_ratios computes every ratio)
+        if n > 0:
             cone_ratios(p[j0:m], g[j0:m], 0, g0, p_hit, const, wk, n, fl[2], fl[3], fl[4], fl[5], out)
             for j in range(n):
                 c = np.uint64(np.uint32(ib[j0 + j]))

@@ -35,12 +35,7 @@ class ForwardArrays(NamedTuple):
 
 @dataclass(frozen=True)
 class ForwardIndex:
-    """Readings and the cells of their (truncated) cones, in range order, as CSR arrays.
-
-    ``ptr`` (R+1,) delimits reading t's entries ``ptr[t]:ptr[t+1]``; ``cell`` holds flat grid
-    indices (row * W + col) and ``g`` the Gaussian N(z_t; d, sigma^2) of each entry's range d.
-    ``const`` (R,) is C_t, ``g0`` (R,) is G0_t. ``reading`` (R,) maps back to the caller's ids.
-    """
+    """Readings and the cells of their (truncated) cones, in range order, as CSR arrays."""
 
     ptr: np.ndarray
     cell: np.ndarray
@@ -81,7 +76,7 @@ class IndexBuffers(NamedTuple):
 
 @numba.njit(cache=True)
 def _reading_sum(ptr, cell, g, g0, p_hit, occupied, t):
-    """S_t for reading t (arrays of ``ForwardArrays``) under the binary map ``occupied`` (flat bool)."""
+    """S_t for reading t under the binary map ``occupied``."""
     q = 1.0 - p_hit
     qk = 1.0
     s = 0.0
@@ -110,16 +105,7 @@ def log_likelihoods(index: ForwardIndex, occupied_flat: np.ndarray) -> np.ndarra
 
 @numba.njit(cache=True, _nrt=False)  # allocates nothing: as ``standard._standard_kernel``
 def _fill_index(tpl, flat, grid, readings, sigma, window, out):
-    """Cone cells (flat ids) and Gaussians of every reading, packed reading after reading.
-
-    ``tpl`` is ``ConeTemplates.kernel_arrays``, ``flat`` its ``cone.FlatOffsets`` for the
-    grid's width, ``grid`` an ``IndexGrid``, ``readings`` ``ExpectationReadings`` (each cone's
-    ``limit`` set) and ``out`` ``IndexBuffers``; returns the number of entries written.
-    Each cone is the template's entries up to the reading's limit, in range order, with the
-    cells outside the grid left out (``cone.cone_flat_cells``, as the standard mapper walks
-    them). With a non-empty ``mask`` (flat bool), a reading none of whose cells is in the
-    mask gets no entries. With a non-empty ``held_free``, the cells it marks are left out.
-    """
+    """Cone cells (flat ids) and Gaussians of every reading, packed; returns the number of entries."""
     height = grid.height
     width = grid.width
     ext = tpl.extent
@@ -133,7 +119,7 @@ def _fill_index(tpl, flat, grid, readings, sigma, window, out):
         col0 = readings.cols[t]
         out.counts[t] = 0
         if row0 + ext < 0 or row0 - ext >= height or col0 + ext < 0 or col0 - ext >= width:
-            continue  # the cone cannot touch the grid
+            continue
         k = readings.bins[t]
         b = tpl.base_bin[k]
         r = tpl.ranges[tpl.offsets[b] : tpl.offsets[b + 1]]
@@ -144,7 +130,7 @@ def _fill_index(tpl, flat, grid, readings, sigma, window, out):
         n = 0
         for j in range(m):
             c = np.int64(ib[j])
-            if c >= n_cells:  # outside the grid
+            if c >= n_cells:
                 continue
             if use_mask and grid.mask[c]:
                 touches = True
@@ -153,7 +139,7 @@ def _fill_index(tpl, flat, grid, readings, sigma, window, out):
             out.cell[pos + n] = c
             out.g[pos + n] = gaussian_at(z, r[j], sigma, window)
             n += 1
-        if touches:  # else none of its cells is in the mask: the reading keeps no entry
+        if touches:
             out.counts[t] = n
             pos += n
     return pos
@@ -179,18 +165,10 @@ def build_forward_index(
     masks: IndexMasks = NO_MASKS,
     shadow: np.ndarray | None = None,
 ) -> ForwardIndex:
-    """The forward model's index for ``cones`` = (rows, cols, bins, z): readings z taken from
-    sensor cells (rows, cols) with heading bins ``bins`` (as ``cone.reading_geometry`` gives them;
-    flat arrays of one length).
-
-    NaN readings are dropped; +inf is a max-range reading (cone up to z_max). Other cones end
-    ``config.window`` sigmas beyond z. ``reading_ids`` name the readings (default 0..N-1).
-    With ``masks.mask`` (flat bool over the grid), only the readings whose cones touch it get
-    entries; the others stay in the index with none. ``masks.held_free`` (flat bool) marks cells
-    that are free and stay free while the index is used (neither candidates of EM nor
-    occupied): a free cell adds nothing to any S_t, so leaving its entries out changes no
-    likelihood, and the index of a small cluster holds little more than the cluster's cells.
-    ``shadow`` (per reading, ``surface.reading_shadows``) cuts readings short (``cone_limits``).
+    """The forward model's index for ``cones`` = (rows, cols, bins, z); NaN readings are dropped.
+    ``masks.held_free`` cells stay free while the index is used: a free cell adds nothing to any S_t,
+    so leaving it out changes no likelihood and keeps a small cluster's index small. ``shadow`` cuts
+    readings short (``cone_limits``).
     """
     rows, cols, bins, z = cones
     z = np.asarray(z, dtype=np.float64).reshape(-1)

@@ -15,39 +15,27 @@ from aogm_cli.core.errors import InputError
 from aogm_cli.sensor_models.cone import cone_flat_cells
 
 
-# A reading has one cause: random (uniform 1/z_max), a max-range dropout (optional point mass), no
-# obstacle detected (max-range reading), or the k-th obstacle of its cone in range order, detected with
-# probability p_hit each. For reading t with obstacles d_1 <= ... <= d_K in its cone, q = 1 - p_hit and
-# g(d) = N(z; d, sigma^2), G0 = N(z; z_max, sigma^2):
-#
+# A reading has one cause: random, a max-range dropout, no obstacle detected, or the k-th obstacle of its
+# cone (d_1 <= ... <= d_K), each detected with p_hit; q = 1 - p_hit, g(d) = N(z; d, sigma^2), G0 = g(z_max):
 #     p(z | m) = C + w * S,   C = p_rand / z_max + p_max * G0,   w = 1 - p_rand - p_max,
 #     S = sum_k q^(k-1) p_hit g(d_k) + q^K G0.
-#
-# The Gaussian is truncated at ``window`` sigmas (g = 0 beyond; the mass left out is below
-# exp(-window^2 / 2) of the peak), and so is a cone beyond z; a max-range reading keeps its whole cone
-# up to z_max. Cells before a reading's window then change it only through the detection factor q,
-# which EM scores in O(1) per reading.
+# g is truncated at ``window`` sigmas, and so is a cone beyond z (a max-range reading's reaches z_max):
+# cells before the window change p only through the factor q, which EM scores in O(1) per reading.
 @dataclass(frozen=True)
 class ForwardModelConfig:
-    """Parameters of the forward model; see the comment above for their meaning, and
-    docs/algorithms.md, "Where the defaults come from", for how the defaults were chosen."""
+    """Parameters of the forward model (the comment above; defaults: docs/algorithms.md)."""
 
     sigma: float = 0.03  # m: sonar noise 0.02 m and the grid's quantisation (0.05 / sqrt 12)
     p_rand: float = 0.05  # prior of a random reading
     p_hit: float = 0.7  # probability that each obstacle in the cone, nearest first, is detected
     p_max: float = 0.1  # point mass of a max-range dropout (specular reflection)
     window: float = 4.0  # sigmas beyond z up to which a cone's cells count
-    # the largest angle between a reading's direction and a surface's normal (``surface.py``) at
-    # which the surface still echoes: a surface cell met more obliquely, before the reading's
-    # window, is left out of its cone (no echo comes back from a grazing pass, so the pass is no
-    # evidence against the surface). 90: every cell counts at any angle (Thrun's model). A 40 kHz
-    # sonar sees a painted wall within 15-30 deg of its normal; calibration learns it from the log
+    # the largest angle off a surface's normal (``surface.py``) at which it still echoes: a surface
+    # cell met more obliquely before the window is left out of the cone (a grazing pass is no
+    # evidence against it). 90: Thrun's model. Calibration learns it from the log
     specular_deg: float = 90.0
-    # the opening (degrees, full angle) of the part of the cone that detects: a transducer's main
-    # lobe is strongest on its axis, and a surface near the cone's edge returns an echo too weak
-    # to register, so the cells beyond this angle are left out of every cone of the em and adaptive
-    # modes (their standard passes too); 0: the log's beam width, which also bounds it. Calibration
-    # learns it from the log (``sensor_models.lobe``)
+    # the opening (degrees, full angle) of the cone that detects (a surface near the edge echoes too
+    # weakly); 0: the log's beam width. Calibration learns it (``sensor_models.lobe``)
     opening_deg: float = 0.0
 
     def validate(self) -> ForwardModelConfig:
@@ -81,8 +69,7 @@ class ForwardModelConfig:
 
 
 class ExpectationReadings(NamedTuple):
-    """Readings as the forward model's kernels take them (``expectation_sums``, ``_fill_index``, the
-    exact model's): flat arrays of one length, NaN readings left out."""
+    """Readings as the forward model's kernels take them: flat arrays, NaN readings left out."""
 
     rows: np.ndarray  # the sensor's cell (int64; may lie outside the grid)
     cols: np.ndarray
@@ -115,9 +102,7 @@ def gaussian_at(z, r, sigma, window):
 
 @numba.njit(cache=True, inline="always")
 def cone_reach(z, cut, z_max, sigma, window):
-    """Compiled (z, limit) of a reading as the forward model takes it: z at most z_max (a longer
-    one, or +inf, is a max-range reading, whose cone reaches z_max), and the template range its
-    cone counts up to: ``window`` sigmas beyond z, at most z_max and the ``cut`` of a deflected beam."""
+    """Compiled (z, limit) of a reading: z at most z_max, and the range its cone counts up to."""
     if not z < z_max:
         return z_max, min(z_max, cut)
     return z, min(min(z + window * sigma, z_max), cut)
@@ -125,10 +110,8 @@ def cone_reach(z, cut, z_max, sigma, window):
 
 @numba.njit(cache=True)
 def cone_entries(r, z, limit, sigma, window):
-    """How many of a template bin's entries (ranges ``r``, sorted) a reading's cone holds: those
-    up to ``limit``, and beyond the range z only while the Gaussian is not 0 (rounding at
-    z + window sigma, or an underflow, must not leave a cell of zero weight after the window's
-    obstacles, where it would scale their terms by q as if it came before them)."""
+    """How many of a template bin's entries a reading's cone holds: up to ``limit``, and beyond z only
+    while the Gaussian is not 0 (a zero-weight cell after the window would scale its terms by q)."""
     if not limit >= 0.0:
         return 0
     m = np.searchsorted(r, limit, side="right")
@@ -138,10 +121,7 @@ def cone_entries(r, z, limit, sigma, window):
 
 
 def deflect(z: np.ndarray, shadow: np.ndarray | None, z_max: float) -> tuple[np.ndarray, np.ndarray]:
-    """(z, limit) of readings whose beams a surface deflected (``surface.reading_shadows``: a finite
-    ``shadow``): each becomes a max-range reading (+inf) whose cone ends just before that surface
-    (limit), saying that nothing nearer echoed and nothing of the cells beyond, which the beam
-    never crossed; the others keep z and no limit (+inf)."""
+    """(z, limit) of readings: a deflected one becomes a max-range reading ending before the surface."""
     z = np.asarray(z, dtype=np.float64)
     if shadow is None:
         return z, np.full(z.shape, np.inf)
@@ -151,9 +131,7 @@ def deflect(z: np.ndarray, shadow: np.ndarray | None, z_max: float) -> tuple[np.
 
 def cone_limits(z: np.ndarray, z_max: float, config: ForwardModelConfig,
                 shadow: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(z, limit) of each reading as the forward model takes it: a cone counts up to ``config.window``
-    sigmas beyond its range, a max-range reading's (+inf) up to z_max, a deflected one's up to its
-    shadow (``deflect``)."""
+    """(z, limit) of each reading as the forward model takes it (``cone_reach``, ``deflect``)."""
     z, cut = deflect(z, shadow, z_max)
     limits = np.where(np.isfinite(z), np.minimum(z + config.window * config.sigma, z_max), z_max)
     return z, np.minimum(limits, cut)
@@ -165,11 +143,8 @@ E_READINGS, E_LOGLIK, E_RANDOM, E_DROPOUT, E_DETECTED, E_EXAMINED, E_SQUARED, E_
 
 @numba.njit(cache=True)
 def cone_obstacles(tpl, flat, shape, readings, occupied, sigma, window, z_max, ptr, d):
-    """The template ranges of the occupied cells (flat bool ``occupied``) of each reading's cone
-    as the forward model takes it at ``sigma`` (``cone_reach``, ``cone_entries``), in range order,
-    reading t's at ``d[ptr[t]:ptr[t + 1]]``. Returns how many there are: when ``d`` holds fewer,
-    only ``ptr`` is right (call again with ``d`` that large). ``expectation_sums`` at any sigma up
-    to this one needs only these (``obstacle_sums``)."""
+    """The ranges of the occupied cells of each reading's cone at ``sigma``, reading t's at
+    ``d[ptr[t]:ptr[t + 1]]``. Returns how many there are (when ``d`` holds fewer, only ``ptr`` is right)."""
     height, width = shape
     n_cells = height * width
     ext = tpl.extent
@@ -200,9 +175,7 @@ def cone_obstacles(tpl, flat, shape, readings, occupied, sigma, window, z_max, p
 
 @numba.njit(cache=True)
 def obstacle_sums(ptr, d, readings, model, out):
-    """``expectation_sums`` from each reading's obstacles (``cone_obstacles``, found at a sigma at
-    least ``model``'s): those beyond the cone at this sigma are left out as ``cone_entries`` leaves
-    them (beyond the limit, or beyond z where the Gaussian is 0: beyond z it only falls)."""
+    """``expectation_sums`` from the obstacles found at a sigma at least ``model``'s."""
     p_rand, p_max, p_hit, sigma, window, z_max = model
     q = 1.0 - p_hit
     w = 1.0 - p_rand - p_max
@@ -248,8 +221,7 @@ class Obstacles(NamedTuple):
 
 
 def find_obstacles(tpl, flat, shape, readings, occupied, sigma: float, window: float, z_max: float) -> Obstacles:
-    """``cone_obstacles`` of ``readings`` at ``sigma``: one walk of every cone, two when there
-    are more than 16 obstacles per reading."""
+    """``cone_obstacles`` of ``readings`` at ``sigma`` (two walks when d's first size is short)."""
     ptr = np.zeros(readings.z.shape[0] + 1, dtype=np.int64)
     d = np.empty(16 * readings.z.shape[0] + 1)
     n = cone_obstacles(tpl, flat, shape, readings, occupied, sigma, window, z_max, ptr, d)
@@ -260,18 +232,10 @@ def find_obstacles(tpl, flat, shape, readings, occupied, sigma: float, window: f
 
 
 def expectation_sums(tpl, flat, shape, readings, occupied, model, out, obstacles: Obstacles | None = None) -> Obstacles:
-    """The expectations of every reading's cause under the flat binary map ``occupied``, summed.
-
-    ``model`` is (p_rand, p_max, p_hit, sigma, window, z_max). For reading t with obstacles
-    d_1 <= ... <= d_K in its cone (cells up to z + window sigma; up to z_max for a max-range
-    reading), the causes' posteriors are e_rand = (p_rand / z_max) / p, e_dropout = p_max G0 / p,
-    e_k = w q^(k-1) p_hit g(d_k) / p and e_0 = w q^K G0 / p, with p = p(z_t | m) (the comment
-    above ``ForwardModelConfig``). Adds into ``out`` (E_SIZE,): readings, sum of log p, sum e_rand, sum e_dropout,
-    sum_k e_k (detections), sum_k k e_k + K e_0 (obstacles examined), sum_k e_k (z - d_k)^2,
-    sum e_0 (no obstacle detected).
-
-    ``obstacles`` found at a sigma at least ``model``'s are used as they are (else found here);
-    returns those used, for the next call (a fit changes sigma, not the map).
+    """The expectations of every reading's cause under the flat binary map ``occupied``, summed:
+    the causes' posteriors are e_rand = (p_rand / z_max) / p, e_dropout = p_max G0 / p, e_k = w
+    q^(k-1) p_hit g(d_k) / p and e_0 = w q^K G0 / p; ``out`` gets their sums (the E_* slots).
+    ``obstacles`` found at a sigma at least ``model``'s are reused; returns those used.
     """
     sigma, window, z_max = model[3], model[4], model[5]
     if obstacles is None or obstacles.sigma < sigma:

@@ -19,10 +19,7 @@ MODELS = ("elfes", "constant", "exact")  # exact: derived from the forward model
 @dataclass(frozen=True)
 class InverseModelConfig:
     """Parameters of the sonar inverse model and of the log-odds update (log-odds, metres).
-
-    Defaults: OctoMap's hit/miss probabilities 0.7/0.4 (l_occ = +0.85, l_free = -0.41) and
-    clamping bounds [-2.0, +3.5] (probabilities 0.12/0.97); prior l0 = 0 (p = 0.5).
-    """
+    Defaults: OctoMap's hit/miss probabilities 0.7/0.4 and clamps 0.12/0.97; prior p = 0.5."""
 
     model: str = "elfes"
     l_occ: float = 0.85
@@ -30,12 +27,9 @@ class InverseModelConfig:
     l0: float = 0.0
     clamp_min: float = -2.0
     clamp_max: float = 3.5
-    # alpha, the obstacle thickness (Elfes' range band 2 epsilon): the Polaroid ranging module is
-    # accurate to about 1% of the reading, +/-2.5 cm at a typical 2.5 m, and 0.05 m is one cell of the
-    # default grid. Thicker arcs (0.1 m) thicken every wall by a cell towards the robot and cost
-    # accuracy (python bench/params_sweep.py standard); arcs thinner than a cell's diagonal can leave
-    # single-cell holes along diagonal walls, which the many overlapping sonar cones fill. On coarser
-    # grids choose alpha of about the resolution.
+    # alpha, the obstacle thickness (Elfes' 2 epsilon): about the Polaroid's accuracy (1% of the
+    # reading) and one default cell; thicker arcs thicken walls towards the robot (docs/algorithms.md).
+    # On coarser grids choose alpha of about the resolution.
     alpha: float = 0.05
 
     def validate(self) -> InverseModelConfig:
@@ -79,11 +73,8 @@ def angular_profile(theta, beam_width: float):
 
 
 def range_profile(d, z_free, min_range: float):
-    """Elfes' E_r(d) = 1 - ((d - Rmin) / (z_free - Rmin))^2 on [Rmin, z_free), 0 elsewhere.
-
-    ``z_free`` is where free space ends: z - alpha/2, or max_range for a max-range reading
-    (whose free region includes max_range itself, where E_r is 0 anyway).
-    """
+    """Elfes' E_r(d) = 1 - ((d - Rmin) / (z_free - Rmin))^2 on [Rmin, z_free), 0 elsewhere
+    (``z_free``: z - alpha/2, or max_range for a max-range reading)."""
     d = np.asarray(d, dtype=np.float64)
     z_free = np.asarray(z_free, dtype=np.float64)
     span = z_free - min_range
@@ -93,28 +84,16 @@ def range_profile(d, z_free, min_range: float):
     return np.where((d >= min_range) & (d < z_free) & (span > 0), e, 0.0)
 
 
-# The model (Elfes 1989; Moravec 1988; Probabilistic Robotics table 9.2). For a reading z and a cell
-# at range d and bearing theta from the beam axis (|theta| <= beta/2, beta the beam width), the inverse
-# model's log-odds is
+# The model (Elfes 1989; Probabilistic Robotics table 9.2): a cell at range d inside the cone has log-odds
 # * occupied arc, z - alpha/2 <= d <= min(z + alpha/2, max_range): l0 + w_occ * (l_occ - l0)
 # * free region, min_range <= d < z - alpha/2:                     l0 + w_free * (l_free - l0)
 # * anything else (beyond the arc, outside the cone, nearer than min_range): l0 (no evidence)
-# with weights in [0, 1]:
-# * model "elfes": w_free = E_r(d) E_a(theta), w_occ = E_a(theta), where E_a(theta) = 1 - (2 theta /
-#   beta)^2 and E_r(d) = 1 - ((d - Rmin) / (z - alpha/2 - Rmin))^2, Rmin the sensor's min_range. Free
-#   evidence is strongest next to the sensor and fades to nothing at the arc; both kinds fade to
-#   nothing at the cone's edge.
-# * model "constant": w_free = w_occ = 1 (l_free inside, l_occ on the arc).
-# A max-range reading (z = +inf, or any z >= max_range: the sensor saw no echo within its range) is
-# evidence of free space only: the free region runs to max_range inclusive, with z - alpha/2 replaced
-# by max_range in E_r. A NaN or negative reading carries no information. The sensor's blind zone
-# (d < min_range) gets no evidence in either model.
+# with weights "elfes": w_free = E_r(d) E_a(theta), w_occ = E_a(theta); "constant": both 1.
+# A max-range reading (z >= max_range) is free evidence only, up to max_range inclusive; a NaN or
+# negative reading carries none.
 def inverse_model(d, theta, z, config: InverseModelConfig, *, beam_width: float, min_range: float, max_range: float):
     """Log-odds l(x | z) of a cell at range ``d`` (m) and bearing ``theta`` (rad, from the beam
-    axis) given reading ``z`` (m; +inf = max-range reading, NaN = invalid). Broadcasts.
-
-    The log-odds update of standard mapping adds ``inverse_model(...) - config.l0``.
-    """
+    axis) given reading ``z`` (m; +inf = max-range reading, NaN = invalid). Broadcasts."""
     d = np.asarray(d, dtype=np.float64)
     theta = np.asarray(theta, dtype=np.float64)
     z = np.asarray(z, dtype=np.float64)
@@ -143,9 +122,7 @@ def inverse_model(d, theta, z, config: InverseModelConfig, *, beam_width: float,
 
 
 class InverseUpdate(NamedTuple):
-    """The per-map constants of the log-odds update, as the compiled kernels of
-    ``mapping.standard`` (cones) and ``mapping.beam`` (rays) take them; ``inverse_update``
-    builds it. Every field is float64 but ``elfes``."""
+    """The per-map constants of the log-odds update, as the compiled mappers take them."""
 
     half_alpha: float  # alpha / 2 (m): half the occupied arc's thickness
     min_range: float  # the sensor's (m): no evidence nearer
@@ -163,8 +140,7 @@ UNOBSERVED = np.float32(-np.inf)  # a cell of the mappers' log-odds state that n
 
 
 def observed_log_odds(state: np.ndarray, l0: float) -> tuple[np.ndarray, np.ndarray]:
-    """(log_odds float32, observed bool) of a mapper's float32 log-odds ``state``: cells still
-    ``UNOBSERVED`` are not observed and hold the prior ``l0``."""
+    """(log_odds, observed) of a mapper's log-odds ``state``; unobserved cells hold the prior ``l0``."""
     log_odds = state.copy()
     observed = log_odds != UNOBSERVED
     log_odds[~observed] = np.float32(l0)
@@ -172,8 +148,7 @@ def observed_log_odds(state: np.ndarray, l0: float) -> tuple[np.ndarray, np.ndar
 
 
 def inverse_update(config: InverseModelConfig, sensor, resolution: float) -> InverseUpdate:
-    """The ``InverseUpdate`` of ``config`` for ``sensor`` (its min and max range) on a grid of
-    ``resolution`` metres."""
+    """The ``InverseUpdate`` of ``config`` for ``sensor`` on a grid of ``resolution`` metres."""
     return InverseUpdate(
         half_alpha=0.5 * float(config.alpha),
         min_range=float(sensor.min_range),
@@ -190,15 +165,12 @@ def inverse_update(config: InverseModelConfig, sensor, resolution: float) -> Inv
 
 @numba.njit(cache=True, inline="always")
 def float32_update(update):
-    """(c_occ, lo, hi, l0) of an ``InverseUpdate`` as float32, as the compiled mappers add and
-    compare them: the occupied increment, the clamps and the prior."""
+    """(c_occ, lo, hi, l0) of an ``InverseUpdate`` as float32, as the compiled mappers use them."""
     return (np.float32(update.l_occ_minus_l0), np.float32(update.clamp_min), np.float32(update.clamp_max),
             np.float32(update.l0))
 
 
 @numba.njit(cache=True, inline="always")
 def occupied_arc(z, half_alpha, max_range):
-    """(start, end) range of the occupied arc of an echo at range ``z`` (< max_range): from
-    z - alpha/2 to z + alpha/2, cut at max_range. The one definition the compiled mappers
-    (cones and rays) and the consistency re-cast use; ``inverse_model`` is its numpy reference."""
+    """(start, end) of the occupied arc of an echo at ``z``, cut at max_range (one definition for all)."""
     return z - half_alpha, min(z + half_alpha, max_range)

@@ -12,9 +12,8 @@ import numpy as np
 from aogm_cli.sensor_models.surface import cone_walk
 
 LOBE_BIN_DEG = 1.0  # the width of a bin of the angle off the axis (degrees)
-# A log keeps its cone unless the cone explains this share fewer echoes than the best opening: the
-# thinned map's own smear leaves the cone a little short on logs whose beam detects across it, and
-# a cone narrowed below such a beam costs EM accuracy (docs/algorithms.md, "The beam's opening")
+# A log keeps its cone unless it explains this share fewer echoes than the best opening: the thinned
+# map's smear leaves the cone a little short, and a too narrow cone costs EM accuracy (docs/algorithms.md)
 CONE_TOLERANCE = 0.04
 # then the opening is the widest that explains at least this share fewer than the best one does
 OPENING_TOLERANCE = 0.01
@@ -28,16 +27,11 @@ def lobe_bins(beam_width: float) -> int:
 
 @numba.njit(cache=True)
 def opening_matches(tpl, flat, bearings, shape, readings, occupied, model, out):
-    """out[a] += 1 for every echo whose range the map ``occupied`` (flat bool) explains when the
-    beam detects up to (a + 1) bins of ``bin`` rad off its axis: the nearest occupied cell within
-    that angle lies within ``band`` of the reading's range. A reading without echo is left out
-    (a specular wall met at a grazing angle is silent at every angle off the axis: the specular
-    angle's part, ``surface.incidence_counts``).
+    """out[a] += 1 for every echo that the map ``occupied`` explains when the beam detects up to
+    (a + 1) bins off its axis: the nearest occupied cell within that angle lies within ``band`` of z.
 
-    An opening narrower than the beam's puts the nearest surface too far for readings that met
-    it off the axis, a wider one too near: the curve peaks at the beam's. ``bearings`` are the
-    templates' (``ConeTemplates.bearings``); ``readings`` = (rows, cols, bins, z) (template
-    ranges; >= z_max: no echo); ``model`` = (band, z_max, bin); ``out`` (bins,)."""
+    A narrower opening puts the nearest surface too far, a wider one too near: the curve peaks at
+    the beam's. ``readings`` = (rows, cols, bins, z); ``model`` = (band, z_max, bin)."""
     band, z_max, width = model
     rows, cols, bins, z_all = readings
     n_bins = out.shape[0]
@@ -71,12 +65,8 @@ def cone_deg(beam_width: float) -> float:
 
 
 def learned_opening(matches: np.ndarray, echoes: int, beam_width: float) -> float:
-    """The effective opening (degrees, full angle) from ``opening_matches``' curve over ``echoes``
-    echoes: the cone (``beam_width`` rad) unless it explains ``CONE_TOLERANCE`` fewer echoes than
-    the best opening (or there are fewer than ``MIN_ECHOES`` echoes), else the widest opening
-    within ``OPENING_TOLERANCE`` of the best."""
+    """The effective opening (degrees) from ``opening_matches``' curve (the constants above)."""
     if echoes < MIN_ECHOES or matches.size == 0 or matches[-1] >= (1.0 - CONE_TOLERANCE) * matches.max():
         return cone_deg(beam_width)
-    # the cone is more than CONE_TOLERANCE short here, so the widest within OPENING_TOLERANCE is narrower
     a = int(np.flatnonzero(matches >= (1.0 - OPENING_TOLERANCE) * matches.max())[-1])
     return 2.0 * LOBE_BIN_DEG * (a + 1)

@@ -15,15 +15,13 @@ from aogm_cli.core.frames import sensor_poses
 from aogm_cli.core.grid import GridSpec, dda_steps
 from aogm_cli.core.log import SensorSpec
 
-# a ray that stays in a cell for at most this many cells' length only touches it (a corner,
-# up to rounding) and leaves it alone
+# a ray that stays in a cell for at most this many cells' length only touches it (a corner)
 TOUCH = 1e-9
 AXIS_SHORT = 2  # cells: an echo's axis counts as crossing the cells up to this many cells short of it
 
 
 class Ray(NamedTuple):
-    """One ray for ``_ray_cells_kernel``: from (px, py) (m, from the grid's origin) along the
-    unit vector (ux, uy), up to ``length`` m."""
+    """One ray from (px, py) (m, from the grid's origin) along the unit vector (ux, uy)."""
 
     px: float
     py: float
@@ -50,23 +48,13 @@ class RayGrid(NamedTuple):
 
 
 def is_narrow_beam(sensor: SensorSpec, resolution: float) -> bool:
-    """Does standard mapping trace this sensor's readings as rays rather than cones?
-
-    Yes for a laser (``kind == "laser"``: its reading is the first return near the beam's
-    axis, and its beam, 0.5 deg or less, is no wider than the spacing of its beams), and for
-    any sensor whose cone is under a cell wide at max range (beam_width * max_range < resolution).
-    """
+    """Does standard mapping trace this sensor's readings as rays rather than cones? Yes for a laser
+    (its return is near the axis, its beam no wider than their spacing) and a cone under a cell wide."""
     return sensor.kind == "laser" or float(sensor.beam_width) * float(sensor.max_range) < float(resolution)
 
 
 def ray_cells(grid: GridSpec, x: float, y: float, yaw: float, length: float):
-    """Cells of ``grid`` that the ray from (x, y) along ``yaw`` crosses up to ``length`` metres.
-
-    Returns (rows, cols, t_enter, t_exit) in order along the ray: int64 cell indices and the
-    float64 stretch [t_enter, t_exit) of the ray inside each cell (t from (x, y), clipped to
-    [0, length]); cells the ray only touches (a corner, or a stretch under ``TOUCH`` cells)
-    are left out. The start may lie outside the grid; cells outside it are left out.
-    """
+    """Cells (rows, cols, t_enter, t_exit) that the ray from (x, y) along ``yaw`` crosses up to ``length``."""
     n_max = int(grid.height + grid.width + 2)
     rows = np.empty(n_max, dtype=np.int64)
     cols = np.empty(n_max, dtype=np.int64)
@@ -91,11 +79,7 @@ def _slab(p, u, size, t_lo, t_hi):
 
 @numba.njit(cache=True)
 def ray_start(px, py, ux, uy, begin, end, height, width, res):
-    """Set-up of the traversal of [begin, end] along one ray, in metres from the grid's origin.
-
-    Returns (row, col, t_start, t_stop, t_max_row, t_max_col, t_delta_row, t_delta_col,
-    step_row, step_col); t_start >= t_stop when that stretch misses the grid.
-    """
+    """Set-up of the traversal of [begin, end] along one ray (t_start >= t_stop: it misses the grid)."""
     inf = np.inf
     if not (np.isfinite(px) and np.isfinite(py) and np.isfinite(ux) and np.isfinite(uy)):
         return 0, 0, 1.0, 0.0, inf, inf, inf, inf, 0, 0
@@ -103,7 +87,6 @@ def ray_start(px, py, ux, uy, begin, end, height, width, res):
     t_hi = end
     x_max = width * res
     y_max = height * res
-    # clip the stretch to the grid's box (slab method)
     t_lo, t_hi = _slab(px, ux, x_max, t_lo, t_hi)
     t_lo, t_hi = _slab(py, uy, y_max, t_lo, t_hi)
     if not t_lo < t_hi:
@@ -118,9 +101,7 @@ def ray_start(px, py, ux, uy, begin, end, height, width, res):
 
 @numba.njit(cache=True)
 def next_cell(row, col, t_max_row, t_max_col, d_row, d_col, s_row, s_col, height, width):
-    """One Amanatides-Woo step: (row, col, t_max_row, t_max_col, still inside the grid).
-    On a tie (a corner) the row steps first; the column's zero-length cell that follows is
-    skipped by the callers."""
+    """One Amanatides-Woo step; on a tie the row steps first (callers skip the zero-length cell)."""
     if t_max_col < t_max_row:
         col += s_col
         return row, col, t_max_row, t_max_col + d_col, 0 <= col < width
@@ -130,8 +111,7 @@ def next_cell(row, col, t_max_row, t_max_col, d_row, d_col, s_row, s_col, height
 
 @numba.njit(cache=True)
 def _ray_cells_kernel(ray, grid, out):
-    """Write the cells of one ``Ray`` on a ``RayGrid`` (see ``ray_cells``) to ``out``
-    (``RayCells``); return how many."""
+    """Write the cells of one ``Ray`` (``ray_cells``) to ``out``; return how many."""
     height = grid.height
     width = grid.width
     res = grid.resolution
@@ -163,14 +143,9 @@ def _ray_cells_kernel(ray, grid, out):
 
 def axis_counts(pose: np.ndarray, ranges: np.ndarray, sensor: SensorSpec, grid: GridSpec,
                 short_cells: float = AXIS_SHORT) -> tuple[np.ndarray, np.ndarray]:
-    """(ends, passes), each int32 (H, W), of the echoes among the readings (pose (T, 3), ranges
-    (T, S)): a finite range below max_range, from a finite pose. ``ends``: per cell, the echoes
-    whose point on their sensor's axis (the sensor's position plus the range along its heading)
-    lies in it; ``passes``: the echoes whose axis crosses it from the sensor out to
-    ``short_cells`` cells short of the range (``ray_cells``'s cells of length z - short_cells *
-    resolution), one count per echo. No-echo and NaN readings count nothing; cells outside the
-    grid are left out. The held-out AUC's labels (``evaluation.holdout``) and the evidence by
-    which adaptive joins its two maps (``mapping.adaptive``)."""
+    """(ends, passes), each int32 (H, W), of the echoes: per cell, the echoes whose point on their
+    sensor's axis lies in it, and those whose axis crosses it up to ``short_cells`` cells short of
+    the range. The held-out AUC's labels and adaptive's evidence."""
     sp = sensor_poses(np.asarray(pose, dtype=np.float64).reshape(-1, 3), sensor.mount).reshape(-1, 3)
     z = np.asarray(ranges, dtype=np.float64).reshape(-1)
     with np.errstate(invalid="ignore"):
@@ -191,9 +166,7 @@ def axis_counts(pose: np.ndarray, ranges: np.ndarray, sensor: SensorSpec, grid: 
 
 @numba.njit(cache=True)
 def _pass_counts(px, py, ux, uy, length, grid, cells, counts):
-    """Add one to ``counts`` (flat, height * width) at every cell each ray (from (px, py), m from
-    the grid's origin, along (ux, uy), up to ``length``; nothing for length <= 0) crosses;
-    ``cells``: a ``RayCells`` with room for one ray."""
+    """Add one to ``counts`` at every cell each ray crosses (nothing for length <= 0)."""
     for i in range(length.size):
         n = _ray_cells_kernel(Ray(px[i], py[i], ux[i], uy[i], length[i]), grid, cells)
         for j in range(n):

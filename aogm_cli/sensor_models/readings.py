@@ -24,20 +24,15 @@ READINGS_PER_CALL = 1 << 14
 
 def echo_ranges(ranges: np.ndarray, grid: GridSpec) -> np.ndarray:
     """Ranges as the cone mappers use them: half a cell longer (the one place this shift is made).
-
-    A truth (and map) cell is occupied when its centre lies inside an obstacle, so the first
-    occupied cell along a beam has its centre between 0 and 1 cell beyond the surface that
-    echoed: half a cell on average. Without this, standard and EM maps put walls half a cell
-    too near the robot. Narrow beams (rays) take ranges as logged (see ``mapping.standard``)."""
+    A cell is occupied when its centre lies inside an obstacle, so the first occupied cell along a
+    beam has its centre on average half a cell beyond the surface; without this, walls come half a
+    cell too near. Rays take ranges as logged."""
     return np.asarray(ranges, dtype=np.float64) + 0.5 * grid.resolution
 
 
 def cone_templates(grid: GridSpec, sensor: SensorSpec, narrow: bool | None = None) -> ConeTemplates:
-    """The cone templates every mode uses on ``grid``: reach max_range plus one cell (for the
-    axis-offset correction of ``cone.reading_geometry``); cached, one-time set-up. A narrow
-    beam's cones (EM's forward model of a laser) also hold every cell their ray crosses, as the
-    ray tracing of standard mapping and of the held-out scores does (``build_cone_templates``).
-    ``narrow`` is ``ray.is_narrow_beam(sensor, grid.resolution)``, decided here unless the caller has."""
+    """The cone templates every mode uses on ``grid``: reach max_range plus one cell (for the axis
+    offset); a narrow beam's cones also hold every cell their ray crosses, as ray tracing does."""
     if narrow is None:
         narrow = is_narrow_beam(sensor, grid.resolution)
     return build_cone_templates(grid.resolution, sensor.beam_width, sensor.max_range, margin=grid.resolution,
@@ -45,41 +40,30 @@ def cone_templates(grid: GridSpec, sensor: SensorSpec, narrow: bool | None = Non
 
 
 def forward_templates(grid: GridSpec, sensor: SensorSpec) -> ConeTemplates:
-    """The forward model's templates: the standard mapper's (one cache for both), with their
-    flat offsets for this grid's width built (and cached) now, as one-time set-up."""
+    """The forward model's templates: the standard mapper's, with their flat offsets built now."""
     templates = cone_templates(grid, sensor)
     flat_offsets(templates, grid.width)
     return templates
 
 
 def readings_of(pose: np.ndarray, ranges: np.ndarray, sensor: SensorSpec, grid: GridSpec, templates):
-    """All readings as flat arrays: sensor cell rows, cols, heading bins, and ranges shifted
-    into template ranges: ``echo_ranges`` plus the sensor's offset from its cell's centre
-    along the beam (``cone.reading_geometry``)."""
+    """All readings as flat arrays: rows, cols, heading bins, and template ranges."""
     rows, cols, bins, valid, offset = reading_geometry(pose, sensor, grid, templates)
     z = np.where(valid, echo_ranges(ranges, grid), np.nan) + offset
     return rows.reshape(-1), cols.reshape(-1), bins.reshape(-1), z.reshape(-1)
 
 
 def reading_spans(n: int) -> list[tuple[int, int]]:
-    """(start, stop) of readings 0 .. n - 1 in spans of ``READINGS_PER_CALL``: the kernels that
-    walk every reading's cone once take a span per call and so return to Python between spans,
-    where a signal's handler runs (``core.interrupts``): a signal ends a run within a second
-    whatever the log's size."""
+    """(start, stop) spans of ``READINGS_PER_CALL`` readings: Python (signal handlers) runs between them."""
     return [(a, min(a + READINGS_PER_CALL, n)) for a in range(0, n, READINGS_PER_CALL)]
 
 
-# the kernels that walk every reading's cone once on threads split the readings into this many fixed
-# parts (``reading_parts``): a fixed number, so that what they compute is the same for any thread count
+# fixed parts of the readings for threads (``reading_parts``): results the same for any thread count
 READING_PARTS = 4
 
 
 def reading_parts(n: int, call: Callable[[int, tuple[int, int]], None]) -> None:
-    """``call(part, span)`` over readings 0 .. n - 1: ``READING_PARTS`` fixed parts of them, each
-    in spans (``reading_spans``), the parts on up to ``Limits.threads`` threads
-    (``core.budget.in_parts``). A kernel whose outputs are each reading's own, or each part's,
-    computes the same for any thread count; it must release the GIL (numba's ``nogil``) for the
-    threads to gain."""
+    """``call(part, span)`` over readings in ``READING_PARTS`` fixed parts on threads (kernels: ``nogil``)."""
     parts = READING_PARTS
     bounds = np.linspace(0, n, parts + 1).astype(np.int64)
 
@@ -94,9 +78,7 @@ def reading_parts(n: int, call: Callable[[int, tuple[int, int]], None]) -> None:
 
 
 def summed_in_parts(n: int, out: np.ndarray, call: Callable[[int, np.ndarray, tuple[int, int]], None]) -> None:
-    """``call(part, part_out, span)`` over readings 0 .. n - 1 (``reading_parts``), each part adding
-    into zeros of its own like ``out``, the parts then added into ``out`` in their order, whatever
-    thread made each: the same sums for any thread count (whole counts: as one pass made them)."""
+    """``reading_parts``, each part summing into its own zeros, added in part order: any thread count."""
     sums = [np.zeros_like(out) for _ in range(READING_PARTS)]
     reading_parts(n, lambda k, span: call(k, sums[k], span))
     for part in sums:
@@ -115,21 +97,18 @@ class LaidOutReadings:
     cols: np.ndarray
     bins: np.ndarray
     z: np.ndarray
-    # per reading, the template range where a surface deflected its beam (``surface.reading_shadows``;
-    # +inf: none); None: no beam deflected
+    # per reading, the range where a surface deflected its beam (+inf: none; None: no beam deflected)
     shadow: np.ndarray | None = None
 
     @property
     def cones(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(rows, cols, bins, z): where each reading's cone sits, as ``em_readings`` and
-        ``cone_bands`` take them."""
+        """(rows, cols, bins, z): where each reading's cone sits."""
         return self.rows, self.cols, self.bins, self.z
 
 
 def lay_out_readings(pose: np.ndarray, ranges: np.ndarray, sensor: SensorSpec, grid: GridSpec,
                      chunk: int = 4096) -> LaidOutReadings:
-    """The readings of (pose (T, 3), ranges (T, S)) as ``LaidOutReadings`` on ``grid``, laid out
-    ``chunk`` scans at a time (the placement's temporaries stay small at any log size)."""
+    """The readings as ``LaidOutReadings`` on ``grid``, ``chunk`` scans at a time (small temporaries)."""
     templates = forward_templates(grid, sensor)
     n = ranges.size
     rows, cols, bins = (np.empty(n, dtype=np.int64) for _ in range(3))
@@ -164,8 +143,7 @@ class BandGrid(NamedTuple):
 
 @numba.njit(cache=True)
 def _band(tpl, grid, readings, counts, span):
-    """Mark the band of each reading span[0] <= t < span[1] in ``grid.swept`` and count its
-    cells of ``grid.cell_mask`` into ``counts``; ``tpl`` is ``ConeTemplates.kernel_arrays``."""
+    """Mark each reading's band in ``grid.swept`` and count its cells of ``grid.cell_mask`` into ``counts``."""
     scratch_cell = np.empty(tpl.offsets[-1], dtype=np.int64)
     scratch_range = np.empty(tpl.offsets[-1], dtype=np.float64)
     for t in range(span[0], span[1]):
@@ -184,12 +162,8 @@ def _band(tpl, grid, readings, counts, span):
 
 def cone_bands(grid: GridSpec, templates, cones, below: float, above: float,
                cell_mask: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Each reading's band, the cells of its cone with template range in [z - below, z + above].
-
-    ``cones``: (rows, cols, bins, z) as ``readings_of`` gives them (z in template ranges); a
-    non-finite z has no band. Returns ((H, W) bool union of the bands, (N,) int64 cells of
-    ``cell_mask`` (H, W) on each reading's band; zeros without a mask).
-    """
+    """Each reading's band, the cells of its cone with template range in [z - below, z + above]
+    (none for a non-finite z): ((H, W) union of the bands, (N,) cells of ``cell_mask`` on each)."""
     rows, cols, bins, z_model = cones
     z = np.asarray(z_model, dtype=np.float64).reshape(-1)
     finite = np.isfinite(z)

@@ -14,12 +14,10 @@ from aogm_cli.core.errors import InputError
 from aogm_cli.sensor_models.cone import cone_flat_cells, flat_offsets
 from aogm_cli.sensor_models.readings import reading_parts, summed_in_parts
 
-# What makes a cell a surface with a direction (``surface_normals``): heard by at least MIN_ECHOES
-# readings whose directions (as axes) have a doubled-angle mean resultant length of at least
-# MIN_COHERENCE (directions spread evenly over +-30 deg give 0.83, +-45 deg 0.64, +-60 deg 0.41; a
-# corner heard from all around 0), and passed by at most MAX_PASS_SHARE of the readings that meet it
-# head-on (within HEAD_ON_DEG of its normal), which a surface there would have echoed: a doorway,
-# which the echoes of the wall beside it smear over, is passed head-on; a wall is not.
+# A cell is a surface with a direction (``surface_normals``) when heard by at least MIN_ECHOES readings
+# whose directions' doubled-angle mean resultant length is at least MIN_COHERENCE (even spread over
+# +-45 deg: 0.64; a corner: 0), and passed by at most MAX_PASS_SHARE of the readings that meet it within
+# HEAD_ON_DEG of its normal: a doorway smeared by the wall's echoes is passed head-on; a wall is not.
 MIN_ECHOES = 2
 MIN_COHERENCE = 0.5
 MAX_PASS_SHARE = 0.5
@@ -28,21 +26,15 @@ HEAD_ON_DEG = 20.0
 
 @dataclass(frozen=True)
 class SurfaceConfig:
-    """Whether the angle of incidence plays a part (sonar logs only): which cells are surfaces with
-    a direction, from the directions they echoed in. A smooth surface echoes only near its normal,
-    so the directions from which a cell was heard (each echo's arc, within one cell of its range)
-    gather around its normal (``MIN_ECHOES``, ``MIN_COHERENCE``, ``MAX_PASS_SHARE``). Corners,
-    pillars and clutter, heard from every side, keep Thrun's model (visible at any angle). A beam
-    is deflected where the ``core`` of its cone (this share of its opening about the axis) meets a
-    surface at a grazing angle: a cone whose edge clips a door frame mostly passes the door
-    (docs/algorithms.md, "The angle of incidence", measures the share)."""
+    """Whether the angle of incidence plays a part (sonar logs only): a smooth surface echoes only near
+    its normal; corners and clutter keep Thrun's model. A beam is deflected where the ``core`` of its
+    cone meets a surface at a grazing angle (an edge clipping a door frame passes it; docs/algorithms.md)."""
 
     enabled: bool = True
     core: float = 0.1
 
     def validate(self) -> SurfaceConfig:
-        """Return self, or raise ``InputError(key=<field>)`` for an impossible value (the fields'
-        types are checked where the parameters are read: ``mapping.params.check_field_types``)."""
+        """Return self, or raise ``InputError(key=<field>)`` for an impossible value."""
         if not 0 <= self.core <= 1:
             raise InputError(f"expected a number in [0, 1], got {self.core!r}", key="core")
         return self
@@ -53,15 +45,11 @@ class SurfaceConfig:
 
 def surface_normals(tpl, flat, shape: tuple[int, int], cones: tuple, z_max: float, resolution: float,
                     config: SurfaceConfig, believed: np.ndarray | None = None) -> np.ndarray:
-    """(2, H * W) float32: the unit normal (d row, d col) of each surface the readings ``cones`` =
-    (sensor rows, cols, heading bins, template ranges; NaN invalid, >= z_max no echo) echoed from,
-    NaN elsewhere, on a grid of ``shape``: ``tpl`` and ``flat`` are the cone templates' kernel
-    arrays and flat offsets. With ``believed`` (bool, the grid's shape), only the cells it marks
-    (a map's occupied cells) can be surfaces."""
+    """(2, H * W) float32: the unit normal (d row, d col) of each surface the readings ``cones`` echoed
+    from, NaN elsewhere; with ``believed``, only the cells it marks can be surfaces."""
     rows, cols, bins, z = (np.ascontiguousarray(a).reshape(-1) for a in cones)
     readings = (rows.astype(np.int64), cols.astype(np.int64), bins.astype(np.int64), z.astype(np.float64))
-    # float32 sums and normals (12 + 8 bytes a cell at their largest; sums of whole counts and of
-    # unit doubled-angle terms, exact enough for a threshold on their ratio)
+    # float32: sums of counts and unit terms, exact enough for a threshold on their ratio
     sums = np.zeros((3, shape[0] * shape[1]), dtype=np.float32)
     echo_direction_sums(tpl, flat, shape, readings, float(resolution), float(z_max), sums)
     count = sums[2]
@@ -95,9 +83,7 @@ def _offset(cell, row0, col0, width):
 
 @numba.njit(cache=True, inline="always")
 def cone_walk(tpl, flat, shape, row0, col0, k, end, right, ib):
-    """The cells of heading bin k's cone from (row0, col0) up to template range ``end`` (``right``:
-    ranges <= end, else < end) into ``ib`` (``cone.cone_flat_cells``): (their count, the bin's
-    ranges); none when the cone cannot touch the grid or ``end`` <= 0."""
+    """The cells of heading bin k's cone up to range ``end`` into ``ib``: (count, the bin's ranges)."""
     height, width = shape
     ext = tpl.extent
     b = tpl.base_bin[k]
@@ -111,10 +97,7 @@ def cone_walk(tpl, flat, shape, row0, col0, k, end, right, ib):
 
 @numba.njit(cache=True, nogil=True)
 def head_on_passes(tpl, flat, shape, readings, normal, cos2, margin, z_max, out, span):
-    """out[c] += 1 for every reading span[0] <= t < span[1] of ``readings`` = (rows, cols, bins, z)
-    whose cone holds the surface cell c (``normal`` not NaN) more than ``margin`` before its range
-    (every cell of a reading without echo), met within the angle whose cos^2 is ``cos2`` of its
-    normal."""
+    """out[c] += 1 for every reading meeting surface cell c head-on (``cos2``), ``margin`` before its range."""
     rows, cols, bins, z = readings
     n_cells = shape[0] * shape[1]
     ib = np.empty(int(np.max(np.diff(tpl.offsets))), dtype=np.int32)
@@ -131,10 +114,8 @@ def head_on_passes(tpl, flat, shape, readings, normal, cos2, margin, z_max, out,
 
 @numba.njit(cache=True)
 def echo_direction_sums(tpl, flat, shape, readings, half_band, z_max, out):
-    """Add, for every echo (z < z_max) of ``readings`` = (rows, cols, bins, z) and every cell of
-    its cone within ``half_band`` of its range, the doubled angle of the direction from the sensor
-    to the cell, (cos 2 phi, sin 2 phi) in (row, col) axes, into out[0], out[1] and 1 into out[2]
-    (``out`` (3, H * W))."""
+    """Add, for every echo and every cell of its cone within ``half_band`` of its range, the doubled
+    angle of the direction to the cell, (cos 2 phi, sin 2 phi), into out[0], out[1] and 1 into out[2]."""
     rows, cols, bins, z = readings
     n_cells = shape[0] * shape[1]
     ib = np.empty(int(np.max(np.diff(tpl.offsets))), dtype=np.int32)
@@ -164,9 +145,7 @@ def cos2_of(specular_deg: float) -> float:
 
 @numba.njit(cache=True, inline="always")
 def hidden(normal, cos2, cell, row0, col0, width):
-    """True when the flat ``cell`` is a surface cell that a reading from sensor cell (row0, col0)
-    meets at more than the specular angle from its normal (cos^2 of that angle: ``cos2``): a
-    grazing pass, which returns no echo; the beam is deflected there (``shadow_ranges``)."""
+    """True when a reading from (row0, col0) meets the surface ``cell`` beyond the specular angle."""
     n_r = normal[0, cell]
     if not n_r == n_r:  # NaN: no surface there
         return False
@@ -214,25 +193,15 @@ def incidence_kernel(tpl, flat, shape, readings, occupied, normal, model, out, s
 
 
 def incidence_counts(tpl, flat, shape, readings, occupied, normal, model, out):
-    """How often the readings echoed from, and passed, the occupied surface cells of the flat map
-    ``occupied`` (normals ``normal``), by angle of incidence: ``out`` (2, INCIDENCE_BINS) gets, per
-    10-degree bin, in row 0 the readings whose first occupied cell inside the Gaussian window (the
-    echo) is a surface met at that angle, and in row 1 the readings that passed an occupied surface
-    cell met at that angle at least ``margin`` before its range (once per reading and bin; a
-    reading without echo passes every one in its cone).
-
-    ``readings`` = (rows, cols, bins, z) (template ranges; >= z_max: no echo), ``model`` =
-    (sigma, window, z_max, margin)."""
+    """How often the readings echoed from (row 0 of ``out``) and passed (row 1, at least ``margin``
+    before the range, once per reading and bin) the occupied surface cells, per 10-degree bin of
+    the angle of incidence. ``model`` = (sigma, window, z_max, margin)."""
     summed_in_parts(readings[3].shape[0], out,
                     lambda _, part, span: incidence_kernel(tpl, flat, shape, readings, occupied, normal, model, part, span))
 
 
 def specular_angle(counts: np.ndarray, fraction: float = 0.5, min_readings: int = 30) -> float:
-    """The incidence angle (degrees) beyond which surfaces stop echoing, from ``incidence_counts``:
-    where the echo rate echoes / (echoes + passes) first falls below ``fraction`` of its largest
-    value within 30 degrees of the normal (linear between the bins' centres), 90 when it never
-    does. Bins with fewer than ``min_readings`` readings are skipped; without any within 30
-    degrees, 90."""
+    """The incidence angle (degrees) beyond which surfaces stop echoing, from ``incidence_counts``."""
     total = counts[0] + counts[1]
     ok = total >= min_readings
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -254,11 +223,8 @@ def specular_angle(counts: np.ndarray, fraction: float = 0.5, min_readings: int 
 
 @numba.njit(cache=True, nogil=True)
 def shadow_ranges(tpl, flat, shape, readings, normal, cos2, model, out, span):
-    """out[t], span[0] <= t < span[1], = the template range of the first cell of the core of reading
-    t's cone (within the angle whose cosine is ``core_cos`` of its axis), before its Gaussian window, that is a surface
-    met beyond the specular angle (``hidden``; out[t] untouched when there is none). ``readings``
-    = (rows, cols, bins, z) (template ranges; >= z_max: no echo), ``model`` = (sigma, window,
-    z_max, core_cos)."""
+    """out[t] = the range of the first cell of the core of reading t's cone, before its window, that
+    is ``hidden`` (out[t] untouched when none). ``model`` = (sigma, window, z_max, core_cos)."""
     sigma, window, z_max, core_cos = model
     n_bins = tpl.base_bin.shape[0]
     rows, cols, bins, z_all = readings
@@ -283,11 +249,8 @@ def shadow_ranges(tpl, flat, shape, readings, normal, cos2, model, out, span):
 
 
 def reading_shadows(run, normals: np.ndarray, forward, core: float = 1.0) -> np.ndarray | None:
-    """Per reading of ``run`` (a ``readings.LaidOutReadings``), the template range where the core
-    of its beam (the share ``core`` of its opening about the axis) met one of the surfaces
-    ``normals`` (``surface_normals``) beyond ``forward.specular_deg`` before its window (+inf:
-    none): the beam was deflected there (``forward_model.deflect``). None when the angle is 90
-    degrees."""
+    """Per reading of ``run``, the range where the core of its beam met a surface beyond
+    ``forward.specular_deg`` before its window (+inf: none); None when that angle is 90 degrees."""
     if forward.specular_deg >= 90.0:
         return None
     out = np.full(run.z.shape[0], np.inf)

@@ -12,9 +12,7 @@ from aogm_cli.sensor_models.forward_model import cone_entries
 
 @numba.njit(cache=True, inline="always")
 def _entry_row_col(tpl, s, tr, j, row0, col0):
-    """Grid row and column of entry j of a cone from (row0, col0), inside the grid or not: ``s``
-    the first entry of its stored bin, ``tr`` its heading bin's transform (``_bin_transform``),
-    both taken once per reading."""
+    """Grid row and column of entry j of a cone from (row0, col0), inside the grid or not."""
     dc = np.int64(tpl.dcol[s + j])
     dr = np.int64(tpl.drow[s + j])
     return row0 + tr[2] * dc + tr[3] * dr, col0 + tr[0] * dc + tr[1] * dr
@@ -47,12 +45,7 @@ def _bin_transform(tpl, k):
 
 @numba.njit(cache=True, nogil=True)
 def _reading_extent(tpl, groups, readings, bounds, gauss, grid_shape, span):
-    """Per reading span[0] <= t < span[1] of ``readings`` (``EMReadings``: its cells, bins and
-    z), with ``bounds`` = (limits, lower): the entries of its cone (m: up to ``limits``, and
-    beyond z only while the Gaussian, ``gauss`` = (sigma, window), is not 0, as
-    ``forward_model.cone_entries``), the first entry at range >= ``lower`` (jlo), the grid rows
-    and columns its cone spans (row_lo > row_hi: none) and the squared offsets (cells) of entries
-    m - 1 and jlo - 1 (``reach2``), into its fields."""
+    """Per reading in ``span``, into its fields: entries m, first entry at range >= ``lower`` (jlo), box, reach2."""
     rd, _ = _columns(readings)
     rows, cols, bins, z = rd.row0, rd.col0, rd.bin, rd.z
     limits, lower = bounds
@@ -104,8 +97,7 @@ def _reading_extent(tpl, groups, readings, bounds, gauss, grid_shape, span):
 
 @numba.njit(cache=True, nogil=True)
 def _window_rows(tpl, readings, height, span):
-    """The last grid row of the window cells (entries jlo .. m - 1; -1: none) of each reading
-    span[0] <= t < span[1] of ``readings`` (``EMReadings``), into its field ``window_hi``."""
+    """Each reading's last grid row of window cells (entries jlo .. m - 1; -1: none), into ``window_hi``."""
     rd, _ = _columns(readings)
     out = rd.window_hi
     for t in range(span[0], span[1]):
@@ -120,9 +112,7 @@ def _window_rows(tpl, readings, height, span):
 
 @numba.njit(cache=True, nogil=True)
 def _window_cells(tpl, readings, grid_shape, span, out):
-    """Mark in ``out`` (flat bool over the grid) the window cells (entries jlo .. m - 1: where
-    the Gaussian may be above 0) of each reading span[0] <= t < span[1] of ``readings``
-    (``EMReadings``). Only True is written: parts may mark one array on threads."""
+    """Mark each reading's window cells in ``out`` (only True is written: threads may share it)."""
     rd, _ = _columns(readings)
     height, width = grid_shape
     for t in range(span[0], span[1]):
@@ -137,10 +127,7 @@ def _window_cells(tpl, readings, grid_shape, span, out):
 
 @numba.njit(cache=True, nogil=True)
 def _far_gains(tpl, readings, grid_shape, of_cell, span, out):
-    """Add each reading's log ratio of an obstacle added before its window (its state's
-    ``far_log[t, 0]``) into ``out[i]`` for every cell of its far run (entries 0 .. min(jlo, m)
-    - 1) with ``of_cell[cell] = i >= 0``: a free cell's gain of flipping, from the readings that
-    hold it before their windows (readings span[0] <= t < span[1] of ``readings``)."""
+    """Add each reading's ``far_log[t, 0]`` to the gain of every candidate before its window."""
     rd, state = _columns(readings)
     height, width = grid_shape
     for t in range(span[0], span[1]):
@@ -159,9 +146,7 @@ def _far_gains(tpl, readings, grid_shape, of_cell, span, out):
 
 @numba.njit(cache=True, nogil=True)
 def _box_of_cells(tpl, readings, grid_shape, mask, span, box):
-    """Into ``box`` (R, 4): the rows and columns of the cone cells of each reading span[0] <= t
-    < span[1] of ``readings`` that ``mask`` (flat bool) marks (row_lo > row_hi: none), the only
-    ones a sweep over those cells needs the reading at (``EMReadings.extent``)."""
+    """Into ``box`` (R, 4): the bounds of each reading's cone cells that ``mask`` marks."""
     rd, _ = _columns(readings)
     height, width = grid_shape
     for t in range(span[0], span[1]):

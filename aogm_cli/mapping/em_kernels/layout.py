@@ -16,14 +16,11 @@ from numba.extending import intrinsic
 SWEEP = 0  # TileWork.ctl's mode: flip candidates that raise the objective
 SCORE = 1  # score every candidate once (the residual pass), flip none
 SEGMENT = 32  # columns per tile
-# the window arena's largest size (entries of 24 bytes: 96 MB); beyond it slots are dropped
-# and rebuilt (a slot lives while the sweep crosses its reading's window rows)
+# the window arena's largest size (entries of 24 bytes: 96 MB); beyond it slots are dropped and rebuilt
 ARENA_ENTRIES = 1 << 22
 
-# A reading's integers and reals, one record each (``EMReadings.ints``, ``.floats``): what the tiles
-# need of one reading shares a cache line or two, whichever pass of the robot it came from. Every
-# integer fits an int32: cells, bins, template entries (< 2^31 for any template), counts, arena slots
-# (< ARENA_ENTRIES but for one huge tile) and the clock of stamps (accepted flips, < 2^31).
+# A reading's integers and reals, one record each: what the tiles need of a reading shares a cache
+# line or two. Every integer fits an int32 (entries, slots, the clock of stamps < 2^31).
 READING_INTS = np.dtype([
     ("row0", np.int32), ("col0", np.int32),  # sensor cell (may lie outside the grid)
     ("bin", np.int32),  # heading bin
@@ -55,39 +52,28 @@ CONTROL = np.dtype([(name, np.int64) for name in (
     "sg_lo", "sg_hi",  # the band's segments: the sweep visits tiles sg_lo <= sg < sg_hi
 )], align=True)
 DONE, NEED_BUFFERS, PAUSED = 0, 1, 2
-# the work (in window pairs: see _sweep_tiles) after which a sweep pauses, so that the caller is
-# back in Python, where a signal's handler runs, many times a second: on the 50k-scan office a
-# call took 0.04 s (median; 0.1 s at the 99th percentile, 0.2 s at most: a tile is not divided)
+# the work (window pairs) after which a sweep pauses, so that Python, where a signal's handler runs,
+# is back many times a second (timings: docs/algorithms.md)
 PAUSE_WORK = 1 << 21
 
 
 class RowGroups(NamedTuple):
-    """Each stored template bin's entries grouped by one offset coordinate and sorted by the
-    other (``row_groups``): ``kind`` 0 groups by dr (listing dc), 1 by dc (listing dr).
+    """Each stored bin's entries grouped by grid row (``kind`` 0 by dr, 1 by dc: as the symmetry takes drow)."""
 
-    A heading bin whose symmetry takes drow from dr uses kind 0, one that takes it from dc
-    kind 1; either way a group is the cone's cells in one grid row, by column."""
-
-    rows: np.ndarray  # (2, n_base, 2 ext + 1, 4) int32: group v's first entry, entry count, least and
-    # greatest other offset, at [kind, b, v + ext]: what a sweep's listing reads of a reading's row, in one
-    # 16-byte record (three arrays cost three cache misses per reading and row on the intel log's
-    # 163 800 readings: the listing's largest cost)
+    rows: np.ndarray  # (2, n_base, 2 ext + 1, 4) int32: group v's first entry, count, least and greatest
+    # other offset: one 16-byte record, not three arrays' cache misses (docs/algorithms.md)
     j: np.ndarray  # (2, E) int32: entry index within its stored bin (range order)
     box: np.ndarray  # (4, E) int32: min dr, max dr, min dc, max dc over a bin's entries 0..j
 
 
 class EMReadings(NamedTuple):
-    """The readings of an EM problem (``em.em_readings``), and their ``EMState``: a record per
-    reading in each table (their fields name them: ``READING_INTS``, ``READING_FLOATS``).
-
-    The kernels take the tables whole (a table's column is strided, unless the table has one row
-    or none, which numba would compile every kernel again for: a cluster that one reading
-    reaches) and their fields in compiled code (``_columns``)."""
+    """The readings of an EM problem (``em.em_readings``) and their ``EMState``: a record per reading
+    in each table. Kernels take the tables whole (a column of a one-row table would be contiguous, and
+    numba would compile every kernel again) and their fields in compiled code (``_columns``)."""
 
     ints: np.ndarray  # (R,) READING_INTS
     floats: np.ndarray  # (R,) READING_FLOATS
     extent: np.ndarray  # (R, 4) int32 row_lo, row_hi, col_lo, col_hi: where a sweep needs each reading
-    # (row_lo > row_hi: nowhere): its cone's box, or the part of it that holds the cells swept
     enter: np.ndarray  # int32 readings by extent row_lo (stable)
     leave: np.ndarray  # int32 readings by extent row_hi (stable)
     window_leave: np.ndarray  # int32 readings by window_hi (stable): their window slots are dropped past it
@@ -98,8 +84,7 @@ class EMReadings(NamedTuple):
 
 
 class Columns(NamedTuple):
-    """Compiled: the fields of ``EMReadings``' tables but its state, as arrays over the readings
-    (``_columns``; see ``READING_INTS`` and ``READING_FLOATS``)."""
+    """Compiled: the fields of ``EMReadings``' tables but its state, as arrays (``_columns``)."""
 
     row0: np.ndarray
     col0: np.ndarray
@@ -127,11 +112,7 @@ class EMModel(NamedTuple):
 
 
 class EMState(NamedTuple):
-    """What every reading t keeps under the current map (fields of ``EMReadings``' tables).
-
-    Far obstacles (g = 0, before the window) come before the window's in range order, so
-    S_t = q^nfar (wsum + q^nobs G0), wsum being the window obstacles' sum of
-    q^(rank) p_hit g (``_set_sum``)."""
+    """What each reading keeps under the map: S_t = q^nfar (wsum + q^nobs G0), far obstacles first."""
 
     s: np.ndarray  # (R,) float64 S_t
     wsum: np.ndarray  # (R,) float64
@@ -148,9 +129,8 @@ def em_state(rd: EMReadings) -> EMState:
     return EMState(**{name: (rd.ints if name in READING_INTS.names else rd.floats)[name] for name in EMState._fields})
 
 
-# Each field's word in a table seen as a plain (R, words) array: numba reads a record array's field
-# views slower than the columns of such an array (docs/algorithms.md, "EM's kernel tables"), so the
-# kernels take their columns from it, at the offsets the record types give by name
+# Each field's word in a table seen as a plain (R, words) array, whose columns numba reads faster than
+# field views (docs/algorithms.md, "EM's kernel tables")
 _INT_WORDS, _FLOAT_WORDS = READING_INTS.itemsize // 4, READING_FLOATS.itemsize // 8
 _ROW0, _COL0, _BIN, _M, _JLO, _REACH2, _BOX, _NOBS, _NFAR, _STAMP, _SLOT, _INSIDE, _WINDOW_HI = (
     READING_INTS.fields[name][1] // 4 for name in ("row0", "col0", "bin", "m", "jlo", "reach2", "box", "nobs", "nfar",
@@ -207,8 +187,7 @@ class TileWork(NamedTuple):
     far_sum: np.ndarray  # (2, SEGMENT + 1) float64 differences of sum_t log far ratio along the tile (add, remove)
     spans: np.ndarray  # listing.SPAN the row's listed readings (seg_list points into it)
     seg_mask: np.ndarray  # (n_seg,) int64 bit k of segment s: column s * SEGMENT + k holds a candidate
-    # the band's readings (``mapping.sweeps``): those whose cones reach its columns, by position i;
-    # ``active`` is a bit set of positions
+    # the band's readings (``mapping.sweeps``), by position
     members: np.ndarray  # int64 position -> reading
     enter: np.ndarray  # int64 positions by their readings' extent row_lo (stable; ``EMReadings.enter`` for all)
     leave: np.ndarray  # by row_hi
@@ -258,8 +237,7 @@ def row_groups(templates) -> RowGroups:
             rows[kind, b, :, 1] = counts
             rows[kind, b, filled, 2] = sorted_other[starts[filled] - s]
             rows[kind, b, filled, 3] = sorted_other[stops[filled] - 1 - s]
-            # a row of a cone (a convex set) is a run of consecutive cells: entry positions follow
-            # from the other offset by arithmetic
+            # a row of a (convex) cone is a run of cells: positions follow from the other offset
             if np.any(rows[kind, b, filled, 3] - rows[kind, b, filled, 2] + 1 != counts[filled]):
                 raise AssertionError("a template row is not a run of consecutive cells")
     groups = RowGroups(rows, j_all, box)

@@ -17,12 +17,8 @@ from aogm_cli.sensor_models.forward_model import gaussian_at
 
 @numba.njit(cache=True, inline="always")
 def _set_sum(t, rd, model, state):
-    """S_t from the state, and the likelihood ratios of adding / removing a far obstacle.
-
-    A far cell has g = 0 and so have all obstacles before it (they are nearer), so adding
-    it makes S_t -> q S_t and removing it S_t -> S_t / q, whatever its rank: one value per
-    reading instead of a search per (cell, reading) pair.
-    """
+    """S_t from the state, and the likelihood ratios of adding / removing a far obstacle: S_t -> q S_t
+    and S_t / q whatever its rank (every obstacle before it has g = 0 too), one value per reading."""
     qpow = model.qpow
     w = model.w
     q = 1.0 - model.p_hit
@@ -30,8 +26,8 @@ def _set_sum(t, rd, model, state):
     state.s[t] = value
     c = rd.const[t]
     base = c + w * value
-    state.far_ratio[t, 0] = (c + w * q * value) / base  # likelihood ratio of adding one
-    state.far_ratio[t, 1] = (c + w * value / q) / base  # ... and of removing one
+    state.far_ratio[t, 0] = (c + w * q * value) / base
+    state.far_ratio[t, 1] = (c + w * value / q) / base
     state.far_log[t, 0] = math.log(state.far_ratio[t, 0])
     state.far_log[t, 1] = math.log(state.far_ratio[t, 1])
 
@@ -47,8 +43,7 @@ def _find(parent, x):
 
 @numba.njit(cache=True)
 def _join_parents(parent, other):
-    """Join into the union-find ``parent`` every set of ``other`` (over the same ids), each root
-    the least id of its set, as ``_init_state`` joins them."""
+    """Join into the union-find ``parent`` every set of ``other``, each root its set's least id."""
     for x in range(other.shape[0]):
         a = _find(parent, x)
         c = _find(parent, _find(other, x))
@@ -56,20 +51,14 @@ def _join_parents(parent, other):
             parent[max(a, c)] = min(a, c)
 
 
-# _nrt=False (a private numba option): the kernel allocates nothing, and without numba's
-# reference counting its tuples' arrays cost nothing per reading; nogil: parts of the readings
-# run on threads (``em.em_problem``)
+# _nrt=False: nothing is allocated, and without reference counting the tuples' arrays cost nothing
+# per reading; nogil: parts run on threads
 @numba.njit(cache=True, _nrt=False, nogil=True)
 def _init_state(tpl, flat, readings, model, occupied, grid_shape, marks, span):
-    """The ``EMState`` (in ``readings``, ``EMReadings``) of each reading span[0] <= t < span[1]
-    under ``occupied`` (one walk of its cone, nearest first).
-
-    ``marks`` = (seen, labels, parent, box): with a non-empty ``seen`` (flat bool) every
-    cone cell is marked in it; with non-empty ``labels`` (flat int, 0 outside every cluster)
-    clusters that share a reading are joined in the union-find ``parent``, and ``box`` (R, 4)
-    gets the rows and columns of each reading's cluster cells (row_lo > row_hi: none), the
-    only ones EM may flip: the reading need only be active there (``EMReadings.extent``).
-    """
+    """The ``EMState`` of each reading in ``span`` under ``occupied`` (one walk of its cone).
+    ``marks`` = (seen, labels, parent, box), each optional (empty): every cone cell is marked in
+    ``seen``; clusters (``labels``) that share a reading are joined in ``parent``, and ``box`` gets
+    each reading's cluster cells' bounds, the only cells EM may flip."""
     rd, state = _columns(readings)
     seen, labels, parent, box = marks
     height, width = grid_shape
@@ -138,10 +127,7 @@ def _init_state(tpl, flat, readings, model, occupied, grid_shape, marks, span):
 
 @numba.njit(cache=True, inline="always")
 def _flip_gain(c, x, lo_pair, hi_pair, rd, model, cand, state, work):
-    """Exact change of sum_t log p(z_t | m) when candidate c (tile column x) flips (data part
-    only): the readings whose cones hold it before their windows through the tile's sums of
-    their log ratios (``far_sum``), the others over its pairs lo_pair:hi_pair, whose window
-    obstacle lists must be built (``_build_window``)."""
+    """Exact change of sum_t log p(z_t | m) when candidate c flips (data part only)."""
     pair_pos = work.pair_pos
     pair_j = work.pair_j
     pair_g = work.pair_g
@@ -175,8 +161,7 @@ def _flip_gain(c, x, lo_pair, hi_pair, rd, model, cand, state, work):
             if rest < 0.0:
                 rest = 0.0
             s_new = a + rest / q
-        # one log per candidate instead of one per pair: multiply the ratios, taking the log
-        # only when the product leaves a safe range
+        # one log per candidate, not per pair, unless the product leaves a safe range
         ratio *= (const[t] + w * s_new) / (const[t] + w * st)
         if ratio > 1e100 or ratio < 1e-100:
             delta += math.log(ratio)
@@ -186,8 +171,7 @@ def _flip_gain(c, x, lo_pair, hi_pair, rd, model, cand, state, work):
 
 @numba.njit(cache=True, inline="always")
 def _far_changed(li, t, x, old_add, old_rem, state, work):
-    """Reading t (listing li) changed after a flip at tile column x: move its log far ratios
-    in the tile's sums over its far columns beyond x (the columns still to be scored)."""
+    """Reading t changed after a flip at column x: move its log far ratios in the tile's sums beyond x."""
     lo = max(work.far_lo[li], x + 1)
     hi = work.far_hi[li]
     if lo > hi:
@@ -202,8 +186,7 @@ def _far_changed(li, t, x, old_add, old_rem, state, work):
 
 @numba.njit(cache=True, inline="always")
 def _update_reading(t, j, g, adding, model, rd, state, work):
-    """Add (or remove) the obstacle at entry j (Gaussian g) of reading t: O(1) before the
-    window, else an insertion into the window's list and its prefix sums from that rank on."""
+    """Add (or remove) the obstacle at entry j (Gaussian g) of reading t, and redo its sums."""
     if g == 0.0:
         state.nfar[t] += 1 if adding else -1
         _set_sum(t, rd, model, state)
@@ -242,8 +225,7 @@ def _update_reading(t, j, g, adding, model, rd, state, work):
 
 @numba.njit(cache=True)
 def _objective(readings, model, occupied, cand_cell):
-    """sum_t log p(z_t | m) plus l_prior per occupied candidate (the readings and their state in
-    ``readings``, ``EMReadings``)."""
+    """sum_t log p(z_t | m) plus l_prior per occupied candidate."""
     rd, state = _columns(readings)
     const = rd.const
     w = model.w

@@ -28,8 +28,7 @@ def _isqrt(n):
 
 
 class RowSpan(NamedTuple):
-    """One reading's cone in one grid row, as runs of the other offset o (``_row_span``): the
-    cell at o has column col0 + sign * o and template entry j[kind, first + o - o_first]."""
+    """One reading's cone in one grid row: the cell at offset o has column col0 + sign * o."""
 
     kind: int
     first: int
@@ -58,8 +57,7 @@ def _row_span(tpl, groups, rd, t, r):
     first = np.int64(rows[kind, b, at, 0])
     o_first = np.int64(rows[kind, b, at, 2])
     o_last = np.int64(rows[kind, b, at, 3])
-    # a template entry's range is resolution * sqrt(dr^2 + dc^2): entries < m (or < jlo) are
-    # the cells of the row with o^2 <= reach2 - gv^2, exactly, in integers
+    # entries < m (or < jlo) are the row's cells with o^2 <= reach2 - gv^2, exactly
     v = _isqrt(rd.reach2[0, t] - gv * gv)
     if v < 0:
         return RowSpan(0, 0, 0, 1, 1, 0, 1, 0)
@@ -77,9 +75,8 @@ def _o_range(span, col0, c0, c1, lo, hi):
 
 @numba.njit(cache=True, inline="always")
 def _advance(extent, rd, state, work, r):
-    """The active bit set at row r: the band's readings whose extent rows reach r (repeatable).
-    A reading's arena slot is dropped when it enters (a slot another band's sweep left points
-    into that sweep's arena), when it leaves and when the sweep is past its window."""
+    """The active bit set at row r. A reading's arena slot is dropped when it enters (a slot left by
+    another band's sweep points into that sweep's arena), leaves, and when the sweep is past its window."""
     ctl = work.ctl[0]
     active = work.active
     members = work.members
@@ -95,12 +92,12 @@ def _advance(extent, rd, state, work, r):
     while k < n_read and extent[members[work.leave[k]], 1] < r:
         i = work.leave[k]
         active[i >> 6] &= ~(np.uint64(1) << np.uint64(i & 63))
-        state.slot[members[i]] = -1  # its arena slot (if any) is dead
+        state.slot[members[i]] = -1
         k += 1
     ctl.leave = k
     k = ctl.window_leave
     while k < n_read and rd.window_hi[members[work.window_leave[k]]] < r:
-        state.slot[members[work.window_leave[k]]] = -1  # the sweep is past its window: no tile needs the slot again
+        state.slot[members[work.window_leave[k]]] = -1
         k += 1
     ctl.window_leave = k
 
@@ -130,10 +127,8 @@ def _span_mask(lo, hi, s):
 
 @numba.njit(cache=True, inline="always")
 def _list_segments(tpl, groups, extent, rd, cand, work, r, n_seg):
-    """The row's active readings with their ``RowSpan`` in ``spans`` (one each), and each
-    segment's (ascending) in seg_ptr / seg_list, as positions in ``spans``: a reading is
-    listed where its cone holds a candidate of the row in the band's columns (``seg_mask``).
-    False (with the size needed in ctl) when a buffer is too small."""
+    """The row's active readings with their ``RowSpan`` in ``spans``, and each segment's in seg_ptr /
+    seg_list, where their cone holds a candidate. False (size needed in ctl) when a buffer is too small."""
     active = work.active
     members = work.members
     seg_ptr = work.seg_ptr
@@ -157,7 +152,7 @@ def _list_segments(tpl, groups, extent, rd, cand, work, r, n_seg):
         word = active[wi]
         while word != np.uint64(0):
             t = members[(wi << 6) + np.int64(_trailing_zeros(word))]
-            word &= word - np.uint64(1)  # the lowest set bit off
+            word &= word - np.uint64(1)
             visited += 1
             span = _row_span(tpl, groups, rd, t, r)
             if span.o_hi >= span.o_lo:
@@ -208,9 +203,7 @@ def _band_columns(work, width):
 
 @numba.njit(cache=True, inline="always")
 def _row_unchanged(rd, cand, state, work, r):
-    """True (and every candidate of row r in the band stamped as scored now) when no active
-    reading changed since the row's tiles were last visited: a check of one stamp per reading
-    instead of listing them (late sweeps change few readings)."""
+    """True (and row r's candidates stamped scored) when no active reading changed since the row's last visit."""
     ctl = work.ctl[0]
     sg_lo, sg_hi = ctl.sg_lo, ctl.sg_hi
     since = cand.tile_clock[r, sg_lo]

@@ -3,15 +3,10 @@ readings listed per segment, their (candidate, reading) pairs generated from the
 each flip kept when it raises the objective (``_sweep_tiles``)."""
 
 
-# How a tile works. The readings whose cones cross grid row r are *active* at r (a bit set,
-# updated as r grows); each lists itself under the column segments its cone's row-r cells can
-# reach. For one segment, the (candidate, reading) pairs are generated from the templates
-# (reading order within each candidate, as the sweep needs them), the candidates are visited
-# in order and each flip updates its readings' state. The obstacles of a reading inside its
-# Gaussian window (which a flip's score needs in range order, with prefix sums) are rebuilt
-# from the map into an arena when a tile first needs them and dropped once the sweep passes
-# the window's last row (or the arena reaches its cap); what a reading keeps otherwise is S_t,
-# the window's sum, its obstacle counts and the ratios of adding or removing a far obstacle.
+# How a tile works: readings whose cones cross row r are active there and list themselves under the
+# segments they reach; a segment's (candidate, reading) pairs come from the templates, and each flip
+# updates its readings' state. A reading's window obstacles (in range order, with prefix sums) are
+# rebuilt into an arena when a tile needs them and dropped once the sweep is past the window.
 
 from __future__ import annotations
 
@@ -33,8 +28,7 @@ from aogm_cli.sensor_models.forward_model import gaussian_at
 
 @numba.njit(cache=True, inline="always")
 def _window_pairs(i, t, span, r, c0, c1, c_start, fill, tpl, groups, rd, model, cand, work):
-    """Count (``fill`` False) or write reading t's window pairs in tile columns [c0, c1) of
-    row r (the cone's cells beyond its far run: up to two runs of o); returns how many."""
+    """Count (``fill`` False) or write reading t's window pairs in tile columns [c0, c1) of row r."""
     width = cand.of_cell.shape[0] // cand.tile_clock.shape[0]
     col0 = rd.col0[t]
     at = r * width + col0
@@ -71,9 +65,7 @@ def _window_pairs(i, t, span, r, c0, c1, c_start, fill, tpl, groups, rd, model, 
 
 @numba.njit(cache=True, inline="always")
 def _tile_clean(cand, state, work, r, sg, list_lo, list_hi, c_start, c_stop):
-    """True (and the candidates c_start..c_stop - 1 stamped as scored now) when none of the
-    listed readings list_lo..list_hi - 1 of tile (r, sg) changed since its last visit: nothing
-    its candidates see changed, and each keeps its gain."""
+    """True (candidates stamped scored) when none of tile (r, sg)'s readings changed since its last visit."""
     since = cand.tile_clock[r, sg]
     if since < 0:
         return False
@@ -89,10 +81,7 @@ def _tile_clean(cand, state, work, r, sg, list_lo, list_hi, c_start, c_stop):
 
 @numba.njit(cache=True, inline="always")
 def _count_pairs(tpl, groups, rd, model, cand, state, work, r, c0, c1, c_start, list_lo, list_hi, nc):
-    """The tile's listing (readings list_lo..list_hi - 1, candidates from c_start, columns [c0,
-    c1) of row r): each reading's far run into the sums of log far ratios (``far_sum``), its
-    window pairs counted per candidate (``count``, cumulative); (pairs, the arena entries of
-    the windows not built yet)."""
+    """The tile's listing: far runs into ``far_sum``, window pairs counted; (pairs, arena entries needed)."""
     cnt = work.count
     for i in range(nc + 1):
         cnt[i] = 0
@@ -141,8 +130,7 @@ def _write_pairs(tpl, groups, rd, model, cand, work, r, c0, c1, c_start, list_lo
 
 @numba.njit(cache=True, inline="always")
 def _flip(c, x, lo_pair, hi_pair, n_list, rd, model, cand, state, work):
-    """Flip candidate c (tile column x, pairs lo_pair..hi_pair - 1) and update the tile's
-    readings (``n_list`` listed) that hold it, before their windows and inside them."""
+    """Flip candidate c (tile column x) and update the tile's readings that hold it."""
     ctl = work.ctl[0]
     occupied = cand.occupied
     cell = cand.cell[c]
@@ -161,7 +149,7 @@ def _flip(c, x, lo_pair, hi_pair, n_list, rd, model, cand, state, work):
             _set_sum(t, rd, model, state)
             _far_changed(i, t, x, old_add, old_rem, state, work)
             state.stamp[t] = now
-    for p in range(lo_pair, hi_pair):  # ... and inside them
+    for p in range(lo_pair, hi_pair):
         i = work.pair_pos[p]
         t = work.tile_t[i]
         old_add, old_rem = state.far_log[t, 0], state.far_log[t, 1]
@@ -172,10 +160,9 @@ def _flip(c, x, lo_pair, hi_pair, n_list, rd, model, cand, state, work):
 
 @numba.njit(cache=True, inline="always")
 def _visit(c, x, lo_pair, hi_pair, n_list, mode, tpl, flat, rd, model, cand, state, work):
-    """Score candidate c (tile column x) over its pairs lo_pair..hi_pair - 1, building the
-    windows they need, into ``last_gain``; in SWEEP mode flip it when that raises the objective."""
+    """Score candidate c into ``last_gain``; in SWEEP mode flip it when that raises the objective."""
     ctl = work.ctl[0]
-    for p in range(lo_pair, hi_pair):  # the window obstacles the score needs
+    for p in range(lo_pair, hi_pair):
         t = work.tile_t[work.pair_pos[p]]
         if work.pair_g[p] != 0.0 and state.slot[t] < 0:
             _build_window(t, tpl, flat, rd, model, cand, state, work)
@@ -193,9 +180,8 @@ def _visit(c, x, lo_pair, hi_pair, n_list, mode, tpl, flat, rd, model, cand, sta
 
 @numba.njit(cache=True, inline="always")
 def _tile(r, sg, c_start, c_stop, tpl, flat, groups, rd, model, cand, state, work):
-    """Tile (r, sg): its candidates c_start..c_stop - 1 scored (and flipped, ``_visit``) over the
-    pairs of the readings listed in segment sg; skipped when none of them changed since its last
-    visit (SWEEP). False, before any change, when the scratch is too small."""
+    """Tile (r, sg): its candidates scored (and flipped, ``_visit``); skipped when none of its readings
+    changed since its last visit (SWEEP). False, before any change, when the scratch is too small."""
     ctl = work.ctl[0]
     mode = ctl.mode
     width = cand.of_cell.shape[0] // cand.tile_clock.shape[0]
@@ -229,30 +215,16 @@ def _tile(r, sg, c_start, c_stop, tpl, flat, groups, rd, model, cand, state, wor
     return True
 
 
-# _nrt=False: the sweep allocates nothing (its scratch comes in ``work``), and without numba's
-# reference-counting runtime the arrays it hands to the inlined helpers cost nothing per call
+# _nrt=False: the sweep allocates nothing, and without reference counting its arrays cost nothing per call
 @numba.njit(cache=True, _nrt=False, nogil=True)
 def _sweep_tiles(tpl, flat, groups, readings, model, cand, work):
-    """One pass over the candidates of a band (the tiles of segments ctl.sg_lo to
-    ctl.sg_hi, the readings ``work.members``) in flat-id order, tile by tile (see the module
-    docstring), of the readings and their state in ``readings`` (``EMReadings``, each active
-    over its ``extent``), with ``work`` (a ``TileWork``, ``ctl`` its control words). Bands no
-    reading joins may be swept at once, on threads (``mapping.sweeps``):
-    ctl.mode SWEEP keeps each flip that raises the objective, SCORE scores every
-    candidate into ``last_gain`` and flips none.
-
-    A candidate none of whose readings changed since it was last scored keeps its (non-
-    improving) gain and is skipped, and so is a whole tile none of whose readings changed
-    since the tile's last visit: the result equals a full sweep's. The clock counts accepted
-    flips. Starts at (ctl.row, ctl.seg); returns NEED_BUFFERS, with the sizes
-    needed in ctl, before a tile's first change when the scratch is too small (grow it and
-    call again: the pass resumes there), PAUSED before a row or a tile once the work done in
-    this call (subtracted from ctl.budget, in window pairs: a listed reading counts 2, a
-    scored candidate 8, a window built its entries, a flip the tile's readings and the cell's
-    pairs) exhausts the budget the caller set (set it again and call again: the pass resumes
-    there, with the row's listing kept, ctl.listed), else DONE. Every call does at least
-    one tile or row before it pauses; where it pauses changes nothing computed.
-    """
+    """One pass over a band's candidates (segments ctl.sg_lo to ctl.sg_hi) in flat-id order, tile by
+    tile; bands no reading joins may be swept at once, on threads. ctl.mode SWEEP keeps each flip
+    that raises the objective, SCORE scores every candidate and flips none. Rows and tiles whose
+    readings did not change since their last visit are skipped: the result equals a full sweep's.
+    Starts at (ctl.row, ctl.seg); returns NEED_BUFFERS (sizes in ctl) when the scratch is too small,
+    PAUSED once ctl.budget (in window pairs) is spent, else DONE; the caller grows or refills and
+    calls again, and the pass resumes there. Where it pauses changes nothing."""
     rd, state = _columns(readings)
     ctl = work.ctl[0]
     height, n_seg = cand.tile_clock.shape
@@ -272,7 +244,7 @@ def _sweep_tiles(tpl, flat, groups, readings, model, cand, work):
             ctl.budget -= _active_words(work)
             if _row_unchanged(rd, cand, state, work, r):
                 fresh = False
-                continue  # no reading whose cone crosses the row changed since its last visit
+                continue
         if ctl.listed != r:  # else listed before a pause, and still so
             if not _list_segments(tpl, groups, readings.extent, rd, cand, work, r, n_seg):
                 return NEED_BUFFERS

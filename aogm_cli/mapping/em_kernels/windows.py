@@ -28,8 +28,7 @@ def _room(rd, t):
 
 @numba.njit(cache=True, inline="always")
 def _build_window(t, tpl, flat, rd, model, cand, state, work):
-    """Reading t's window obstacles (entries ascending), their Gaussians and prefix sums into a
-    new arena slot, from the map (the arena must have room: ``_make_room``)."""
+    """Reading t's window obstacles, their Gaussians and prefix sums into a new arena slot."""
     height = cand.tile_clock.shape[0]
     width = cand.of_cell.shape[0] // height
     qpow = model.qpow
@@ -72,10 +71,7 @@ def _build_window(t, tpl, flat, rd, model, cand, state, work):
 
 @numba.njit(cache=True, inline="always")
 def _make_room(rd, state, work, need):
-    """Slide the live slots of the arena down over the dead ones (readings that left, in
-    address order) when fewer than ``need`` entries are free. Past ARENA_ENTRIES the arena
-    does not grow: every slot is dropped instead (called before a tile builds any, so none is
-    in use; they are rebuilt from the map when needed). False when it must grow."""
+    """Compact the arena when fewer than ``need`` entries are free (at the cap drop every slot); False: grow it."""
     ctl = work.ctl[0]
     top = ctl.bump
     if top + need <= work.obs_j.shape[0]:
@@ -126,8 +122,7 @@ def _popcount(x):
 
 @numba.njit(cache=True, inline="always")
 def _rank(bits, base, q):
-    """How many window obstacles lie before window entry q: set bits below q in the slot's
-    bit map (a wall the standard map draws thick puts tens of obstacles in one window)."""
+    """How many window obstacles lie before window entry q (a thick wall puts tens in one window)."""
     n = 0
     w = q >> 6
     for k in range(w):
