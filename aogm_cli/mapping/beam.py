@@ -1,6 +1,5 @@
-"""Standard mapping of narrow-beam sensors (lasers): ``BeamMapper``, the log-odds update along rays
-(traversed by ``sensor_models.ray``) with the state and clamping of ``standard``; which sensors count as
-narrow is ``ray.is_narrow_beam``."""
+"""Standard mapping of narrow-beam sensors (lasers, ``ray.is_narrow_beam``): ``BeamMapper``, the log-odds
+update along rays (``sensor_models.ray``) with the state and clamping of ``standard``."""
 
 from __future__ import annotations
 
@@ -42,31 +41,15 @@ class Rays(NamedTuple):
     z: np.ndarray  # float32 range as logged (NaN or negative: nothing; >= max_range: max-range)
 
 
-# The model along a ray (Amanatides & Woo 1987, traversed from the sensor's true position). A cell is
-# the stretch [t_enter, t_exit) of the ray inside it (t in metres from the sensor). For a reading z
-# (the hit: the range as logged, see ``standard.standard_map``):
-# * occupied: cells that overlap the hit band [z - alpha/2, min(z + alpha/2, max_range)], so the cell
-#   holding the endpoint always (OctoMap's and GMapping's convention), and the cell before it when the
-#   endpoint lies within alpha/2 of their common edge;
-# * free: the cells before the band (t_exit <= z - alpha/2) that reach past min_range;
-# * observed only: the blind zone (t_exit <= min_range), no evidence.
-# A max-range reading (z >= max_range, or +inf) clears the cells that overlap [min_range, max_range]
-# and marks nothing occupied; NaN or negative readings carry nothing. Increments are the constant
-# model's (``l_free - l0``, ``l_occ - l0``) whichever model the ``InverseModelConfig`` names: a ray has
-# no angular profile, and Elfes' range profile, which models a sonar's fading cone, is not applied to a
-# laser. Within one scan (one row of the log's ranges), a cell in some reading's hit band gets no free
-# evidence from the other readings of that scan (OctoMap's insertPointCloud: occupied wins; it puts
-# more of a laser log's endpoints on occupied cells). Otherwise every reading updates its cells once
-# each, clamped, in the log's order, exactly as ``standard.StandardMapper`` does. A ray through a
-# lattice corner steps diagonally: a cell the ray crosses for less than ``TOUCH`` cells (zero, up to
-# rounding) is skipped. Cost: O(cells on the ray) per reading, no set-up.
+# The model along a ray (Amanatides & Woo 1987, from the sensor's true position): for a reading z, cells
+# overlapping the hit band [z - alpha/2, min(z + alpha/2, max_range)] are occupied (always the endpoint's:
+# OctoMap's and GMapping's convention), those before it past min_range free, the blind zone observed only;
+# a max-range reading only clears. Increments are the constant model's whatever the config names (a ray has
+# no angular profile; Elfes' range profile models a sonar's fading cone). Within a scan a hit band's cells
+# get no free evidence (OctoMap's insertPointCloud: occupied wins, more endpoints on occupied cells).
+# A cell crossed for less than ``TOUCH`` cells is skipped (a ray through a corner steps diagonally).
 class BeamMapper:
-    """Incremental standard mapping of a narrow-beam sensor: ``update`` with chunks, then ``result``.
-
-    Same interface and state as ``standard.StandardMapper``: one float32 grid holding each
-    cell's log-odds once some ray covered it and ``UNOBSERVED`` (-inf) before; plus, per cell,
-    the last scan whose hit band covered it (for hit precedence within a scan).
-    """
+    """Incremental standard mapping of a narrow beam, as ``StandardMapper``, plus each cell's last hit-band scan."""
 
     def __init__(self, sensor: SensorSpec, grid: GridSpec, config: InverseModelConfig):
         config.validate()
@@ -103,13 +86,7 @@ class BeamMapper:
 
 @numba.njit(cache=True, _nrt=False)
 def _beam_kernel(grid, rays, update, n_beams, first_scan):
-    """Compiled log-odds update of the ``Rays`` in order, scan by scan (``n_beams`` readings
-    each, the first scan numbered ``first_scan``), on the ``BeamGrid``, with the constants of
-    ``update`` (an ``InverseUpdate``). Reading t is a ray from (px[t], py[t]) (m, from the
-    grid's origin) along (ux[t], uy[t]). First pass per scan: stamp the cells of every hit band
-    with the scan's number in ``hit_scan``; second pass: update every ray's cells, with no free
-    evidence for stamped cells.
-    """
+    """Compiled update of the ``Rays`` scan by scan: stamp hit bands in ``hit_scan``, then update (stamped: no free)."""
     state = grid.state
     hit_scan = grid.hit_scan
     height = grid.height

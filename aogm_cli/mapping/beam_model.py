@@ -1,6 +1,5 @@
-"""What the log says of its beam before EM: the beam's effective opening (``opening_record``,
-``with_opening``) and the angle of incidence: the surfaces the echoes came from, the specular angle
-learned there and the beams deflected beyond it (``surfaces``, ``specular_record``, ``deflected_run``)."""
+"""What the log says of its beam before EM: its effective opening (``opening_record``, ``with_opening``) and the
+angle of incidence: echo surfaces, specular angle, deflected beams (``specular_record``, ``deflected_run``)."""
 
 from __future__ import annotations
 
@@ -19,8 +18,7 @@ from aogm_cli.sensor_models.surface import reading_shadows, surface_normals
 
 
 def surfaces(run: LaidOutReadings, params: MapParams, log_odds: np.ndarray) -> np.ndarray:
-    """The surfaces the echoes came from (``surface.surface_normals``), among the cells the
-    standard map ``log_odds`` holds occupied (a cone's: ``plan.Plan.incidence``)."""
+    """The surfaces the echoes came from (``surface.surface_normals``) among the standard map's walls."""
     grid = run.grid
     believed = np.asarray(log_odds).reshape(grid.shape) > 0
     return surface_normals(run.templates.kernel_arrays, flat_offsets(run.templates, grid.width), grid.shape,
@@ -34,8 +32,7 @@ def specular_record(run: LaidOutReadings, params: MapParams, log_odds: np.ndarra
 
 
 def deflected_run(run: LaidOutReadings, normals: np.ndarray, params: MapParams) -> LaidOutReadings | None:
-    """``run`` with the readings whose beams met a surface beyond the specular angle before their
-    windows stopped there (``surface.reading_shadows``), or None when no beam was."""
+    """``run`` with beams that met a surface beyond the specular angle stopped there (None: no such beam)."""
     shadow = reading_shadows(run, normals, params.em.forward, params.surface.core)
     if shadow is None or not np.isfinite(shadow).any():
         return None
@@ -43,8 +40,7 @@ def deflected_run(run: LaidOutReadings, normals: np.ndarray, params: MapParams) 
 
 
 def with_opening(whole: Log, opening_deg: float) -> Log:
-    """``whole`` (a log of a cone in memory) with its sensor's beam narrowed to ``opening_deg``
-    (degrees, ``em.opening_deg``), or ``whole`` itself when that is 0 or not narrower than the beam."""
+    """``whole`` with its beam narrowed to ``opening_deg``, or ``whole`` itself when that is not narrower."""
     sensor = whole.sensor
     if not 0 < math.radians(opening_deg) < sensor.beam_width - 1e-9:
         return whole
@@ -53,8 +49,7 @@ def with_opening(whole: Log, opening_deg: float) -> Log:
 
 def opening_record(whole: Log, run: LaidOutReadings, params: MapParams, log_odds: np.ndarray,
                    observed: np.ndarray) -> dict:
-    """The beam's effective opening learned from the log (``calibration.opening_at``) at the
-    standard map ``log_odds`` thinned by the exact inverse model (``standard.thin_pass``)."""
+    """The beam's effective opening learned (``calibration.opening_at``) at the thinned standard map."""
     thin = dataclasses.replace(params, exact=dataclasses.replace(params.exact, thin=True))
     thinned = thin_pass(whole, run.grid, thin, log_odds, observed).log_odds
     return opening_at(run, sample_readings(run, MAX_READINGS), (thinned > 0).reshape(-1), params.em.forward)

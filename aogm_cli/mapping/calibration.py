@@ -1,7 +1,5 @@
-"""The forward model learned from the log it maps (Thrun 2003's "learning"): closed-form updates
-of p_rand, p_max, p_hit and sigma from the expectations of every reading's cause at a binary map,
-alternated with EM's map until the parameters settle (``calibration_rounds``), bounded and recorded.
-"""
+"""The forward model learned from the log it maps (Thrun 2003): closed-form updates of p_rand, p_max, p_hit and
+sigma from each reading's expected cause at a binary map, alternated with EM's map (``calibration_rounds``)."""
 
 from __future__ import annotations
 
@@ -26,9 +24,8 @@ CAL_BLOCKS = 4  # a long log's calibration maps this many runs of consecutive sc
 
 @dataclass(frozen=True)
 class Tuning:
-    """How calibration works inside, fixed by measurement (docs/algorithms.md, "Calibration's
-    constants", says why each value): not a user's setting. ``TUNING`` is what every map uses;
-    tests make their own."""
+    """How calibration works inside, fixed by measurement (docs/algorithms.md, "Calibration's constants"):
+    not a user's setting. ``TUNING`` is what every map uses; tests make their own."""
 
     fit_iterations: int = 30  # updates of the parameters at one map (``fit_at_map``)
     max_readings: int = 200_000  # the readings fitted on (every n-th beyond: ``sample_readings``)
@@ -42,10 +39,9 @@ class Tuning:
     max_mapped_readings: int = 64_000
     pass_margin: float = 0.3  # m: a reading passed a surface cell when its echo lies this far beyond
     specular_rate: float = 0.5  # the specular angle: where the echo rate falls below this share of head-on
-    # bounds of the learned values: sigma from a tenth of a typical 5 cm cell to half a metre; p_rand,
-    # p_max below one half each (a model that calls most readings random or dropped explains
-    # nothing); p_hit away from 0 and 1 (EM needs q = 1 - p_hit > 0, and a wall missed by every
-    # reading is no wall)
+    # bounds: sigma from a tenth of a 5 cm cell to half a metre; p_rand, p_max below one half (a model
+    # calling most readings random or dropped explains nothing); p_hit away from 0 and 1 (EM needs
+    # 1 - p_hit > 0; a wall every reading misses is no wall)
     sigma_min: float = 0.005
     sigma_max: float = 0.5
     p_rand_min: float = 0.001
@@ -60,10 +56,8 @@ MAX_READINGS = TUNING.max_readings
 
 
 def sample_readings(run: LaidOutReadings, max_readings: int, select: np.ndarray | None = None) -> F.ExpectationReadings:
-    """The readings the parameters are fitted on: every valid reading of ``run`` (NaN left out;
-    with ``select``, a bool mask, only those it marks), or every n-th of them when there are
-    more than ``max_readings`` (deterministic, spread over the whole log); deflected beams
-    (``run.shadow``) as the forward model takes them (``forward_model.deflect``)."""
+    """The readings the parameters are fitted on: the valid ones of ``run`` (those ``select`` marks), every
+    n-th beyond ``max_readings`` (spread over the log), deflected beams as ``forward_model.deflect`` has them."""
     valid = ~np.isnan(run.z)
     keep = np.flatnonzero(valid if select is None else valid & select)
     if keep.size > max_readings:
@@ -85,9 +79,7 @@ def _flat_bool(occupied: np.ndarray) -> np.ndarray:
 
 def expectations(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: np.ndarray,
                  forward: F.ForwardModelConfig, obstacles: F.Obstacles | None = None) -> tuple[np.ndarray, F.Obstacles]:
-    """The summed expectations (``forward_model.expectation_sums``, E_SIZE,) of ``readings``
-    under the flat binary map ``occupied`` and the model ``forward``, and the cones' obstacles
-    they were taken from (pass them back while the map stands: ``fit_at_map``)."""
+    """The summed expectations of ``readings`` under ``occupied`` and ``forward``, and the obstacles they came from."""
     out = np.zeros(F.E_SIZE)
     obstacles = F.expectation_sums(*_cones(run), readings, _flat_bool(occupied), forward.kernel_model(run.sensor.max_range),
                                    out, obstacles)
@@ -96,9 +88,7 @@ def expectations(run: LaidOutReadings, readings: F.ExpectationReadings, occupied
 
 def m_step(sums: np.ndarray, forward: F.ForwardModelConfig, keys: tuple[str, ...],
            bounds: Tuning = TUNING) -> F.ForwardModelConfig:
-    """The parameters ``keys`` (of sigma, p_rand, p_hit, p_max) that maximise the expected log-likelihood given the summed
-    expectations, each clipped to its ``bounds``. A component that got no weight (p_max
-    0 from the start, no detection, no obstacle examined) keeps its value."""
+    """The ``keys`` maximising the expected log-likelihood, clipped to ``bounds``; unweighted ones keep their value."""
     n = sums[F.E_READINGS]
     if n <= 0:
         return forward
@@ -118,8 +108,7 @@ def m_step(sums: np.ndarray, forward: F.ForwardModelConfig, keys: tuple[str, ...
 
 
 def settled(a: F.ForwardModelConfig, b: F.ForwardModelConfig, tolerance: float) -> bool:
-    """True when no learned parameter moved by more than ``tolerance``: sigma relative to its
-    value, the probabilities in absolute terms."""
+    """True when no learned parameter moved by more than ``tolerance`` (sigma relative, the rest absolute)."""
     if abs(a.sigma - b.sigma) > tolerance * max(a.sigma, b.sigma):
         return False
     return all(abs(getattr(a, k) - getattr(b, k)) <= tolerance for k in LEARNED if k != "sigma")
@@ -136,13 +125,10 @@ class Fit:
 
 def fit_at_map(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: np.ndarray, forward: F.ForwardModelConfig,
                config: CalibrationConfig, tuning: Tuning = TUNING, loglik: bool = True) -> Fit:
-    """EM over the parameters alone at a fixed map: expectations, then ``m_step``, until the
-    parameters settle (``config.tolerance`` / 10) or ``tuning.fit_iterations``; with ``loglik``,
-    one more pass of expectations for the sample's mean log-likelihood under the fit (a round's
-    record: what the rates stage does not need)."""
+    """EM over the parameters alone at a fixed map: expectations, then ``m_step``, until they settle
+    (``config.tolerance`` / 10); with ``loglik``, one more pass for the sample's mean log-likelihood."""
     iterations = 0
-    # the cones' obstacles found once, at twice the starting sigma, serve every iteration whose
-    # sigma stays below (found again if it grows beyond): the same sums, one cone walk
+    # obstacles found once at twice the starting sigma serve every iteration below it: one cone walk
     obstacles = F.find_obstacles(*_cones(run), readings, _flat_bool(occupied), min(2.0 * forward.sigma, tuning.sigma_max),
                                  float(forward.window), float(run.sensor.max_range))
     while iterations < tuning.fit_iterations:
@@ -162,11 +148,7 @@ def fit_at_map(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: 
 
 def incidence_at(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: np.ndarray,
                  forward: F.ForwardModelConfig, normals: np.ndarray, tuning: Tuning = TUNING) -> dict:
-    """The specular angle learned from ``readings`` at the flat binary map ``occupied`` (the
-    standard map's, which keeps the walls that grazing passes would make EM erase): per 10-degree
-    bin of incidence the readings that echoed from a surface cell and those that passed one
-    (``surface.incidence_counts``, surfaces ``normals``), and where the echo rate falls to half
-    (``specular_angle``)."""
+    """The specular angle learned at ``occupied`` (the standard map's: grazing passes would make EM erase walls)."""
     counts = np.zeros((2, INCIDENCE_BINS))
     incidence_counts(*_cones(run), (readings.rows, readings.cols, readings.bins, readings.z), _flat_bool(occupied), normals,
                      (float(forward.sigma), float(forward.window), float(run.sensor.max_range), tuning.pass_margin), counts)
@@ -176,12 +158,8 @@ def incidence_at(run: LaidOutReadings, readings: F.ExpectationReadings, occupied
 
 def opening_at(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: np.ndarray,
                forward: F.ForwardModelConfig) -> dict:
-    """The beam's effective opening learned from ``readings`` at the flat binary map ``occupied``
-    (the thinned standard map: Elfes' map smears each echo over the whole cone, and its smear
-    would make every opening wider than the axis look wrong): how many echoes the map explains
-    (the nearest occupied cell within the opening lies within the Gaussian window of the range)
-    for each opening, per degree off the axis (``lobe.opening_matches``), and the opening
-    learned from that curve (``lobe.learned_opening``)."""
+    """The beam's effective opening learned at ``occupied`` (the thinned map: Elfes' smear would make every
+    opening wider than the axis look wrong), from the echoes explained per opening (``lobe.opening_matches``)."""
     tpl, flat, shape = _cones(run)
     matches = np.zeros(lobe_bins(run.sensor.beam_width))
     z_max = float(run.sensor.max_range)
@@ -199,28 +177,18 @@ def model_values(forward: F.ForwardModelConfig) -> dict:
     return {k: float(getattr(forward, k)) for k in (*LEARNED, *ONCE)}
 
 
-# (config, flat occupied updated in place, a bool mask of the readings to map or None for all) ->
-# (EM's objective after its last sweep, its sweeps, what the caller keeps)
+# (config, flat occupied updated in place, reading mask or None) -> (EM's last objective, sweeps, the result)
 EMStep = Callable[[EMConfig, np.ndarray, np.ndarray | None], tuple[float, int, object]]
 
 
 def calibration_rounds(run: LaidOutReadings, occupied: np.ndarray, em: EMConfig, config: CalibrationConfig,
                        em_step: EMStep, select: np.ndarray | None = None,
                        tuning: Tuning = TUNING) -> tuple[EMConfig, dict]:
-    """Alternate EM maps of part of the log with fits of the forward model at them
-    (``fit_at_map``, on every reading ``select`` marks, default all); the final map of every
-    scan with the last fit is the caller's. Round 0 maps every ``tuning.start_subsample``-th
-    scan with the model ``em`` made at least ``tuning.start_sigma`` broad, in at most
-    ``tuning.start_sweeps`` sweeps (its map only serves the first fit: a broad model puts each
-    wall at the readings' mean); each later round fits the parameters at the last map and, until
-    they settle (``config.tolerance``) or ``config.rounds``, maps every ``tuning.subsample``-th
-    scan with them (at most ``tuning.fit_sweeps`` sweeps). Every EM run starts from the flat
-    binary map ``occupied`` as given, which is left as it was: a warm start from a broad or
-    half-made map keeps walls thick (docs/algorithms.md, "Calibration's constants").
-
-    Returns (the EM config of the last fit, the record: the starting values, per round the
-    fitted values, the mean log-likelihood of the sample at the fit and EM's objective and
-    sweeps, and the final values)."""
+    """Alternate EM maps of part of the log with fits of the forward model at them (``fit_at_map``); the
+    final map is the caller's. Round 0 maps with a broad model (a broad model puts each wall at the readings'
+    mean), later rounds with the last fit, until it settles or ``config.rounds``. Every run starts from
+    ``occupied`` as given, left as it was: a warm start from a broad or half-made map keeps walls thick
+    (docs/algorithms.md, "Calibration's constants"). Returns (the last fit's EM config, the record)."""
     max_scans = calibration_scans(run, tuning)
     blocks = _scan_blocks(run, max_scans)
     if blocks is not None:  # a long log: the rounds map (and fit on) blocks of its scans only
@@ -255,18 +223,14 @@ def calibration_rounds(run: LaidOutReadings, occupied: np.ndarray, em: EMConfig,
 
 
 def calibration_scans(run: LaidOutReadings, tuning: Tuning = TUNING) -> int:
-    """How many of ``run``'s scans a long log calibrates on: ``tuning.max_scans``, fewer when
-    they would hold more than ``tuning.max_mapped_readings`` readings (a scan of many beams), so
-    that calibration's cost is bounded in readings whatever the sensor."""
+    """Scans a long log calibrates on: ``tuning.max_scans``, fewer for wide scans (cost bounded in readings)."""
     width = run.ranges.shape[1]
     return max(CAL_BLOCKS, min(tuning.max_scans, tuning.max_mapped_readings // max(width, 1)))
 
 
 def _scan_blocks(run: LaidOutReadings, max_scans: int) -> np.ndarray | None:
-    """A bool mask over ``run``'s readings marking ``max_scans`` of its scans in ``CAL_BLOCKS``
-    runs of consecutive scans spread evenly over the log (None: the log has no more scans than
-    that). Consecutive scans keep the readings' density where the blocks are, so that the fits
-    see the walls as every scan draws them (every n-th scan instead broadens sigma)."""
+    """A reading mask of ``max_scans`` scans in ``CAL_BLOCKS`` runs of consecutive scans spread over the log
+    (None: no more scans than that): the fits see walls as every scan draws them (every n-th broadens sigma)."""
     scans, width = run.ranges.shape
     if scans <= max_scans:
         return None

@@ -7,10 +7,8 @@ import numpy as np
 
 from aogm_cli.core.grid import GridSpec
 
-# A flagged reading's cluster cells are the band of its cone near its range (z - 0.2 m to z + alpha,
-# ``readings.cone_bands``; none for a max-range reading), kept where the standard map is observed,
-# not at its free clamp, and holds the cell occupied (or, with ``adaptive.NEAR_OCCUPIED`` = n, within n
-# cells of one it holds occupied); the components of their union are the clusters (``label_clusters``).
+# A flagged reading's cluster cells: its cone's band near its range (``adaptive.find_clusters``); the
+# components of their union are the clusters (``label_clusters``).
 
 
 def grown(mask: np.ndarray, cells: int) -> np.ndarray:
@@ -19,7 +17,6 @@ def grown(mask: np.ndarray, cells: int) -> np.ndarray:
     if cells <= 0 or not mask.any():
         return mask
     from scipy import ndimage  # not at start-up (``core.grid.GridSpec.cells_near``)
-
     return ndimage.binary_dilation(mask, structure=np.ones((3, 3), dtype=bool), iterations=cells)
 
 
@@ -31,15 +28,12 @@ def near_occupied(log_odds: np.ndarray, cells: int = 1) -> np.ndarray:
 def label_clusters(region: np.ndarray) -> tuple[np.ndarray, int]:
     """8-connected components of ``region``: (int32 ids, 0 outside; number of clusters)."""
     from scipy import ndimage
-
     labels, n = ndimage.label(region, structure=np.ones((3, 3), dtype=int))
     return labels.astype(np.int32), int(n)
 
 
 def readings_near_clusters(clusters, rows, cols, z, grid: GridSpec, z_max: float, forward) -> np.ndarray:
-    """Positions of the readings whose forward cone could reach a cluster: the square of the
-    cone's reach around the sensor's cell holds a cluster cell (counted in O(1) per reading
-    from a summed-area table of the cluster mask)."""
+    """Positions of the readings whose cone's reach square holds a cluster cell (summed-area table: O(1) each)."""
     reach = np.where(np.isfinite(z), np.minimum(z + forward.window * forward.sigma, z_max), z_max)
     reach = np.where(np.isnan(z), -1.0, reach)
     r = np.ceil(reach / grid.resolution).astype(np.int64) + 1

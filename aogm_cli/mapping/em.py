@@ -1,13 +1,6 @@
-"""EM mapping with forward sensor models (Thrun 2003): hill climbing by single-cell flips.
-
-Each candidate flip is scored by the exact change of sum_t log p(z_t | m) over the readings
-whose cones hold the cell, plus the occupancy prior: the E-step redone for those readings
-after every accepted flip (generalised EM), so the objective never decreases and EM can
-create obstacles from an empty start. Memory is bounded: each reading keeps a few scalars
-and the cone cells are regenerated tile by tile (``em_kernels``). ``run_em`` works on any
-set of cells with every other cell held fixed: the adaptive mapper calls it on the clusters, the
-em mode on every cell some cone holds (``whole_log_problems``); ``mapping.stages`` runs the modes.
-"""
+"""EM mapping with forward sensor models (Thrun 2003): hill climbing by single-cell flips, each scored exactly, the
+E-step redone after every accepted flip (generalised EM: the objective never decreases, obstacles grow from an empty
+start); cones regenerated tile by tile (``em_kernels``). ``run_em`` works on any cells, the others held fixed."""
 
 from __future__ import annotations
 
@@ -53,12 +46,8 @@ class EMResult:
 
 def em_readings(cones, templates, grid, z_max: float, config: ForwardModelConfig,
                 select: np.ndarray | None = None, shadow: np.ndarray | None = None) -> L.EMReadings:
-    """The readings ``cones`` (sensor cells, heading bins, template ranges: flat arrays of one
-    length, as ``sensor_models.readings.LaidOutReadings.cones`` has them) as EM's kernels take them, or those ``select`` picks (a
-    bool mask or positions; taken one column at a time, without a copy of every array). NaN
-    readings must be left out; +inf is a max-range reading (cone up to z_max); other cones end
-    ``config.window`` sigmas beyond z; ``shadow`` (one per reading of ``cones``) cuts them short
-    (``forward_model.cone_limits``)."""
+    """The readings ``cones`` (those ``select`` picks, taken a column at a time without copies) as EM's kernels
+    take them: NaN left out, +inf a max-range reading, ``shadow`` cutting cones short (``cone_limits``)."""
     rows, cols, bins, z = cones
     pick = (lambda a: np.asarray(a).reshape(-1)) if select is None else (lambda a: np.asarray(a).reshape(-1)[select])
     z = pick(z).astype(np.float64, copy=False)
@@ -112,11 +101,8 @@ class EMProblem:
 
 def em_problem(rd: L.EMReadings, templates, shape: tuple[int, int], occupied: np.ndarray, config: EMConfig,
                labels: np.ndarray | None = None) -> EMProblem:
-    """Every reading's likelihood state under the flat binary map ``occupied`` (one walk of its
-    cone), the cells the cones hold, and with ``labels`` (flat cluster ids, 0 outside; EM's
-    candidates are then the cluster cells) which clusters share a reading, each reading's
-    extent narrowed to its cluster cells (a new ``EMReadings.extent``). The state is written into
-    ``rd``'s own tables: build one problem per ``em_readings`` result."""
+    """Every reading's likelihood state under ``occupied`` and, with ``labels``, which clusters share a reading,
+    extents narrowed to their cells. Writes into ``rd``'s tables: one problem per ``em_readings`` result."""
     fwd = config.forward
     p_hit = float(fwd.p_hit)
     n = rd.ints.shape[0]
@@ -131,8 +117,7 @@ def em_problem(rd: L.EMReadings, templates, shape: tuple[int, int], occupied: np
     else:
         labels = np.ascontiguousarray(labels, dtype=np.int64).reshape(-1)
         box = np.empty((n, 4), dtype=np.int32)
-        # a union-find over the cluster ids per part (each reading joins the clusters its cone holds),
-        # joined after: the same clusters share a root, the least id, for any thread count
+        # a union-find per part, joined after: one root (the least id) per group for any thread count
         marks = [(seen, labels, np.arange(int(labels.max(initial=0)) + 1, dtype=np.int64), box)
                  for _ in range(READING_PARTS)]
     flat, occupied = flat_offsets(templates, shape[1]), _flat_bool(occupied)
@@ -173,21 +158,15 @@ def _candidates(cells: np.ndarray, shape: tuple[int, int]) -> L.Candidates:
     # of memory: two bands' threads write apart
 
 
-# the share of the candidates that must be held free (``_flippable``) for EM to leave them out of
-# its sweeps: their gains then cost one walk of every cone's far run, which pays when most go (the
-# intel laser log's em map: 84.5% of its candidates, sweeps 3.1-4.4 s -> 2.2-2.8 s; corridor_door's
-# 36%: 78-93 ms -> 86-90 ms, the generated office's 17% at 5000 scans: 5.8 s -> 6.1 s in one run)
+# the share of candidates held free (``_flippable``) at which EM leaves them out of its sweeps: their
+# gains then cost one walk of every cone's far run, which pays when most go (docs/algorithms.md)
 HELD_FREE_SHARE = 0.5
 
 
 def run_em(problem: EMProblem, occupied: np.ndarray, candidates: np.ndarray, config: EMConfig,
            progress: Callable[[int, int, float], None] | None = None, final: bool = True) -> EMResult:
-    """Hill-climb the binary map over ``candidates`` (flat ids); ``occupied`` (flat bool, the map
-    ``problem`` was set up under) is updated in place, every other cell stays as it is. Sweeps
-    until no flip improves the objective or ``config.max_sweeps``; ``progress(sweep, flips,
-    objective)`` after each. ``final``: a run stopped by ``max_sweeps`` scores every candidate
-    once more, so that its residuals describe the map it leaves (not needed between the sweeps
-    of a calibration)."""
+    """Hill-climb the binary map over ``candidates``, ``occupied`` in place; with ``final``, a run stopped by
+    ``config.max_sweeps`` scores every candidate once more, so that its residuals describe its map."""
     occupied = _flat_bool(occupied)
     every = _candidates(candidates, problem.shape).cell
     swept, held_free = _flippable(problem, occupied, every)
@@ -220,15 +199,11 @@ def run_em(problem: EMProblem, occupied: np.ndarray, candidates: np.ndarray, con
 
 
 def _flippable(problem: EMProblem, occupied: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``cells`` (sorted flat ids) split into those EM sweeps and those it leaves free whatever
-    it flips, when at least ``HELD_FREE_SHARE`` of them are such: free cells in no reading's
-    Gaussian window, while the prior is below one half. Such a cell lies only before the windows
-    of the readings that hold it, where an obstacle multiplies each reading's chance of its echo
-    by 1 - p_hit: occupancy can only lower the readings' likelihood, and the prior too. Their
-    gains are then one walk of the cones' far runs (``_held_free_gains``), not a tile's in every
-    sweep. Not in a cluster problem (``em_problem``'s labels), whose readings' extents are
-    narrowed to its cells already: the intel log's adaptive map (79.5% of its cluster cells held
-    free) gained nothing measurable (docs/algorithms.md, the intel log's sweep)."""
+    """``cells`` (sorted) split into those EM sweeps and those it leaves free, when at least
+    ``HELD_FREE_SHARE`` are such: free cells in no reading's window while the prior is below one half.
+    There an obstacle only scales each echo's chance by 1 - p_hit, so occupancy can only lower the
+    objective; their gains are one walk of the far runs (``_held_free_gains``). Not in a cluster
+    problem, whose extents are narrowed already (no gain measured: docs/algorithms.md)."""
     if problem.model.l_prior >= 0.0 or cells.size == 0 or problem.parent is not None:
         return cells, cells[:0]
     rd = problem.readings
@@ -242,9 +217,7 @@ def _flippable(problem: EMProblem, occupied: np.ndarray, cells: np.ndarray) -> t
 
 
 def _narrowed(problem: EMProblem, swept: np.ndarray) -> EMProblem:
-    """``problem`` with each reading's extent narrowed to the cells of ``swept`` its cone holds (a
-    new ``EMReadings.extent``, as a cluster problem's are: ``em_problem``), the only rows and
-    columns a sweep over them needs it at; the same tables, with their state."""
+    """``problem`` with extents narrowed to the cells of ``swept`` (as a cluster problem's); the same tables."""
     rd = problem.readings
     mask = np.zeros(problem.shape[0] * problem.shape[1], dtype=np.bool_)
     mask[swept] = True
@@ -255,9 +228,7 @@ def _narrowed(problem: EMProblem, swept: np.ndarray) -> EMProblem:
 
 
 def _held_free_gains(problem: EMProblem, cells: np.ndarray) -> np.ndarray:
-    """The gain of flipping each of ``cells`` (free, in no window: ``_flippable``) at the
-    problem's current state, as a sweep would score it: the readings' log ratios of an obstacle
-    before their windows, summed in the readings' fixed parts (the same for any thread count)."""
+    """The gain of flipping each free, unwindowed cell of ``cells``, summed in fixed parts (any thread count alike)."""
     of_cell = np.full(problem.shape[0] * problem.shape[1], -1, dtype=np.int32)
     of_cell[cells] = np.arange(cells.size, dtype=np.int32)
     rd = problem.readings
@@ -276,21 +247,16 @@ class EMOutcome:
     problem: EMProblem
 
 
-# (EM config, flat occupied map, bool mask of the readings to use or None for all) -> (EM's
-# problem under that map, the flat ids of its candidate cells)
+# (EM config, flat occupied map, reading mask or None) -> (EM's problem under it, its candidates' flat ids)
 ProblemFor = Callable[[EMConfig, np.ndarray, "np.ndarray | None"], tuple[EMProblem, np.ndarray]]
 
 
 def em_step(problem_for: ProblemFor, on_sweep=None):
-    """One EM run as calibration's rounds take it (``calibration.EMStep``): the problem under the
-    flat map ``occ`` (updated in place), its sweeps; a run on a subset of the readings is not
-    scored once more when stopped by the sweep limit (``run_em``'s ``final``)."""
-
+    """One EM run as calibration's rounds take it; on a subset of readings, not scored once more (``final``)."""
     def step(config: EMConfig, occ: np.ndarray, subset: np.ndarray | None):
         problem, candidates = problem_for(config, occ, subset)
         result = run_em(problem, occ, candidates, config, on_sweep, final=subset is None)
         return result.objective[-1], result.sweeps, result
-
     return step
 
 
@@ -308,22 +274,18 @@ def em_stats(outcome: EMOutcome | None) -> dict:
 
 
 def whole_log_problems(run: LaidOutReadings) -> ProblemFor:
-    """The em mode's problems: every valid reading of ``run`` (of a subset, if given), every cell
-    some cone holds a candidate."""
+    """The em mode's problems: every valid reading (of a subset, if given), every cell some cone holds."""
     keep = ~np.isnan(run.z)
-
     def problem_for(config: EMConfig, occ: np.ndarray, subset: np.ndarray | None):
         rd = em_readings(run.cones, run.templates, run.grid, run.sensor.max_range, config.forward,
                          select=keep if subset is None else keep & subset, shadow=run.shadow)
         problem = em_problem(rd, run.templates, run.grid.shape, occ, config)
         return problem, np.flatnonzero(problem.seen)
-
     return problem_for
 
 
 def prepared_templates(grid, sensor):
-    """The forward templates of ``grid`` with their row groups, built or loaded before any clock
-    starts: a one-time set-up, cached."""
+    """The forward templates of ``grid`` with their row groups, built or loaded before any clock starts."""
     templates = forward_templates(grid, sensor)
     L.row_groups(templates)
     return templates

@@ -1,6 +1,5 @@
-"""The exact inverse model on a log (``inverse_model.model: exact``, or ``exact.thin``): readings
-applied in log order, each cell independent as in Elfes' map, each reading's update computed from
-the forward model given the map so far (``sensor_models.exact_inverse``); and the thinned map."""
+"""The exact inverse model on a log (``inverse_model.model: exact``, or ``exact.thin``): readings in log order, cells
+independent as in Elfes' map, each update from the forward model given the map so far; and the thinned map."""
 
 from __future__ import annotations
 
@@ -30,11 +29,7 @@ from aogm_cli.sensor_models.readings import (
 
 
 class ExactMapper:
-    """``update`` with chunks of scans (ranges as ``readings.echo_ranges`` gives them), then
-    ``result``, as ``standard.StandardMapper``; the cones are the forward model's (EM's), and
-    ``forward`` its parameters. The state is one flat float32 grid of probabilities, -1 until
-    observed (then SPARE_MASK + 1 spare cells of 0 for cone cells outside the grid:
-    ``exact_inverse.exact_inverse_updates``); the prior is ``config``'s, the bounds +-``BOUND``."""
+    """``update`` with chunks of scans, then ``result``, as ``standard.StandardMapper``, on EM's cones."""
 
     def __init__(self, sensor: SensorSpec, grid: GridSpec, config: ExactModelConfig, forward: ForwardModelConfig,
                  templates: ConeTemplates | None = None):
@@ -52,8 +47,7 @@ class ExactMapper:
         self.state[:] = -1.0
 
     def update(self, pose: np.ndarray, ranges: np.ndarray, cut: np.ndarray | None = None) -> None:
-        """Apply scans (pose (T, 3), ranges (T, S)) in order; a finite ``cut`` ((T, S) template
-        ranges) is a deflected beam (``forward_model.deflect``)."""
+        """Apply scans (pose (T, 3), ranges (T, S)) in order; a finite ``cut`` is a deflected beam."""
         rows, cols, bins, valid, offset = reading_geometry(pose, self.sensor, self.grid, self.templates)
         z = np.where(valid, np.asarray(ranges, dtype=np.float64), np.nan) + offset
         z, limit = deflect(z.reshape(-1), None if cut is None else np.asarray(cut, dtype=np.float64).reshape(-1),
@@ -73,11 +67,7 @@ class ExactMapper:
 
 
 def map_evidence(run: LaidOutReadings, forward: ForwardModelConfig, occupied: np.ndarray) -> np.ndarray:
-    """(H, W) float64: each cell's evidence at the binary map ``occupied`` (flat or (H, W) bool),
-    log p(Z | m, cell occupied) - log p(Z | m, cell free) over every reading of ``run`` (its
-    deflected beams cut), as EM scores a candidate (``view.decided``), in one pass over the cones
-    (``exact_inverse.map_evidence_sums``), its parts summed on threads (``readings.summed_in_parts``:
-    the same evidence for any thread count): where it is near 0 no reading decides the cell."""
+    """(H, W): each cell's evidence log p(Z | occupied) - log p(Z | free) at ``occupied``, as EM scores candidates."""
     grid, templates = run.grid, run.templates
     n = grid.height * grid.width
     occupancy = np.zeros(n + SPARE_MASK + 1, dtype=np.float32)
@@ -98,9 +88,7 @@ def _sigmoid(x: float) -> float:
 
 def thinned(log_odds: np.ndarray, observed: np.ndarray, exact: tuple[np.ndarray, np.ndarray], config: ExactModelConfig,
             free: float, margin: float = MARGIN) -> np.ndarray:
-    """The standard map ``log_odds`` (H, W) with the observed cells that the exact model's map
-    ``exact`` (its log-odds and observed) holds free, more than ``margin`` below its
-    prior, set to ``free`` (the standard map's free clamp)."""
+    """``log_odds`` with the cells the exact map ``exact`` holds free (``margin`` below its prior) set to ``free``."""
     exact_log_odds, exact_observed = exact
     out = log_odds.copy()
     out[observed & exact_observed & (exact_log_odds < config.l0 - margin)] = np.float32(free)

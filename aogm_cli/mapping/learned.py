@@ -1,6 +1,5 @@
-"""What a map learns from its log, kept apart from what was configured: the sensor's forward model
-(sigma, p_rand, p_hit, p_max and the beam's opening: once per robot) and the building's specular
-angle (per log), each with where it came from, and the model EM uses made of both."""
+"""What a map learns from its log, apart from what was configured: the sensor's forward model (once per robot) and
+the building's specular angle (per log), each with where it came from, and the model EM uses made of both."""
 
 from __future__ import annotations
 
@@ -10,9 +9,8 @@ from dataclasses import dataclass
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig
 
 SENSOR_KEYS = ("sigma", "p_rand", "p_hit", "p_max")  # the forward model's parameters calibration sets
-ONCE = ("specular_deg", "opening_deg")  # and those learned once, before EM (``calibration.incidence_at``, ``opening_at``)
-# what a robot's model (a file's, or the detector's) leaves to each log: the building's specular
-# angle and its share of max-range readings (``stages.rates``)
+ONCE = ("specular_deg", "opening_deg")  # learned once, before EM (``calibration.incidence_at``, ``opening_at``)
+# what a robot's model leaves to each log: the building's specular angle and max-range share (``stages.rates``)
 BUILDING = ("specular_deg", "p_max")
 
 # where a sensor model came from (``Learned.origin``)
@@ -22,9 +20,7 @@ FROM_LOG = "learned from this log"
 
 @dataclass(frozen=True)
 class SensorModel:
-    """The forward model's parameters that belong to the sensor: learned once per robot and
-    carried to every log it records (``aogm calibrate -o MODEL``, ``--forward-model MODEL``).
-    ``opening_deg`` 0: the log's beam width (not learned)."""
+    """The forward model's parameters that belong to the sensor: learned once per robot, carried to its logs."""
 
     sigma: float
     p_rand: float
@@ -42,11 +38,8 @@ class SensorModel:
 
 @dataclass(frozen=True)
 class Learned:
-    """What a map learned from its log or was given: the sensor's model (None: the configured
-    values) and where it came from, the building's specular angle and the beam's opening (None:
-    as configured), the records of how each was learned, and the seconds learning the sensor's
-    model took where it was learned (a model carried from another map of the same log counts them
-    in its map's cost; one from a file, learned once per robot, does not)."""
+    """What a map learned from its log or was given (None: as configured), with its records and the seconds
+    learning took (a model carried from another map of the log counts them in its cost; a file's does not)."""
 
     sensor: SensorModel | None = None
     origin: str = CONFIGURED
@@ -69,8 +62,7 @@ class Learned:
         return dataclasses.replace(configured, **values)
 
     def carried(self, mode: str, seconds: float) -> Learned:
-        """What the ``mode`` map of a log learned, as another map of the same log takes it: all of
-        it, and the ``seconds`` learning it took there."""
+        """What the ``mode`` map of a log learned, as another map of the same log takes it."""
         return dataclasses.replace(self, origin=f"the {mode} map of this log", made_by=mode, seconds=seconds)
 
     @classmethod

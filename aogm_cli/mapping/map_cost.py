@@ -1,6 +1,5 @@
-"""What mapping a log in a mode would cost (``map_estimate``): grid cells with the standard mapper's
-padding, cone templates and readings (EM keeps a few scalars per reading, not its cones' cells), from
-the header, the poses and a sample of ranges; ``report.map_files.check_logs`` refuses a run over the budget."""
+"""What mapping a log in a mode would cost (``map_estimate``), from the header, the poses and a sample of ranges;
+``report.map_files.check_logs`` refuses a run over the budget."""
 
 from __future__ import annotations
 
@@ -16,23 +15,18 @@ from aogm_cli.sensor_models.readings import READING_PARTS
 
 BYTES_PER_CELL = 40  # log-odds, probability, observed, EM state, the map file in memory
 BYTES_PER_PADDED_CELL = 4  # the standard mapper's padded float32 state
-# EM / adaptive: the readings laid out (rows, cols, bins, z: 32), EM's two tables of them with
-# their cones' extents, likelihood state and tile slot (int32 68 + float64 72), their orders
-# (12), the set-up's temporaries and the log's ranges (docs/benchmarks.md: `make bench-scale`'s peak RSS)
+# EM / adaptive: the readings laid out, EM's two tables of them, their orders, the set-up's temporaries
+# and the log's ranges (docs/benchmarks.md: `make bench-scale`'s peak RSS)
 BYTES_PER_READING = 300
-# EM / adaptive on a sonar log: where beams were deflected (float64 a reading), and a cell's surface
-# normal (float32 x 2) beside its echo sums (float32 x 3) and head-on passes (float32, and a float32
-# per part of the readings while they are counted: ``readings.summed_in_parts``) while they are made
-# (``sensor_models.surface``)
+# EM / adaptive on a sonar log: where beams were deflected (float64), and a cell's surface normal, echo
+# sums and head-on passes (float32 x 6, one per part of the readings: ``sensor_models.surface``)
 BYTES_PER_SHADOW = 8
 BYTES_PER_SURFACE_CELL = 24 + 4 * READING_PARTS
 BYTES_PER_TEMPLATE_CELL = 48  # the disc the cone templates are cut from (int64 offsets, ranges, angles)
-# adaptive on a sonar log: the thinned map's exact-model state and evidence (float32 x 3), and the
-# evidence at the final map in its parts (float64 x ``readings.READING_PARTS``)
+# adaptive on a sonar log: the thinned map's state and evidence (float32 x 3), the final evidence's parts
 BYTES_PER_THINNED_CELL = 12 + 8 * READING_PARTS
-# the em mode's candidates held free out of its sweeps (``em._flippable``): the window marks and the swept
-# mask (bool x 2), the held cells' numbers (int32) and their gains in the readings' parts (float64 x
-# ``readings.READING_PARTS``); each reading's narrowed extent and its orders (int64 x 4, int32 x 6)
+# the em mode's candidates held free (``em._flippable``): two masks, the cells' numbers and their gains
+# in parts; each reading's narrowed extent and its orders (int64 x 4, int32 x 6)
 BYTES_PER_HELD_CELL = 6 + 8 * READING_PARTS
 BYTES_PER_HELD_READING = 56
 SAMPLE_BLOCKS, BLOCK_SCANS = 32, 64  # ranges read to estimate the cones' mean size
@@ -44,8 +38,7 @@ def cone_area_cells(reach_cells: np.ndarray, beam_width: float) -> np.ndarray:
 
 
 def mean_reach(reader, params: MapParams, resolution: float) -> float:
-    """The mean reach (m) of a reading's cone (its range plus EM's window, max range for no
-    echo, 0 for invalid), from up to SAMPLE_BLOCKS blocks of scans spread over the log."""
+    """The mean reach (m) of a reading's cone, from up to SAMPLE_BLOCKS blocks of scans over the log."""
     n = reader.n_scans
     sensor = reader.sensor
     starts = np.unique(np.linspace(0, max(0, n - BLOCK_SCANS), min(SAMPLE_BLOCKS, max(1, n))).astype(np.int64))
@@ -90,8 +83,7 @@ def map_estimate(reader, mode: str, params: MapParams) -> Estimate:
     memory = grid_bytes + reading_bytes
     detail = (f"a {grid.height} x {grid.width} grid at {res:g} m, {readings:.3g} readings, "
               f"about {per_reading:.3g} cone cells each")
-    # what else makes it fit: the grid's share shrinks with the square of a coarser resolution; the
-    # readings' share (em, adaptive) only in the standard mode or with fewer scans
+    # what else makes it fit: a coarser grid (the square); the readings' share only standard or fewer scans
     advice = f"a coarser --resolution (the grid's share is {format_bytes(grid_bytes)}, a quarter of it at {2 * res:g} m)"
     if reading_bytes:
         advice += (f"; the readings' share ({format_bytes(reading_bytes)}) no resolution changes: map part of the "

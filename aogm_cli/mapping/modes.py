@@ -1,6 +1,5 @@
-"""The three modes, each a list of stages (``mode_stages``) as a map's plan has them, behind one call: ``map_source(log, mode,
-params, detector)`` resolves the parameters the log derives (the grid's resolution), compiles every
-kernel the mode runs by mapping a tiny synthetic log with the same sensor, and maps the log."""
+"""The three modes, each a list of stages (``mode_stages``), behind one call: ``map_source`` resolves the
+parameters the log derives, compiles the mode's kernels on a tiny synthetic log, and maps the log."""
 
 from __future__ import annotations
 
@@ -53,10 +52,7 @@ ADAPTIVE_VIEW = Stage("view", S.adaptive_view, ("whole", "standard", "clusters",
 
 
 def mode_stages(plan: Plan) -> tuple[Stage, ...]:
-    """The stages of ``plan.mode`` as its plan has them, one line each (an entry the plan leaves out
-    is False): the standard map; em over every cell some cone holds; adaptive over the clusters of
-    the readings the detector flags. ``READINGS`` and ``STANDARD`` run again only after a stage
-    took them away: a beam narrowed to the learned opening, beams deflected by a surface."""
+    """The stages of ``plan.mode`` as its plan has them; READINGS and STANDARD run again after a stage drops them."""
     opening, incidence = plan.learns_opening, plan.incidence
     thinned = plan.thinning is not None
     if plan.mode == "standard":
@@ -92,8 +88,7 @@ def mode_stages(plan: Plan) -> tuple[Stage, ...]:
 
 
 class Flagger(NamedTuple):
-    """The adaptive mode's detector (anything with ``flag(ranges, max_range)``) and what the map's
-    params record of it (``{"detector": name}``, and a file's sha256)."""
+    """The adaptive mode's detector (with ``flag(ranges, max_range)``) and what the map records of it."""
 
     detector: object
     record: dict
@@ -104,9 +99,7 @@ ALL = Flagger(ConstantDetector(True), {"detector": "all"})  # the baseline that 
 
 def map_in_mode(log, mode: str, params: MapParams, flagger: Flagger = ALL, progress: Progress | None = None,
                 given: Learned | None = None) -> OccupancyMap:
-    """Map a log source (an open ``LogReader`` or a ``Log``) in ``mode``: its plan (``plan.plan_map``),
-    then its stages (``mode_stages``); adaptive flags readings with ``flagger``. ``given``: the
-    forward model to use instead of learning one (``mapping.learned``)."""
+    """Map a log source in ``mode``: its plan, then its stages; ``given``: a forward model instead of learning one."""
     stages, state = planned(log, mode, params, flagger, progress, given)
     state, phases = run_stages(stages, state)
     if given is not None and given.seconds:  # learned by another map of this log: its cost counts here too
@@ -127,28 +120,21 @@ def planned(log, mode: str, params: MapParams, flagger: Flagger = ALL, progress:
 
 
 def state_before(log, mode: str, params: MapParams, stage: str, given: Learned | None = None) -> State:
-    """The state of a ``mode`` map of ``log`` just before its first stage named ``stage`` runs:
-    what that stage is given (for tests and studies of one stage)."""
+    """The state of a ``mode`` map of ``log`` just before its first stage named ``stage`` (for tests)."""
     stages, state = planned(log, mode, params, given=given)
     names = [s.name for s in stages]
     return run_stages(stages[:names.index(stage)], state)[0]
 
 
 def resolved_params(log, params: MapParams) -> MapParams:
-    """``params`` with the values the log decides: a simulated log's maps take its truth grid,
-    and so its resolution."""
+    """``params`` with the values the log decides: a simulated log's truth grid's resolution."""
     return dataclasses.replace(params, resolution=log_grid(log, params.resolution).resolution)
 
 
 def map_source(log, mode: str, params: MapParams, flagger: Flagger = ALL, progress: Progress | None = None,
                limits: Limits | None = None, file: str | None = None, given: Learned | None = None) -> OccupancyMap:
-    """Map a log source (an open ``LogReader`` or an in-memory ``Log``) in ``mode``, with
-    ``flagger`` and ``given`` (``map_in_mode``); refused (``InputError``, naming ``file``) before any work when its estimate
-    exceeds ``limits`` (default: the limits in force, ``core.budget.active_limits``).
-
-    The map's ``runtime_s`` is its mapping work; ``stats["untimed_seconds"]`` says what was
-    left out: ``compile`` (the warm-up) and ``read_and_set_up`` (reading the log, cached
-    one-time templates)."""
+    """Map a log source in ``mode`` unless its estimate exceeds ``limits``; ``stats["untimed_seconds"]`` has
+    what ``runtime_s`` leaves out (``compile``, ``read_and_set_up``)."""
     params = resolved_params(log, params)
     check(map_estimate(log, mode, params), limits, file=file)
     t0 = time.perf_counter()
@@ -163,8 +149,7 @@ def map_source(log, mode: str, params: MapParams, flagger: Flagger = ALL, progre
 
 
 def tiny_log(sensor: SensorSpec) -> Log:
-    """Three scans of ``sensor`` in a round room (every reading at one range, one no echo):
-    enough for every kernel of every mode to run, clusters and EM flips included."""
+    """Three scans of ``sensor`` in a round room, one reading without echo: every mode's kernels run."""
     pose = np.array([[0.0, 0.0, 0.0], [0.2, 0.1, 0.7], [0.1, 0.3, 1.9]])
     z = 0.5 * (max(sensor.min_range, 0.0) + sensor.max_range)
     ranges = np.full((3, sensor.count), z, dtype=np.float32)
@@ -173,22 +158,16 @@ def tiny_log(sensor: SensorSpec) -> Log:
 
 
 def warm_up(sensor: SensorSpec, params: MapParams, mode: str) -> None:
-    """Compile (or load from numba's cache) the kernels ``mode`` runs, by running the mode's
-    own pipeline on ``tiny_log(sensor)``, so that ``runtime_s`` leaves compilation out. EM
-    modes run twice (to convergence and stopped by the sweep limit: each ends in its own kernel);
-    EM's kernels take the same types whatever the number of readings (``em_kernels.layout.EMReadings``),
-    so that these serve a cluster of one reading too.
-    Cached kernels are loaded without numba's full start-up (``core.jit_cache``)."""
+    """Compile (or load) the kernels ``mode`` runs by mapping ``tiny_log(sensor)``, so that ``runtime_s`` leaves
+    compilation out; EM modes run twice (converged and stopped by the sweep limit: each ends in its own kernel)."""
     jit_cache.load_lean()
     log = tiny_log(sensor)
     map_in_mode(log, mode, params)
     if mode != "standard":
-        # stopped by the sweep limit, and with a specular angle given (the tiny log learns none: too
-        # few readings), so that the deflected beams' kernel runs too
+        # stopped by the sweep limit, with a specular angle given (the tiny log learns none): deflected beams
         forward = dataclasses.replace(params.em.forward, specular_deg=30.0)
         learn = ",".join(k for k in params.calibration.learned if k != "specular_deg") or "sigma"
-        # and, for adaptive, with the thinned map outside the clusters (the tiny log has no model
-        # given, so "auto" chose Elfes' map above)
+        # and, for adaptive, the thinned map outside the clusters ("auto" chose Elfes' map above)
         one_sweep = dataclasses.replace(params, em=dataclasses.replace(params.em, forward=forward, max_sweeps=1),
                                         calibration=dataclasses.replace(params.calibration, learn=learn),
                                         adaptive=dataclasses.replace(params.adaptive, outside="thinned"))

@@ -1,6 +1,5 @@
-"""Every mapping parameter: one frozen dataclass per concern (EM, clusters, calibration; the sensor models'
-own beside them), gathered in ``MapParams``, read from a ``--params`` YAML and CLI options and validated
-here, once; the resolved parameters are written into every map file."""
+"""Every mapping parameter: one frozen dataclass per concern, gathered in ``MapParams``, read from a ``--params``
+YAML and CLI options and validated here, once; the resolved parameters are written into every map file."""
 
 from __future__ import annotations
 
@@ -17,10 +16,7 @@ from aogm_cli.sensor_models.surface import SurfaceConfig
 
 
 def check_field_types(config) -> None:
-    """Raise ``InputError(key=<field>)`` unless each field of the dataclass ``config`` has its
-    declared type: float fields a finite number (not a bool), int fields a whole number (not a
-    bool, not 2.5 or 2.0), str fields a string, bool fields true or false. Nested dataclasses are
-    left to their own check."""
+    """Raise ``InputError(key=<field>)`` unless each field of ``config`` has its declared type (no bool as number)."""
     for f in dataclasses.fields(config):
         kind = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", "")
         v = getattr(config, f.name)
@@ -42,13 +38,9 @@ class EMConfig:
     prior_occupied: float = 0.3  # prior p(m_x = 1) of every cell
     max_sweeps: int = 20
     start: str = "standard"  # "standard": the thresholded standard map; "empty": all free
-    # What EM reports at the cells it leaves free although no reading objects to an obstacle
-    # there (occupancy would lower the data log-likelihood by at most view.HIDDEN_GAIN: a wall's far
-    # layers, the space behind a wall, a gap in a wall that the prior alone keeps open): "prior"
-    # (Thrun's residual, the prior 0.3, which a planner reads as free), "standard" (the standard
-    # map's estimate) or "unobserved" (the standard map's estimate where it is above 0.5, else
-    # unobserved: p 0.5, /map/observed false); docs/algorithms.md, "What EM reports where the
-    # data say nothing", measures them
+    # What EM reports at cells it leaves free though no reading objects to an obstacle (view.HIDDEN_GAIN):
+    # "prior" (Thrun's residual, which a planner reads as free), "standard" (the standard map's estimate) or
+    # "unobserved" (that estimate above 0.5, else unobserved); docs/algorithms.md measures them
     hidden: str = "unobserved"
 
     def validate(self) -> EMConfig:
@@ -79,20 +71,8 @@ class EMConfig:
 
 @dataclass(frozen=True)
 class AdaptiveConfig:
-    """What the adaptive map is outside its clusters and where they lie (``adaptive.find_clusters``;
-    docs/algorithms.md, "The adaptive mapper", measures each): ``outside`` "thinned" (the map
-    thinned by the exact inverse model, its free cells that no reading holds free at the final map
-    unknown to a planner; clusters on the flagged readings' walls, grown by one cell into the wall
-    layers the thinning removed, and on the cells it holds free but the exact model holds occupied
-    by ``contested`` log-odds), "elfes" (Elfes' map; besides the flagged readings' walls the
-    ``contested`` cells, whose occupied evidence alone reaches this many log-odds but which the
-    standard map holds free, and the ``weak`` cells, whose log-odds lie within this of the prior
-    (0: none), every cluster grown by ``grow`` cells; sonar cones only) or "auto" (the default:
-    "thinned" where the sensor's forward model is known before the map is made, carried by the
-    detector or given, "elfes" where it is learned from the log, after the clusters; a narrow
-    beam's map is never thinned); and the ``scale`` of the probabilities outside the clusters:
-    "em", the EM probability of the cluster cells that the log's readings end in as often
-    (``view.one_scale``), or "mixed", the map's own."""
+    """What the adaptive map is outside its clusters and where they lie (``adaptive.find_clusters``,
+    ``plan.auto_outside``; docs/algorithms.md, "The adaptive mapper"); ``scale``: ``view.one_scale``."""
 
     outside: str = "auto"
     contested: float = 0.5
@@ -119,15 +99,8 @@ class AdaptiveConfig:
 
 @dataclass(frozen=True)
 class CalibrationConfig:
-    """Whether em and adaptive learn the forward model from the log they map (``mapping.calibration``),
-    which of its parameters (``learn``: sigma, p_rand, p_hit, p_max in rounds with EM; specular_deg
-    and opening_deg once, before them), in at most ``rounds`` EM runs alternated with closed-form
-    fits, ended when no parameter moves by more than ``tolerance`` (sigma relative, the
-    probabilities absolute). With ``carried`` (the default) a simulated log of a sensor the
-    detector carries a model of (``report.map_files.carried_model``: learned once, on its training
-    logs) takes it instead, and only the building's part is learned from the log (the specular
-    angle; p_max at its standard map, ``stages.rates``). How the rounds work inside is
-    ``calibration.TUNING``."""
+    """Whether em and adaptive learn the forward model from their log; with ``carried``, a simulated log of a
+    sensor the detector carries a model of learns only the building's part (specular angle; p_max)."""
 
     enabled: bool = True
     carried: bool = True
@@ -233,9 +206,7 @@ SECTION_CONFIGS = {"inverse_model": _checked(InverseModelConfig), "em": _em, "ad
 
 def params_from(raw: dict | None = None, file: str | None = None,
                 overrides: dict[str, dict[str, Any]] | None = None) -> MapParams:
-    """Defaults, then ``raw`` (a ``--params`` file's values, read at the edge; ``file`` names it in
-    errors), then ``overrides`` ({section: {key: value}}; None values ignored). Raises InputError
-    naming the file and ``section.key``."""
+    """Defaults, then ``raw`` (``file``'s values), then ``overrides`` ({section: {key: value}}, None ignored)."""
     merged, resolution, file = _merged({} if raw is None else raw, file, overrides or {})
     sections = {}
     for section, make in SECTION_CONFIGS.items():

@@ -1,6 +1,5 @@
-"""What every mode shares between a log and its map: the grid of a log, the parameters a map records,
-and timing that leaves out reading I/O. A *log source* is an open ``io.logfile.LogReader`` or an
-in-memory ``core.log.Log``: both have ``sensor``, ``n_scans``, ``truth_grid()``, ``poses()``, ``chunks()``."""
+"""What every mode shares between a log and its map: the log's grid, the parameters a map records, timing without
+reading I/O. A *log source* is an open ``io.logfile.LogReader`` or an in-memory ``core.log.Log``."""
 
 from __future__ import annotations
 
@@ -35,8 +34,7 @@ def log_grid(log, resolution: float) -> GridSpec:
 
 
 class TimedSource:
-    """A log source that adds up the seconds spent reading it (``chunks()``'s iterators and
-    ``read()``), so that the time of mapping work can leave them out."""
+    """A log source that adds up the seconds spent reading it, so that mapping's time can leave them out."""
 
     def __init__(self, source):
         self.source = source
@@ -63,8 +61,7 @@ class TimedSource:
 
 
 def params_json(params: MapParams, mode: str, grid: GridSpec) -> dict:
-    """The parameters a map of ``mode`` records: every parameter, defaults included, and the
-    grid it was derived onto (the truth's, or the poses' bounds)."""
+    """The parameters a map of ``mode`` records: every parameter, defaults included, and its grid."""
     d = params.as_dict()
     d["mode"] = mode
     d["grid"] = {"origin": [grid.origin_x, grid.origin_y], "resolution": grid.resolution,

@@ -1,6 +1,5 @@
-"""A map's plan, decided once before its first stage (``plan_map``): the log's sensor kind, where the
-sensor model comes from and which of its keys this log teaches, what an adaptive map is outside its
-clusters, how the standard map is thinned and where EM starts. Stages read it; none asks again."""
+"""A map's plan, decided once before its first stage (``plan_map``): sensor kind, the sensor model's origin and keys
+learned, what adaptive is outside its clusters, thinning, EM's start. Stages read it; none asks again."""
 
 from __future__ import annotations
 
@@ -14,25 +13,16 @@ from aogm_cli.sensor_models.exact_inverse import MARGIN
 from aogm_cli.sensor_models.ray import is_narrow_beam
 
 CONE, NARROW_BEAM = "cone", "narrow beam"  # ``Plan.sensor``: a sonar's cone, or a ray (``ray.is_narrow_beam``)
-# log-odds below the exact model's prior at which adaptive's thinning frees a cell when the thinned map
-# stands outside the clusters: any (the ``decided`` stage then checks each free cell against the
-# readings; docs/algorithms.md, "Adaptive with the thinned map outside its clusters"); elsewhere ``MARGIN``
+# adaptive's thinning margin with the thinned map outside: any (the ``decided`` stage checks each free cell;
+# docs/algorithms.md, "Adaptive with the thinned map outside its clusters"); elsewhere ``MARGIN``
 OUTSIDE_MARGIN = 0.0
 
 
 @dataclass(frozen=True)
 class Plan:
-    """What a map of ``mode`` does, decided from what it is given (``plan_map``).
-
-    ``sensor``: ``CONE`` or ``NARROW_BEAM``. ``model``: where the forward model comes from (a
-    ``Learned.origin``). ``learns``: the forward model's keys learned from this log; ``calibrates``:
-    in calibration rounds of EM (no model given), ``fits_rates``: the building's p_max at the
-    standard map (a robot's model given). ``incidence``: the angle of incidence plays its part
-    (surfaces of a cone's echoes). ``outside``: what an adaptive map is outside its clusters
-    ("thinned" or "elfes"; None for the other modes). ``thinning``: the margin the standard map is
-    thinned at (None: not thinned). ``start``: EM's start map ("standard", "empty", or "elfes in
-    clusters": the thinned map outside, Elfes' inside; None for the standard mode). ``stages``:
-    the stages the mode runs (``modes.mode_stages``)."""
+    """What a map of ``mode`` does, decided from what it is given (``plan_map``): ``learns`` the keys learned from
+    this log, in EM's rounds (``calibrates``) or, with a robot's model, p_max (``fits_rates``); ``thinning``
+    the margin (None: not thinned); ``start`` EM's ("elfes in clusters": thinned outside, Elfes' inside)."""
 
     mode: str
     sensor: str
@@ -52,8 +42,7 @@ class Plan:
 
     @property
     def decides(self) -> bool:
-        """Adaptive keeps the thinned map outside its clusters, whose free cells the readings must
-        hold free (``stages.final_evidence``)."""
+        """Adaptive keeps the thinned map outside, whose free cells the readings must hold free."""
         return self.outside == "thinned" and self.thinning is not None
 
     def as_dict(self) -> dict:
@@ -62,9 +51,7 @@ class Plan:
 
 
 def learned_keys(params: MapParams, given: Learned | None) -> tuple[str, ...]:
-    """The forward model's keys a map learns from its log: calibration on and the key listed; of a
-    model given, a robot's (a file's, or carried by the detector) leaves the building's part
-    (``learned.BUILDING``) to the log, one from another map of the same log nothing."""
+    """The forward model's keys a map learns from its log (of a robot's model given, the building's part only)."""
     config = params.calibration
     if not config.enabled:
         return ()
@@ -72,15 +59,13 @@ def learned_keys(params: MapParams, given: Learned | None) -> tuple[str, ...]:
 
 
 def auto_outside(known: bool, sensor: str) -> str:
-    """What ``adaptive.outside`` "auto" is: "thinned" for a cone whose forward model is ``known``
-    before the map is made (the thinning and the clusters need it), else "elfes" (the model is
-    learned by EM in the clusters, after them; a narrow beam's map is never thinned)."""
+    """``adaptive.outside`` "auto": "thinned" for a cone whose forward model is ``known`` before the map (the
+    thinning and clusters need it), else "elfes" (learned in the clusters, after them)."""
     return "thinned" if known and sensor == CONE else "elfes"
 
 
 def plan_map(mode: str, params: MapParams, sensor: SensorSpec, resolution: float, given: Learned | None) -> Plan:
-    """The plan of a ``mode`` map of a log of ``sensor`` at ``resolution``, with the forward model
-    ``given`` (a file's, the detector's or another map's; None: none)."""
+    """The plan of a ``mode`` map of a log of ``sensor`` at ``resolution``, with the forward model ``given``."""
     kind = NARROW_BEAM if is_narrow_beam(sensor, resolution) else CONE
     thinnable = params.inverse_model.model != "exact" and kind == CONE  # a ray draws walls one cell thick
     if mode == "standard":

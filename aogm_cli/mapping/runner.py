@@ -1,6 +1,5 @@
-"""The runner of a mode's stages: each ``Stage`` names the fields of the ``State`` it reads and those
-it writes; ``run_stages`` runs them in order, checks both, skips a stage whose condition on the state
-does not hold, and times each (reading the log left out)."""
+"""The runner of a mode's stages: each ``Stage`` names the ``State`` fields it reads and writes; ``run_stages`` runs
+them in order, checks both, skips a stage whose condition does not hold, and times each (reading left out)."""
 
 from __future__ import annotations
 
@@ -12,10 +11,8 @@ from aogm_cli.mapping.state import MADE, State
 
 
 class Stage(NamedTuple):
-    """One step of a mode: its name (the map's ``phase_seconds`` key), what it does, the fields of
-    the state it ``reads`` (each must be there; a name ending in "?" may be None) and ``writes``
-    (no other may change), whether its seconds are mapping work (set-up is not) and a condition
-    on the state (None: it always runs; ``lacks``, ``has``)."""
+    """One step of a mode: the state's fields it ``reads`` (must be there; "?": may be None) and ``writes``
+    (no other may change), whether its seconds are mapping work, and when it runs (None: always)."""
 
     name: str
     run: Callable[[State], State]
@@ -40,8 +37,7 @@ def has(field: str) -> Callable[[State], bool]:
 
 
 def run_stages(stages: tuple[Stage, ...], state: State, clock=time.perf_counter) -> tuple[State, dict]:
-    """Run ``stages`` in order: (the last state, the seconds of each timed stage that ran, reading
-    the log left out). ``StageError`` when a stage reads a missing field or writes an undeclared one."""
+    """Run ``stages`` in order: (the last state, the seconds of each timed stage, reading left out)."""
     phases: dict[str, float] = {}
     for stage in stages:
         if stage.when is not None and not stage.when(state):

@@ -1,6 +1,5 @@
-"""The stages the modes are made of (``modes.mode_stages`` lists them): each takes the ``State`` and
-returns the next, with what it adds (the scans, the laid-out readings, the standard map, what was
-learned, the clusters, EM's problem and outcome, the view), as its plan says; and the finished map."""
+"""The stages the modes are made of (``modes.mode_stages``): each takes the ``State`` and returns the next with what
+it adds, as its plan says; and the finished map (``finished``)."""
 
 from __future__ import annotations
 
@@ -29,8 +28,7 @@ from aogm_cli.mapping.state import Clusters, EMRegion, StandardMap, State, View
 from aogm_cli.mapping.view import decided_free, em_view, joined_view
 from aogm_cli.sensor_models.readings import LaidOutReadings, lay_out_readings
 
-# log-odds of occupied evidence alone that put a cell the map holds free among the walls the
-# building's rates are fitted at (``rates``; docs/algorithms.md, "The sensor model a detector carries")
+# log-odds of occupied evidence alone making a free cell a wall for ``rates`` (docs/algorithms.md)
 RATES_EVIDENCE = 2.0
 RATES_START = 0.05  # the fit of p_max starts from at least this share (from 0 it would get no weight)
 RATES_READINGS = 1000  # readings the fit of p_max is made on (every n-th beyond)
@@ -72,8 +70,7 @@ def standard_view(s: State) -> State:
 
 
 def read(s: State) -> State:
-    """The scans in memory (EM needs every reading), the sensor narrowed to the beam's opening as
-    configured or given, unless it is learned (``opening``)."""
+    """The scans in memory, the sensor narrowed to the opening configured or given unless it is learned."""
     whole = s.source.read()
     if not s.plan.learns_opening and s.plan.sensor == CONE:
         whole = B.with_opening(whole, s.in_use.em.forward.opening_deg)
@@ -98,9 +95,7 @@ def standard(s: State) -> State:
 
 
 def opening(s: State) -> State:
-    """The beam's opening learned at the thinned standard map (``beam_model.opening_record``); when
-    it is narrower than the log's beam, the sensor narrowed, and the readings and the standard map
-    of the wider beam taken away (the next stages lay them out and make it again)."""
+    """The beam's opening learned at the thinned map; if narrower, the sensor narrowed, readings and map taken away."""
     record = B.opening_record(s.whole, s.readings, s.in_use, s.standard.log_odds, s.standard.observed)
     s = s.but(learned=dataclasses.replace(s.learned, opening_deg=record["opening_deg"], opening=record))
     narrowed = B.with_opening(s.whole, record["opening_deg"])
@@ -108,9 +103,7 @@ def opening(s: State) -> State:
 
 
 def deflections(s: State) -> State:
-    """The angle of incidence: the surfaces the echoes came from, the specular angle learned there
-    when the plan learns it, and the readings whose beams met a surface beyond it stopped there (the
-    standard map, made with them passing, taken away: the next stage makes it again)."""
+    """The echoes' surfaces, the specular angle if learned, beams met beyond it stopped (standard map taken away)."""
     normals = B.surfaces(s.readings, s.in_use, s.standard.log_odds)
     if "specular_deg" in s.plan.learns:
         record = B.specular_record(s.readings, s.in_use, s.standard.log_odds, normals)
@@ -120,13 +113,8 @@ def deflections(s: State) -> State:
 
 
 def rates(s: State) -> State:
-    """With a robot's model (carried by the detector, or a file's): the building's share of
-    max-range readings (p_max: beams that specular walls send away, open space) fitted on
-    ``RATES_READINGS`` of the readings (``calibration.fit_at_map``) at the standard map
-    thresholded, with the cells the occupied evidence alone holds occupied by ``RATES_EVIDENCE``
-    (``standard.occupied_evidence``): the walls passing beams cleared are there, so that the
-    readings crossing them count as lost ones, as a calibration of the log finds them; the
-    sensor's sigma, p_hit and p_rand are kept."""
+    """With a robot's model: the building's share of max-range readings (p_max) fitted at the standard map
+    plus the cells occupied evidence alone holds (``RATES_EVIDENCE``): readings crossing cleared walls count as lost."""
     cuts = _cuts(s.readings)
     walls = (s.standard.log_odds > 0) | (occupied_evidence(s.whole, s.grid, s.in_use, cuts) >= RATES_EVIDENCE)
     config = dataclasses.replace(s.params.calibration, learn="p_max")
@@ -160,8 +148,7 @@ def detect(s: State) -> State:
 
 
 def clusters(s: State) -> State:
-    """The clusters of the flagged readings, with the contested and weak cells
-    (``adaptive.find_clusters``), and EM's region there: none when there is no cluster."""
+    """The clusters of the flagged readings (``adaptive.find_clusters``) and EM's region there (None: none)."""
     ids, count = A.find_clusters(s.readings, s.flags, s.standard, s.in_use, s.plan, s.whole)
     region = None
     if count > 0:
@@ -171,9 +158,8 @@ def clusters(s: State) -> State:
 
 
 def start(s: State) -> State:
-    """EM's start (``Plan.start``): the thresholded standard map, or an empty one; with the thinned
-    map outside the clusters, Elfes' map inside them, so that EM thins a wall's inner layers there
-    as it does from Elfes' map (started from the thinned map it keeps single cells of them)."""
+    """EM's start (``Plan.start``); with the thinned map outside the clusters, Elfes' inside, so that EM thins
+    a wall's inner layers as from Elfes' map (from the thinned map it keeps single cells of them)."""
     empty = s.plan.start == "empty"
     flat = np.zeros(s.grid.height * s.grid.width, bool) if empty else (s.standard.log_odds > 0).reshape(-1)
     if s.plan.start == "elfes in clusters":
@@ -184,17 +170,14 @@ def start(s: State) -> State:
 
 def _on_sweep(s: State):
     max_sweeps = s.params.em.max_sweeps
-
     def on_sweep(sweep, flips, objective):
         if s.progress:
             s.progress("em sweep", sweep, max_sweeps)
-
     return on_sweep
 
 
 def calibration(s: State) -> State:
-    """The sensor's forward model learned in rounds of EM and closed-form fits
-    (``calibration.calibration_rounds``), on the readings whose cones reach EM's region."""
+    """The forward model learned in rounds of EM and fits (``calibration.calibration_rounds``)."""
     config = s.in_use.em
     used, record = calibration_rounds(s.readings, s.occupied, config, s.params.calibration,
                                       E.em_step(s.region.problems, _on_sweep(s)), s.region.fitted_readings())
@@ -216,8 +199,7 @@ def sweeps(s: State) -> State:
 
 
 def final_evidence(s: State) -> State:
-    """Each cell's evidence at the map adaptive leaves (the thinned map outside the clusters, EM's
-    inside), as EM scores a candidate (``exact.map_evidence``); ``adaptive_view`` reads it."""
+    """Each cell's evidence at the map adaptive leaves, as EM scores a candidate (``exact.map_evidence``)."""
     return s.but(final_evidence=map_evidence(s.readings, s.in_use.em.forward, s.occupied))
 
 
@@ -229,11 +211,8 @@ def em_mode_view(s: State) -> State:
 
 
 def adaptive_view(s: State) -> State:
-    """EM's residuals in the clusters, the standard map's outside, on one scale (``view.joined_view``).
-    With the thinned map outside (``Plan.decides``) a free cell there is free to a planner only
-    where its occupancy would lower the readings' likelihood by more than ``HIDDEN_GAIN``
-    (``final_evidence``), as EM decides the cells it leaves free; the others are behind a wall,
-    crossed only by readings the map cannot explain, or wanted occupied: unknown."""
+    """EM's residuals in the clusters, the standard map's outside (``view.joined_view``); with the thinned map
+    outside (``Plan.decides``) a free cell there not ``decided_free`` is unknown, as EM treats its own."""
     observed = s.standard.observed
     if s.plan.decides:
         observed = observed & ~((s.clusters.ids == 0) & (s.standard.log_odds <= 0) & ~decided_free(s.final_evidence))
@@ -245,8 +224,7 @@ def adaptive_view(s: State) -> State:
 
 
 def finished(s: State, phases: dict) -> OccupancyMap:
-    """The map of the last state: its layers, the configured parameters, what was learned, its
-    plan, and one stats format for every mode."""
+    """The map of the last state: layers, parameters, what was learned, plan, one stats format."""
     grid, view, mode = s.grid, s.view, s.plan.mode
     em = mode != "standard"
     occupied = None if s.occupied is None else s.occupied.reshape(grid.shape) & view.observed
@@ -260,8 +238,7 @@ def finished(s: State, phases: dict) -> OccupancyMap:
 
 
 def map_stats(s: State, phases: dict, em: bool) -> dict:
-    """The map's statistics: its scans and phases; EM's (``em.em_stats``) and the calibration's
-    record when EM ran; the clusters' of an adaptive map."""
+    """The map's statistics: scans, phases, EM's and the calibration's, an adaptive map's clusters'."""
     stats: dict = {"scans": s.source.n_scans, "phase_seconds": phases}
     if em:
         stats |= E.em_stats(s.em)
@@ -279,9 +256,7 @@ def map_stats(s: State, phases: dict, em: bool) -> dict:
 
 
 def calibration_record(learned: Learned, outcome: E.EMOutcome | None) -> dict | None:
-    """What the map records of its calibration (None: nothing calibrated): the rounds' record,
-    the final map's EM objective and sweeps, how the opening and the specular angle were learned,
-    and, for a model carried from another map of the log, which mode made it."""
+    """What the map records of its calibration (None: nothing): rounds, final EM run, opening, incidence, maker."""
     if learned.calibration is None:
         return None
     record = dict(learned.calibration)

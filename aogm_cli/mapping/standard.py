@@ -1,6 +1,5 @@
-"""Standard occupancy-grid mapping (Elfes 1989, Moravec 1988): each cell on its own, in log-odds.
-``standard_map`` streams a log's scans chunk by chunk through one compiled kernel that, for every
-reading and every cell of its cone, adds ``inverse_model - l0`` and clamps; narrow beams go to ``beam``."""
+"""Standard occupancy-grid mapping (Elfes 1989, Moravec 1988), each cell on its own in log-odds: ``standard_map``
+streams a log through one compiled kernel, ``inverse_model - l0`` per cone cell, clamped; narrow beams: ``beam``."""
 
 from __future__ import annotations
 
@@ -82,35 +81,17 @@ def _entry_tables(templates: ConeTemplates, model: str, beam_width: float) -> En
     return EntryTables(weights, ranges32)
 
 
-# Choices:
-# * Clamping after every update (OctoMap's clamping update): a cell's log-odds never leaves
-#   [clamp_min, clamp_max], so a long run of identical evidence cannot make a cell too confident to
-#   change back. The result depends on the order of readings; that order is the log's (scans in time,
-#   sensors in mount order), so maps are reproducible.
-# * A reading visits each cell of its cone once (the templates hold each cell once).
-# * Geometry: cones come from ``cone`` templates (sensor snapped to its cell's centre, heading to its
-#   bin). The snap's component along the beam axis is corrected per reading: a cell at template range
-#   d is taken to lie at d - axis_offset from the real sensor (see ``cone.reading_geometry``), so the
-#   occupied arc does not jitter by up to res/sqrt 2 with the sensor's position inside its cell.
-#   Templates therefore reach one cell beyond max_range.
-# * ``observed`` marks every cell that some reading's cone covered up to min(z + alpha/2, max_range),
-#   or up to max_range for a max-range reading, including the blind zone next to the sensor, where the
-#   reading gives no evidence.
-# * Arithmetic on the grid is float32 in a fixed order, so a map made chunk by chunk equals, bit for
-#   bit, the map made in one pass.
-# * Narrow beams (lasers, or a cone under a cell wide at max range: ``ray.is_narrow_beam``) are traced
-#   as rays by ``beam.BeamMapper`` instead (``standard_map`` chooses); cone templates of an 80 m laser
-#   would be enormous and a ray is the laser's own model.
+# Choices: clamping after every update (OctoMap's), so that a long run of identical evidence cannot make a
+# cell too confident to change back; the order is the log's, so maps are reproducible. A reading visits each
+# cone cell once. Cones come from ``cone`` templates (sensor snapped to its cell's centre); the snap along the
+# beam axis is corrected per reading (``cone.reading_geometry``) so that the occupied arc does not jitter
+# (templates reach one cell beyond max_range). ``observed``: every cell a cone covered, blind zone included.
+# Float32 in a fixed order: a map made chunk by chunk equals the one-pass map bit for bit. Narrow beams are
+# rays (``beam.BeamMapper``): cone templates of an 80 m laser would be enormous, and a ray is its own model.
 class StandardMapper:
-    """Incremental standard mapping on one grid: ``update`` with chunks of scans, then ``result``.
-
-    The state is one float32 grid: a cell's log-odds once some reading's cone covered it, and
-    ``UNOBSERVED`` (-inf) before; ``result`` splits it into (log_odds, observed). Keeping
-    "observed" inside the log-odds grid saves the kernel a second scattered write per cell.
-    The state is padded by the templates' extent on every side (a 2000 x 2000 grid at 0.05 m
-    with a 5 m sonar grows by 20%), so that the cone of a sensor inside the grid never needs
-    bounds checks; only sensors outside the grid take the kernel's checked path.
-    """
+    """Incremental standard mapping on one grid: ``update`` with chunks of scans, then ``result``. One float32
+    state, ``UNOBSERVED`` (-inf) until a cone covers a cell (no second scattered write for "observed"),
+    padded by the templates' extent so that a sensor inside the grid needs no bounds checks."""
 
     def __init__(
         self,
@@ -133,8 +114,6 @@ class StandardMapper:
         self.templates = templates
         self.entries = _entry_tables(templates, config.model, float(sensor.beam_width))
         self.update_constants = inverse_update(config, sensor, templates.resolution)
-        # the state is padded by the templates' extent on every side, so that the cone of any
-        # sensor inside the grid lies wholly inside the padded state: no bounds checks
         self.pad = int(templates.extent)
         self.padded_shape = (grid.height + 2 * self.pad, grid.width + 2 * self.pad)
         if self.padded_shape[0] * self.padded_shape[1] + SPARE_MASK + 1 >= 2**31:
@@ -149,9 +128,7 @@ class StandardMapper:
         self.state = padded[self.pad : self.pad + grid.height, self.pad : self.pad + grid.width]
 
     def update(self, pose: np.ndarray, ranges: np.ndarray, cut: np.ndarray | None = None) -> None:
-        """Apply scans (pose (T, 3), ranges (T, S)) in order: every reading's cone, clamped; a
-        reading with a finite ``cut`` ((T, S) template ranges, ``surface.reading_shadows``) is a
-        deflected beam: free space up to the cut, nothing beyond."""
+        """Apply scans in order; a finite ``cut`` is a deflected beam: free space up to the cut, nothing beyond."""
         rows, cols, bins, valid, offset = reading_geometry(pose, self.sensor, self.grid, self.templates)
         z = np.where(valid, np.asarray(ranges, dtype=np.float32), np.float32(np.nan)).astype(np.float32)
         readings = ConeReadings(rows.reshape(-1) + self.pad, cols.reshape(-1) + self.pad, bins.reshape(-1),
@@ -168,10 +145,7 @@ class StandardMapper:
 
 def _mapper_for(sensor: SensorSpec, grid: GridSpec, config: InverseModelConfig, templates: ConeTemplates | None,
                 narrow: bool, models: tuple[ForwardModelConfig, ExactModelConfig] | None = None):
-    """The exact inverse model (``exact.ExactMapper``; ``models`` its forward model and settings,
-    defaults without) when ``config.model`` is "exact"; else rays (``beam.BeamMapper``) for a
-    ``narrow`` beam (``ray.is_narrow_beam``), else cone templates (``StandardMapper``;
-    ``templates`` is ignored for rays)."""
+    """The mapper: ``ExactMapper`` for the exact model, else ``BeamMapper`` if ``narrow``, else ``StandardMapper``."""
     if config.model == "exact":
         forward, exact = models or (ForwardModelConfig(), ExactModelConfig())
         return ExactMapper(sensor, grid, exact, forward, templates)
@@ -192,18 +166,10 @@ def standard_map(
     models: tuple[ForwardModelConfig, ExactModelConfig] | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Standard log-odds map of logged scans: (log_odds float32 (H, W), observed bool (H, W)).
-
-    ``chunks`` yields (start, time, pose (T, 3), ranges (T, S)) with ranges as logged, like
-    ``LogReader.chunks()``; the range convention is applied here: cones take
-    ``readings.echo_ranges``, narrow beams (rays) the logged range, whose hit is the cell
-    holding the endpoint (OctoMap's convention, which puts more endpoints on occupied cells than
-    the half-cell shift: docs/algorithms.md, "Where the defaults come from"). Memory is the grid, the templates and one chunk. Unobserved cells hold the prior l0. ``templates`` defaults to
-    ``readings.cone_templates(grid, sensor)``; rays need none. ``narrow`` is
-    ``ray.is_narrow_beam(sensor, grid.resolution)``, decided here unless the caller has.
-    ``cuts`` ((scans, sensors) template ranges, cones only) stops deflected beams
-    (``StandardMapper.update``). ``models``: the forward model the exact inverse model derives
-    from and its settings (``config.model`` "exact"; its cones take ``echo_ranges``, a laser's too).
-    """
+    ``chunks`` yields (start, time, pose (T, 3), ranges (T, S)) as logged (``LogReader.chunks()``). Cones
+    take ``readings.echo_ranges``; rays the logged range, the hit being the endpoint's cell (OctoMap's
+    convention: docs/algorithms.md, "Where the defaults come from"). Memory: grid, templates, one chunk.
+    ``cuts`` stop deflected beams; ``models``: the exact inverse model's forward model and settings."""
     if narrow is None:
         narrow = is_narrow_beam(sensor, grid.resolution)
     mapper = _mapper_for(sensor, grid, config, templates, narrow, models)
@@ -218,9 +184,7 @@ def standard_map(
 
 
 def set_up(sensor: SensorSpec, grid: GridSpec, params: MapParams) -> ConeTemplates | None:
-    """The one-time set-up of ``standard_log_odds`` on ``grid``, done before any clock starts,
-    like compilation: the cone templates and their per-grid-width tables built (or found in
-    their caches) by mapping no scans. Returns the templates (None for a narrow beam)."""
+    """One-time set-up of ``standard_log_odds`` before any clock starts: the templates (None for a narrow beam)."""
     narrow = is_narrow_beam(sensor, grid.resolution)
     templates = None if narrow else cone_templates(grid, sensor, narrow=narrow)
     standard_map([], sensor, grid, params.inverse_model, templates=templates, narrow=narrow,
@@ -229,8 +193,7 @@ def set_up(sensor: SensorSpec, grid: GridSpec, params: MapParams) -> ConeTemplat
 
 
 def standard_log_odds(log, grid: GridSpec, params: MapParams, cuts=None, chunk: int = 4096):
-    """(log_odds, observed) of a whole log source, streamed in chunks (``log.chunks(chunk)``);
-    ``cuts`` stops deflected beams (``standard_map``)."""
+    """(log_odds, observed) of a whole log source, streamed in chunks; ``cuts`` stop deflected beams."""
     narrow = is_narrow_beam(log.sensor, grid.resolution)  # decided once, for the templates and the map
     templates = None if narrow else cone_templates(grid, log.sensor, narrow=narrow)
     return standard_map(log.chunks(chunk), log.sensor, grid, params.inverse_model, templates=templates,
@@ -238,11 +201,7 @@ def standard_log_odds(log, grid: GridSpec, params: MapParams, cuts=None, chunk: 
 
 
 def occupied_evidence(log, grid: GridSpec, params: MapParams, cuts=None) -> np.ndarray:
-    """(H, W) float32: the log-odds the readings' occupied arcs alone give each cell (one more
-    standard pass with no free evidence; Elfes' arcs whatever model the map uses, as the exact
-    model has none of its own; ``cuts`` stop deflected beams, which hit nothing): where echoes
-    end, though passing beams may have cleared the cell in the map (a wall that specular or
-    multipath readings cross)."""
+    """(H, W): the log-odds Elfes' occupied arcs alone give each cell: where echoes end, though beams cleared it."""
     inverse = dataclasses.replace(params.inverse_model, l_free=params.inverse_model.l0,
                                   model="elfes" if params.inverse_model.model == "exact" else params.inverse_model.model)
     hits, _ = standard_log_odds(log, grid, dataclasses.replace(params, inverse_model=inverse), cuts=cuts)
@@ -250,8 +209,7 @@ def occupied_evidence(log, grid: GridSpec, params: MapParams, cuts=None) -> np.n
 
 
 class Thinned(NamedTuple):
-    """``thin_pass``: the thinned map's log-odds and the exact model's evidence, its log-odds less
-    its prior (0 where no reading reached), (H, W) each."""
+    """``thin_pass``: the thinned log-odds and the exact model's evidence (less its prior; 0 unreached)."""
 
     log_odds: np.ndarray
     evidence: np.ndarray
@@ -259,10 +217,7 @@ class Thinned(NamedTuple):
 
 def thin_pass(log, grid: GridSpec, params: MapParams, log_odds: np.ndarray, observed: np.ndarray,
               cuts=None, margin: float = MARGIN) -> Thinned:
-    """The standard map ``log_odds`` thinned by the exact inverse model (``exact.thinned``, at
-    ``margin``): one more pass over ``log`` with the exact model (``cuts`` stop deflected beams).
-    The em and adaptive modes thin the map after the angle of incidence is learned from the map as
-    Elfes' model makes it."""
+    """``log_odds`` thinned by one more pass with the exact inverse model (``exact.thinned``, at ``margin``)."""
     exact_params = dataclasses.replace(params, inverse_model=dataclasses.replace(params.inverse_model, model="exact"))
     exact = standard_log_odds(log, grid, exact_params, cuts=cuts)
     evidence = np.where(exact[1], exact[0] - np.float32(params.exact.l0), np.float32(0.0))
@@ -270,41 +225,25 @@ def thin_pass(log, grid: GridSpec, params: MapParams, log_odds: np.ndarray, obse
 
 
 def truth_grid_map(log: Log) -> tuple[np.ndarray, np.ndarray]:
-    """(probability float32, observed bool) (H, W): the standard map of an in-memory simulated
-    ``log`` on its truth grid at the default inverse model, in one chunk: the map the detector's
-    training labels compare with the truth (``training.labels``, rule (c))."""
+    """(probability, observed) (H, W): the default standard map of a simulated ``log`` on its truth grid."""
     grid = log.truth.grid
     ranges = np.asarray(log.ranges, dtype=np.float32)
     log_odds, observed = standard_map([(0, log.time, log.pose, ranges)], log.sensor, grid, InverseModelConfig())
     return probability_from_log_odds(log_odds, observed), observed
 
 
-# Speed (``bench/bench_standard.py`` compares the kernel with a plain compiled scatter-add over the
-# same cells; the grid's padding and "observed" inside it: ``StandardMapper``):
-# * no transcendental function per cell: per template entry the kernel reads a precomputed angular
-#   weight a (E_a, or 1 for the constant model), the range d and a flat index offset; the free
-#   increment is a (c_free - B u^2) with u = d - Rmin and B = c_free / span^2 per reading (Elfes'
-#   E_r), the occupied one c_occ a;
-# * a reading's region boundaries are short table-assisted binary searches in its template's sorted
-#   ranges (``cone.range_search``); flat offsets are precomputed per grid width (no multiplies);
-# * ``_nrt=False`` (a private numba option, as every kernel that allocates nothing): without
-#   reference counting, the arrays of its named-tuple inputs cost nothing per reading.
+# Speed (``bench/bench_standard.py`` compares with a plain compiled scatter-add): no transcendental function
+# per cell (per template entry a precomputed angular weight a, range d and flat offset; the free increment is
+# a (c_free - B u^2), u = d - Rmin, B = c_free / span^2 per reading; the occupied one c_occ a); region bounds
+# by table-assisted binary searches (``cone.range_search``); ``_nrt=False`` (a private numba option, for
+# kernels that allocate nothing): no reference counting of the named tuples' arrays per reading.
 @numba.njit(cache=True, _nrt=False)
 def _standard_kernel(grid, readings, tpl, flat, entries, update, span):
-    """Compiled log-odds update of readings t = span[0], span[0] + 1, ... < span[1] in order on
-    the flat ``grid.state``.
-
-    ``grid`` is a ``PaddedGrid``, ``readings`` ``cone.ConeReadings`` (cells of the padded
-    grid), ``tpl`` ``ConeTemplates.kernel_arrays``, ``flat`` its ``cone.FlatOffsets`` for the
-    padded width, ``entries`` the ``EntryTables`` and ``update`` the ``InverseUpdate``.
-    ``grid.state`` holds height * width cells (the padded grid) plus SPARE_MASK + 1 spare cells
-    at the end that absorb the updates of cone cells outside it. Per reading, entries
-    [0, f0) of its template are the blind zone (observed only), [f0, f1) get free evidence
-    and [f1, m) occupied evidence; every update is clamped. Vectorised passes write the increments to
-    ``inc_buf`` and the cells' flat indices to ``idx_buf``; then a scalar pass, as lean as a
-    scatter-add, does the read-modify-write of the grid. Loops run over slices from 0 so that
-    numba drops its negative-index checks, which would otherwise stop vectorisation.
-    """
+    """Compiled log-odds update of readings span[0] <= t < span[1] in order on ``grid.state`` (the padded
+    grid plus SPARE_MASK + 1 spare cells absorbing cone cells outside it). Per reading, template entries
+    [0, f0) are the blind zone (observed only), [f0, f1) free, [f1, m) occupied, each update clamped.
+    Vectorised passes fill ``inc_buf`` and ``idx_buf``, then a scalar pass as lean as a scatter-add does
+    the read-modify-write. Loops run over slices from 0 so that numba drops negative-index checks."""
     state = grid.state
     height = grid.height
     width = grid.width

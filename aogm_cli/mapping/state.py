@@ -1,6 +1,5 @@
-"""A map in the making: the ``State`` the stages pass along (what the map was given, its plan, and
-what each stage has added so far) and the parts it holds. Types only: the stages (``stages``) fill
-it, the runner (``runner``) checks what each stage reads and writes of it."""
+"""A map in the making: the ``State`` the stages pass along and the parts it holds. Types only: the stages
+(``stages``) fill it, the runner (``runner``) checks what each stage reads and writes of it."""
 
 from __future__ import annotations
 
@@ -25,8 +24,7 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class StandardMap:
-    """A log-odds map and its observed cells, (H, W) each (``standard.standard_map``); once
-    thinned (``standard.thin_pass``), the exact model's ``evidence`` and Elfes' log-odds before."""
+    """A log-odds map and its observed cells (H, W); once thinned, the exact model's ``evidence`` and Elfes' map."""
 
     log_odds: np.ndarray
     observed: np.ndarray
@@ -43,8 +41,7 @@ class Clusters:
 
 
 class EMRegion(NamedTuple):
-    """What EM works on: its problems under a map (``em.ProblemFor``: every cell some cone holds,
-    or the clusters' cells), and the readings calibration fits the model on (None: all)."""
+    """What EM works on: its problems under a map, and the readings calibration fits on (None: all)."""
 
     problems: ProblemFor
     fitted_readings: Callable[[], np.ndarray | None]
@@ -57,12 +54,7 @@ class View(NamedTuple):
 
 @dataclass(frozen=True)
 class State:
-    """A map in the making. Given: the configured ``params``, the log ``source``, its ``grid``,
-    the ``plan``, the detector and what the map records of it, a progress callback. Added by the
-    stages (each field None until a stage writes it; ``runner.Stage`` says which): the scans in
-    memory, the laid-out readings, the standard map, what was learned, the readings the detector
-    flags, the clusters, EM's region, its binary map, problem and outcome, each cell's evidence at
-    the final map, and the map's layers."""
+    """A map in the making: what it was given (``GIVEN``), then what the stages add (None until written)."""
 
     params: MapParams
     source: TimedSource
@@ -90,8 +82,7 @@ class State:
 
     @property
     def in_use(self) -> MapParams:
-        """The configured parameters with the forward model learned so far in EM's place: what
-        the mappers are handed (the map records ``params`` and ``learned`` apart)."""
+        """The configured parameters with the forward model learned so far: what the mappers are handed."""
         forward = self.learned.model(self.params.em.forward)
         return dataclasses.replace(self.params, em=dataclasses.replace(self.params.em, forward=forward))
 

@@ -1,6 +1,5 @@
-"""EM's sweeps as ``run_em`` runs them: the grid's column bands (``sweep_bands``), colour by colour,
-the bands of one colour at once on threads (``Sweeps``), each band a call of the tile kernel
-(``em_kernels.tiles._sweep_tiles``) resumed after every pause and every growth of its scratch."""
+"""EM's sweeps as ``run_em`` runs them: the grid's column bands (``sweep_bands``) colour by colour, a colour's bands
+at once on threads (``Sweeps``), each a tile-kernel call resumed after every pause and every growth of its scratch."""
 
 from __future__ import annotations
 
@@ -16,11 +15,8 @@ from aogm_cli.mapping.em_kernels import layout as L
 from aogm_cli.mapping.em_kernels import listing, tiles
 from aogm_cli.sensor_models.cone import flat_offsets
 
-# bytes of slack on either side of a scratch's small arrays: two threads' control words and tile
-# sums, written at every tile, must not share a cache line wherever the allocator puts them (on the
-# office of 5000 scans the bands' busy time on two threads was 40% over one thread's before the
-# readings were ordered by row, and within noise of it after, with or without the slack:
-# docs/algorithms.md)
+# bytes of slack around a scratch's small arrays: two threads' control words and tile sums, written at every
+# tile, must not share a cache line wherever the allocator puts them (docs/algorithms.md)
 SLACK = 128
 
 
@@ -44,15 +40,10 @@ def _work(readings: L.EMReadings, n_seg: int) -> L.TileWork:
         window_leave=none)
 
 
-# A sweep visits column bands of the grid, colour by colour (``sweep_bands``): two bands of one colour
-# are separated by bands at least as wide as any reading's cone, so no reading reaches both and they
-# can be swept at once, each on its own thread, with the same result as one after the other. The
-# order (colour 0's bands left to right, then colour 1's, ...) depends on the problem alone, so the
-# map is the same on any number of threads. A problem of fewer readings than BAND_READINGS is one
-# band, swept row by row over the whole grid as before: every bundled world (2408-8400 readings) and
-# the real 8-sonar ring (3304), whose maps the band order would move as another start would (the
-# ring's em.walls_kept 0.954 -> 0.947, under CI's gate of 0.95; on the 13 worlds leak up to +0.012),
-# for a saving of tens of milliseconds (docs/algorithms.md, "EM's sweep on several threads").
+# A sweep visits column bands colour by colour (``sweep_bands``): bands of one colour lie further apart than
+# any cone reaches, so they are swept at once on threads with the result of one after the other, in an order
+# set by the problem alone (the same map on any thread count). Below BAND_READINGS readings a problem is one
+# band: the band order would move small maps for little gain (docs/algorithms.md, "EM's sweep on several threads").
 BAND_READINGS = 10000
 
 
@@ -69,13 +60,8 @@ class Band:
 
 
 def sweep_bands(rd: L.EMReadings, width: int) -> tuple[list[list[Band]], np.ndarray | None]:
-    """The bands of one sweep, by colour, and the order of the readings they are numbered in
-    (None: as they are). Bands are ``w`` segments wide (the last takes the rest), w * SEGMENT at
-    least half the widest cone's columns, so that the colour-1 bands between two bands of one
-    colour are as wide as any cone; one band when there are fewer than BAND_READINGS readings or
-    no more bands than colours. The readings are ordered by the band of their cones' middle
-    column, so that two threads seldom write one cache line of the readings' tables, and then by
-    their first row, so that those a band's sweep holds at a row lie together."""
+    """The bands of one sweep by colour (those between two of one colour span any cone), and the readings' order
+    (None: as they are): by middle column's band (threads seldom share a cache line), then by first row."""
     n_read = rd.ints.shape[0]
     n_seg = -(-width // L.SEGMENT)
     box = rd.extent.T
@@ -90,8 +76,6 @@ def sweep_bands(rd: L.EMReadings, width: int) -> tuple[list[list[Band]], np.ndar
     n_bands = n_seg // w
     if n_bands <= colours:
         return whole, None
-    # by the band of the middle column, then by first row: a band's readings active at a row lie
-    # together in the tables, its own part of them
     middle = np.where(live, (box[2].astype(np.int64) + box[3]) // (2 * w * L.SEGMENT), -1)
     order = np.lexsort((box[0], middle))
     box, live, window_hi = box[:, order], live[order], rd.ints["window_hi"][order]
@@ -105,8 +89,7 @@ def sweep_bands(rd: L.EMReadings, width: int) -> tuple[list[list[Band]], np.ndar
 
 
 def _permuted(rd: L.EMReadings, order: np.ndarray) -> L.EMReadings:
-    """``rd``'s readings (their tables, with their state, and extents) in ``order``: copies. The
-    sweep takes no order of them (a band has its own)."""
+    """Copies of ``rd``'s tables, state and extents in ``order`` (no reading order: a band has its own)."""
     none = rd.enter[:0]
     return L.EMReadings(ints=rd.ints[order], floats=rd.floats[order], extent=rd.extent[order], enter=none, leave=none,
                         window_leave=none)
@@ -145,10 +128,7 @@ def _scratch_bytes(work: L.TileWork) -> int:
 
 
 class Sweeps:
-    """The sweeps of one run of EM over ``cand`` (``em_kernels.layout.Candidates``): ``one_pass(mode)``
-    visits every band, colour by colour, the bands of a colour on up to ``Limits.threads``
-    threads (``core.budget.in_parts``), one scratch each. Use as a context manager: on leaving,
-    the readings' tables hold their state in the problem's order again."""
+    """The sweeps of one EM run over ``cand``; as a context manager, leaves the tables in the problem's order."""
 
     def __init__(self, problem, cand: L.Candidates):  # problem: an em.EMProblem (the layer above)
         rd = problem.readings
@@ -156,8 +136,7 @@ class Sweeps:
         self.kernel_args = (problem.templates.kernel_arrays, flat_offsets(problem.templates, problem.shape[1]),
                             L.row_groups(problem.templates))
         self.phases, self.order = sweep_bands(rd, problem.shape[1])
-        # the readings and their state as the kernels take them: by column while the bands sweep
-        # (put back on leaving)
+        # the readings and their state by column while the bands sweep (put back on leaving)
         self.tables = rd if self.order is None else _permuted(rd, self.order)
         self.threads = min(active_limits().thread_count(), max(len(bands) for bands in self.phases))
         self.works = queue.SimpleQueue()  # one scratch per thread
@@ -165,10 +144,8 @@ class Sweeps:
             self.works.put(_work(self.tables, cand.tile_clock.shape[1]))
         self.peak = [0, 0]  # the most pairs of a tile, the bytes of a thread's scratch
         self.clock = 0  # accepted flips so far: a band starts at the clock its colour starts at
-        self.seconds: dict[int, float] = {}  # each band's (by seg_lo) time in the last pass: the order of a colour's
-        # bands on the threads (which changes nothing computed)
-        self.band_seconds = 0.0  # the bands' times added up over the run: against the sweeps' wall time on
-        # several threads, how busy they were
+        self.seconds: dict[int, float] = {}  # each band's (by seg_lo) time in the last pass: their order
+        self.band_seconds = 0.0  # the bands' times added up: against the wall time, how busy the threads were
 
     def __enter__(self) -> Sweeps:
         return self
@@ -179,12 +156,10 @@ class Sweeps:
             self.problem.readings.floats[self.order] = self.tables.floats
 
     def one_pass(self, mode: int) -> tuple[int, int, int]:
-        """One sweep (``mode`` em_kernels.layout.SWEEP) or scoring pass (SCORE): (flips, candidates
-        scored, pairs generated)."""
+        """One sweep (``mode`` SWEEP) or scoring pass (SCORE): (flips, candidates scored, pairs generated)."""
         totals = [0, 0, 0]
         for bands in self.phases:
-            # the costliest bands of the last pass first, so that the threads end together (each band
-            # starts at the colour's clock: their order changes nothing computed)
+            # the costliest bands first, so that the threads end together (the order changes nothing computed)
             by_cost = sorted(bands, key=lambda band: -self.seconds.get(band.seg_lo, 0.0))
             done = in_parts(len(by_cost), lambda k, stop, by_cost=by_cost: self._band(by_cost[k], mode, stop))
             for i in range(3):

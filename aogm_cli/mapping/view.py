@@ -1,6 +1,5 @@
-"""What a map of EM shows a planner: EM's residuals on the cells the data decide, the hidden ones
-unobserved, the robot's footprint clear (``em_view``), and for an adaptive map the cells outside its
-clusters put on the scale of those inside (``joined_view``)."""
+"""What a map of EM shows a planner: EM's residuals where the data decide, hidden cells unobserved, the robot's
+footprint clear (``em_view``); an adaptive map's outside put on the scale of its clusters (``joined_view``)."""
 
 from __future__ import annotations
 
@@ -14,40 +13,24 @@ from aogm_cli.mapping.params import EMConfig, MapParams
 from aogm_cli.mapping.standard import probability_from_log_odds
 from aogm_cli.sensor_models.ray import axis_counts
 
-HIDDEN_GAIN = 0.05  # log-odds: the evidence that decides a cell free (EM's ``decided``, adaptive's ``stages.adaptive_view``)
+HIDDEN_GAIN = 0.05  # log-odds: the evidence that decides a cell free (``decided``, ``stages.adaptive_view``)
 
 
 def decided_free(evidence: np.ndarray) -> np.ndarray:
-    """Where ``evidence`` (log p(Z | occupied) - log p(Z | free)) decides a cell free: its
-    occupancy would lower the readings' likelihood by more than ``HIDDEN_GAIN``."""
+    """Where ``evidence`` decides a cell free: occupancy would lower the likelihood by over ``HIDDEN_GAIN``."""
     return evidence < -HIDDEN_GAIN
 
 
-# a candidate EM leaves free is decided by the data when occupancy would lower the data
-# log-likelihood by more than ``HIDDEN_GAIN`` (log-odds); the others are the hidden cells
-# of the setting ``em.hidden``
-
-
 def decided(result: EMResult, config: EMConfig) -> np.ndarray:
-    """Which of ``result``'s candidates the data decides: those believed occupied, and those
-    believed free whose occupancy would lower the data log-likelihood by more than
-    ``HIDDEN_GAIN``. The others are cells EM leaves free although no reading objects to
-    an obstacle there: hidden behind the obstacles the readings detect (a wall's far layers,
-    beyond every cone's window or barely inside it), where the prior alone decides."""
+    """``result``'s candidates the data decides: occupied or ``decided_free`` (the others are ``em.hidden``)."""
     with np.errstate(divide="ignore"):
         evidence = np.log(result.residual) - np.log1p(-result.residual) - config.l_prior  # log p(Z|occ) - log p(Z|free)
     return (result.residual > 0.5) | decided_free(evidence)
 
 
 def residual_into(probability: np.ndarray, result: EMResult, config: EMConfig) -> np.ndarray:
-    """Write EM's residual occupancy into the flat ``probability`` at the candidates the data
-    decides (``decided``); the hidden ones (undecided: the prior alone puts them free) keep what
-    ``probability`` holds (the standard map's estimate) with ``config.hidden == "standard"``,
-    get the residual too with ``"prior"``, and with ``"unobserved"`` (the default) keep the
-    standard estimate where it is above 0.5 and are returned, to be reported unobserved, where
-    it is not: a planner must not drive where no reading says the way is free.
-
-    Returns the flat ids of the cells to report unobserved (empty but for ``"unobserved"``)."""
+    """Write EM's residuals into ``probability`` at the ``decided`` candidates; returns the hidden cells to report
+    unobserved ("unobserved": standard estimate <= 0.5; a planner must not drive where no reading says free)."""
     none = np.zeros(0, dtype=np.int64)
     if config.hidden == "prior":
         probability[result.candidates] = result.residual
@@ -61,19 +44,15 @@ def residual_into(probability: np.ndarray, result: EMResult, config: EMConfig) -
 
 
 def footprint(grid, poses: np.ndarray, sensor) -> np.ndarray:
-    """Bool (H, W): cells inside the sensor ring at some pose (within the smallest mount radius
-    of its position): the robot's own body stood there."""
+    """Bool (H, W): cells inside the sensor ring (smallest mount radius) at some pose: the robot's body."""
     radius = np.hypot(sensor.mount[:, 0], sensor.mount[:, 1])
     return grid.cells_near(poses[:, 0], poses[:, 1], float(np.min(radius[np.isfinite(radius)])))
 
 
 def planner_view(probability: np.ndarray, observed: np.ndarray, unseen: np.ndarray, body: np.ndarray,
                  free: float) -> np.ndarray:
-    """What EM's map claims, for a planner: the flat cells ``unseen`` (``residual_into``)
-    reported unobserved, and the robot's ``footprint`` ``body`` observed and free (probability
-    at most ``free``) whatever the readings say, as a costmap clears its footprint (no cone
-    covers those cells well, and a short random or crosstalk reading can leave an obstacle
-    there). ``probability`` (flat) is updated in place; returns the new observed (H, W)."""
+    """EM's map for a planner: ``unseen`` unobserved, the robot's ``body`` observed and at most ``free``, as a
+    costmap clears its footprint (no cone covers it well; a short random reading can leave an obstacle)."""
     out = observed.copy()
     flat = out.reshape(-1)
     flat[unseen] = False
@@ -84,9 +63,7 @@ def planner_view(probability: np.ndarray, observed: np.ndarray, unseen: np.ndarr
 
 def em_view(log_odds: np.ndarray, observed: np.ndarray, outcome: EMOutcome | None, grid, poses: np.ndarray, sensor,
             params: MapParams, body: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(probability, observed) (H, W) of an em or adaptive map: the standard map's, EM's residuals
-    on its candidates (``residual_into``), what a planner sees (``planner_view``; ``body``: the
-    robot's ``footprint``, when the caller has it), 0.5 where unobserved."""
+    """(probability, observed) (H, W) of an em or adaptive map as a planner sees it, 0.5 where unobserved."""
     probability = probability_from_log_odds(log_odds, observed).reshape(-1)
     if outcome is not None:
         free = probability_from_log_odds(np.float64(params.inverse_model.clamp_min))
@@ -98,15 +75,9 @@ def em_view(log_odds: np.ndarray, observed: np.ndarray, outcome: EMOutcome | Non
 
 
 # --- one scale (issue 28) --------------------------------------------------------------------------
-# Inside the clusters a cell's probability is EM's residual, outside the standard map's: two scales
-# that rank cells unlike each other (the standard map's free cells sit at its clamp, 0.12, above EM's
-# free cells at a wall's edge, where readings end; docs/algorithms.md, "Where the defaults come
-# from", has what that cost on the intel log). The log's own readings say what each scale means: of the echoes whose
-# axis reaches a cell, the share that end in it (its hit rate, ``ray.axis_counts``). Each observed cell
-# outside the clusters takes the EM probability of the cluster cells whose hit rate its probability
-# has: one increasing map per log, learned from the readings that made the map (no truth, no
-# held-out scan), which keeps every cell on its side of 0.5, so that what the map believes occupied,
-# free or unknown (accuracy, checks, what a planner sees) is what it was.
+# EM's residuals inside the clusters and the standard map outside rank cells unlike each other (docs/algorithms.md,
+# "Where the defaults come from"), so each outside cell takes the EM probability of the cluster cells with its hit
+# rate (``ray.axis_counts``): one increasing map per log, from its readings, each cell on its side of 0.5.
 
 RATE_BINS = (-15, 15)  # log-odds: the hit-rate curves' bins are one log-odds wide over this range
 SIDE = 1e-3  # a cell the scale would move across 0.5 stops this far short of it
@@ -114,11 +85,8 @@ SIDE = 1e-3  # a cell the scale would move across 0.5 stops this far short of it
 
 def joined_view(log_odds: np.ndarray, observed: np.ndarray, outcome: EMOutcome | None, clusters: np.ndarray,
                 whole: Log, grid, params: MapParams, evidence: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(probability, observed) (H, W) of an adaptive map: ``em_view``'s (EM's residuals in the
-    clusters, the standard map's elsewhere, what a planner sees), its observed cells outside the
-    clusters put on EM's scale, unless ``adaptive.scale`` is "mixed": with each cell's
-    ``evidence`` at the final map (the thinned map outside the clusters: ``stages.final_evidence``), EM's
-    residual there (``residual_scale``), else by the hit rates of the log's echoes (``one_scale``)."""
+    """``em_view`` of an adaptive map, the cells outside the clusters on EM's scale unless ``adaptive.scale``
+    is "mixed": by final ``evidence`` if given (``residual_scale``), else by hit rates (``one_scale``)."""
     robot = footprint(grid, whole.pose, whole.sensor) if outcome is not None or evidence is not None else None
     probability, observed = em_view(log_odds, observed, outcome, grid, whole.pose, whole.sensor, params, robot)
     if params.adaptive.scale == "mixed" or (outcome is None and evidence is None):
@@ -135,11 +103,7 @@ def joined_view(log_odds: np.ndarray, observed: np.ndarray, outcome: EMOutcome |
 
 
 def residual_scale(probability: np.ndarray, cells: np.ndarray, evidence: np.ndarray, l_prior: float) -> np.ndarray:
-    """``probability`` (H, W) with ``cells`` given EM's residual occupancy logistic(evidence +
-    l_prior), as EM gives its own candidates (``decided``), each kept on its side of 0.5 (``SIDE``
-    short of it): what the map believes is unchanged, and the cells outside the clusters rank on
-    the scale of those inside (its held-out scores against the hit rates' scale: docs/algorithms.md,
-    "Adaptive with the thinned map outside its clusters")."""
+    """``probability`` with ``cells`` at EM's residual logistic(evidence + l_prior), each on its side of 0.5."""
     residual = 1.0 / (1.0 + np.exp(-(np.asarray(evidence, dtype=np.float64) + l_prior)))
     p = probability[cells]
     side = np.where(p > 0.5, np.maximum(residual[cells], 0.5 + SIDE), np.minimum(residual[cells], 0.5 - SIDE))
@@ -149,9 +113,7 @@ def residual_scale(probability: np.ndarray, cells: np.ndarray, evidence: np.ndar
 
 
 def pool_adjacent_violators(y: np.ndarray, weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The increasing fit of the sequence ``y`` in weighted least squares: adjacent values that
-    do not rise are pooled into their weighted mean (weighted pool-adjacent-violators). Returns
-    (the pooled values, strictly increasing; the index in ``y`` where each pool starts)."""
+    """Increasing weighted least-squares fit of ``y`` (PAV): (pooled values, the index where each pool starts)."""
     blocks: list[list[float]] = []  # [weight, weight * y, first index]
     for i, (yi, wi) in enumerate(zip(y, weights, strict=True)):
         blocks.append([float(wi), float(wi * yi), i])
@@ -164,8 +126,7 @@ def pool_adjacent_violators(y: np.ndarray, weights: np.ndarray) -> tuple[np.ndar
 
 
 class HitRates(NamedTuple):
-    """``hit_rate_curve``: per pool of cells (bins one log-odds wide, pooled until the rate rises),
-    in increasing order of probability and of rate."""
+    """``hit_rate_curve``'s pools (bins one log-odds wide, pooled until the rate rises), in increasing order."""
 
     rate: np.ndarray  # (ends + 1/2) / (reaches + 1) of its cells' echoes, pooled
     mean: np.ndarray  # its cells' probability, the mean weighted by reaches
@@ -174,12 +135,8 @@ class HitRates(NamedTuple):
 
 
 def hit_rate_curve(probability: np.ndarray, ends: np.ndarray, passes: np.ndarray, region: np.ndarray) -> HitRates:
-    """How often the log's echoes end in the cells of ``region`` (bool (H, W)) that some echo's
-    axis reaches (``ends`` + ``passes`` > 0), against the cells' probability: the cells fall
-    into bins one log-odds wide (``RATE_BINS``), and each bin's hit rate, (ends + 1/2) /
-    (reaches + 1) (Jeffreys: never 0 or 1), is pooled with its neighbours' until it rises with
-    the probability (``pool_adjacent_violators``, weighted by reaches). Empty arrays when no echo
-    reaches the region."""
+    """How often the echoes end in ``region``'s reached cells by probability: per log-odds bin the hit rate
+    (ends + 1/2) / (reaches + 1) (Jeffreys: never 0 or 1), pooled until it rises (empty if none reached)."""
     reach = (ends + passes).astype(np.float64)
     cells = region & (reach > 0)
     p = probability[cells].astype(np.float64)
@@ -206,15 +163,9 @@ def hit_rate_curve(probability: np.ndarray, ends: np.ndarray, passes: np.ndarray
 
 def one_scale(probability: np.ndarray, observed: np.ndarray, inside: np.ndarray, ends: np.ndarray,
               passes: np.ndarray) -> np.ndarray:
-    """``probability`` (H, W) with its observed cells outside ``inside`` (the clusters) put on the
-    inside's scale by their hit rates (``hit_rate_curve``). An outside cell's hit rate h is the
-    outside cells' curve at its probability (linear between the pools' mean probabilities,
-    constant beyond them); it then ranks among the inside cells by h: with h between the rates
-    of inside pools k and k + 1 it lies between pool k's highest probability and pool k + 1's
-    lowest (linear in h), below the lowest pool's rate under its lowest probability (in
-    proportion to h), above the highest pool's rate over its highest (the distance to 1 in
-    proportion to 1 - h). Each cell keeps its side of 0.5 (0.5 stays; one that would cross
-    stops ``SIDE`` short of it). A copy; unchanged when no echo reaches either side."""
+    """``probability`` (H, W), a copy, with the observed cells outside ``inside`` put on the inside's scale: an
+    outside cell's hit rate h is placed among the inside pools' rates (linear between pool k's highest and
+    k + 1's lowest probability, proportional beyond), each kept on its side of 0.5 (``SIDE``)."""
     outside = observed & ~inside
     ins = hit_rate_curve(probability, ends, passes, inside & observed)
     outs = hit_rate_curve(probability, ends, passes, outside)
