@@ -20,9 +20,9 @@ OUTSIDE_MARGIN = 0.0
 
 @dataclass(frozen=True)
 class Plan:
-    """What a map of ``mode`` does, decided from what it is given (``plan_map``): ``learns`` the keys learned from
-    this log, in EM's rounds (``calibrates``) or, with a robot's model, p_max (``fits_rates``); ``thinning``
-    the margin (None: not thinned); ``start`` EM's ("elfes in clusters": thinned outside, Elfes' inside)."""
+    """What a map of ``mode`` does, decided from what it is given (``plan_map``); every field is described where
+    users read it (docs/commands.md, the map's root attribute ``plan``). ``thinning`` is the margin (None: not
+    thinned); ``start`` EM's ("elfes in clusters": thinned outside, Elfes' inside); ``stages``: ``modes``'."""
 
     mode: str
     sensor: str
