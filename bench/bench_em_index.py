@@ -48,12 +48,16 @@ def bench_world(world: str, log_path, calls: int) -> None:
     marks = (np.zeros(grid.height * grid.width, dtype=bool), np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64),
              np.zeros((0, 4), dtype=np.int32))
     flat = flat_offsets(run.templates, grid.width)
+    rows = (("em_readings", readings),
+            ("em_problem", lambda: E.em_problem(rd, run.templates, grid.shape, empty.copy(), config)),
+            ("em_problem, clusters", lambda: E.em_problem(rd, run.templates, grid.shape, empty.copy(), config,
+                                                          labels=labels)),
+            ("_init_state", lambda: _init_state(run.templates.kernel_arrays, flat, rd, problem.model, empty, grid.shape,
+                                                marks, (0, n))))
     print(f"{world} ({n} readings, one thread)")
     with using(Limits(threads=1)):
-        print(f"  em_readings            {timed(readings, calls)}")
-        print(f"  em_problem             {timed(lambda: E.em_problem(rd, run.templates, grid.shape, empty.copy(), config), calls)}")
-        print(f"  em_problem, clusters   {timed(lambda: E.em_problem(rd, run.templates, grid.shape, empty.copy(), config, labels=labels), calls)}")
-        print(f"  _init_state            {timed(lambda: _init_state(run.templates.kernel_arrays, flat, rd, problem.model, empty, grid.shape, marks, (0, n)), calls)}")
+        for name, call in rows:
+            print(f"  {name:22s} {timed(call, calls)}")
 
 
 def main() -> None:
