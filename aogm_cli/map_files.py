@@ -24,7 +24,7 @@ from aogm_cli.mapping.learned import FROM_LOG, Learned, SensorModel
 from aogm_cli.mapping.map_cost import map_estimate
 from aogm_cli.mapping.params import MapParams, params_from
 from aogm_cli.mapping.pipeline import Progress
-from aogm_cli.mapping.plan import CONE
+from aogm_cli.mapping.plan import auto_outside
 from aogm_cli.sensor_models import cone_build
 
 __all__ = ["BASELINE_DETECTORS", "NamedSource", "calibration_notice", "carried_model", "check_logs", "given_model",
@@ -119,7 +119,7 @@ def calibration_notice(path, m: OccupancyMap) -> str | None:
         why = ("the detector carries none for its sensor; aogm calibrate LOG -o MODEL learns one, --forward-model "
                "MODEL carries it")
     if (m.mode == "adaptive" and m.stats.get("outside") == "elfes" and m.params.get("adaptive", {}).get("outside") == "auto"
-            and (m.plan or {}).get("sensor") == CONE):  # a narrow beam's map is never thinned
+            and auto_outside(True, (m.plan or {}).get("sensor")) == "thinned"):
         why += "; with a model given, adaptive keeps the thinned map outside its clusters, at less cost"
     return f"{path}: calibrated the sensor's model on this log ({why})"
 

@@ -56,34 +56,36 @@ def mode_stages(plan: Plan) -> tuple[Stage, ...]:
     opening, incidence = plan.learns_opening, plan.incidence
     thinned = plan.thinning is not None
     if plan.mode == "standard":
-        stages = (SET_UP_CONES,
-                  STANDARD_STREAMED,
-                  thinned and THINNING_STREAMED,
-                  STANDARD_VIEW)
-    else:
-        prepared = (READ, SET_UP, READINGS, STANDARD,  # the em and adaptive modes alike
-                    opening and OPENING, opening and READINGS, opening and STANDARD,
-                    incidence and DEFLECTIONS, incidence and STANDARD,
-                    plan.fits_rates and RATES,
-                    thinned and THINNING)
+        return _present(SET_UP_CONES,
+                        STANDARD_STREAMED,
+                        thinned and THINNING_STREAMED,
+                        STANDARD_VIEW)
+    prepared = (READ, SET_UP, READINGS, STANDARD,  # the em and adaptive modes alike
+                opening and OPENING, opening and READINGS, opening and STANDARD,
+                incidence and DEFLECTIONS, incidence and STANDARD,
+                plan.fits_rates and RATES,
+                thinned and THINNING)
     if plan.mode == "em":
-        stages = (*prepared,
-                  WHOLE_LOG,
-                  START,
-                  plan.calibrates and CALIBRATION,
-                  INDEX,
-                  SWEEPS,
-                  EM_VIEW)
-    elif plan.mode == "adaptive":
-        stages = (*prepared,
-                  DETECTOR,
-                  CLUSTERS,
-                  START,
-                  plan.calibrates and CALIBRATION,
-                  INDEX,
-                  SWEEPS,
-                  plan.decides and DECIDED,
-                  ADAPTIVE_VIEW)
+        return _present(*prepared,
+                        WHOLE_LOG,
+                        START,
+                        plan.calibrates and CALIBRATION,
+                        INDEX,
+                        SWEEPS,
+                        EM_VIEW)
+    return _present(*prepared,
+                    DETECTOR,
+                    CLUSTERS,
+                    START,
+                    plan.calibrates and CALIBRATION,
+                    INDEX,
+                    SWEEPS,
+                    plan.decides and DECIDED,
+                    ADAPTIVE_VIEW)
+
+
+def _present(*stages) -> tuple[Stage, ...]:
+    """The stages the plan keeps (one it leaves out is False)."""
     return tuple(stage for stage in stages if stage)
 
 
