@@ -28,6 +28,7 @@ from aogm_cli.sensor_models import readings as laid_out
 from aogm_cli.sensor_models.cone_build import build_cone_templates
 from aogm_cli.sensor_models.forward_index import build_forward_index, log_likelihoods
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig
+from aogm_cli.sensor_models.heard import heard_templates
 
 GRID = GridSpec(0.0, 0.0, 0.1, 30, 70)
 Z_MAX = 2.5
@@ -491,3 +492,23 @@ def test_one_reading_takes_the_kernels_compiled_for_many():
     result, _, _ = run_case(case)
     assert result.sweeps >= 1 and result.candidates.size > 0
     assert [list(kernel.signatures) for kernel in kernels] == compiled
+
+
+@pytest.mark.parametrize("seed", range(300, 312))
+def test_a_lobe_climbs_as_the_reference(seed):
+    # cones whose cells the sonar hears only near the axis and, farther off it, only near the sensor
+    # (``heard.heard_templates``): EM's tiles, state and windows leave the unheard cells out of a
+    # reading as the reference index does; every cone cell still counts as seen
+    height, width = SHAPES[seed % len(SHAPES)]
+    case = random_case(seed, GridSpec(0.0, 0.0, 0.1, height, width), n_readings=(10, 60), beams=(30.0, 60.0))
+    rng = np.random.default_rng(seed)
+    whole = case.templates
+    case.templates = heard_templates(whole, float(rng.choice([3.0, 8.0, 12.0])), float(rng.choice([0.7, 1.5, 3.0])))
+    assert 0 < int(case.templates.heard.sum()) < case.templates.heard.size
+    result, occupied, problem = run_case(case)
+    everything = dataclasses.replace(case, templates=whole).index()
+    heard = case.index()
+    assert heard.cell.size < everything.cell.size
+    assert np.array_equal(np.flatnonzero(problem.seen), np.unique(everything.cell))
+    check_against_reference(case, result, occupied, dataclasses.replace(problem, seen=np.isin(
+        np.arange(problem.seen.size), heard.cell)))

@@ -1,5 +1,6 @@
-"""What the log says of its beam before EM: its effective opening (``opening_record``, ``with_opening``) and the
-angle of incidence: echo surfaces, specular angle, deflected beams (``specular_record``, ``deflected_run``)."""
+"""What the log says of its beam before EM: its effective opening (``opening_record``, ``with_opening``), the lobe
+that hears (``heard_run``) and the angle of incidence: echo surfaces, specular angle, deflected beams
+(``specular_record``, ``deflected_run``)."""
 
 from __future__ import annotations
 
@@ -13,6 +14,8 @@ from aogm_cli.mapping.calibration import MAX_READINGS, incidence_at, opening_at,
 from aogm_cli.mapping.params import MapParams
 from aogm_cli.mapping.standard import thin_pass
 from aogm_cli.sensor_models.cone import flat_offsets
+from aogm_cli.sensor_models.forward_model import ForwardModelConfig
+from aogm_cli.sensor_models.heard import heard_templates
 from aogm_cli.sensor_models.readings import LaidOutReadings
 from aogm_cli.sensor_models.surface import reading_shadows, surface_normals
 
@@ -53,3 +56,9 @@ def opening_record(whole: Log, run: LaidOutReadings, params: MapParams, log_odds
     thin = dataclasses.replace(params, exact=dataclasses.replace(params.exact, thin=True))
     thinned = thin_pass(whole, run.grid, thin, log_odds, observed).log_odds
     return opening_at(run, sample_readings(run, MAX_READINGS), (thinned > 0).reshape(-1), params.em.forward)
+
+
+def heard_run(run: LaidOutReadings, forward: ForwardModelConfig) -> LaidOutReadings:
+    """``run`` with its cones' unheard cells marked (``heard.heard_templates``) for EM and calibration."""
+    templates = heard_templates(run.templates, forward.lobe_deg, forward.lobe_range)
+    return run if templates is run.templates else dataclasses.replace(run, templates=templates)

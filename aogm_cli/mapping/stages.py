@@ -85,8 +85,9 @@ def set_up_em(s: State) -> State:
 
 
 def readings(s: State) -> State:
-    """Every reading laid out on its cone (``readings.lay_out_readings``)."""
-    return s.but(readings=lay_out_readings(s.whole.pose, s.whole.ranges, s.whole.sensor, s.grid))
+    """Every reading laid out on its cone (``readings.lay_out_readings``), the cells the lobe hears marked."""
+    run = lay_out_readings(s.whole.pose, s.whole.ranges, s.whole.sensor, s.grid)
+    return s.but(readings=B.heard_run(run, s.in_use.em.forward))
 
 
 def standard(s: State) -> State:

@@ -28,6 +28,7 @@ from aogm_cli.sensor_models.cone import (
 )
 from aogm_cli.sensor_models.exact_inverse import MARGIN, ExactModelConfig
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig
+from aogm_cli.sensor_models.heard import heard_templates
 from aogm_cli.sensor_models.inverse_model import (
     UNOBSERVED,
     InverseModelConfig,
@@ -196,6 +197,8 @@ def standard_log_odds(log, grid: GridSpec, params: MapParams, cuts=None, chunk: 
     """(log_odds, observed) of a whole log source, streamed in chunks; ``cuts`` stop deflected beams."""
     narrow = is_narrow_beam(log.sensor, grid.resolution)  # decided once, for the templates and the map
     templates = None if narrow else cone_templates(grid, log.sensor, narrow=narrow)
+    if templates is not None and params.inverse_model.model == "exact":  # it hears what EM hears
+        templates = heard_templates(templates, params.em.forward.lobe_deg, params.em.forward.lobe_range)
     return standard_map(log.chunks(chunk), log.sensor, grid, params.inverse_model, templates=templates,
                         narrow=narrow, cuts=cuts, models=(params.em.forward, params.exact))
 

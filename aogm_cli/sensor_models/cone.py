@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numba
@@ -30,6 +30,7 @@ class ConeArrays(NamedTuple):
     range_index: np.ndarray  # (n_base, n_shells + 1) int64: see ``range_search``
     resolution: float  # m: the grid's cell size (and the shells' width of range_index)
     extent: int  # bound of |drow| and |dcol|
+    heard: np.ndarray  # (E,) uint8: 1 where the sonar hears a surface (``heard.heard_templates``); empty: all
 
 
 class FlatOffsets(NamedTuple):
@@ -40,6 +41,7 @@ class FlatOffsets(NamedTuple):
 
 
 NO_CUT = np.zeros(0, dtype=np.float32)  # ``ConeReadings.cut`` when no reading is cut
+NO_CELLS = np.zeros(0, dtype=np.uint8)  # ``ConeTemplates.heard`` when every cell is heard
 
 
 class ConeReadings(NamedTuple):
@@ -73,6 +75,10 @@ class ConeTemplates:
     transform: np.ndarray  # (n_bins, 4) int64
     extent: int
     range_index: np.ndarray  # (n_base, n_shells + 1) int64: entries with range < q * resolution
+    # (E,) uint8: the cells whose surfaces the sonar hears (``heard.heard_templates``); empty: every cell.
+    # EM, the exact inverse model and calibration leave the others out; the standard mapper draws them all
+    heard: np.ndarray = field(default_factory=lambda: NO_CELLS)
+    lobe: tuple[float, float] | None = None  # (lobe_deg, lobe_range) that ``heard`` was made of
 
     @property
     def bin_width(self) -> float:
@@ -82,7 +88,7 @@ class ConeTemplates:
     def kernel_arrays(self) -> ConeArrays:
         """The templates as compiled kernels take them."""
         return ConeArrays(self.offsets, self.dcol, self.drow, self.ranges, self.base_bin, self.transform,
-                          self.range_index, float(self.resolution), int(self.extent))
+                          self.range_index, float(self.resolution), int(self.extent), self.heard)
 
     def heading_bin(self, yaw):
         """Heading bin (int64 array) of each yaw (rad, any real): the bin whose centre is nearest."""

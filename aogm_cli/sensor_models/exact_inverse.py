@@ -129,6 +129,22 @@ def cone_ratios(p, g, j0, g0, p_hit, const, w, n, a, u, r, na, out):
     return True
 
 
+@numba.njit(cache=True, inline="always")
+def _heard_only(heard, rk, ib, m, j0, ranges):
+    """The first ``m`` cells of a cone (``ib``, ranges ``rk``) with the unheard left out: (m, j0, their ranges in
+    ``ranges``)."""
+    n = 0
+    n0 = 0
+    for j in range(m):
+        if heard[j] != 0:
+            ib[n] = ib[j]
+            ranges[n] = rk[j]
+            n += 1
+            if j < j0:
+                n0 += 1
+    return n, n0, ranges
+
+
 @numba.njit(cache=True, _nrt=False, error_model="numpy")
 def _reading_cone(tpl, flat, shape, readings, t, state, prior, model, ib, fl):
     """Reading t's cone under ``state`` (negative: ``prior``): flat ids in ``ib``, occupancy in
@@ -153,6 +169,8 @@ def _reading_cone(tpl, flat, shape, readings, t, state, prior, model, ib, fl):
     j0 = min(range_search(rk, tpl.range_index[b], tpl.resolution, z - window * sigma - 1e-9, False), m)
     p = fl[0]
     g = fl[1]
+    if tpl.heard.shape[0] > 0:  # the cone's heard cells only, in order (``ConeTemplates.heard``)
+        m, j0, rk = _heard_only(tpl.heard[tpl.offsets[b]:], rk, ib, m, j0, fl[2])
     for j in range(m):
         v = state[np.uint64(np.uint32(ib[j]))]
         p[j] = prior if v < 0.0 else v

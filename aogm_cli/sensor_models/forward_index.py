@@ -128,9 +128,11 @@ def _fill_index(tpl, flat, grid, readings, sigma, window, out):
         cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width)
         touches = not use_mask
         n = 0
+        heard = tpl.heard[tpl.offsets[b]:]
+        deaf = heard.shape[0] > 0
         for j in range(m):
             c = np.int64(ib[j])
-            if c >= n_cells:
+            if c >= n_cells or (deaf and heard[j] == 0):  # unheard cells: not in the reading's cone
                 continue
             if use_mask and grid.mask[c]:
                 touches = True

@@ -37,6 +37,11 @@ class ForwardModelConfig:
     # the opening (degrees, full angle) of the cone that detects (a surface near the edge echoes too
     # weakly); 0: the log's beam width. Calibration learns it (``sensor_models.lobe``)
     opening_deg: float = 0.0
+    # the lobe that hears (``heard``): a cell at range r, phi off the axis, is heard when
+    # r <= lobe_range * exp(-(phi / lobe_deg)^2); EM, the exact inverse model and calibration leave the others
+    # out of its reading. 0: every cell of the cone
+    lobe_deg: float = 0.0
+    lobe_range: float = 10.0  # m: how far a surface met head-on on the axis is heard
 
     def validate(self) -> ForwardModelConfig:
         def bad(key, msg):
@@ -57,6 +62,11 @@ class ForwardModelConfig:
         if not 0 <= self.opening_deg < 180:
             raise bad("opening_deg", f"expected an angle in [0, 180) degrees (0: the log's beam width), "
                                      f"got {self.opening_deg:g}")
+        if not 0 <= self.lobe_deg <= 90:
+            raise bad("lobe_deg", f"expected an angle in [0, 90] degrees (0: every cell of the cone heard), "
+                                  f"got {self.lobe_deg:g}")
+        if not self.lobe_range > 0:
+            raise bad("lobe_range", f"expected a positive range (m), got {self.lobe_range:g}")
         return self
 
     def as_dict(self) -> dict:
@@ -163,9 +173,11 @@ def cone_obstacles(tpl, flat, shape, readings, occupied, sigma, window, z_max, p
             r = ranges[tpl.offsets[b] : tpl.offsets[b + 1]]
             m = cone_entries(r, z, limit, sigma, window)
             cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width)
+            deaf = tpl.heard.shape[0] > 0  # unheard cells are no obstacles of a reading
+            s0 = tpl.offsets[b]
             for j in range(m):
                 c = ib[j]
-                if c < n_cells and occupied[c]:
+                if c < n_cells and occupied[c] and not (deaf and tpl.heard[s0 + j] == 0):
                     if n < room:
                         d[n] = r[j]
                     n += 1

@@ -120,6 +120,8 @@ def _window_cells(tpl, readings, grid_shape, span, out):
         s = tpl.offsets[tpl.base_bin[k]]
         tr = _bin_transform(tpl, k)
         for j in range(rd.jlo[t], rd.m[t]):
+            if tpl.heard.shape[0] > 0 and tpl.heard[s + j] == 0:  # no window cell of the reading
+                continue
             c = _entry_cell(tpl, s, tr, j, np.int64(rd.row0[t]), np.int64(rd.col0[t]), height, width)
             if c >= 0:
                 out[c] = True
@@ -138,7 +140,10 @@ def _far_gains(tpl, readings, grid_shape, of_cell, span, out):
         s = tpl.offsets[tpl.base_bin[k]]
         tr = _bin_transform(tpl, k)
         v = state.far_log[t, 0]
+        deaf = tpl.heard.shape[0] > 0  # unheard cells are no part of the reading
         for j in range(far):
+            if deaf and tpl.heard[s + j] == 0:
+                continue
             c = _entry_cell(tpl, s, tr, j, np.int64(rd.row0[t]), np.int64(rd.col0[t]), height, width)
             if c >= 0 and of_cell[c] >= 0:
                 out[of_cell[c]] += v

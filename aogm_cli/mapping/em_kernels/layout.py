@@ -60,8 +60,9 @@ PAUSE_WORK = 1 << 21
 class RowGroups(NamedTuple):
     """Each stored bin's entries grouped by grid row (``kind`` 0 by dr, 1 by dc: as the symmetry takes drow)."""
 
-    rows: np.ndarray  # (2, n_base, 2 ext + 1, 4) int32: group v's first entry, count, least and greatest
-    # other offset: one 16-byte record, not three arrays' cache misses (docs/algorithms.md)
+    rows: np.ndarray  # (2, n_base, 2 ext + 1, 6) int32: group v's first entry, count, least and greatest
+    # other offset, least and greatest heard (``ConeTemplates.heard``; greatest < least: none): one record,
+    # not several arrays' cache misses (docs/algorithms.md)
     j: np.ndarray  # (2, E) int32: entry index within its stored bin (range order)
     box: np.ndarray  # (4, E) int32: min dr, max dr, min dc, max dc over a bin's entries 0..j
 
@@ -213,8 +214,10 @@ def row_groups(templates) -> RowGroups:
     total = int(templates.offsets[-1])
     if total >= 2**31:
         raise ValueError(f"{total} template entries: more than an int32 row table holds")
-    rows = np.zeros((2, n_base, 2 * ext + 1, 4), dtype=np.int32)
+    rows = np.zeros((2, n_base, 2 * ext + 1, 6), dtype=np.int32)
     rows[..., 3] = -1
+    rows[..., 5] = -1
+    heard = templates.heard.astype(bool) if templates.heard.size else np.ones(total, dtype=bool)
     j_all = np.empty((2, total), dtype=np.int32)
     box = np.empty((4, total), dtype=np.int32)
     for b in range(n_base):
@@ -240,6 +243,16 @@ def row_groups(templates) -> RowGroups:
             # a row of a (convex) cone is a run of cells: positions follow from the other offset
             if np.any(rows[kind, b, filled, 3] - rows[kind, b, filled, 2] + 1 != counts[filled]):
                 raise AssertionError("a template row is not a run of consecutive cells")
+            h = heard[s:e]
+            lo = np.full(2 * ext + 1, np.iinfo(np.int32).max, dtype=np.int64)
+            hi = np.full(2 * ext + 1, np.iinfo(np.int32).min, dtype=np.int64)
+            np.minimum.at(lo, key[h] + ext, other[h])
+            np.maximum.at(hi, key[h] + ext, other[h])
+            some = hi >= lo
+            rows[kind, b, some, 4] = lo[some]
+            rows[kind, b, some, 5] = hi[some]
+            rows[kind, b, ~some, 4] = 1  # none heard: an empty run
+            rows[kind, b, ~some, 5] = 0
     groups = RowGroups(rows, j_all, box)
     for a in groups:
         a.setflags(write=False)

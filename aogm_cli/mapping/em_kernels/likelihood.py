@@ -66,6 +66,8 @@ def _init_state(tpl, flat, readings, model, occupied, grid_shape, marks, span):
     p_hit = model.p_hit
     mark = seen.shape[0] > 0
     join = labels.shape[0] > 0
+    heard = tpl.heard
+    deaf = heard.shape[0] > 0  # some cells unheard: left out but for ``seen``
     inv_width = 1.0 / width
     for t in range(span[0], span[1]):
         state.stamp[t] = 0
@@ -96,6 +98,8 @@ def _init_state(tpl, flat, readings, model, occupied, grid_shape, marks, span):
                     continue
                 if mark:
                     seen[cell] = True
+                if deaf and heard[s0 + j] == 0:
+                    continue
                 if join and labels[cell] > 0:
                     row = np.int64(cell * inv_width)  # cell // width without a division per cell:
                     if row * width > cell:  # the product is off by at most one row either way

@@ -62,7 +62,9 @@ def _row_span(tpl, groups, rd, t, r):
     if v < 0:
         return RowSpan(0, 0, 0, 1, 1, 0, 1, 0)
     f = min(_isqrt(rd.reach2[1, t] - gv * gv), v)
-    return RowSpan(kind, first, o_first, sign, max(o_first, -v), min(o_last, v), max(o_first, -f), min(o_last, f))
+    h_lo = max(o_first, np.int64(rows[kind, b, at, 4]))  # the heard run (``ConeTemplates.heard``)
+    h_hi = min(o_last, np.int64(rows[kind, b, at, 5]))
+    return RowSpan(kind, first, o_first, sign, max(h_lo, -v), min(h_hi, v), max(h_lo, -f), min(h_hi, f))
 
 
 @numba.njit(cache=True, inline="always")

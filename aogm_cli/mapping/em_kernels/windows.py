@@ -56,7 +56,7 @@ def _build_window(t, tpl, flat, rd, model, cand, state, work):
     for j in range(rd.jlo[t], rd.m[t]):
         cell = at + sign * np.int64(x_off[s0 + j]) if inside else _entry_cell(tpl, s0, tr, j, row0, col0, height,
                                                                               width)
-        if cell < 0 or not cand.occupied[cell]:
+        if cell < 0 or not cand.occupied[cell] or (tpl.heard.shape[0] > 0 and tpl.heard[s0 + j] == 0):
             continue
         g = gaussian_at(rd.z[t], tpl.ranges[s0 + j], model.sigma, model.window)
         if g == 0.0:
