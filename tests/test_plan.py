@@ -133,3 +133,14 @@ def test_the_grid_of_a_plan_is_the_logs():
     stages, state = planned(log, "em", params(resolution=0.5))
     assert isinstance(state.source, TimedSource) and isinstance(state.grid, GridSpec)
     assert state.plan.stages == tuple(s.name for s in stages) and state.grid.resolution == 0.5
+
+
+def test_a_configured_opening_wins_over_a_carried_one():
+    """A robot's model carries its opening; the user's em.opening_deg wins, one learned from this log wins over both."""
+    carried = dataclasses.replace(ROBOT, opening_deg=24.0)
+    configured = params(em={"opening_deg": 16.0}).em.forward
+    assert carried.model(configured).opening_deg == 16.0
+    assert carried.model(params().em.forward).opening_deg == 24.0  # none configured: the carried one
+    learned = dataclasses.replace(carried, opening_deg=20.0, opening={"opening_deg": 20.0})
+    assert learned.model(configured).opening_deg == 20.0
+    assert carried.model(configured).p_hit == 0.9  # the rest of the robot's model stays

@@ -57,7 +57,8 @@ class Learned:
         values = {} if self.sensor is None else {k: getattr(self.sensor, k) for k in SENSOR_KEYS}
         if self.specular_deg is not None:
             values["specular_deg"] = self.specular_deg
-        if self.opening_deg is not None:
+        # a carried or given opening, unless the user configured one (an opening learned from this log wins)
+        if self.opening_deg is not None and (self.opening is not None or configured.opening_deg == 0.0):
             values["opening_deg"] = self.opening_deg
         return dataclasses.replace(configured, **values)
 
