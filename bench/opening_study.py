@@ -32,7 +32,8 @@ def scores(m, log, ref, robot_radius: float) -> str:
         return f"accuracy {e['accuracy']:.4f}, leak {e['leak']:.4f}, block {e['block']:.4f}, checks {checks}"
     ref_log, std = ref
     s = against_standard(std.grid, m.probability, m.observed, std.probability, std.observed, ref_log.pose, robot_radius)
-    return f"walls kept {s['walls_kept']:.3f}, leak vs standard {s['leak_vs_standard']:.3f}"
+    return (f"walls kept {s['walls_kept']:.3f}, leak vs standard {s['leak_vs_standard']:.3f}, "
+            f"far leak {s['far_leak']:.3f}")
 
 
 def main() -> None:

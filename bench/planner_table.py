@@ -3,7 +3,8 @@
     python bench/planner_table.py out/*.h5 --maps-dir out/maps [--robot-radius 0.2]
 
 Maps are found as MAPS_DIR/<log stem>_<mode>.h5 (compare --maps-dir's names); logs with truth
-get leak/block/surface; every mode also gets walls_kept and leak_vs_standard against the standard map.
+get leak/block/surface; every mode also gets walls_kept, leak_vs_standard and far_leak against the
+standard map.
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ def main() -> None:
     ap.add_argument("--robot-radius", type=float, default=0.2)
     a = ap.parse_args()
     modes = a.modes.split(",")
-    print(f"| world | {' | '.join(modes)} |  (leak / block / surface / walls_kept / leak_vs_std / checks failed)")
+    print(f"| world | {' | '.join(modes)} |  (leak / block / surface / walls_kept / leak_vs_std / far_leak / checks failed)")
     print("|---|" + "---|" * len(modes))
     for log_path in a.logs:
         stem = Path(log_path).stem
@@ -47,7 +48,7 @@ def main() -> None:
                 parts.append(f"{pm['leak']:.3f} / {pm['block']:.3f} / {pm['surface_recall']:.2f}")
             if std is not None:
                 s = against_standard(m.grid, m.probability, m.observed, std.probability, std.observed, poses, a.robot_radius)
-                parts.append(f"{s['walls_kept']:.2f} / {s['leak_vs_standard']:.3f}")
+                parts.append(f"{s['walls_kept']:.2f} / {s['leak_vs_standard']:.3f} / {s['far_leak']:.3f}")
             if truth is not None:
                 failed = [c["name"] for c in run_checks(m.grid, m.probability, m.observed, truth.checks) if not c["passed"]]
                 parts.append(",".join(failed) or "ok")

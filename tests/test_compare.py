@@ -237,7 +237,7 @@ def test_a_log_without_truth_has_no_truth_metrics(logs, tmp_path):
     assert "FAILED bare: standard.accuracy > 0.5  (n/a > 0.5; standard.accuracy not available)" in result.output
     (r,) = json.loads((tmp_path / "r.json").read_text())["results"]
     assert r["world"] == "bare" and r["runtime_s"] > 0
-    assert r["metrics"] == {"walls_kept": 1.0, "leak_vs_standard": 0.0}  # the standard map against itself
+    assert r["metrics"] == {"walls_kept": 1.0, "leak_vs_standard": 0.0, "far_leak": 0.0}  # the standard map itself
     assert "n/a" in result.output
 
 

@@ -155,7 +155,7 @@ def test_compare_reports_consistency_for_a_log_without_truth(tmp_path):
     assert "Ends on occ." in result.output and "Free contra." in result.output
     (r,) = json.loads(out.read_text())["results"]
     # no truth: no accuracy, only what a planner sees against the standard map (itself)
-    assert r["metrics"] == {"walls_kept": 1.0, "leak_vs_standard": 0.0}
+    assert r["metrics"] == {"walls_kept": 1.0, "leak_vs_standard": 0.0, "far_leak": 0.0}
     c = r["consistency"]
     assert c["method"] == "endpoint" and c["readings"] == 3
     # the standard map of its own three rays puts every endpoint on an occupied cell

@@ -1,5 +1,5 @@
-"""What a planner sees (``evaluation.planner``): leak, block, surface_recall, walls_kept and
-leak_vs_standard on hand-made grids with hand-counted cells, and ``aogm compare`` reporting them
+"""What a planner sees (``evaluation.planner``): leak, block, surface_recall, walls_kept,
+leak_vs_standard and far_leak on hand-made grids with hand-counted cells, and ``aogm compare`` reporting them
 (table, JSON, CSV, gates, --robot-radius, --from-json of older files, logs without truth)."""
 
 import dataclasses
@@ -84,14 +84,49 @@ def test_nothing_observed_is_not_a_number():
 
 def test_against_the_standard_map():
     """The standard map holds the wall at 0.95 (its 30 confident cells); a map with the 6-cell
-    gap keeps 26 of them and reaches 236 cells beyond the standard map's 224."""
+    gap keeps 26 of them and reaches 236 cells beyond the standard map's 224: of these the 4 of
+    row 9 lie 0.1 m from row 8, which the standard map reaches; the other 232 are far."""
     standard = wall_map(p_wall=0.95)
     gap = against_standard(GRID, wall_map(gap=(12, 18)), OBSERVED, standard, OBSERVED, POSES, RADIUS)
-    assert gap == pytest.approx({"walls_kept": 26 / 30, "leak_vs_standard": (3 * 4 + BELOW) / BELOW})
+    assert gap == pytest.approx({"walls_kept": 26 / 30, "leak_vs_standard": (3 * 4 + BELOW) / BELOW,
+                                 "far_leak": (2 * 4 + BELOW) / BELOW})
     itself = against_standard(GRID, standard, OBSERVED, standard, OBSERVED, POSES, RADIUS)
-    assert itself == {"walls_kept": 1.0, "leak_vs_standard": 0.0}
+    assert itself == {"walls_kept": 1.0, "leak_vs_standard": 0.0, "far_leak": 0.0}
     unsure = against_standard(GRID, standard, OBSERVED, wall_map(p_wall=0.8), OBSERVED, POSES, RADIUS)
     assert np.isnan(unsure["walls_kept"])  # no cell at p >= 0.9 in the standard map to keep
+    unseen = np.zeros(GRID.shape, dtype=bool)  # the standard map reaches nothing: no share to take
+    blind = against_standard(GRID, standard, OBSERVED, standard, unseen, POSES, RADIUS)
+    assert np.isnan(blind["leak_vs_standard"]) and np.isnan(blind["far_leak"])
+
+
+def thick_wall(p_wall: float = 0.95) -> np.ndarray:
+    """Probabilities: the wall five cells thick (rows 8-12) at ``p_wall``, free 0.1."""
+    p = np.full(GRID.shape, 0.1)
+    p[8:13, :] = p_wall
+    return p
+
+
+def test_far_leak_leaves_out_the_band_beside_the_standard_maps_reach():
+    """The standard map draws the wall five cells thick (rows 8-12), the map one (row 10): the
+    0.15 m robot drives rows 1-6 (columns 1-28: 168 cells) in the standard map and rows 1-8 in the
+    map. Row 7 lies 0.1 m from row 6, inside the band; row 8 lies 0.2 m from it, beyond."""
+    thin = against_standard(GRID, wall_map(), OBSERVED, thick_wall(), OBSERVED, POSES, RADIUS)
+    assert thin["leak_vs_standard"] == pytest.approx(2 * 28 / 168)
+    assert thin["far_leak"] == pytest.approx(28 / 168)
+    assert thin["walls_kept"] == pytest.approx(3 / 5)  # rows 9-11 lie within 0.15 m of row 10; 8 and 12 not
+    # a 0.2 m robot: columns 2-27, rows 2-5 in the standard map (104 cells), rows 2-7 in the map;
+    # row 7 lies exactly 0.2 m from row 5, not farther: all of it band, no far leak
+    wide = against_standard(GRID, wall_map(), OBSERVED, thick_wall(), OBSERVED, POSES, 0.2)
+    assert (wide["leak_vs_standard"], wide["far_leak"]) == (pytest.approx(2 * 26 / 104), 0.0)
+
+
+def test_far_leak_counts_what_gets_through_a_gap():
+    """The one-cell wall with the 6-cell gap against the five-cell standard wall: 460 cells reached
+    (224 below, the gap's 12, 224 above) beyond the standard map's 168 rows 1-6: 292; row 7's 28
+    lie in the band, the other 264 are far."""
+    gap = against_standard(GRID, wall_map(gap=(12, 18)), OBSERVED, thick_wall(), OBSERVED, POSES, RADIUS)
+    assert gap["leak_vs_standard"] == pytest.approx(292 / 168)
+    assert gap["far_leak"] == pytest.approx(264 / 168)
 
 
 # --- aogm compare ---------------------------------------------------------------------------------
@@ -100,7 +135,7 @@ BEHIND_THE_WALL = """  - name: behind_the_wall
     blocked: {from: [1.0, 1.0], to: [1.0, 3.0], robot_radius: 0.2}
 """  # a third check, appended to the tiny door world's checks
 TRUTH_KEYS = ("leak", "block", "surface_recall")
-STANDARD_KEYS = ("walls_kept", "leak_vs_standard")
+STANDARD_KEYS = ("walls_kept", "leak_vs_standard", "far_leak")
 
 
 def run(*args):
@@ -141,10 +176,10 @@ def test_compare_reports_leak_block_and_surface_recall(logs, compared, read_csv)
         assert {k: r["metrics"][k] for k in TRUTH_KEYS} == pytest.approx({k: expected[k] for k in TRUTH_KEYS})
         assert [c["name"] for c in r["metrics"]["checks"]] == ["door_passable", "through_wall", "behind_the_wall"]
     header, rows = read_csv(out / "r.csv")
-    assert header[header.index("checks_passed") + 1:][:5] == [*TRUTH_KEYS, *STANDARD_KEYS]
+    assert header[header.index("checks_passed") + 1:][:6] == [*TRUTH_KEYS, *STANDARD_KEYS]
     for row, r in zip(rows, doc["results"], strict=True):
         assert [float(row[k]) for k in TRUTH_KEYS] == [r["metrics"][k] for k in TRUTH_KEYS]
-        assert row["walls_kept"] == row["leak_vs_standard"] == ""
+        assert row["walls_kept"] == row["leak_vs_standard"] == row["far_leak"] == ""
 
 
 def test_robot_radius_reaches_the_metrics_and_is_checked(logs, compared, tmp_path):
@@ -208,9 +243,9 @@ def test_without_truth_every_map_is_compared_with_the_standard_map(logs, tmp_pat
     both = run("compare", bare, "--modes", "standard,em", "--no-calibrate", "--json", tmp_path / "b.json",
                "--maps-dir", tmp_path / "maps", "--require", "em.walls_kept >= 0", "-q")
     assert both.exit_code == 0, both.output
-    assert "Walls kept" in both.output and "Leak vs std" in both.output
+    assert "Walls kept" in both.output and "Leak vs std" in both.output and "Far leak" in both.output
     standard, em = json.loads((tmp_path / "b.json").read_text())["results"]
-    assert standard["metrics"] == {"walls_kept": 1.0, "leak_vs_standard": 0.0}
+    assert standard["metrics"] == {"walls_kept": 1.0, "leak_vs_standard": 0.0, "far_leak": 0.0}
     assert set(em["metrics"]) == set(STANDARD_KEYS)
     maps = {mode: read_map_file(tmp_path / "maps" / f"bare_{mode}.h5") for mode in ("standard", "em")}
     poses = read_log(bare).pose
@@ -229,8 +264,30 @@ def test_without_truth_every_map_is_compared_with_the_standard_map(logs, tmp_pat
                 tmp_path / "g.json", "-q")
     assert given.exit_code == 0, given.output
     assert json.loads((tmp_path / "g.json").read_text())["results"][1]["metrics"] == pytest.approx(expected)
-    back = run("compare", "--from-json", tmp_path / "b.json", "--require", "em.leak_vs_standard >= 0", "-q")
+    back = run("compare", "--from-json", tmp_path / "b.json", "--require", "em.leak_vs_standard >= 0",
+               "--require", "em.far_leak <= em.leak_vs_standard", "-q")
     assert back.exit_code == 0, back.output
+    assert "gates: 2 of 2 passed" in back.output
+
+
+def test_from_json_reads_older_files_without_far_leak(logs, tmp_path, read_csv):
+    """A file written before far_leak: read back with walls_kept and leak_vs_standard only,
+    written again so, its CSV cells empty, and a gate naming it not available."""
+    made = run("compare", logs[1], "--modes", "standard,em", "--no-calibrate", "--json", tmp_path / "b.json", "-q")
+    assert made.exit_code == 0, made.output
+    old = json.loads((tmp_path / "b.json").read_text())
+    for r in old["results"]:
+        del r["metrics"]["far_leak"]
+    (tmp_path / "old.json").write_text(json.dumps(old))
+    back = run("compare", "--from-json", tmp_path / "old.json", "--json", tmp_path / "again.json", "--csv",
+               tmp_path / "again.csv", "-q")
+    assert back.exit_code == 0, back.output
+    assert "Leak vs std" in back.output and "Far leak" not in back.output
+    assert json.loads((tmp_path / "again.json").read_text())["results"] == old["results"]
+    _, rows = read_csv(tmp_path / "again.csv")
+    assert all(row["far_leak"] == "" and row["leak_vs_standard"] != "" for row in rows)
+    gated = run("compare", "--from-json", tmp_path / "old.json", "--require", "em.far_leak <= 0.01", "-q")
+    assert gated.exit_code == 1 and "em.far_leak not available" in gated.output
 
 
 def test_the_figure_draws_what_the_planner_reaches(compared, tmp_path, monkeypatch):

@@ -62,8 +62,9 @@ from aogm_cli.io.outputs import resolve_outputs
               help="Hold out every round(1/FRACTION)-th scan (0 < FRACTION <= 0.5), map the rest and score "
                    "each map on the held-out readings (see Held-out scores above).")
 @click.option("--robot-radius", type=float, metavar="M",
-              help="The disk robot whose planner leak, block, surface_recall, walls_kept and leak_vs_standard "
-                   "measure (see What a planner sees above; world checks keep their own radius).  [default: 0.2]")
+              help="The disk robot whose planner leak, block, surface_recall, walls_kept, leak_vs_standard and "
+                   "far_leak measure (see What a planner sees above; world checks keep their own radius).  "
+                   "[default: 0.2]")
 @calibrate_option
 @seed_option
 @quiet_option
@@ -93,9 +94,12 @@ def compare(inputs, modes_text, detector, params_file, forward_model, json_out, 
       block            share of the truth-reachable observed cells it cannot reach
       surface_recall   truth wall-surface cells with a map cell above 0.5 within 0.1 m
     Without truth, against the standard map of the same log and grid (made for the purpose
-    when it is not at hand; its own values are 1 and 0):
+    when it is not at hand; its own values are 1, 0 and 0):
       walls_kept       share of its cells at p >= 0.9 with a cell above 0.5 within 0.15 m
       leak_vs_standard cells reached beyond those reached in it, over the latter
+      far_leak         cells reached farther than --robot-radius from every cell reached
+                       in it, over the latter (a wall drawn thinner lets the robot a little
+                       closer to it: that band is not counted)
 
     \b
     Held-out scores (--holdout FRACTION, with or without truth):
@@ -115,7 +119,8 @@ def compare(inputs, modes_text, detector, params_file, forward_model, json_out, 
       --require EXPR       MODE.METRIC names, numbers, + - * /, ( ), one of < <= > >= == !=
                            METRIC: accuracy, occupied_precision, occupied_recall,
                            occupied_f1, brier, ece, runtime (= runtime_s), checks_passed (fraction),
-                           leak, block, surface_recall, walls_kept, leak_vs_standard;
+                           leak, block, surface_recall, walls_kept, leak_vs_standard,
+                           far_leak;
                            with --holdout: holdout_auc, holdout_auc_band, holdout_loglik,
                            holdout_readings, holdout_scans
       --require-checks M   every check of every log passes in mode M
@@ -124,7 +129,7 @@ def compare(inputs, modes_text, detector, params_file, forward_model, json_out, 
     CSV (--csv): one row per log and mode, always these columns in this order, empty where a
     value does not apply: log, world, mode, truth, runtime_s, runtime_vs_standard, accuracy,
     occupied_precision, occupied_recall, occupied_f1, brier, ece, checks_passed, leak, block,
-    surface_recall (truth), walls_kept, leak_vs_standard (no truth), consistency_* (logs
+    surface_recall (truth), walls_kept, leak_vs_standard, far_leak (no truth), consistency_* (logs
     without truth), holdout_* (--holdout), learned_sigma, learned_p_rand,
     learned_p_hit, learned_p_max, learned_specular_deg, learned_opening_deg, learned_from_readings (the forward
     model an em or adaptive map's calibration learned); then one check:NAME column

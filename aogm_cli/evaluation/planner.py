@@ -1,6 +1,6 @@
 """What a planner sees in a map: where a disk robot starting at the trajectory can drive. ``leak``,
-``block`` and ``surface_recall`` against a simulated truth; ``walls_kept`` and ``leak_vs_standard``
-against the standard map of the same log and grid (CONTRACT.md, Metrics)."""
+``block`` and ``surface_recall`` against a simulated truth; ``walls_kept``, ``leak_vs_standard`` and
+``far_leak`` against the standard map of the same log and grid (CONTRACT.md, Metrics)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.scores import STANDARD_KEYS as STANDARD_KEYS  # without truth, against the standard map
 from aogm_cli.core.scores import TRUTH_KEYS as TRUTH_KEYS  # against a simulated log's truth
 
-STANDARD_ITSELF = {"walls_kept": 1.0, "leak_vs_standard": 0.0}  # the standard map's own values
+STANDARD_ITSELF = {"walls_kept": 1.0, "leak_vs_standard": 0.0, "far_leak": 0.0}  # the standard map's own values
 ROBOT_RADIUS = 0.2  # m: aogm compare's default --robot-radius
 START_DISTANCE = 0.3  # m: the planner starts anywhere this close to the trajectory
 SURFACE_DISTANCE = 0.1  # m: a truth wall surface is found when a map cell above 0.5 is this close
@@ -92,14 +92,21 @@ def planner_metrics(grid: GridSpec, probability, observed, truth_occupancy, pose
 
 def against_standard(grid: GridSpec, probability, observed, standard_probability, standard_observed, poses,
                      robot_radius: float) -> dict:
-    """``walls_kept`` and ``leak_vs_standard`` of a map against the standard map of the same log
-    and grid (for logs without truth)."""
+    """``walls_kept``, ``leak_vs_standard`` and ``far_leak`` of a map against the standard map of the
+    same log and grid (for logs without truth). ``far_leak`` counts only the cells reached farther
+    than ``robot_radius`` from every cell reached in the standard map: a thinner wall lets the
+    robot a little closer to it, and that band beside the standard map's reach is no leak."""
     standard_probability = np.asarray(standard_probability)
     walls = np.asarray(standard_observed, dtype=bool) & (standard_probability >= CONFIDENT)
     kept = grid.within(np.asarray(probability) > 0.5, WALL_DISTANCE)
     in_map = map_reach(grid, probability, observed, poses, robot_radius)
     in_standard = map_reach(grid, standard_probability, standard_observed, poses, robot_radius)
+    n_standard = int(in_standard.sum())
+    far = np.zeros(grid.shape, dtype=bool)
+    if n_standard:  # else NaN whatever is reached
+        far = ndimage.distance_transform_edt(~in_standard) * grid.resolution > robot_radius
     return {
         "walls_kept": _share(int(np.sum(walls & kept)), int(walls.sum())),
-        "leak_vs_standard": _share(int(np.sum(in_map & ~in_standard)), int(in_standard.sum())),
+        "leak_vs_standard": _share(int(np.sum(in_map & ~in_standard)), n_standard),
+        "far_leak": _share(int(np.sum(in_map & far)), n_standard),
     }

@@ -33,8 +33,9 @@ class ModeResult:
     """One (log, mode): the map, its runtime, its metrics (None without truth), where it came
     from, and for a log without truth its consistency with the log (``evaluation.consistency``).
     ``planner``: what a planner sees (``evaluation.planner``): leak, block and surface_recall with
-    truth, walls_kept and leak_vs_standard without (a result read back from an older file may
-    lack them). A result read back from a --json file (``read_results_file``) has no map."""
+    truth, walls_kept, leak_vs_standard and far_leak without (a result read back from an older
+    file may lack them all, or far_leak alone). A result read back from a --json file
+    (``read_results_file``) has no map."""
 
     log: str
     world: str
@@ -94,7 +95,7 @@ def results_json(results: list[ModeResult], holdout: dict | None = None, provena
     ``stats["calibration"]``: the forward model it learned, per round and ``final``, else null).
 
     A result of a log with truth has in ``metrics`` also what a planner sees (leak, block,
-    surface_recall); one of a log without truth has there walls_kept and leak_vs_standard only,
+    surface_recall); one of a log without truth has there walls_kept, leak_vs_standard and far_leak only,
     and a ``consistency`` object beside it (``evaluation.consistency``: method, readings,
     endpoint_occupied, endpoint_occupied_8, endpoint_free, free_cells, free_contradicted).
 
@@ -292,7 +293,8 @@ class _ResultsReader:
             if banded:  # written before issue 28: its holdout_auc is what holdout_auc_band is now
                 scores[BAND_AUC], scores["holdout_auc"] = scores["holdout_auc"], math.nan
         truth_metrics = self.truth_metrics(metrics, f"{where}.metrics") if truth else None
-        # what a planner sees: optional, as files written before it was measured lack it
+        # what a planner sees: optional key by key, as files written before it was measured lack it
+        # (and those written before far_leak lack far_leak alone)
         found = {k: get(metrics, k, f"{where}.metrics", _number_or_null, "a number or null")
                  for k in (TRUTH_KEYS if truth else STANDARD_KEYS) if k in (metrics or {})}
         return ModeResult(log, world, mode, _nan(runtime), truth_metrics, None, consistency=consistency,

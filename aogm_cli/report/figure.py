@@ -24,12 +24,12 @@ def _pyplot():
 
 def panel_title(result: ModeResult) -> str:
     """``em  acc 0.973  leak 0.012  0.21 s``; accuracy omitted without truth, and leak there
-    leak_vs_standard (``lvs``)."""
+    leak_vs_standard (``lvs``) and far_leak (``far``)."""
     parts = [result.mode]
     if result.metrics is not None:
         parts.append(f"acc {result.metrics['accuracy']:.3f}")
     planner = result.planner or {}
-    for key, short in (("leak", "leak"), ("leak_vs_standard", "lvs")):
+    for key, short in (("leak", "leak"), ("leak_vs_standard", "lvs"), ("far_leak", "far")):
         if planner.get(key) is not None:
             parts.append(f"{short} {planner[key]:.3f}")
     parts.append(f"{result.runtime_s:.3g} s")

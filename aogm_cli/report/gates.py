@@ -16,8 +16,8 @@ from aogm_cli.io.results import ModeResult
 from aogm_cli.report.table import checks_passed
 
 # metric names of a gate -> what they mean; runtime is runtime_s, checks_passed a fraction; what a
-# planner sees (``evaluation.planner``: leak, block, surface_recall with truth, walls_kept and
-# leak_vs_standard without); the held-out scores (``evaluation.holdout``) exist only with --holdout
+# planner sees (``evaluation.planner``: leak, block, surface_recall with truth, walls_kept,
+# leak_vs_standard and far_leak without); the held-out scores (``evaluation.holdout``) exist only with --holdout
 HOLDOUT_METRICS = SCORE_KEYS
 METRICS = ("accuracy", "occupied_precision", "occupied_recall", "occupied_f1", "brier", "ece", "runtime", "checks_passed",
            *TRUTH_KEYS, *STANDARD_KEYS, *HOLDOUT_METRICS)

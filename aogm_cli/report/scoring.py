@@ -153,9 +153,9 @@ def planner_values(log: ScoredLog, mode: str, m: OccupancyMap, poses, job: Compa
                    standard: OccupancyMap | None = None, map_file: str | None = None) -> dict:
     """What a planner with a robot of ``job.robot_radius`` sees in map ``m`` (``evaluation.planner``),
     starting at the log's ``poses``: leak, block and surface_recall against the log's truth;
-    without truth, walls_kept and leak_vs_standard against the standard map of the same log and
-    grid (``standard`` when it is on that grid, else made here by ``job`` at the map's resolution,
-    from the same scans), which itself has 1 and 0."""
+    without truth, walls_kept, leak_vs_standard and far_leak against the standard map of the same
+    log and grid (``standard`` when it is on that grid, else made here by ``job`` at the map's
+    resolution, from the same scans), which itself has 1, 0 and 0."""
     if log.truth is not None:
         values = planner_metrics(m.grid, m.probability, m.observed, log.truth.occupancy, poses, job.robot_radius)
         return {k: values[k] for k in TRUTH_KEYS}

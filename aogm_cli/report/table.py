@@ -69,7 +69,7 @@ def relative_runtimes(results: list[ModeResult]) -> dict[tuple[str, str], float 
 
 # what a planner sees (``evaluation.planner``) -> its column: with truth, then without
 PLANNER_COLUMNS = {"leak": "Leak", "block": "Block", "surface_recall": "Surface", "walls_kept": "Walls kept",
-                   "leak_vs_standard": "Leak vs std"}
+                   "leak_vs_standard": "Leak vs std", "far_leak": "Far leak"}
 
 
 class Shown(NamedTuple):
