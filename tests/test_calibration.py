@@ -192,7 +192,7 @@ def test_calibrated_map_records_the_learned_model_and_its_rounds(corridor_door_l
     m = read_map_file(off)
     assert "calibration" not in m.stats and m.params["em"]["sigma"] == 0.03
     assert m.learned == {"sensor": None, "origin": "configured", "specular_deg": None, "opening_deg": None,
-                         "rates": None}
+                         "rates": None, "lobe_deg": None, "lobe_range": None, "lobe": None}
 
 
 def test_calibrate_writes_the_sensors_model_that_map_and_compare_take(corridor_door_log, tmp_path):

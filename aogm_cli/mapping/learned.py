@@ -11,7 +11,7 @@ from aogm_cli.sensor_models.forward_model import ForwardModelConfig
 SENSOR_KEYS = ("sigma", "p_rand", "p_hit", "p_max")  # the forward model's parameters calibration sets
 ONCE = ("specular_deg", "opening_deg")  # learned once, before EM (``calibration.incidence_at``, ``opening_at``)
 # what a robot's model leaves to each log: the building's specular angle and max-range share (``stages.rates``)
-BUILDING = ("specular_deg", "p_max")
+BUILDING = ("specular_deg", "p_max", "lobe_deg")
 
 # where a sensor model came from (``Learned.origin``)
 CONFIGURED = "configured"  # the values of --params / the defaults: nothing learned
@@ -51,6 +51,9 @@ class Learned:
     seconds: float = 0.0
     made_by: str | None = None  # the mode of the map of the same log that learned it (``carried``)
     rates: dict | None = None  # the building's p_max fitted for a robot's model (``stages.rates``)
+    lobe_deg: float | None = None  # the lobe that hears (``ForwardModelConfig.lobe_deg``), learned from this log
+    lobe_range: float | None = None
+    lobe: dict | None = None  # ``beam_model.lobe_record``'s record
 
     def model(self, configured: ForwardModelConfig) -> ForwardModelConfig:
         """The forward model EM uses: ``configured`` with what was learned in its place."""
@@ -60,6 +63,8 @@ class Learned:
         # a carried or given opening, unless the user configured one (an opening learned from this log wins)
         if self.opening_deg is not None and (self.opening is not None or configured.opening_deg == 0.0):
             values["opening_deg"] = self.opening_deg
+        if self.lobe_deg is not None:  # learned from this log: it wins over a configured lobe
+            values["lobe_deg"], values["lobe_range"] = self.lobe_deg, self.lobe_range
         return dataclasses.replace(configured, **values)
 
     def carried(self, mode: str, seconds: float) -> Learned:
@@ -74,9 +79,12 @@ class Learned:
         rounds = None if calibration is None else {k: v for k, v in calibration.items()
                                                     if k not in ("opening", "incidence", "final_em", "made_by")}
         return cls(None if sensor is None else SensorModel(**sensor), learned.get("origin", CONFIGURED),
-                   learned.get("specular_deg"), learned.get("opening_deg"), calibration=rounds, **records)
+                   learned.get("specular_deg"), learned.get("opening_deg"), calibration=rounds,
+                   lobe_deg=learned.get("lobe_deg"), lobe_range=learned.get("lobe_range"), lobe=learned.get("lobe"),
+                   **records)
 
     def as_dict(self) -> dict:
         """What the map file records beside its params (root attribute ``learned``)."""
         return {"sensor": None if self.sensor is None else self.sensor.as_dict(), "origin": self.origin,
-                "specular_deg": self.specular_deg, "opening_deg": self.opening_deg, "rates": self.rates}
+                "specular_deg": self.specular_deg, "opening_deg": self.opening_deg, "rates": self.rates,
+                "lobe_deg": self.lobe_deg, "lobe_range": self.lobe_range, "lobe": self.lobe}

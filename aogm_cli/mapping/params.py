@@ -110,9 +110,10 @@ class CalibrationConfig:
 
     def validate(self) -> CalibrationConfig:
         check_field_types(self)
-        unknown = set(self.learned) - {"sigma", "p_rand", "p_hit", "p_max", "specular_deg", "opening_deg"}
+        unknown = set(self.learned) - {"sigma", "p_rand", "p_hit", "p_max", "specular_deg", "opening_deg", "lobe_deg"}
         if unknown or not self.learned:
             raise InputError("expected a comma-separated list of sigma, p_rand, p_hit, p_max, specular_deg, opening_deg, "
+                             "lobe_deg, "
                              f"got {self.learn!r}", key="learn")
         if self.rounds < 1:
             raise InputError(f"expected a whole number >= 1, got {self.rounds}", key="rounds")

@@ -41,6 +41,10 @@ class Plan:
         return "opening_deg" in self.learns
 
     @property
+    def learns_lobe(self) -> bool:
+        return "lobe_deg" in self.learns
+
+    @property
     def decides(self) -> bool:
         """Adaptive keeps the thinned map outside, whose free cells the readings must hold free."""
         return self.outside == "thinned" and self.thinning is not None
@@ -74,7 +78,7 @@ def plan_map(mode: str, params: MapParams, sensor: SensorSpec, resolution: float
     incidence = params.surface.enabled and kind == CONE
     # what this log can teach: no specular angle without surfaces, no opening of a ray
     learns = tuple(k for k in learned_keys(params, given)
-                   if (k != "specular_deg" or incidence) and (k != "opening_deg" or kind == CONE))
+                   if (k != "specular_deg" or incidence) and (k not in ("opening_deg", "lobe_deg") or kind == CONE))
     calibrates = params.calibration.enabled and given is None
     robots = given is not None and given.made_by is None and given.sensor is not None
     model = given.origin if given is not None else FROM_LOG if calibrates else CONFIGURED

@@ -103,6 +103,14 @@ def opening(s: State) -> State:
     return s if narrowed is s.whole else s.but(whole=narrowed, readings=None, standard=None)
 
 
+def lobe(s: State) -> State:
+    """The lobe that hears, learned at the standard map's walls; the readings' cones keep the cells it hears."""
+    record = B.lobe_record(s.readings, s.in_use, s.standard.log_odds, s.standard.observed)
+    s = s.but(learned=dataclasses.replace(s.learned, lobe_deg=record["lobe_deg"], lobe_range=record["lobe_range"],
+                                          lobe=record))
+    return s.but(readings=B.heard_run(s.readings, s.in_use.em.forward))
+
+
 def deflections(s: State) -> State:
     """The echoes' surfaces, the specular angle if learned, beams met beyond it stopped (standard map taken away)."""
     normals = B.surfaces(s.readings, s.in_use, s.standard.log_odds)
