@@ -81,13 +81,16 @@ def learned_opening(matches: np.ndarray, echoes: int, beam_width: float) -> floa
 # Kuc & Siegel: a cone cell at range r and angle phi off the axis is heard when exp(-2 phi^2 / theta0^2) / r^2
 # >= 1 / R0^2, i.e. phi^2 <= theta0^2 ln(R0 / r); R0 is the on-axis range at which a surface met head-on is
 # no longer heard (its reflectivity and the threshold in one number). Incidence is left out: R0 is the reach
-# averaged over the angles the log meets its walls at (cos^n of incidence with the map's normals, n fitted,
-# moved theta0 by 0-2.5 degrees away from the simulator's: bench/lobe_study.py).
+# averaged over the angles the log meets its walls at, shorter than the head-on one (docs/algorithms.md, "The
+# detection lobe": cos^n of incidence at the map's normals, or cells met obliquely left out, did not help).
 THETA0_GRID_DEG = np.arange(1.0, 45.01, 0.5)  # the fit's candidates of theta0 (degrees)
-R0_GRID_M = np.geomspace(1.0, 100.0, 41)  # and of R0 (metres, log-spaced)
+R0_GRID_M = np.geomspace(1.0, 100.0, 21)  # and of R0 (metres, log-spaced: 26% apart)
 LOBE_RANGE_BIN = 0.5  # m: the range bins of the record's hits and chances
 # candidates explaining within this share as many echoes as the best explain the log as well (the intervals)
 LOBE_TIE = 0.01
+# the cone as drawn stays unless the best lobe explains this share more echoes than it: the bundled worlds'
+# cones gain at most 0.9% from a lobe, their theta0 8 and 12 variants at least 4.5% (docs/algorithms.md)
+LOBE_CONE_TOLERANCE = 0.02
 
 
 @numba.njit(cache=True)
@@ -123,25 +126,44 @@ def nearest_surfaces(tpl, flat, bearings, shape, readings, occupied, model, near
 def explained_by_lobe(near, angle, z, band, theta0, log_r0, out):
     """out[i, j] += 1 for every echo t whose range the lobe (theta0[i] (rad, ascending), R0 = exp(log_r0[j]))
     explains: the nearest of its ``nearest_surfaces`` (near[t], angle[t]) that the lobe hears lies within
-    ``band`` of z[t]. Per echo and R0 the bins in the order theta0 hears them: one pass over theta0."""
+    ``band`` of z[t]. Per echo and R0, the bins in the order theta0 hears them: each run of theta0 that
+    hears the same bins is one interval, added as +1 and -1 at its ends and summed over theta0 at last."""
     n_bins = near.shape[1]
-    need = np.empty(n_bins)
+    n_theta = theta0.shape[0]
+    steps = np.zeros((n_theta + 1, log_r0.shape[0]))
+    need = np.empty(n_bins + 1)
+    found = np.empty(n_bins + 1)  # the ranges of the bins in need's order
+    log_near = np.empty(n_bins)
     for t in range(near.shape[0]):
-        if not np.isfinite(near[t, 0:n_bins]).any():
-            continue
         for j in range(log_r0.shape[0]):
+            n = 0  # the bins the lobe hears at some theta0, in the order it hears them (insertion sort)
             for a in range(n_bins):  # bin a is heard once theta0 >= phi / sqrt(ln(R0 / r)), never when r >= R0
-                headroom = log_r0[j] - math.log(max(near[t, a], 1e-9))
-                need[a] = angle[t, a] / math.sqrt(headroom) if near[t, a] < np.inf and headroom > 0.0 else np.inf
-            order = np.argsort(need)
+                if j == 0:
+                    log_near[a] = math.log(near[t, a]) if near[t, a] < np.inf else np.inf
+                headroom = log_r0[j] - log_near[a]
+                if not headroom > 0.0:
+                    continue
+                v = angle[t, a] / math.sqrt(headroom)
+                k = n
+                while k > 0 and need[k - 1] > v:
+                    need[k] = need[k - 1]
+                    found[k] = found[k - 1]
+                    k -= 1
+                need[k] = v
+                found[k] = near[t, a]
+                n += 1
+            need[n] = np.inf
             nearest = np.inf
-            p = 0
-            for i in range(theta0.shape[0]):
-                while p < n_bins and need[order[p]] <= theta0[i]:
-                    nearest = min(nearest, near[t, order[p]])
-                    p += 1
-                if abs(nearest - z[t]) <= band:
-                    out[i, j] += 1.0
+            for p in range(n):
+                nearest = min(nearest, found[p])
+                if abs(nearest - z[t]) <= band:  # explained from the theta0 hearing bin p to the next one
+                    steps[np.searchsorted(theta0, need[p]), j] += 1.0
+                    steps[np.searchsorted(theta0, need[p + 1]), j] -= 1.0
+    for j in range(log_r0.shape[0]):
+        running = 0.0
+        for i in range(n_theta):
+            running += steps[i, j]
+            out[i, j] += running
 
 
 class SurfaceTable(NamedTuple):
@@ -156,7 +178,7 @@ class SurfaceTable(NamedTuple):
 class Lobe:
     """The detection lobe learned from a log (``learn_lobe``): theta0 (degrees) and R0 (metres) of the rule
     above, each with the interval of values explaining the log as well (``LOBE_TIE``), or ``full_cone``: the
-    cone as drawn explains the echoes within ``CONE_TOLERANCE`` as well as the best lobe (then theta0_deg and
+    cone as drawn explains the echoes within ``LOBE_CONE_TOLERANCE`` as well as the best lobe (then theta0_deg and
     r0_m are inf). ``explained`` (THETA0_GRID_DEG, R0_GRID_M): the fit's objective. ``counts`` (2, angle bins,
     range bins): per echo, the nearest wall cell of each angle bin up to it (chances, counts[0]) and those
     on it (hits, counts[1]), by the cell's range: the hit rate traces the lobe."""
@@ -236,7 +258,7 @@ def learn_lobe(templates, grid: GridSpec, cones: tuple, occupied: np.ndarray, z_
     ``occupied`` (H * W bool; ``beam_model.thinned_walls``): of the candidates ``THETA0_GRID_DEG`` x
     ``R0_GRID_M``, the one under which most echoes lie within ``band`` of the nearest wall cell it hears
     (``explained_by_lobe``: the likelihood of a hard threshold with random readings). The cone as drawn
-    stays (``full_cone``) unless the best lobe explains ``CONE_TOLERANCE`` more echoes than it."""
+    stays (``full_cone``) unless the best lobe explains ``LOBE_CONE_TOLERANCE`` more echoes than it."""
     table = surface_table(templates, grid, cones, occupied, z_max, band)
     explained = np.zeros((THETA0_GRID_DEG.size, R0_GRID_M.size))
     explained_by_lobe(table.near, table.angle, table.z, float(band), np.radians(THETA0_GRID_DEG), np.log(R0_GRID_M),
@@ -244,7 +266,7 @@ def learn_lobe(templates, grid: GridSpec, cones: tuple, occupied: np.ndarray, z_
     cone = int(np.sum(np.abs(table.near.min(axis=1, initial=np.inf) - table.z) <= band))
     i, j = np.unravel_index(int(np.argmax(explained)), explained.shape)
     best = float(explained[i, j])
-    full = best == 0 or cone >= (1.0 - CONE_TOLERANCE) * best
+    full = best == 0 or cone >= (1.0 - LOBE_CONE_TOLERANCE) * best
     edges, counts = hits_and_chances(table, band, z_max)
     theta0, r0 = (math.inf, math.inf) if full else (float(THETA0_GRID_DEG[i]), float(R0_GRID_M[j]))
     return Lobe(theta0, r0, full, _interval(explained.max(axis=1), THETA0_GRID_DEG, best),
