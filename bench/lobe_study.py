@@ -1,7 +1,7 @@
 """Does the detection lobe learned from a log (``sensor_models.lobe.learn_lobe``) give back the simulator's
 beam pattern? Each bundled world is simulated with Kuc & Siegel's pattern of width theta0 (``errors.echo_strength:
 {min_strength: 0.01, beam_deg: theta0}``, random readings 5%) and as it is (every echo of the cone heard), seed 1;
-each log's lobe is learned at its thinned standard map (``beam_model.thinned_walls`` with the echoes' walls):
+each log's lobe is learned at its thinned standard map (``beam_model.lobe_walls``):
 
     python bench/lobe_study.py [--out /tmp/lf] [--worlds corridor_door ...] [--thetas 8 12]
     python bench/lobe_study.py --logs LOG.h5 ... --resolution 0.1      # logs as they are (a real robot's)
@@ -68,7 +68,7 @@ def measured(path: Path, resolution: float | None) -> dict:
     names = [s.name for s in stages]
     s, phases = run_stages(stages[: names.index("standard") + 1], state)
     t0 = time.perf_counter()
-    walls = B.thinned_walls(s.whole, s.readings, params, s.standard.log_odds, s.standard.observed, echoes=True)
+    walls = B.lobe_walls(s.whole, s.readings, params, s.standard.log_odds, s.standard.observed)
     t1 = time.perf_counter()
     B.lobe_record(s.readings, params, walls)  # its kernels compiled (or loaded): the next call is timed
     t1b = time.perf_counter()

@@ -18,7 +18,7 @@ from aogm_cli.sensor_models.lobe import Lobe, learn_lobe
 from aogm_cli.sensor_models.readings import LaidOutReadings
 from aogm_cli.sensor_models.surface import reading_shadows, surface_normals
 
-# log-odds of occupied evidence alone that make a cell a wall for the lobe (``thinned_walls``): the standard map
+# log-odds of occupied evidence alone that make a cell a wall for the lobe (``lobe_walls``): the standard map
 # loses walls that grazing beams pass unheard (stages.RATES_EVIDENCE, the same value for p_max's fit)
 ECHO_EVIDENCE = 2.0
 
@@ -53,13 +53,12 @@ def with_opening(whole: Log, opening_deg: float) -> Log:
     return dataclasses.replace(whole, sensor=dataclasses.replace(sensor, beam_width=math.radians(opening_deg)))
 
 
-def thinned_walls(whole: Log, run: LaidOutReadings, params: MapParams, log_odds: np.ndarray, observed: np.ndarray,
-                  echoes: bool = False) -> np.ndarray:
-    """(H * W) bool: the walls of the standard map ``log_odds`` thinned by the exact inverse model; with
-    ``echoes``, also the cells occupied evidence alone makes walls (``ECHO_EVIDENCE``), thinned alike."""
-    if echoes:
-        evidence = occupied_evidence(whole, run.grid, params, _cuts(run))
-        log_odds = np.where(evidence >= ECHO_EVIDENCE, np.maximum(log_odds, np.float32(1.0)), log_odds)
+def lobe_walls(whole: Log, run: LaidOutReadings, params: MapParams, log_odds: np.ndarray,
+               observed: np.ndarray) -> np.ndarray:
+    """(H * W) bool: the walls the lobe is learned at: the standard map's ``log_odds`` and the cells occupied
+    evidence alone makes walls (``ECHO_EVIDENCE``), thinned by the exact inverse model."""
+    evidence = occupied_evidence(whole, run.grid, params, _cuts(run))
+    log_odds = np.where(evidence >= ECHO_EVIDENCE, np.maximum(log_odds, np.float32(1.0)), log_odds)
     thin = dataclasses.replace(params, exact=dataclasses.replace(params.exact, thin=True))
     return (thin_pass(whole, run.grid, thin, log_odds, observed, _cuts(run)).log_odds > 0).reshape(-1)
 
@@ -78,8 +77,8 @@ def opening_record(whole: Log, run: LaidOutReadings, params: MapParams, log_odds
 
 
 def lobe_record(run: LaidOutReadings, params: MapParams, walls: np.ndarray) -> Lobe:
-    """The detection lobe (``lobe.learn_lobe``) of ``run``'s readings at ``walls`` (``thinned_walls`` with
-    ``echoes``), an echo within EM's window (``window`` sigmas) of a wall cell explained by it."""
+    """The detection lobe (``lobe.learn_lobe``) of ``run``'s readings at ``walls`` (``lobe_walls``), an echo
+    within EM's window (``window`` sigmas) of a wall cell explained by it."""
     forward = params.em.forward
     return learn_lobe(run.templates, run.grid, run.cones, walls, float(run.sensor.max_range),
                       float(forward.window * forward.sigma))

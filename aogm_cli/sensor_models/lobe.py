@@ -1,6 +1,7 @@
 """The sonar's beam as it detects: how many readings a map explains when the beam detects out to each
-angle off its axis (``opening_matches``), and the effective opening learned from that curve
-(``learned_opening``)."""
+angle off its axis (``opening_matches``), the effective opening learned from that curve
+(``learned_opening``), and Kuc & Siegel's detection lobe, theta0 and R0, learned from the echoes
+(``learn_lobe``)."""
 
 from __future__ import annotations
 
@@ -255,7 +256,7 @@ def _interval(profile: np.ndarray, grid: np.ndarray, best: float) -> tuple[float
 
 def learn_lobe(templates, grid: GridSpec, cones: tuple, occupied: np.ndarray, z_max: float, band: float) -> Lobe:
     """The detection lobe that explains most echoes of ``cones`` = (rows, cols, bins, z) at the walls
-    ``occupied`` (H * W bool; ``beam_model.thinned_walls``): of the candidates ``THETA0_GRID_DEG`` x
+    ``occupied`` (H * W bool; ``beam_model.lobe_walls``): of the candidates ``THETA0_GRID_DEG`` x
     ``R0_GRID_M``, the one under which most echoes lie within ``band`` of the nearest wall cell it hears
     (``explained_by_lobe``: the likelihood of a hard threshold with random readings). The cone as drawn
     stays (``full_cone``) unless the best lobe explains ``LOBE_CONE_TOLERANCE`` more echoes than it."""
