@@ -1,7 +1,9 @@
 """The beam's effective opening (``sensor_models.lobe``, ``calibration.opening_at``): how many echoes
 a map explains at each opening, by hand on a tiny grid, the opening learned from that curve, and
-what a simulated sonar with a known beam pattern learns."""
+what a simulated sonar with a known beam pattern learns; the detection lobe (``learn_lobe``) given
+back from readings of a wall made with a known one, or the full cone."""
 
+import json
 import math
 
 import numpy as np
@@ -11,7 +13,16 @@ import yaml
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.sensor_models.cone import flat_offsets
 from aogm_cli.sensor_models.cone_build import build_cone_templates
-from aogm_cli.sensor_models.lobe import learned_opening, lobe_bins, opening_matches
+from aogm_cli.sensor_models.lobe import (
+    Lobe,
+    SurfaceTable,
+    explained_by_lobe,
+    hits_and_chances,
+    learn_lobe,
+    learned_opening,
+    lobe_bins,
+    opening_matches,
+)
 
 GRID = GridSpec(0.0, 0.0, 0.05, 120, 160)
 WALL_ROW = 100  # a wall along the columns, 5 m up the rows
@@ -168,3 +179,103 @@ def test_a_bad_opening_exits_2_naming_the_key(corridor_door_log, tmp_path, value
     result = run("map", corridor_door_log, "--mode", "em", "--params", params, "-o", tmp_path / "m.h5", "-q")
     assert result.exit_code == 2 and "opening_deg" in result.output and "Traceback" not in result.output
     assert not (tmp_path / "m.h5").exists()
+
+
+# --- the detection lobe (``learn_lobe``) ---------------------------------------------------------
+
+
+def wall_readings(heard, band_rows=(12, 20, 30, 40, 50, 60), yaws=range(20, 161, 5), cols=range(20, 141, 6)):
+    """Readings from cell centres ``band_rows`` rows below the wall at WALL_ROW (0.6-3 m), heading each
+    of ``yaws`` (degrees, from +cols towards +rows), with the range of the nearest point of the wall's
+    line of cell centres that ``heard(r, phi_deg)`` says is heard, over rays 0.1 degree apart across the
+    30-degree cone (no echo: inf). (rows, cols, bins, z) as ``learn_lobe`` takes them, and the templates."""
+    tpl = build_cone_templates(GRID.resolution, math.radians(30.0), 5.0)
+    rows, cs, bins, zs = [], [], [], []
+    phi = np.arange(-15.0, 15.0001, 0.1)
+    for d in band_rows:
+        for yaw in yaws:
+            k = int(tpl.heading_bin(np.array([math.radians(yaw)]))[0])
+            heading = float(tpl.bin_heading(k))  # the yaw the cone is drawn at
+            s = np.sin(heading + np.radians(phi))
+            r = np.where(s > 1e-9, d * GRID.resolution / np.maximum(s, 1e-9), np.inf)
+            ok = (r <= 5.0) & heard(r, phi)
+            z = float(r[ok].min()) if ok.any() else np.inf
+            for c in cols:
+                rows.append(WALL_ROW - d)
+                cs.append(c)
+                bins.append(k)
+                zs.append(z)
+    return tpl, (np.array(rows, np.int64), np.array(cs, np.int64), np.array(bins, np.int64), np.array(zs))
+
+
+def wall():
+    occupied = np.zeros(GRID.height * GRID.width, dtype=bool)
+    occupied[WALL_ROW * GRID.width:(WALL_ROW + 1) * GRID.width] = True
+    return occupied
+
+
+def kuc_siegel(theta0_deg, r0):
+    return lambda r, phi: np.exp(-2.0 * (phi / theta0_deg) ** 2) / r**2 >= 1.0 / r0**2
+
+
+@pytest.mark.parametrize(("theta0", "r0"), [(6.0, 8.0), (8.0, 6.0), (10.0, 20.0)])
+def test_a_known_lobe_is_learned_from_readings_of_a_wall(theta0, r0):
+    """A wall 0.6-3 m away met at 0-70 degrees of incidence by a beam heard by Kuc & Siegel's rule: the
+    learned theta0 lies within 1.5 degrees, and the angle heard at 1 and 3 m within 1.5 degrees too."""
+    tpl, cones = wall_readings(kuc_siegel(theta0, r0))
+    lobe = learn_lobe(tpl, GRID, cones, wall(), 5.0, 0.05)
+    assert not lobe.full_cone
+    assert abs(lobe.theta0_deg - theta0) <= 1.5, lobe.theta0_deg
+    true = Lobe(theta0, r0, *([None] * 10))
+    for r in (1.0, 3.0):
+        assert abs(lobe.heard_deg(r) - true.heard_deg(r)) <= 1.5
+    assert lobe.theta0_interval_deg[0] <= lobe.theta0_deg <= lobe.theta0_interval_deg[1]
+    assert lobe.echoes == int(np.isfinite(cones[3]).sum()) and lobe.explained_best >= 0.85 * lobe.echoes
+
+
+def test_a_beam_heard_across_the_cone_is_the_full_cone():
+    tpl, cones = wall_readings(lambda r, phi: np.ones_like(r, dtype=bool))
+    lobe = learn_lobe(tpl, GRID, cones, wall(), 5.0, 0.05)
+    assert lobe.full_cone and lobe.theta0_deg == math.inf and lobe.r0_m == math.inf
+    assert lobe.explained_cone >= 0.9 * lobe.echoes
+    assert lobe.heard_deg(4.0) == math.inf
+    record = lobe.as_dict()
+    assert record["theta0_deg"] is None and record["r0_m"] is None and record["full_cone"] is True
+    assert json.loads(json.dumps(record)) == record
+
+
+def test_a_log_without_echoes_keeps_the_cone():
+    tpl, (rows, cols, bins, z) = wall_readings(lambda r, phi: np.ones_like(r, dtype=bool))
+    lobe = learn_lobe(tpl, GRID, (rows, cols, bins, np.full(z.size, np.inf)), wall(), 5.0, 0.05)
+    assert lobe.full_cone and lobe.echoes == 0 and lobe.counts.sum() == 0
+
+
+def test_explained_by_lobe_by_hand():
+    # one echo, two surfaces: on the axis at 2.0 m (bin 0) and 10.5 degrees off it at 1.8 m (bin 10). At
+    # R0 = 10 m the lobe hears the second once theta0 >= 10.5 / sqrt(ln(10 / 1.8)) = 8.02 degrees, the first
+    # at any theta0; at R0 = 1.9 m it never hears the first (2.0 m > R0), the second from 10.5 / sqrt(ln(1.9
+    # / 1.8)) = 45.1 degrees (beyond the candidates)
+    near = np.full((1, 15), np.inf)
+    angle = np.full((1, 15), np.nan)
+    near[0, 0], angle[0, 0] = 2.0, 0.0
+    near[0, 10], angle[0, 10] = 1.8, math.radians(10.5)
+    theta0 = np.radians(np.arange(1.0, 15.5, 0.5))
+    log_r0 = np.log([10.0, 1.9])
+    out = np.zeros((theta0.size, 2))
+    explained_by_lobe(near, angle, np.array([1.8]), 0.05, theta0, log_r0, out)
+    heard_far = np.degrees(theta0) >= 10.5 / math.sqrt(math.log(10.0 / 1.8))
+    assert out[:, 0].tolist() == heard_far.astype(float).tolist() and not out[:, 1].any()
+    out[:] = 0
+    explained_by_lobe(near, angle, np.array([2.0]), 0.05, theta0, log_r0, out)
+    assert out[:, 0].tolist() == (~heard_far).astype(float).tolist() and not out[:, 1].any()
+
+
+def test_hits_and_chances_by_hand():
+    # two echoes at 1.0 and 2.0 m; bin 0 holds walls at 1.0 (a hit) and 1.2 m (a chance in range bin 2, the
+    # second echo's: it was passed); bin 1 a wall at 0.6 m of the first (a chance, no hit)
+    near = np.array([[1.0, 0.6], [1.2, np.inf]])
+    table = SurfaceTable(near, np.zeros_like(near), np.array([1.0, 2.0]))
+    edges, counts = hits_and_chances(table, 0.05, 5.0)
+    assert edges.tolist() == [0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0]
+    assert counts[0, 0].tolist() == [0, 0, 2, 0, 0, 0, 0, 0, 0, 0] and counts[1, 0].tolist() == [0, 0, 1] + [0] * 7
+    assert counts[0, 1].tolist() == [0, 1] + [0] * 8 and not counts[1, 1].any()

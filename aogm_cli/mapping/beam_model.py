@@ -1,6 +1,6 @@
-"""What the log says of its beam before EM: its effective opening (``opening_record``, ``with_opening``), the lobe
-that hears (``heard_run``) and the angle of incidence: echo surfaces, specular angle, deflected beams
-(``specular_record``, ``deflected_run``)."""
+"""What the log says of its beam before EM: its effective opening (``opening_record``, ``with_opening``), its
+detection lobe (``lobe_record``, ``heard_run``) and the angle of incidence: echo surfaces, specular angle,
+deflected beams (``specular_record``, ``deflected_run``)."""
 
 from __future__ import annotations
 
@@ -12,12 +12,17 @@ import numpy as np
 from aogm_cli.core.log import Log
 from aogm_cli.mapping.calibration import MAX_READINGS, incidence_at, opening_at, sample_readings
 from aogm_cli.mapping.params import MapParams
-from aogm_cli.mapping.standard import thin_pass
+from aogm_cli.mapping.standard import occupied_evidence, thin_pass
 from aogm_cli.sensor_models.cone import flat_offsets
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig
 from aogm_cli.sensor_models.heard import heard_templates
+from aogm_cli.sensor_models.lobe import Lobe, learn_lobe
 from aogm_cli.sensor_models.readings import LaidOutReadings
 from aogm_cli.sensor_models.surface import reading_shadows, surface_normals
+
+# log-odds of occupied evidence alone that make a cell a wall for the lobe (``lobe_walls``): the standard map
+# loses walls that grazing beams pass unheard (stages.RATES_EVIDENCE, the same value for p_max's fit)
+ECHO_EVIDENCE = 2.0
 
 
 def surfaces(run: LaidOutReadings, params: MapParams, log_odds: np.ndarray) -> np.ndarray:
@@ -50,12 +55,35 @@ def with_opening(whole: Log, opening_deg: float) -> Log:
     return dataclasses.replace(whole, sensor=dataclasses.replace(sensor, beam_width=math.radians(opening_deg)))
 
 
+def lobe_walls(whole: Log, run: LaidOutReadings, params: MapParams, log_odds: np.ndarray,
+               observed: np.ndarray) -> np.ndarray:
+    """(H * W) bool: the walls the lobe is learned at: the standard map's ``log_odds`` and the cells occupied
+    evidence alone makes walls (``ECHO_EVIDENCE``), thinned by the exact inverse model."""
+    evidence = occupied_evidence(whole, run.grid, params, _cuts(run))
+    log_odds = np.where(evidence >= ECHO_EVIDENCE, np.maximum(log_odds, np.float32(1.0)), log_odds)
+    thin = dataclasses.replace(params, exact=dataclasses.replace(params.exact, thin=True))
+    return (thin_pass(whole, run.grid, thin, log_odds, observed, _cuts(run)).log_odds > 0).reshape(-1)
+
+
+def _cuts(run: LaidOutReadings) -> np.ndarray | None:
+    """The deflected beams' ranges as the standard mapper cuts them (as ``stages._cuts``)."""
+    return None if run.shadow is None else run.shadow.reshape(run.ranges.shape)
+
+
 def opening_record(whole: Log, run: LaidOutReadings, params: MapParams, log_odds: np.ndarray,
                    observed: np.ndarray) -> dict:
     """The beam's effective opening learned (``calibration.opening_at``) at the thinned standard map."""
     thin = dataclasses.replace(params, exact=dataclasses.replace(params.exact, thin=True))
-    thinned = thin_pass(whole, run.grid, thin, log_odds, observed).log_odds
-    return opening_at(run, sample_readings(run, MAX_READINGS), (thinned > 0).reshape(-1), params.em.forward)
+    walls = (thin_pass(whole, run.grid, thin, log_odds, observed).log_odds > 0).reshape(-1)
+    return opening_at(run, sample_readings(run, MAX_READINGS), walls, params.em.forward)
+
+
+def lobe_record(run: LaidOutReadings, params: MapParams, walls: np.ndarray) -> Lobe:
+    """The detection lobe (``lobe.learn_lobe``) of ``run``'s readings at ``walls`` (``lobe_walls``), an echo
+    within EM's window (``window`` sigmas) of a wall cell explained by it."""
+    forward = params.em.forward
+    return learn_lobe(run.templates, run.grid, run.cones, walls, float(run.sensor.max_range),
+                      float(forward.window * forward.sigma))
 
 
 def heard_run(run: LaidOutReadings, forward: ForwardModelConfig) -> LaidOutReadings:

@@ -104,10 +104,12 @@ def opening(s: State) -> State:
 
 
 def lobe(s: State) -> State:
-    """The lobe that hears, learned at the standard map's walls; the readings' cones keep the cells it hears."""
-    record = B.lobe_record(s.readings, s.in_use, s.standard.log_odds, s.standard.observed)
-    s = s.but(learned=dataclasses.replace(s.learned, lobe_deg=record["lobe_deg"], lobe_range=record["lobe_range"],
-                                          lobe=record))
+    """The lobe that hears (``beam_model.lobe_record``), learned at the standard map's walls; the readings' cones
+    keep the cells it hears (the whole cone when it explains the echoes as well: ``lobe_deg`` 0)."""
+    walls = B.lobe_walls(s.whole, s.readings, s.in_use, s.standard.log_odds, s.standard.observed)
+    found = B.lobe_record(s.readings, s.in_use, walls)
+    lobe_deg, lobe_range = (0.0, s.in_use.em.forward.lobe_range) if found.full_cone else (found.theta0_deg, found.r0_m)
+    s = s.but(learned=dataclasses.replace(s.learned, lobe_deg=lobe_deg, lobe_range=lobe_range, lobe=found.as_dict()))
     return s.but(readings=B.heard_run(s.readings, s.in_use.em.forward))
 
 

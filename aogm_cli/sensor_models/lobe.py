@@ -1,14 +1,19 @@
 """The sonar's beam as it detects: how many readings a map explains when the beam detects out to each
-angle off its axis (``opening_matches``), and the effective opening learned from that curve
-(``learned_opening``)."""
+angle off its axis (``opening_matches``), the effective opening learned from that curve
+(``learned_opening``), and Kuc & Siegel's detection lobe, theta0 and R0, learned from the echoes
+(``learn_lobe``)."""
 
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba
 import numpy as np
 
+from aogm_cli.core.grid import GridSpec
+from aogm_cli.sensor_models.cone import flat_offsets
 from aogm_cli.sensor_models.surface import cone_walk
 
 LOBE_BIN_DEG = 1.0  # the width of a bin of the angle off the axis (degrees)
@@ -70,3 +75,201 @@ def learned_opening(matches: np.ndarray, echoes: int, beam_width: float) -> floa
         return cone_deg(beam_width)
     a = int(np.flatnonzero(matches >= (1.0 - OPENING_TOLERANCE) * matches.max())[-1])
     return 2.0 * LOBE_BIN_DEG * (a + 1)
+
+
+
+# --- the detection lobe (docs/algorithms.md, "The beam that detects is narrower than the cone we draw") ---
+# Kuc & Siegel: a cone cell at range r and angle phi off the axis is heard when exp(-2 phi^2 / theta0^2) / r^2
+# >= 1 / R0^2, i.e. phi^2 <= theta0^2 ln(R0 / r); R0 is the on-axis range at which a surface met head-on is
+# no longer heard (its reflectivity and the threshold in one number). Incidence is left out: R0 is the reach
+# averaged over the angles the log meets its walls at, shorter than the head-on one (docs/algorithms.md, "The
+# detection lobe": cos^n of incidence at the map's normals, or cells met obliquely left out, did not help).
+THETA0_GRID_DEG = np.arange(1.0, 45.01, 0.5)  # the fit's candidates of theta0 (degrees)
+R0_GRID_M = np.geomspace(1.0, 100.0, 21)  # and of R0 (metres, log-spaced: 26% apart)
+LOBE_RANGE_BIN = 0.5  # m: the range bins of the record's hits and chances
+# candidates explaining within this share as many echoes as the best explain the log as well (the intervals)
+LOBE_TIE = 0.01
+# the cone as drawn stays unless the best lobe explains this share more echoes than it: the bundled worlds'
+# cones gain at most 0.9% from a lobe, their theta0 8 and 12 variants at least 4.5% (docs/algorithms.md)
+LOBE_CONE_TOLERANCE = 0.02
+
+
+@numba.njit(cache=True)
+def nearest_surfaces(tpl, flat, bearings, shape, readings, occupied, model, near, angle):
+    """For every echo t (z < z_max) and bin a of the angle off the axis, the nearest cell of ``occupied``
+    its cone holds up to z + band: near[t, a] its range (inf: none), angle[t, a] its |angle off the axis|
+    (rad; NaN: none). ``readings`` = (rows, cols, bins, z) of echoes; ``model`` = (band, z_max, bin width)."""
+    band, z_max, width = model
+    rows, cols, bins, z_all = readings
+    n_bins = near.shape[1]
+    n_cells = shape[0] * shape[1]
+    ib = np.empty(int(np.max(np.diff(tpl.offsets))), dtype=np.int32)
+    for t in range(z_all.shape[0]):
+        near[t, :] = np.inf
+        angle[t, :] = np.nan
+        z = z_all[t]
+        if not z < z_max:  # no echo (or NaN)
+            continue
+        m, r = cone_walk(tpl, flat, shape, rows[t], cols[t], bins[t], min(z + band, z_max), True, ib)
+        s = tpl.offsets[tpl.base_bin[bins[t]]]
+        for j in range(m):
+            c = np.int64(ib[j])
+            if c >= n_cells or not occupied[c]:
+                continue
+            phi = abs(bearings[s + j])
+            a = min(int(phi / width), n_bins - 1)
+            if r[j] < near[t, a]:
+                near[t, a] = r[j]
+                angle[t, a] = phi
+
+
+@numba.njit(cache=True)
+def explained_by_lobe(near, angle, z, band, theta0, log_r0, out):
+    """out[i, j] += 1 for every echo t whose range the lobe (theta0[i] (rad, ascending), R0 = exp(log_r0[j]))
+    explains: the nearest of its ``nearest_surfaces`` (near[t], angle[t]) that the lobe hears lies within
+    ``band`` of z[t]. Per echo and R0, the bins in the order theta0 hears them: each run of theta0 that
+    hears the same bins is one interval, added as +1 and -1 at its ends and summed over theta0 at last."""
+    n_bins = near.shape[1]
+    n_theta = theta0.shape[0]
+    steps = np.zeros((n_theta + 1, log_r0.shape[0]))
+    need = np.empty(n_bins + 1)
+    found = np.empty(n_bins + 1)  # the ranges of the bins in need's order
+    log_near = np.empty(n_bins)
+    for t in range(near.shape[0]):
+        for j in range(log_r0.shape[0]):
+            n = 0  # the bins the lobe hears at some theta0, in the order it hears them (insertion sort)
+            for a in range(n_bins):  # bin a is heard once theta0 >= phi / sqrt(ln(R0 / r)), never when r >= R0
+                if j == 0:
+                    log_near[a] = math.log(near[t, a]) if near[t, a] < np.inf else np.inf
+                headroom = log_r0[j] - log_near[a]
+                if not headroom > 0.0:
+                    continue
+                v = angle[t, a] / math.sqrt(headroom)
+                k = n
+                while k > 0 and need[k - 1] > v:
+                    need[k] = need[k - 1]
+                    found[k] = found[k - 1]
+                    k -= 1
+                need[k] = v
+                found[k] = near[t, a]
+                n += 1
+            need[n] = np.inf
+            nearest = np.inf
+            for p in range(n):
+                nearest = min(nearest, found[p])
+                if abs(nearest - z[t]) <= band:  # explained from the theta0 hearing bin p to the next one
+                    steps[np.searchsorted(theta0, need[p]), j] += 1.0
+                    steps[np.searchsorted(theta0, need[p + 1]), j] -= 1.0
+    for j in range(log_r0.shape[0]):
+        running = 0.0
+        for i in range(n_theta):
+            running += steps[i, j]
+            out[i, j] += running
+
+
+class SurfaceTable(NamedTuple):
+    """``nearest_surfaces`` of a log's echoes: (echoes, angle bins) ranges and angles; z the echoes'."""
+
+    near: np.ndarray
+    angle: np.ndarray
+    z: np.ndarray
+
+
+@dataclass(frozen=True)
+class Lobe:
+    """The detection lobe learned from a log (``learn_lobe``): theta0 (degrees) and R0 (metres) of the rule
+    above, each with the interval of values explaining the log as well (``LOBE_TIE``), or ``full_cone``: the
+    cone as drawn explains the echoes within ``LOBE_CONE_TOLERANCE`` as well as the best lobe (then theta0_deg and
+    r0_m are inf). ``explained`` (THETA0_GRID_DEG, R0_GRID_M): the fit's objective. ``counts`` (2, angle bins,
+    range bins): per echo, the nearest wall cell of each angle bin up to it (chances, counts[0]) and those
+    on it (hits, counts[1]), by the cell's range: the hit rate traces the lobe."""
+
+    theta0_deg: float
+    r0_m: float
+    full_cone: bool
+    theta0_interval_deg: tuple[float, float]
+    r0_interval_m: tuple[float, float]
+    echoes: int
+    explained_best: int  # echoes the learned lobe explains
+    explained_cone: int  # and those the whole cone does
+    angle_edges_deg: np.ndarray  # (A + 1,) the bins of |angle off the axis|
+    range_edges_m: np.ndarray  # (R + 1,)
+    counts: np.ndarray  # (2, A, R) chances and hits
+    explained: np.ndarray
+
+    def heard_deg(self, r: float) -> float:
+        """The angle off the axis (degrees) out to which a surface met head-on at ``r`` m is heard."""
+        if self.full_cone:
+            return math.inf
+        return self.theta0_deg * math.sqrt(max(math.log(self.r0_m / r), 0.0))
+
+    def hit_rate(self) -> np.ndarray:
+        """(A, R) hits per chance (NaN where no chance)."""
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return self.counts[1] / self.counts[0]
+
+    def as_dict(self) -> dict:
+        """The record as JSON takes it (inf as None; the objective left out)."""
+        def finite(v: float) -> float | None:
+            return float(v) if math.isfinite(v) else None
+        return {"theta0_deg": finite(self.theta0_deg), "r0_m": finite(self.r0_m), "full_cone": self.full_cone,
+                "theta0_interval_deg": list(self.theta0_interval_deg), "r0_interval_m": list(self.r0_interval_m),
+                "echoes": self.echoes, "explained_best": self.explained_best, "explained_cone": self.explained_cone,
+                "angle_edges_deg": self.angle_edges_deg.tolist(), "range_edges_m": self.range_edges_m.tolist(),
+                "chances": self.counts[0].astype(int).tolist(), "hits": self.counts[1].astype(int).tolist()}
+
+
+def surface_table(templates, grid: GridSpec, cones: tuple, occupied: np.ndarray, z_max: float,
+                  band: float) -> SurfaceTable:
+    """``nearest_surfaces`` of the echoes of ``cones`` = (rows, cols, bins, z) at ``occupied`` (H * W bool)."""
+    rows, cols, bins, z = (np.ascontiguousarray(a).reshape(-1) for a in cones)
+    echo = np.flatnonzero(z < z_max)
+    readings = (rows[echo].astype(np.int64), cols[echo].astype(np.int64), bins[echo].astype(np.int64),
+                z[echo].astype(np.float64))
+    table = SurfaceTable(*(np.empty((echo.size, lobe_bins(templates.beam_width))) for _ in range(2)), readings[3])
+    nearest_surfaces(templates.kernel_arrays, flat_offsets(templates, grid.width), templates.bearings, grid.shape,
+                     readings, np.ascontiguousarray(occupied, dtype=np.bool_).reshape(-1),
+                     (float(band), float(z_max), math.radians(LOBE_BIN_DEG)), table.near, table.angle)
+    return table
+
+
+def hits_and_chances(table: SurfaceTable, band: float, z_max: float) -> tuple[np.ndarray, np.ndarray]:
+    """(range edges, counts (2, angle bins, range bins)): each angle bin's nearest wall cell up to the echo
+    (a chance) and on it, within ``band`` of z (a hit), by that cell's range."""
+    near = table.near
+    edges = np.arange(0.0, z_max + LOBE_RANGE_BIN, LOBE_RANGE_BIN)
+    counts = np.zeros((2, near.shape[1], edges.size - 1))
+    chance = np.isfinite(near)
+    hit = chance & (np.abs(near - table.z[:, None]) <= band)
+    column = np.clip(np.digitize(np.where(chance, near, 0.0), edges) - 1, 0, edges.size - 2)
+    for a in range(near.shape[1]):
+        counts[0, a] = np.bincount(column[chance[:, a], a], minlength=edges.size - 1)
+        counts[1, a] = np.bincount(column[hit[:, a], a], minlength=edges.size - 1)
+    return edges, counts
+
+
+def _interval(profile: np.ndarray, grid: np.ndarray, best: float) -> tuple[float, float]:
+    """The span of ``grid`` whose ``profile`` lies within ``LOBE_TIE`` of ``best``."""
+    near_best = np.flatnonzero(profile >= (1.0 - LOBE_TIE) * best)
+    return float(grid[near_best[0]]), float(grid[near_best[-1]])
+
+
+def learn_lobe(templates, grid: GridSpec, cones: tuple, occupied: np.ndarray, z_max: float, band: float) -> Lobe:
+    """The detection lobe that explains most echoes of ``cones`` = (rows, cols, bins, z) at the walls
+    ``occupied`` (H * W bool; ``beam_model.lobe_walls``): of the candidates ``THETA0_GRID_DEG`` x
+    ``R0_GRID_M``, the one under which most echoes lie within ``band`` of the nearest wall cell it hears
+    (``explained_by_lobe``: the likelihood of a hard threshold with random readings). The cone as drawn
+    stays (``full_cone``) unless the best lobe explains ``LOBE_CONE_TOLERANCE`` more echoes than it."""
+    table = surface_table(templates, grid, cones, occupied, z_max, band)
+    explained = np.zeros((THETA0_GRID_DEG.size, R0_GRID_M.size))
+    explained_by_lobe(table.near, table.angle, table.z, float(band), np.radians(THETA0_GRID_DEG), np.log(R0_GRID_M),
+                      explained)
+    cone = int(np.sum(np.abs(table.near.min(axis=1, initial=np.inf) - table.z) <= band))
+    i, j = np.unravel_index(int(np.argmax(explained)), explained.shape)
+    best = float(explained[i, j])
+    full = best == 0 or cone >= (1.0 - LOBE_CONE_TOLERANCE) * best
+    edges, counts = hits_and_chances(table, band, z_max)
+    theta0, r0 = (math.inf, math.inf) if full else (float(THETA0_GRID_DEG[i]), float(R0_GRID_M[j]))
+    return Lobe(theta0, r0, full, _interval(explained.max(axis=1), THETA0_GRID_DEG, best),
+                _interval(explained.max(axis=0), R0_GRID_M, best), int(table.z.size), int(best), cone,
+                LOBE_BIN_DEG * np.arange(table.near.shape[1] + 1), edges, counts, explained)
