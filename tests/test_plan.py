@@ -38,13 +38,14 @@ def test_the_plan_of_each_mode_by_hand():
     # a sonar log with no model: EM calibrates every key on the log; adaptive keeps Elfes' map outside
     em = plan_map("em", params(), SONAR, 0.1, None)
     assert em.calibrates and not em.fits_rates and em.model == "learned from this log"
-    assert em.learns == ("sigma", "p_rand", "p_hit", "p_max", "specular_deg") and em.incidence
+    assert em.learns == ("sigma", "p_rand", "p_hit", "p_max", "specular_deg", "lobe_deg") and em.incidence
+    assert em.learns_lobe
     assert (em.outside, em.thinning, em.start) == (None, None, "standard")
     adaptive = plan_map("adaptive", params(), SONAR, 0.1, None)
     assert (adaptive.outside, adaptive.thinning, adaptive.start, adaptive.decides) == ("elfes", None, "standard", False)
     # a robot's model given: only the building's part is learned, the thinned map stands outside
     given = plan_map("adaptive", params(), SONAR, 0.1, ROBOT)
-    assert given.learns == ("p_max", "specular_deg") and given.fits_rates and not given.calibrates
+    assert given.learns == ("p_max", "specular_deg", "lobe_deg") and given.fits_rates and not given.calibrates
     assert (given.model, given.outside, given.thinning) == ("file robot.yaml", "thinned", OUTSIDE_MARGIN)
     assert given.start == "elfes in clusters" and given.decides
     # a model from another map of the same log gives everything
@@ -52,7 +53,8 @@ def test_the_plan_of_each_mode_by_hand():
     assert carried.learns == () and not carried.fits_rates and not carried.calibrates
     # a laser: no angle of incidence, no opening, never thinned
     laser = plan_map("adaptive", params(exact={"thin": True}, adaptive={"outside": "thinned"}), LASER, 0.1, ROBOT)
-    assert (laser.sensor, laser.incidence, laser.thinning, laser.learns_opening) == (NARROW_BEAM, False, None, False)
+    assert (laser.sensor, laser.incidence, laser.thinning, laser.learns_opening, laser.learns_lobe) == (
+        NARROW_BEAM, False, None, False, False)  # nor a lobe
     assert plan_map("em", params(calibration={"learn": "sigma,specular_deg,opening_deg"}), LASER, 0.1, None).learns == (
         "sigma",)  # a ray has no opening to learn, and no surfaces to learn a specular angle at
     assert plan_map("em", params(exact={"thin": True}), SONAR, 0.1, None).thinning == MARGIN
