@@ -167,3 +167,16 @@ def test_map_opens_its_log_twice_at_most(corridor_door_log, tmp_path, monkeypatc
     from aogm_cli.io.provenance import file_sha256
 
     assert record["inputs"][0] == {"path": str(corridor_door_log), "sha256": file_sha256(corridor_door_log)}
+
+
+def test_map_says_in_one_line_what_it_learned(corridor_door_log, tmp_path):
+    """aogm map prints what the map learned from its log (the lobe, the building's rates) and where the rest of
+    its model came from; --quiet keeps it quiet."""
+    log = corridor_door_log
+    r = CliRunner().invoke(main, ["map", str(log), "--mode", "em", "-o", str(tmp_path / "m.h5")])
+    assert r.exit_code == 0, r.output
+    line = [x for x in r.output.splitlines() if "learned from this log" in x]
+    assert len(line) == 1 and "lobe: the whole cone" in line[0] and "p_max" in line[0]
+    assert "carried by the packaged detector" in line[0]
+    r = CliRunner().invoke(main, ["map", str(log), "--mode", "em", "-o", str(tmp_path / "q.h5"), "--quiet"])
+    assert r.exit_code == 0 and "learned from this log" not in r.output

@@ -120,7 +120,7 @@ def map_log(log_file, mode, output, png, detector, params_file, forward_model, r
     from aogm_cli.io.logfile import LogReader
     from aogm_cli.io.mapfile import map_bytes
     from aogm_cli.io.provenance import provenance
-    from aogm_cli.map_files import calibration_notice, map_file, resolve_params
+    from aogm_cli.map_files import calibration_notice, learned_line, map_file, resolve_params
 
     params = resolve_params(params_file, parameter_overrides(resolution, calibrate, options))
     digest = hashlib.sha256()
@@ -143,5 +143,8 @@ def map_log(log_file, mode, output, png, detector, params_file, forward_model, r
     notice = calibration_notice(log_file, result)
     if notice:
         click.echo(notice, err=True)
+    learned = learned_line(log_file, result)
+    if learned and not quiet:
+        click.echo(learned, err=True)
     if not quiet:
         click.echo(f"{output}: {mode} map {result.grid.height}x{result.grid.width} in {result.runtime_s:.3f} s", err=True)
