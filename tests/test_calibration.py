@@ -202,6 +202,9 @@ def test_calibrate_writes_the_sensors_model_that_map_and_compare_take(corridor_d
     result = run("calibrate", corridor_door_log, "-o", model, "-q")
     assert result.exit_code == 0, result.output
     assert "sigma" in result.output and "learned from" in result.output
+    # and the lobe: the default pattern's echoes are heard across the whole cone
+    assert "of 2904 echoes the whole cone explains" in result.output and result.output.rstrip().endswith(
+        "-> the whole cone")
     assert not list(tmp_path.glob("*.h5"))  # no map written
     written = yaml.safe_load(model.read_text())
     assert written["format"] == "aogm-sensor-model" and written["format_version"] == 1

@@ -72,7 +72,7 @@ def calibrate(log_file, mode, output, detector, params_file, resolution, quiet, 
     from aogm_cli.io.modelfile import model_bytes
     from aogm_cli.io.provenance import provenance
     from aogm_cli.map_files import map_file, resolve_params
-    from aogm_cli.report.calibration_table import calibration_table
+    from aogm_cli.report.calibration_table import calibration_table, lobe_line
 
     made = provenance(inputs) if output else None  # the inputs as read, the time the run starts
     params = resolve_params(params_file, parameter_overrides(resolution, True, options))
@@ -86,6 +86,8 @@ def calibrate(log_file, mode, output, detector, params_file, resolution, quiet, 
     if record is None:  # adaptive without clusters: EM never ran
         raise click.UsageError(f"{log_file}: the detector flagged no cluster; nothing to calibrate in adaptive mode")
     click.echo(calibration_table(record))
+    if (result.learned or {}).get("lobe") is not None:
+        click.echo(lobe_line(result.learned["lobe"]))
     if output:
         from aogm_cli.io.atomic import write_files_atomically
 

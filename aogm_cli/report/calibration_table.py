@@ -1,6 +1,6 @@
 """The record of a calibration (``mapping.calibration.calibration_rounds``, in a map's
 ``stats["calibration"]``) as ``aogm calibrate`` and ``aogm info`` print it: one line per round, then
-what was learned and from how many readings."""
+what was learned and from how many readings; and the lobe that hears (``lobe_line``)."""
 
 from __future__ import annotations
 
@@ -37,3 +37,20 @@ def calibration_table(record: dict) -> str:
     lines.append(f"learned from {record['readings_used']} readings: "
                  + ", ".join(f"{k} {final[k]:.4g}" for k in (*LEARNED, *ONCE) if k in final))
     return "\n".join(lines)
+
+
+def lobe_line(record: dict) -> str:
+    """The lobe a map learned (``sensor_models.lobe.Lobe.as_dict``, the map's ``learned["lobe"]``) as one line: the
+    echo rate by angle off the axis at the walls (2-degree bins), the echoes the whole cone and the lobe explain,
+    and the lobe."""
+    chances = [sum(row) for row in record["chances"]]
+    hits = [sum(row) for row in record["hits"]]
+    pairs = [(sum(hits[a:a + 2]), sum(chances[a:a + 2])) for a in range(0, len(chances), 2)]
+    rates = " ".join(f"{h / c:.2f}" if c else "-" for h, c in pairs)
+    if record["full_cone"]:
+        learned = "the whole cone"
+    else:
+        learned = f"theta0 {record['theta0_deg']:g} deg, heard out to {record['r0_m']:.3g} m on the axis"
+    return (f"echo rate by angle off the axis at the thinned walls (2-degree bins): {rates}; of {record['echoes']} "
+            f"echoes the whole cone explains {record['explained_cone']}, the best lobe {record['explained_best']}"
+            f" -> {learned}")
