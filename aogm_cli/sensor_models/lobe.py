@@ -87,6 +87,7 @@ def learned_opening(matches: np.ndarray, echoes: int, beam_width: float) -> floa
 THETA0_GRID_DEG = np.arange(1.0, 45.01, 0.5)  # the fit's candidates of theta0 (degrees)
 R0_GRID_M = np.geomspace(1.0, 100.0, 21)  # and of R0 (metres, log-spaced: 26% apart)
 LOBE_RANGE_BIN = 0.5  # m: the range bins of the record's hits and chances
+LOBE_ECHOES = 6000  # the echoes the lobe is fitted on, spread evenly over the log: its cost stays bounded
 # candidates explaining within this share as many echoes as the best explain the log as well (the intervals)
 LOBE_TIE = 0.01
 # the cone as drawn stays unless the best lobe explains this share more echoes than it: the bundled worlds'
@@ -123,6 +124,21 @@ def nearest_surfaces(tpl, flat, bearings, shape, readings, occupied, model, near
                 angle[t, a] = phi
 
 
+@numba.njit(cache=True, inline="always")
+def _below(grid, v, g0, per_step):
+    """``np.searchsorted(grid, v)`` (the candidates below v) of an evenly spaced ascending ``grid`` (first value
+    ``g0``, ``per_step`` steps a unit): a guess from the spacing, set right by comparing."""
+    n = grid.shape[0]
+    if not v < np.inf:
+        return n
+    i = min(max(int(math.ceil((v - g0) * per_step)), 0), n)
+    while i > 0 and grid[i - 1] >= v:
+        i -= 1
+    while i < n and grid[i] < v:
+        i += 1
+    return i
+
+
 @numba.njit(cache=True)
 def explained_by_lobe(near, angle, z, band, theta0, log_r0, out):
     """out[i, j] += 1 for every echo t whose range the lobe (theta0[i] (rad, ascending), R0 = exp(log_r0[j]))
@@ -131,6 +147,8 @@ def explained_by_lobe(near, angle, z, band, theta0, log_r0, out):
     hears the same bins is one interval, added as +1 and -1 at its ends and summed over theta0 at last."""
     n_bins = near.shape[1]
     n_theta = theta0.shape[0]
+    t0 = theta0[0]
+    per_step = (n_theta - 1) / (theta0[-1] - theta0[0]) if n_theta > 1 else 0.0
     steps = np.zeros((n_theta + 1, log_r0.shape[0]))
     need = np.empty(n_bins + 1)
     found = np.empty(n_bins + 1)  # the ranges of the bins in need's order
@@ -158,8 +176,8 @@ def explained_by_lobe(near, angle, z, band, theta0, log_r0, out):
             for p in range(n):
                 nearest = min(nearest, found[p])
                 if abs(nearest - z[t]) <= band:  # explained from the theta0 hearing bin p to the next one
-                    steps[np.searchsorted(theta0, need[p]), j] += 1.0
-                    steps[np.searchsorted(theta0, need[p + 1]), j] -= 1.0
+                    steps[_below(theta0, need[p], t0, per_step), j] += 1.0
+                    steps[_below(theta0, need[p + 1], t0, per_step), j] -= 1.0
     for j in range(log_r0.shape[0]):
         running = 0.0
         for i in range(n_theta):
@@ -221,9 +239,12 @@ class Lobe:
 
 def surface_table(templates, grid: GridSpec, cones: tuple, occupied: np.ndarray, z_max: float,
                   band: float) -> SurfaceTable:
-    """``nearest_surfaces`` of the echoes of ``cones`` = (rows, cols, bins, z) at ``occupied`` (H * W bool)."""
+    """``nearest_surfaces`` of the echoes of ``cones`` = (rows, cols, bins, z) at ``occupied`` (H * W bool), at most
+    ``LOBE_ECHOES`` of them."""
     rows, cols, bins, z = (np.ascontiguousarray(a).reshape(-1) for a in cones)
     echo = np.flatnonzero(z < z_max)
+    if echo.size > LOBE_ECHOES:
+        echo = echo[np.unique(np.linspace(0, echo.size - 1, LOBE_ECHOES).round().astype(np.int64))]
     readings = (rows[echo].astype(np.int64), cols[echo].astype(np.int64), bins[echo].astype(np.int64),
                 z[echo].astype(np.float64))
     table = SurfaceTable(*(np.empty((echo.size, lobe_bins(templates.beam_width))) for _ in range(2)), readings[3])
