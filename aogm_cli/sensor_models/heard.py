@@ -53,6 +53,5 @@ def heard_templates(templates: ConeTemplates, lobe_deg: float, lobe_range: float
     heard = _rows_closed(heard_cells(templates.ranges, templates.bearings, lobe_deg, lobe_range), templates)
     if heard.all():
         return templates
-    mask = heard.astype(np.uint8)
-    mask.setflags(write=False)
+    mask = heard.astype(np.uint8)  # writable, as ``cone.NO_CELLS``: the kernels compile one type for both
     return dataclasses.replace(templates, heard=mask, lobe=(float(lobe_deg), float(lobe_range)))
