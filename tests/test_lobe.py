@@ -14,6 +14,8 @@ from aogm_cli.core.grid import GridSpec
 from aogm_cli.sensor_models.cone import flat_offsets
 from aogm_cli.sensor_models.cone_build import build_cone_templates
 from aogm_cli.sensor_models.lobe import (
+    LOBE_MIN_GAIN,
+    LOBE_MIN_HEARD_AT_1M,
     Lobe,
     SurfaceTable,
     explained_by_lobe,
@@ -242,6 +244,26 @@ def test_a_beam_heard_across_the_cone_is_the_full_cone():
     record = lobe.as_dict()
     assert record["theta0_deg"] is None and record["r0_m"] is None and record["full_cone"] is True
     assert json.loads(json.dumps(record)) == record
+
+
+def test_a_lobe_too_narrow_for_a_sonar_is_no_candidate():
+    """Readings a 2-degree lobe hears (2.9 degrees at 1 m: less than a third of the half-cone) learn no lobe that
+    narrow: the cone, or a lobe hearing at least LOBE_MIN_HEARD_AT_1M of the half-cone at 1 m."""
+    tpl, cones = wall_readings(kuc_siegel(2.0, 8.0))
+    lobe = learn_lobe(tpl, GRID, cones, wall(), 5.0, 0.05)
+    assert lobe.full_cone or lobe.heard_deg(1.0) >= LOBE_MIN_HEARD_AT_1M * 15.0 - 1e-9
+
+
+def test_a_lobe_that_explains_few_of_the_logs_echoes_keeps_the_cone():
+    """The readings of a known lobe, but most of the log's echoes random (the walls explain few of them): the
+    lobe explains 4% more than the cone of those it explains, yet under LOBE_MIN_GAIN of all echoes more."""
+    tpl, (rows, cols, bins, z) = wall_readings(kuc_siegel(8.0, 6.0))
+    learned = learn_lobe(tpl, GRID, (rows, cols, bins, z), wall(), 5.0, 0.05)
+    assert not learned.full_cone
+    rng = np.random.default_rng(1)
+    noisy = np.where(rng.random(z.size) < 0.985, rng.uniform(0.1, 0.5, z.size), z)  # nearer than the wall: random
+    lobe = learn_lobe(tpl, GRID, (rows, cols, bins, noisy), wall(), 5.0, 0.05)
+    assert lobe.explained_best - lobe.explained_cone < LOBE_MIN_GAIN * lobe.echoes and lobe.full_cone
 
 
 def test_a_log_without_echoes_keeps_the_cone():
