@@ -330,6 +330,33 @@ def test_calibration_maps_the_whole_log_once_and_part_of_it_before(corridor_door
     assert not occupied.any()  # left as it was: the final map starts where the rounds did
 
 
+def test_a_sigma_not_learned_stays_as_configured(corridor_door_log):
+    """Calibration rounds that learn p_rand, p_hit and p_max only keep the configured sigma: round 0's broad one
+    maps, but no fit and no later round takes it."""
+    from aogm_cli.io.logfile import LogReader
+    from aogm_cli.mapping.params import EMConfig
+    from aogm_cli.mapping.pipeline import log_grid
+    from aogm_cli.sensor_models.readings import lay_out_readings
+
+    with LogReader(corridor_door_log) as reader:
+        log, grid = reader.read(), log_grid(reader, 0.05)
+    run_ = lay_out_readings(log.pose, log.ranges, log.sensor, grid)
+    truth = log.truth.occupancy.reshape(-1).astype(bool)
+    sigmas = []
+
+    def em_step(config, occupied, subset):
+        sigmas.append(config.forward.sigma)
+        occupied[:] = truth
+        return 1.0, 1, "result"
+
+    occupied = np.zeros(grid.height * grid.width, dtype=bool)
+    used, record = C.calibration_rounds(run_, occupied, EMConfig(), CalibrationConfig(learn="p_rand,p_hit,p_max"),
+                                        em_step)
+    assert sigmas[0] == C.TUNING.start_sigma and set(sigmas[1:]) <= {0.03}
+    assert used.forward.sigma == 0.03 and record["final"]["sigma"] == 0.03
+    assert all(r["sigma"] == 0.03 for r in record["rounds"][1:])
+
+
 def test_a_long_log_calibrates_on_runs_of_consecutive_scans(corridor_door_log):
     """Beyond calibration.max_scans, the rounds map (and the fits take) CAL_BLOCKS runs of
     consecutive scans spread over the log, every n-th scan of them; the final EM maps every scan."""

@@ -208,7 +208,9 @@ def calibration_rounds(run: LaidOutReadings, occupied: np.ndarray, em: EMConfig,
         objective, sweeps, _ = em_step(step, occupied, first_scans if round_no == 1 else scans)
         entry.update(em_objective=float(objective), em_sweeps=int(sweeps))
         # fitted on every reading, not only those the map was made from, which it explains too well
-        fit = fit_at_map(run, readings, occupied, used.forward, config, tuning)
+        # round 0's broad sigma is no fit: a sigma not learned stays as configured
+        kept = used.forward if "sigma" in config.learned else dataclasses.replace(used.forward, sigma=em.forward.sigma)
+        fit = fit_at_map(run, readings, occupied, kept, config, tuning)
         occupied[:] = start
         entry = {"round": round_no, **model_values(fit.forward), "fit_iterations": fit.iterations,
                  "loglik_per_reading": fit.loglik_per_reading}
