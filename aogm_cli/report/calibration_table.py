@@ -51,6 +51,7 @@ def lobe_line(record: dict) -> str:
         learned = "the whole cone"
     else:
         learned = f"theta0 {record['theta0_deg']:g} deg, heard out to {record['r0_m']:.3g} m on the axis"
-    return (f"echo rate by angle off the axis at the thinned walls (2-degree bins): {rates}; of {record['echoes']} "
+    return (f"the lobe: echo rate by angle off the axis at the thinned walls (2-degree bins): {rates}; of "
+            f"{record['echoes']} "
             f"echoes the whole cone explains {record['explained_cone']}, the best lobe {record['explained_best']}"
             f" -> {learned}")
