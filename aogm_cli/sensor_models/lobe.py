@@ -288,17 +288,20 @@ def learn_lobe(templates, grid: GridSpec, cones: tuple, occupied: np.ndarray, z_
     ``R0_GRID_M``, the one under which most echoes lie within ``band`` of the nearest wall cell it hears
     (``explained_by_lobe``: the likelihood of a hard threshold with random readings). The cone as drawn
     stays (``full_cone``) unless the best lobe explains ``LOBE_CONE_TOLERANCE`` more echoes than it, and
-    ``LOBE_MIN_GAIN`` of all the echoes more. Only lobes
-    that hear ``LOBE_MIN_HEARD_AT_1M`` of the half-cone at 1 m, and a surface on the axis met head-on out to
-    ``z_max`` (the sensor's rated range), are candidates."""
+    ``LOBE_MIN_GAIN`` of all the echoes more. Only lobes that hear ``LOBE_MIN_HEARD_AT_1M`` of the half-cone
+    at 1 m, and a surface on the axis met head-on out to ``z_max`` (the sensor's rated range), are candidates
+    (the others explain 0 in ``explained``: the R0 below z_max are not counted at all)."""
     table = surface_table(templates, grid, cones, occupied, z_max, band)
     explained = np.zeros((THETA0_GRID_DEG.size, R0_GRID_M.size))
-    explained_by_lobe(table.near, table.angle, table.z, float(band), np.radians(THETA0_GRID_DEG), np.log(R0_GRID_M),
-                      explained)
+    reach = np.flatnonzero(R0_GRID_M >= z_max * (1.0 - 1e-9))  # a surface met head-on is heard out to the max range
+    if reach.size:
+        counted = np.zeros((THETA0_GRID_DEG.size, reach.size))
+        explained_by_lobe(table.near, table.angle, table.z, float(band), np.radians(THETA0_GRID_DEG),
+                          np.log(R0_GRID_M[reach]), counted)
+        explained[:, reach] = counted
     cone = int(np.sum(np.abs(table.near.min(axis=1, initial=np.inf) - table.z) <= band))
     heard_at_1m = THETA0_GRID_DEG[:, None] * np.sqrt(np.maximum(np.log(R0_GRID_M), 0.0))[None, :]
     explained[heard_at_1m < LOBE_MIN_HEARD_AT_1M * math.degrees(0.5 * templates.beam_width)] = 0.0
-    explained[:, R0_GRID_M < z_max * (1.0 - 1e-9)] = 0.0  # a surface met head-on is heard out to the max range
     i, j = np.unravel_index(int(np.argmax(explained)), explained.shape)
     best = float(explained[i, j])
     full = best == 0 or cone >= (1.0 - LOBE_CONE_TOLERANCE) * best or best - cone < LOBE_MIN_GAIN * table.z.size
