@@ -1,5 +1,6 @@
 """What a map learns from its log, apart from what was configured: the sensor's forward model (once per robot) and
-the building's specular angle (per log), each with where it came from, and the model EM uses made of both."""
+the building's part (per log: specular angle, p_max, the lobe that hears), each with where it came from, and the
+model EM uses made of both."""
 
 from __future__ import annotations
 
@@ -10,7 +11,8 @@ from aogm_cli.sensor_models.forward_model import ForwardModelConfig
 
 SENSOR_KEYS = ("sigma", "p_rand", "p_hit", "p_max")  # the forward model's parameters calibration sets
 ONCE = ("specular_deg", "opening_deg")  # learned once, before EM (``calibration.incidence_at``, ``opening_at``)
-# what a robot's model leaves to each log: the building's specular angle and max-range share (``stages.rates``)
+# what a robot's model leaves to each log: the building's specular angle, max-range share (``stages.rates``) and the
+# lobe that hears (``stages.lobe``)
 BUILDING = ("specular_deg", "p_max", "lobe_deg")
 
 # where a sensor model came from (``Learned.origin``)
