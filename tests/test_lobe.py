@@ -301,3 +301,27 @@ def test_hits_and_chances_by_hand():
     assert edges.tolist() == [0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0, 4.5, 5.0]
     assert counts[0, 0].tolist() == [0, 0, 2, 0, 0, 0, 0, 0, 0, 0] and counts[1, 0].tolist() == [0, 0, 1] + [0] * 7
     assert counts[0, 1].tolist() == [0, 1] + [0] * 8 and not counts[1, 1].any()
+
+
+def test_a_learned_lobe_replaces_a_configured_one_and_the_whole_cone_undoes_it(corridor_door_log):
+    """``beam_model.heard_run`` marks the cells from the whole cones each time: a lobe learned after one configured
+    replaces it, and the whole cone learned leaves every cell heard."""
+    import dataclasses
+
+    from aogm_cli.io.logfile import LogReader
+    from aogm_cli.mapping.beam_model import heard_run
+    from aogm_cli.mapping.pipeline import log_grid
+    from aogm_cli.sensor_models.forward_model import ForwardModelConfig
+    from aogm_cli.sensor_models.heard import heard_templates
+    from aogm_cli.sensor_models.readings import lay_out_readings
+
+    with LogReader(corridor_door_log) as reader:
+        log, grid = reader.read(), log_grid(reader, 0.05)
+    run = lay_out_readings(log.pose, log.ranges, log.sensor, grid)
+    configured = heard_run(run, ForwardModelConfig(lobe_deg=6.0, lobe_range=4.0))
+    assert 0 < configured.templates.heard.sum() < configured.templates.heard.size
+    learned = heard_run(configured, ForwardModelConfig(lobe_deg=10.0, lobe_range=8.0))
+    assert learned.templates.lobe == (10.0, 8.0)
+    assert np.array_equal(learned.templates.heard, heard_templates(run.templates, 10.0, 8.0).heard)
+    whole = heard_run(learned, dataclasses.replace(ForwardModelConfig(), lobe_deg=0.0))
+    assert whole.templates is run.templates and whole.templates.heard.size == 0

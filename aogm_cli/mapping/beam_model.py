@@ -17,7 +17,7 @@ from aogm_cli.sensor_models.cone import flat_offsets
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig
 from aogm_cli.sensor_models.heard import heard_templates
 from aogm_cli.sensor_models.lobe import Lobe, learn_lobe
-from aogm_cli.sensor_models.readings import LaidOutReadings
+from aogm_cli.sensor_models.readings import LaidOutReadings, forward_templates
 from aogm_cli.sensor_models.surface import reading_shadows, surface_normals
 
 # log-odds of occupied evidence alone that make a cell a wall for the lobe (``lobe_walls``): the standard map
@@ -97,6 +97,7 @@ def lobe_record(run: LaidOutReadings, params: MapParams, walls: np.ndarray) -> L
 
 
 def heard_run(run: LaidOutReadings, forward: ForwardModelConfig) -> LaidOutReadings:
-    """``run`` with its cones' unheard cells marked (``heard.heard_templates``) for EM and calibration."""
-    templates = heard_templates(run.templates, forward.lobe_deg, forward.lobe_range)
+    """``run`` with its cones' unheard cells marked (``heard.heard_templates``) for EM and calibration, from the
+    whole cones (a lobe learned replaces one configured; the whole cone learned undoes it)."""
+    templates = heard_templates(forward_templates(run.grid, run.sensor), forward.lobe_deg, forward.lobe_range)
     return run if templates is run.templates else dataclasses.replace(run, templates=templates)
