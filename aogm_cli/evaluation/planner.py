@@ -102,9 +102,7 @@ def against_standard(grid: GridSpec, probability, observed, standard_probability
     in_map = map_reach(grid, probability, observed, poses, robot_radius)
     in_standard = map_reach(grid, standard_probability, standard_observed, poses, robot_radius)
     n_standard = int(in_standard.sum())
-    far = np.zeros(grid.shape, dtype=bool)
-    if n_standard:  # else NaN whatever is reached
-        far = ndimage.distance_transform_edt(~in_standard) * grid.resolution > robot_radius
+    far = ~grid.within(in_standard, robot_radius)
     return {
         "walls_kept": _share(int(np.sum(walls & kept)), int(walls.sum())),
         "leak_vs_standard": _share(int(np.sum(in_map & ~in_standard)), n_standard),
