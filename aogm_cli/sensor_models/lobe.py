@@ -30,38 +30,17 @@ def lobe_bins(beam_width: float) -> int:
     return max(1, int(math.ceil(math.degrees(0.5 * beam_width) / LOBE_BIN_DEG - 1e-9)))
 
 
-@numba.njit(cache=True)
 def opening_matches(tpl, flat, bearings, shape, readings, occupied, model, out):
     """out[a] += 1 for every echo that the map ``occupied`` explains when the beam detects up to
     (a + 1) bins off its axis: the nearest occupied cell within that angle lies within ``band`` of z.
 
     A narrower opening puts the nearest surface too far, a wider one too near: the curve peaks at
-    the beam's. ``readings`` = (rows, cols, bins, z); ``model`` = (band, z_max, bin)."""
-    band, z_max, width = model
-    rows, cols, bins, z_all = readings
-    n_bins = out.shape[0]
-    n_cells = shape[0] * shape[1]
-    ib = np.empty(int(np.max(np.diff(tpl.offsets))), dtype=np.int32)
-    first = np.empty(n_bins)
-    for t in range(z_all.shape[0]):
-        z = z_all[t]
-        if not z < z_max:  # no echo (or NaN)
-            continue
-        m, r = cone_walk(tpl, flat, shape, rows[t], cols[t], bins[t], min(z + band, z_max), True, ib)
-        s = tpl.offsets[tpl.base_bin[bins[t]]]
-        first[:] = np.inf
-        for j in range(m):
-            c = np.int64(ib[j])
-            if c >= n_cells or not occupied[c]:
-                continue
-            b = min(int(abs(bearings[s + j]) / width), n_bins - 1)
-            if r[j] < first[b]:
-                first[b] = r[j]
-        nearest = np.inf
-        for a in range(n_bins):
-            nearest = min(nearest, first[a])
-            if abs(nearest - z) <= band:
-                out[a] += 1.0
+    the beam's. ``readings`` = (rows, cols, bins, z); ``model`` = (band, z_max, bin) (``nearest_surfaces``)."""
+    near = np.empty((readings[3].shape[0], out.shape[0]))
+    nearest_surfaces(tpl, flat, bearings, shape, readings, occupied, model, near, np.empty_like(near))
+    with np.errstate(invalid="ignore"):  # a reading without echo: inf - inf, no match
+        within = np.abs(np.minimum.accumulate(near, axis=1) - np.asarray(readings[3])[:, None]) <= model[0]
+    out += np.sum(within, axis=0)
 
 
 def cone_deg(beam_width: float) -> float:
