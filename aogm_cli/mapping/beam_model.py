@@ -12,7 +12,7 @@ import numpy as np
 from aogm_cli.core.log import Log
 from aogm_cli.mapping.calibration import MAX_READINGS, incidence_at, opening_at, sample_readings
 from aogm_cli.mapping.params import MapParams
-from aogm_cli.mapping.standard import occupied_evidence, thin_pass
+from aogm_cli.mapping.standard import echo_walls, thin_pass
 from aogm_cli.sensor_models.cone import flat_offsets
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig
 from aogm_cli.sensor_models.heard import heard_templates
@@ -20,9 +20,6 @@ from aogm_cli.sensor_models.lobe import Lobe, learn_lobe
 from aogm_cli.sensor_models.readings import LaidOutReadings, forward_templates
 from aogm_cli.sensor_models.surface import reading_shadows, surface_normals
 
-# log-odds of occupied evidence alone that make a cell a wall for the lobe (``lobe_walls``): the standard map
-# loses walls that grazing beams pass unheard (stages.RATES_EVIDENCE, the same value for p_max's fit)
-ECHO_EVIDENCE = 2.0
 # the scans the lobe's walls are made of (``lobe_walls``): its two passes cost 1.6 s of a 13 s adaptive map of the
 # office at 20,000 scans (``make bench-scale``); the bundled and real sonar logs have at most 651
 LOBE_SCANS = 2000
@@ -61,23 +58,17 @@ def with_opening(whole: Log, opening_deg: float) -> Log:
 def lobe_walls(whole: Log, run: LaidOutReadings, params: MapParams, log_odds: np.ndarray,
                observed: np.ndarray) -> np.ndarray:
     """(H * W) bool: the walls the lobe is learned at: the standard map's ``log_odds`` and the cells occupied
-    evidence alone makes walls (``ECHO_EVIDENCE``), thinned by the exact inverse model; the evidence and the
+    evidence alone makes walls (``standard.echo_walls``), thinned by the exact inverse model; the evidence and the
     thinning of at most ``LOBE_SCANS`` scans spread over the log (every scan of the bundled and real logs)."""
-    cuts = _cuts(run)
+    cuts = run.cuts
     every = max(1, math.ceil(whole.n_scans / LOBE_SCANS))
     if every > 1:
         whole = dataclasses.replace(whole, time=whole.time[::every], pose=whole.pose[::every],
                                     ranges=whole.ranges[::every])
         cuts = None if cuts is None else cuts[::every]
-    evidence = occupied_evidence(whole, run.grid, params, cuts)
-    log_odds = np.where(evidence >= ECHO_EVIDENCE, np.maximum(log_odds, np.float32(1.0)), log_odds)
+    log_odds = echo_walls(whole, run.grid, params, log_odds, cuts)
     thin = dataclasses.replace(params, exact=dataclasses.replace(params.exact, thin=True))
     return (thin_pass(whole, run.grid, thin, log_odds, observed, cuts).log_odds > 0).reshape(-1)
-
-
-def _cuts(run: LaidOutReadings) -> np.ndarray | None:
-    """The deflected beams' ranges as the standard mapper cuts them (as ``stages._cuts``)."""
-    return None if run.shadow is None else run.shadow.reshape(run.ranges.shape)
 
 
 def opening_record(whole: Log, run: LaidOutReadings, params: MapParams, log_odds: np.ndarray,

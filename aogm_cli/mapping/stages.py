@@ -18,7 +18,7 @@ from aogm_cli.mapping.learned import FROM_LOG, Learned, SensorModel
 from aogm_cli.mapping.pipeline import params_json
 from aogm_cli.mapping.plan import CONE
 from aogm_cli.mapping.standard import (
-    occupied_evidence,
+    echo_walls,
     probability_from_log_odds,
     set_up,
     standard_log_odds,
@@ -26,17 +26,10 @@ from aogm_cli.mapping.standard import (
 )
 from aogm_cli.mapping.state import Clusters, EMRegion, StandardMap, State, View
 from aogm_cli.mapping.view import decided_free, em_view, joined_view
-from aogm_cli.sensor_models.readings import LaidOutReadings, lay_out_readings
+from aogm_cli.sensor_models.readings import lay_out_readings
 
-# log-odds of occupied evidence alone making a free cell a wall for ``rates`` (docs/algorithms.md)
-RATES_EVIDENCE = 2.0
 RATES_START = 0.05  # the fit of p_max starts from at least this share (from 0 it would get no weight)
 RATES_READINGS = 1000  # readings the fit of p_max is made on (every n-th beyond)
-
-
-def _cuts(run: LaidOutReadings) -> np.ndarray | None:
-    """The deflected beams' ranges (``beam_model.deflected_run``) as the standard mapper cuts them."""
-    return None if run.shadow is None else run.shadow.reshape(run.ranges.shape)
 
 
 # --- the standard map ----------------------------------------------------------------------------
@@ -92,7 +85,7 @@ def readings(s: State) -> State:
 
 def standard(s: State) -> State:
     """The standard map of the scans in memory, the deflected beams (if any) cut."""
-    return s.but(standard=StandardMap(*standard_log_odds(s.whole, s.grid, s.in_use, cuts=_cuts(s.readings))))
+    return s.but(standard=StandardMap(*standard_log_odds(s.whole, s.grid, s.in_use, cuts=s.readings.cuts)))
 
 
 def opening(s: State) -> State:
@@ -125,9 +118,10 @@ def deflections(s: State) -> State:
 
 def rates(s: State) -> State:
     """With a robot's model: the building's share of max-range readings (p_max) fitted at the standard map
-    plus the cells occupied evidence alone holds (``RATES_EVIDENCE``): readings crossing cleared walls count as lost."""
-    cuts = _cuts(s.readings)
-    walls = (s.standard.log_odds > 0) | (occupied_evidence(s.whole, s.grid, s.in_use, cuts) >= RATES_EVIDENCE)
+    plus the cells occupied evidence alone holds (``standard.echo_walls``): readings crossing cleared walls count as
+    lost."""
+    cuts = s.readings.cuts
+    walls = echo_walls(s.whole, s.grid, s.in_use, s.standard.log_odds, cuts) > 0
     config = dataclasses.replace(s.params.calibration, learn="p_max")
     forward = s.in_use.em.forward
     start = dataclasses.replace(forward, p_max=max(forward.p_max, RATES_START))
@@ -141,7 +135,7 @@ def rates(s: State) -> State:
 def thinning(s: State) -> State:
     """The standard map thinned by the exact inverse model at the plan's margin (``standard.thin_pass``)."""
     log_odds, evidence = thin_pass(s.whole, s.grid, s.in_use, s.standard.log_odds, s.standard.observed,
-                                   _cuts(s.readings), s.plan.thinning)
+                                   s.readings.cuts, s.plan.thinning)
     return s.but(standard=StandardMap(log_odds, s.standard.observed, evidence, s.standard.log_odds))
 
 

@@ -203,6 +203,17 @@ def standard_log_odds(log, grid: GridSpec, params: MapParams, cuts=None, chunk: 
                         narrow=narrow, cuts=cuts, models=(params.em.forward, params.exact))
 
 
+# log-odds of occupied evidence alone that make a cell a wall (``echo_walls``): the standard map loses walls that
+# passing beams clear, grazing or unheard (docs/algorithms.md: the p_max of ``rates``, the lobe's walls)
+ECHO_EVIDENCE = 2.0
+
+
+def echo_walls(log, grid: GridSpec, params: MapParams, log_odds: np.ndarray, cuts=None) -> np.ndarray:
+    """``log_odds`` with the cells occupied evidence alone makes walls (``ECHO_EVIDENCE``) occupied (at least 1)."""
+    evidence = occupied_evidence(log, grid, params, cuts)
+    return np.where(evidence >= ECHO_EVIDENCE, np.maximum(log_odds, np.float32(1.0)), log_odds)
+
+
 def occupied_evidence(log, grid: GridSpec, params: MapParams, cuts=None) -> np.ndarray:
     """(H, W): the log-odds Elfes' occupied arcs alone give each cell: where echoes end, though beams cleared it."""
     inverse = dataclasses.replace(params.inverse_model, l_free=params.inverse_model.l0,

@@ -105,6 +105,11 @@ class LaidOutReadings:
         """(rows, cols, bins, z): where each reading's cone sits."""
         return self.rows, self.cols, self.bins, self.z
 
+    @property
+    def cuts(self) -> np.ndarray | None:
+        """``shadow`` per scan and sonar (as ``ranges``), where the standard mapper cuts a deflected beam."""
+        return None if self.shadow is None else self.shadow.reshape(self.ranges.shape)
+
 
 def lay_out_readings(pose: np.ndarray, ranges: np.ndarray, sensor: SensorSpec, grid: GridSpec,
                      chunk: int = 4096) -> LaidOutReadings:
