@@ -29,6 +29,7 @@ from aogm_cli.mapping import beam_model as B
 from aogm_cli.mapping.modes import planned, resolved_params, warm_up
 from aogm_cli.mapping.params import MapParams
 from aogm_cli.mapping.runner import run_stages
+from aogm_cli.world.beam_pattern import with_beam_pattern
 
 ROOT = Path(__file__).resolve().parents[1]
 WORLDS = ("corridor_door", "office_doors", "cluttered_lab", "furnished_room", "t_junction", "corridor_specular")
@@ -37,11 +38,8 @@ WORLDS = ("corridor_door", "office_doors", "cluttered_lab", "furnished_room", "t
 def world_variant(name: str, theta0: float | None, out: Path, sub_rays: int | None = None) -> Path:
     """The bundled world ``name`` with the beam pattern theta0 (None: as it is) and ``sub_rays`` sub-rays
     a cone (None: the world's, 11 by default: 3 degrees apart), written to ``out``."""
-    world = yaml.safe_load((ROOT / "worlds" / f"{name}.yaml").read_text())
-    if theta0 is not None:
-        errors = world.setdefault("errors", {})
-        errors["echo_strength"] = {**errors.get("echo_strength", {}), "min_strength": 0.01, "beam_deg": theta0}
-        world.setdefault("sonar", {})["random_rate"] = 0.05
+    text = (ROOT / "worlds" / f"{name}.yaml").read_text()
+    world = yaml.safe_load(text) if theta0 is None else with_beam_pattern(text, theta0)
     if sub_rays is not None:
         world.setdefault("sonar", {})["sub_rays"] = sub_rays
     tail = "" if sub_rays is None else f"_{sub_rays}rays"
