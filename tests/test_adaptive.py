@@ -188,8 +188,8 @@ def test_adaptive_cli_writes_clusters_and_stats(corridor_door_log, tmp_path):
     phases = m.stats["phase_seconds"]
     # the sensor's model carried by the detector: the building's lobe and p_max fitted (lobe, rates), no
     # calibration; so the thinned map outside the clusters (thinning) and its free cells checked (decided)
-    assert set(phases) == {"standard", "readings", "deflections", "lobe", "thinning", "detector", "clusters", "index",
-                           "rates", "sweeps", "decided", "view"}
+    assert set(phases) == {"standard", "readings", "deflections", "walls", "lobe", "thinning", "detector", "clusters",
+                           "index", "rates", "sweeps", "decided", "view"}
     assert m.runtime_s == pytest.approx(sum(phases.values()), rel=1e-12)
     em = read_map_file(_em_map(corridor_door_log, tmp_path))
     assert set(em.stats["phase_seconds"]) == set(phases) - {"detector", "clusters", "thinning", "decided"}

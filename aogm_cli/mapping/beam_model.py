@@ -56,17 +56,18 @@ def with_opening(whole: Log, opening_deg: float) -> Log:
 
 
 def lobe_walls(whole: Log, run: LaidOutReadings, params: MapParams, log_odds: np.ndarray,
-               observed: np.ndarray) -> np.ndarray:
+               observed: np.ndarray, walls: np.ndarray | None = None) -> np.ndarray:
     """(H * W) bool: the walls the lobe is learned at: the standard map's ``log_odds`` and the cells occupied
-    evidence alone makes walls (``standard.echo_walls``), thinned by the exact inverse model; the evidence and the
-    thinning of at most ``LOBE_SCANS`` scans spread over the log (every scan of the bundled and real logs)."""
+    evidence alone makes walls (``standard.echo_walls``; ``walls``: those of the whole log, made already),
+    thinned by the exact inverse model; the evidence and the thinning of at most ``LOBE_SCANS`` scans spread over
+    the log (every scan of the bundled and real logs)."""
     cuts = run.cuts
     every = max(1, math.ceil(whole.n_scans / LOBE_SCANS))
     if every > 1:
         whole = dataclasses.replace(whole, time=whole.time[::every], pose=whole.pose[::every],
                                     ranges=whole.ranges[::every])
         cuts = None if cuts is None else cuts[::every]
-    log_odds = echo_walls(whole, run.grid, params, log_odds, cuts)
+    log_odds = echo_walls(whole, run.grid, params, log_odds, cuts) if walls is None or every > 1 else walls
     thin = dataclasses.replace(params, exact=dataclasses.replace(params.exact, thin=True))
     return (thin_pass(whole, run.grid, thin, log_odds, observed, cuts).log_odds > 0).reshape(-1)
 

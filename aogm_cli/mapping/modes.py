@@ -36,9 +36,10 @@ SET_UP = Stage("set_up", S.set_up_em, ("whole",), timed=False)
 READINGS = Stage("readings", S.readings, ("whole",), ("readings",), when=lacks("readings"))
 STANDARD = Stage("standard", S.standard, ("whole", "readings"), ("standard",), when=lacks("standard"))
 OPENING = Stage("opening", S.opening, ("whole", "readings", "standard"), ("learned", "whole", "readings", "standard"))
-LOBE = Stage("lobe", S.lobe, ("whole", "readings", "standard"), ("learned", "readings"))
+WALLS = Stage("walls", S.walls, ("whole", "readings", "standard"), ("echo_walls",))
+LOBE = Stage("lobe", S.lobe, ("whole", "readings", "standard", "echo_walls"), ("learned", "readings"))
 DEFLECTIONS = Stage("deflections", S.deflections, ("readings", "standard"), ("learned", "readings", "standard"))
-RATES = Stage("rates", S.rates, ("whole", "readings", "standard"), ("learned",))
+RATES = Stage("rates", S.rates, ("whole", "readings", "standard", "echo_walls"), ("learned",))
 THINNING = Stage("thinning", S.thinning, ("whole", "readings", "standard"), ("standard",))
 WHOLE_LOG = Stage("region", S.whole_log, ("readings",), ("region",), timed=False)
 DETECTOR = Stage("detector", S.detect, ("whole",), ("flags",))
@@ -64,6 +65,7 @@ def mode_stages(plan: Plan) -> tuple[Stage, ...]:
     prepared = (READ, SET_UP, READINGS, STANDARD,  # the em and adaptive modes alike
                 opening and OPENING, opening and READINGS, opening and STANDARD,
                 incidence and DEFLECTIONS, incidence and STANDARD,
+                (plan.learns_lobe or plan.fits_rates) and WALLS,
                 plan.learns_lobe and LOBE,
                 plan.fits_rates and RATES,
                 thinned and THINNING)

@@ -99,7 +99,7 @@ def opening(s: State) -> State:
 def lobe(s: State) -> State:
     """The lobe that hears (``beam_model.lobe_record``), learned at the standard map's walls; the readings' cones
     keep the cells it hears (the whole cone when it explains the echoes as well: ``lobe_deg`` 0)."""
-    walls = B.lobe_walls(s.whole, s.readings, s.in_use, s.standard.log_odds, s.standard.observed)
+    walls = B.lobe_walls(s.whole, s.readings, s.in_use, s.standard.log_odds, s.standard.observed, s.echo_walls)
     found = B.lobe_record(s.readings, s.in_use, walls)
     lobe_deg, lobe_range = (0.0, s.in_use.em.forward.lobe_range) if found.full_cone else (found.theta0_deg, found.r0_m)
     s = s.but(learned=dataclasses.replace(s.learned, lobe_deg=lobe_deg, lobe_range=lobe_range, lobe=found.as_dict()))
@@ -116,12 +116,16 @@ def deflections(s: State) -> State:
     return s if run is None else s.but(readings=run, standard=None)
 
 
+def walls(s: State) -> State:
+    """The standard map with the cells occupied evidence alone makes walls (``standard.echo_walls``), for ``lobe``
+    and ``rates``: the standard map loses walls that passing beams clear, grazing or unheard."""
+    return s.but(echo_walls=echo_walls(s.whole, s.grid, s.in_use, s.standard.log_odds, s.readings.cuts))
+
+
 def rates(s: State) -> State:
     """With a robot's model: the building's share of max-range readings (p_max) fitted at the standard map
-    plus the cells occupied evidence alone holds (``standard.echo_walls``): readings crossing cleared walls count as
-    lost."""
-    cuts = s.readings.cuts
-    walls = echo_walls(s.whole, s.grid, s.in_use, s.standard.log_odds, cuts) > 0
+    plus the cells occupied evidence alone holds (``walls``): readings crossing cleared walls count as lost."""
+    walls = s.echo_walls > 0
     config = dataclasses.replace(s.params.calibration, learn="p_max")
     forward = s.in_use.em.forward
     start = dataclasses.replace(forward, p_max=max(forward.p_max, RATES_START))

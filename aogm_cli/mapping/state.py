@@ -67,6 +67,7 @@ class State:
     whole: Log | None = None  # the scans in memory, the sensor with the beam's opening
     readings: LaidOutReadings | None = None
     standard: StandardMap | None = None
+    echo_walls: np.ndarray | None = None  # (H, W): the standard map with the walls echoes alone make (``walls``)
     flags: np.ndarray | None = None  # (readings,) bool: the detector's
     clusters: Clusters | None = None
     region: EMRegion | None = None  # None: EM has nothing to work on

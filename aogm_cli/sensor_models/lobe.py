@@ -129,41 +129,46 @@ def _below(grid, v, g0, per_step):
 def explained_by_lobe(near, angle, z, band, theta0, log_r0, out):
     """out[i, j] += 1 for every echo t whose range the lobe (theta0[i] (rad, ascending), R0 = exp(log_r0[j]))
     explains: the nearest of its ``nearest_surfaces`` (near[t], angle[t]) that the lobe hears lies within
-    ``band`` of z[t]. Per echo and R0, the bins in the order theta0 hears them: each run of theta0 that
-    hears the same bins is one interval, added as +1 and -1 at its ends and summed over theta0 at last."""
+    ``band`` of z[t]. A bin is heard once theta0 >= phi / sqrt(ln(R0 / r)), never when r >= R0; so the echo is
+    explained from the theta0 that hears the first bin within ``band`` of z up to the one that hears the first
+    bin nearer (bins beyond decide nothing): one interval per echo and R0, added
+    as +1 and -1 at its ends and summed over theta0 at last."""
     n_bins = near.shape[1]
     n_theta = theta0.shape[0]
     t0 = theta0[0]
     per_step = (n_theta - 1) / (theta0[-1] - theta0[0]) if n_theta > 1 else 0.0
     steps = np.zeros((n_theta + 1, log_r0.shape[0]))
-    need = np.empty(n_bins + 1)
-    found = np.empty(n_bins + 1)  # the ranges of the bins in need's order
-    log_near = np.empty(n_bins)
+    log_near = np.empty(n_bins)  # the echo's bins that hold a cell up to z + band: ln r, phi^2, on the echo
+    phi2 = np.empty(n_bins)
+    on_echo = np.empty(n_bins, dtype=np.bool_)
     for t in range(near.shape[0]):
+        n = 0
+        any_on = False
+        for a in range(n_bins):
+            r = near[t, a]
+            if r <= z[t] + band:
+                log_near[n] = math.log(r)
+                phi2[n] = angle[t, a] * angle[t, a]
+                on_echo[n] = r >= z[t] - band
+                any_on = any_on or on_echo[n]
+                n += 1
+        if not any_on:  # no cell on the echo: no lobe explains it
+            continue
         for j in range(log_r0.shape[0]):
-            n = 0  # the bins the lobe hears at some theta0, in the order it hears them (insertion sort)
-            for a in range(n_bins):  # bin a is heard once theta0 >= phi / sqrt(ln(R0 / r)), never when r >= R0
-                if j == 0:
-                    log_near[a] = math.log(near[t, a]) if near[t, a] < np.inf else np.inf
-                headroom = log_r0[j] - log_near[a]
+            on = np.inf  # (theta0)^2 from which a bin on the echo is heard
+            short = np.inf  # and from which a bin nearer than the echo is
+            for k in range(n):
+                headroom = log_r0[j] - log_near[k]
                 if not headroom > 0.0:
                     continue
-                v = angle[t, a] / math.sqrt(headroom)
-                k = n
-                while k > 0 and need[k - 1] > v:
-                    need[k] = need[k - 1]
-                    found[k] = found[k - 1]
-                    k -= 1
-                need[k] = v
-                found[k] = near[t, a]
-                n += 1
-            need[n] = np.inf
-            nearest = np.inf
-            for p in range(n):
-                nearest = min(nearest, found[p])
-                if abs(nearest - z[t]) <= band:  # explained from the theta0 hearing bin p to the next one
-                    steps[_below(theta0, need[p], t0, per_step), j] += 1.0
-                    steps[_below(theta0, need[p + 1], t0, per_step), j] -= 1.0
+                v = phi2[k] / headroom
+                if on_echo[k]:
+                    on = min(on, v)
+                else:
+                    short = min(short, v)
+            if on < short:
+                steps[_below(theta0, math.sqrt(on), t0, per_step), j] += 1.0
+                steps[_below(theta0, math.sqrt(short), t0, per_step), j] -= 1.0
     for j in range(log_r0.shape[0]):
         running = 0.0
         for i in range(n_theta):
@@ -243,16 +248,25 @@ def surface_table(templates, grid: GridSpec, cones: tuple, occupied: np.ndarray,
 def hits_and_chances(table: SurfaceTable, band: float, z_max: float) -> tuple[np.ndarray, np.ndarray]:
     """(range edges, counts (2, angle bins, range bins)): each angle bin's nearest wall cell up to the echo
     (a chance) and on it, within ``band`` of z (a hit), by that cell's range."""
-    near = table.near
     edges = np.arange(0.0, z_max + LOBE_RANGE_BIN, LOBE_RANGE_BIN)
-    counts = np.zeros((2, near.shape[1], edges.size - 1))
-    chance = np.isfinite(near)
-    hit = chance & (np.abs(near - table.z[:, None]) <= band)
-    column = np.clip(np.digitize(np.where(chance, near, 0.0), edges) - 1, 0, edges.size - 2)
-    for a in range(near.shape[1]):
-        counts[0, a] = np.bincount(column[chance[:, a], a], minlength=edges.size - 1)
-        counts[1, a] = np.bincount(column[hit[:, a], a], minlength=edges.size - 1)
+    counts = np.zeros((2, table.near.shape[1], edges.size - 1))
+    _count_hits(table.near, table.z, float(band), LOBE_RANGE_BIN, counts)
     return edges, counts
+
+
+@numba.njit(cache=True)
+def _count_hits(near, z, band, bin_width, counts):
+    """``hits_and_chances``' counts: range bin k holds the cells at [k, k + 1) ``bin_width`` (the last one beyond)."""
+    last = counts.shape[2] - 1
+    for t in range(near.shape[0]):
+        for a in range(near.shape[1]):
+            r = near[t, a]
+            if not r < np.inf:
+                continue
+            k = min(int(r / bin_width), last)
+            counts[0, a, k] += 1.0
+            if abs(r - z[t]) <= band:
+                counts[1, a, k] += 1.0
 
 
 def _interval(profile: np.ndarray, grid: np.ndarray, best: float) -> tuple[float, float]:
