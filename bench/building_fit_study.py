@@ -35,7 +35,7 @@ def fits(path: str) -> list[str]:
     stages, state = planned(log, "em", params, Flagger(detector, record), None, given)
     names = [s.name for s in stages]
     state, _ = run_stages(stages[:names.index("rates") if "rates" in names else names.index("region")], state)
-    walls = B.lobe_walls(state.whole, state.readings, state.in_use, state.standard.log_odds, state.standard.observed)
+    walls, _ = B.lobe_walls(state.whole, state.readings, state.in_use, state.standard.log_odds, state.standard.observed)
     forward = state.in_use.em.forward
     lines = [f"in use ({state.learned.origin}): " + " ".join(f"{k} {getattr(forward, k):.3f}" for k in KEYS)]
     for n in (1000, 4000):

@@ -66,7 +66,7 @@ def measured(path: Path, resolution: float | None) -> dict:
     names = [s.name for s in stages]
     s, phases = run_stages(stages[: names.index("standard") + 1], state)
     t0 = time.perf_counter()
-    walls = B.lobe_walls(s.whole, s.readings, params, s.standard.log_odds, s.standard.observed)
+    walls, _ = B.lobe_walls(s.whole, s.readings, params, s.standard.log_odds, s.standard.observed)
     t1 = time.perf_counter()
     B.lobe_record(s.readings, params, walls)  # its kernels compiled (or loaded): the next call is timed
     t1b = time.perf_counter()

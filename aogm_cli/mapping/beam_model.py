@@ -12,7 +12,7 @@ import numpy as np
 from aogm_cli.core.log import Log
 from aogm_cli.mapping.calibration import MAX_READINGS, incidence_at, opening_at, sample_readings
 from aogm_cli.mapping.params import MapParams
-from aogm_cli.mapping.standard import echo_walls, thin_pass
+from aogm_cli.mapping.standard import ExactPass, echo_walls, exact_pass, thin_pass
 from aogm_cli.sensor_models.cone import flat_offsets
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig
 from aogm_cli.sensor_models.heard import heard_templates
@@ -56,20 +56,25 @@ def with_opening(whole: Log, opening_deg: float) -> Log:
 
 
 def lobe_walls(whole: Log, run: LaidOutReadings, params: MapParams, log_odds: np.ndarray,
-               observed: np.ndarray, walls: np.ndarray | None = None) -> np.ndarray:
+               observed: np.ndarray, walls: np.ndarray | None = None,
+               exact: ExactPass | None = None) -> tuple[np.ndarray, ExactPass | None]:
     """(H * W) bool: the walls the lobe is learned at: the standard map's ``log_odds`` and the cells occupied
     evidence alone makes walls (``standard.echo_walls``; ``walls``: those of the whole log, made already),
-    thinned by the exact inverse model; the evidence and the thinning of at most ``LOBE_SCANS`` scans spread over
-    the log (every scan of the bundled and real logs)."""
+    thinned by the exact inverse model (``exact``: its pass of the whole log, made already); the evidence and
+    the thinning of at most ``LOBE_SCANS`` scans spread over the log (every scan of the bundled and real logs).
+    And the exact pass of the whole log it made or took (None: it took fewer scans)."""
     cuts = run.cuts
     every = max(1, math.ceil(whole.n_scans / LOBE_SCANS))
     if every > 1:
         whole = dataclasses.replace(whole, time=whole.time[::every], pose=whole.pose[::every],
                                     ranges=whole.ranges[::every])
         cuts = None if cuts is None else cuts[::every]
-    log_odds = echo_walls(whole, run.grid, params, log_odds, cuts) if walls is None or every > 1 else walls
-    thin = dataclasses.replace(params, exact=dataclasses.replace(params.exact, thin=True))
-    return (thin_pass(whole, run.grid, thin, log_odds, observed, cuts).log_odds > 0).reshape(-1)
+        walls = exact = None
+    log_odds = echo_walls(whole, run.grid, params, log_odds, cuts) if walls is None else walls
+    if exact is None or not exact.made_with(params):
+        exact = exact_pass(whole, run.grid, params, cuts)
+    thinned = thin_pass(whole, run.grid, params, log_odds, observed, cuts, exact=exact).log_odds > 0
+    return thinned.reshape(-1), exact if every == 1 else None
 
 
 def opening_record(whole: Log, run: LaidOutReadings, params: MapParams, log_odds: np.ndarray,

@@ -37,10 +37,10 @@ READINGS = Stage("readings", S.readings, ("whole",), ("readings",), when=lacks("
 STANDARD = Stage("standard", S.standard, ("whole", "readings"), ("standard",), when=lacks("standard"))
 OPENING = Stage("opening", S.opening, ("whole", "readings", "standard"), ("learned", "whole", "readings", "standard"))
 WALLS = Stage("walls", S.walls, ("whole", "readings", "standard"), ("echo_walls",))
-LOBE = Stage("lobe", S.lobe, ("whole", "readings", "standard", "echo_walls"), ("learned", "readings"))
+LOBE = Stage("lobe", S.lobe, ("whole", "readings", "standard", "echo_walls", "exact?"), ("learned", "readings", "exact"))
 DEFLECTIONS = Stage("deflections", S.deflections, ("readings", "standard"), ("learned", "readings", "standard"))
 RATES = Stage("rates", S.rates, ("whole", "readings", "standard", "echo_walls"), ("learned",))
-THINNING = Stage("thinning", S.thinning, ("whole", "readings", "standard"), ("standard",))
+THINNING = Stage("thinning", S.thinning, ("whole", "readings", "standard", "exact?"), ("standard",))
 WHOLE_LOG = Stage("region", S.whole_log, ("readings",), ("region",), timed=False)
 DETECTOR = Stage("detector", S.detect, ("whole",), ("flags",))
 CLUSTERS = Stage("clusters", S.clusters, ("whole", "readings", "standard", "flags"), ("clusters", "region"))
@@ -66,8 +66,8 @@ def mode_stages(plan: Plan) -> tuple[Stage, ...]:
                 opening and OPENING, opening and READINGS, opening and STANDARD,
                 incidence and DEFLECTIONS, incidence and STANDARD,
                 (plan.learns_lobe or plan.fits_rates) and WALLS,
+                plan.fits_rates and RATES,  # at the whole cones; again in LOBE when its lobe narrows them
                 plan.learns_lobe and LOBE,
-                plan.fits_rates and RATES,
                 thinned and THINNING)
     if plan.mode == "em":
         return _present(*prepared,

@@ -97,13 +97,19 @@ def opening(s: State) -> State:
 
 
 def lobe(s: State) -> State:
-    """The lobe that hears (``beam_model.lobe_record``), learned at the standard map's walls; the readings' cones
-    keep the cells it hears (the whole cone when it explains the echoes as well: ``lobe_deg`` 0)."""
-    walls = B.lobe_walls(s.whole, s.readings, s.in_use, s.standard.log_odds, s.standard.observed, s.echo_walls)
+    """The lobe that hears (``beam_model.lobe_record``), learned at the standard map's walls thinned (their exact
+    pass kept for ``thinning``); the readings' cones keep the cells it hears (the whole cone when it explains the
+    echoes as well: ``lobe_deg`` 0), and ``rates`` fits p_max again when that changed them."""
+    walls, exact = B.lobe_walls(s.whole, s.readings, s.in_use, s.standard.log_odds, s.standard.observed,
+                                s.echo_walls, s.exact)
     found = B.lobe_record(s.readings, s.in_use, walls)
     lobe_deg, lobe_range = (0.0, s.in_use.em.forward.lobe_range) if found.full_cone else (found.theta0_deg, found.r0_m)
-    s = s.but(learned=dataclasses.replace(s.learned, lobe_deg=lobe_deg, lobe_range=lobe_range, lobe=found.as_dict()))
-    return s.but(readings=B.heard_run(s.readings, s.in_use.em.forward))
+    s = s.but(learned=dataclasses.replace(s.learned, lobe_deg=lobe_deg, lobe_range=lobe_range, lobe=found.as_dict()),
+              exact=exact)
+    heard = B.heard_run(s.readings, s.in_use.em.forward)
+    if heard is s.readings:
+        return s
+    return rates(s.but(readings=heard)) if s.plan.fits_rates else s.but(readings=heard)
 
 
 def deflections(s: State) -> State:
@@ -137,9 +143,10 @@ def rates(s: State) -> State:
 
 
 def thinning(s: State) -> State:
-    """The standard map thinned by the exact inverse model at the plan's margin (``standard.thin_pass``)."""
+    """The standard map thinned by the exact inverse model at the plan's margin (``standard.thin_pass``; the exact
+    pass the lobe's walls were thinned with, when made with the same models)."""
     log_odds, evidence = thin_pass(s.whole, s.grid, s.in_use, s.standard.log_odds, s.standard.observed,
-                                   s.readings.cuts, s.plan.thinning)
+                                   s.readings.cuts, s.plan.thinning, s.exact)
     return s.but(standard=StandardMap(log_odds, s.standard.observed, evidence, s.standard.log_odds))
 
 

@@ -229,13 +229,38 @@ class Thinned(NamedTuple):
     evidence: np.ndarray
 
 
-def thin_pass(log, grid: GridSpec, params: MapParams, log_odds: np.ndarray, observed: np.ndarray,
-              cuts=None, margin: float = MARGIN) -> Thinned:
-    """``log_odds`` thinned by one more pass with the exact inverse model (``exact.thinned``, at ``margin``)."""
+class ExactPass(NamedTuple):
+    """The exact inverse model's map of a log (``exact_pass``) and the models it was made with: the lobe's walls
+    and the thinned map share one pass when their models are the same."""
+
+    log_odds: np.ndarray
+    observed: np.ndarray
+    models: tuple
+
+    def made_with(self, params: MapParams) -> bool:
+        return self.models == _exact_models(params)
+
+
+def _exact_models(params: MapParams) -> tuple:
+    """What an exact pass depends on besides the log: the inverse model's settings, the forward model, the prior."""
+    return params.inverse_model, params.em.forward, params.exact.prior
+
+
+def exact_pass(log, grid: GridSpec, params: MapParams, cuts=None) -> ExactPass:
+    """The exact inverse model's (log_odds, observed) of a whole log source (``standard_log_odds``)."""
     exact_params = dataclasses.replace(params, inverse_model=dataclasses.replace(params.inverse_model, model="exact"))
-    exact = standard_log_odds(log, grid, exact_params, cuts=cuts)
-    evidence = np.where(exact[1], exact[0] - np.float32(params.exact.l0), np.float32(0.0))
-    return Thinned(thinned(log_odds, observed, exact, params.exact, params.inverse_model.clamp_min, margin), evidence)
+    return ExactPass(*standard_log_odds(log, grid, exact_params, cuts=cuts), _exact_models(params))
+
+
+def thin_pass(log, grid: GridSpec, params: MapParams, log_odds: np.ndarray, observed: np.ndarray,
+              cuts=None, margin: float = MARGIN, exact: ExactPass | None = None) -> Thinned:
+    """``log_odds`` thinned by one more pass with the exact inverse model (``exact.thinned``, at ``margin``);
+    ``exact``: that pass made already (taken when made with ``params``' models, of the same scans and ``cuts``)."""
+    if exact is None or not exact.made_with(params):
+        exact = exact_pass(log, grid, params, cuts)
+    evidence = np.where(exact.observed, exact.log_odds - np.float32(params.exact.l0), np.float32(0.0))
+    return Thinned(thinned(log_odds, observed, exact[:2], params.exact, params.inverse_model.clamp_min, margin),
+                   evidence)
 
 
 def truth_grid_map(log: Log) -> tuple[np.ndarray, np.ndarray]:

@@ -19,6 +19,7 @@ if TYPE_CHECKING:
     from aogm_cli.core.log import Log
     from aogm_cli.mapping.em import EMOutcome, EMProblem, ProblemFor
     from aogm_cli.mapping.pipeline import Progress, TimedSource
+    from aogm_cli.mapping.standard import ExactPass
     from aogm_cli.sensor_models.readings import LaidOutReadings
 
 
@@ -68,6 +69,7 @@ class State:
     readings: LaidOutReadings | None = None
     standard: StandardMap | None = None
     echo_walls: np.ndarray | None = None  # (H, W): the standard map with the walls echoes alone make (``walls``)
+    exact: ExactPass | None = None  # the exact inverse model's pass the lobe's walls were thinned with
     flags: np.ndarray | None = None  # (readings,) bool: the detector's
     clusters: Clusters | None = None
     region: EMRegion | None = None  # None: EM has nothing to work on
