@@ -5,6 +5,7 @@ back from readings of a wall made with a known one, or the full cone."""
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -26,6 +27,7 @@ from aogm_cli.sensor_models.lobe import (
     opening_matches,
 )
 
+ROOT = Path(__file__).resolve().parents[1]
 GRID = GridSpec(0.0, 0.0, 0.05, 120, 160)
 WALL_ROW = 100  # a wall along the columns, 5 m up the rows
 
@@ -325,3 +327,61 @@ def test_a_learned_lobe_replaces_a_configured_one_and_the_whole_cone_undoes_it(c
     assert np.array_equal(learned.templates.heard, heard_templates(run.templates, 10.0, 8.0).heard)
     whole = heard_run(learned, dataclasses.replace(ForwardModelConfig(), lobe_deg=0.0))
     assert whole.templates is run.templates and whole.templates.heard.size == 0
+
+
+def _before(log_path, mode: str, stage: str):
+    """The state of a ``mode`` map of the log at ``log_path`` (defaults) just before its stage ``stage``."""
+    from aogm_cli.io.logfile import LogReader
+    from aogm_cli.map_files import resolve_params, sensor_model
+    from aogm_cli.mapping.modes import resolved_params, state_before
+
+    with LogReader(log_path) as reader:
+        log = reader.read()
+        given = sensor_model(mode, resolve_params(), reader, str(log_path))
+    return state_before(log, mode, resolved_params(log, resolve_params()), stage, given)
+
+
+def test_the_thinned_map_takes_the_lobes_exact_pass_only_when_made_with_the_same_models(corridor_door_log):
+    """The exact pass the lobe's walls were thinned with (``State.exact``) is the one ``thinning`` needs when
+    the model in use has not changed since (the whole cone learned, p_max fitted before): the same thinned map,
+    bit for bit, as a pass made afresh; a pass made with another p_max is not taken."""
+    import dataclasses
+
+    from aogm_cli.mapping.standard import exact_pass, thin_pass
+
+    s = _before(corridor_door_log, "adaptive", "thinning")
+    assert s.exact is not None and s.exact.made_with(s.in_use) and s.learned.lobe_deg == 0.0
+    args = (s.whole, s.grid, s.in_use, s.standard.log_odds, s.standard.observed, s.readings.cuts, s.plan.thinning)
+    taken, fresh = thin_pass(*args, exact=s.exact), thin_pass(*args)
+    assert all(np.array_equal(a, b) for a, b in zip(taken, fresh, strict=True))
+    forward = s.in_use.em.forward
+    other = dataclasses.replace(s.in_use, em=dataclasses.replace(s.in_use.em, forward=dataclasses.replace(
+        forward, p_max=forward.p_max + 0.1)))
+    stale = exact_pass(s.whole, s.grid, other, s.readings.cuts)
+    assert not stale.made_with(s.in_use)
+    again = thin_pass(*args, exact=stale)
+    assert all(np.array_equal(a, b) for a, b in zip(again, fresh, strict=True))
+    assert not np.array_equal(stale.log_odds, s.exact.log_odds)
+
+
+def test_a_lobe_that_narrows_the_cones_fits_p_max_again_at_them(tmp_path):
+    """``rates`` fits p_max at the whole cones before the lobe; a lobe that narrows them (a beam of theta0 8)
+    fits it again at the cells they hear, so the map's p_max is the one its cones give; the whole cone learned
+    leaves the first fit."""
+    from aogm_cli.io.logfile import write_log
+    from aogm_cli.mapping import stages as S
+    from aogm_cli.simulation.sonar import simulate
+    from aogm_cli.world.beam_pattern import with_beam_pattern
+    from aogm_cli.world.loader import load_world
+
+    world = tmp_path / "narrow.yaml"
+    world.write_text(yaml.safe_dump(with_beam_pattern((ROOT / "worlds" / "corridor_door.yaml").read_text(), 8)))
+    log = tmp_path / "narrow.h5"
+    write_log(log, simulate(load_world(world), seed=1))
+    before = _before(log, "em", "lobe")
+    after = S.lobe(before)
+    assert after.learned.lobe_deg > 0 and after.readings is not before.readings
+    p_max = after.learned.rates["p_max"]
+    assert p_max != before.learned.rates["p_max"]
+    assert p_max == S.rates(before.but(readings=after.readings)).learned.rates["p_max"]
+    assert after.learned.sensor.p_max == p_max
