@@ -343,14 +343,16 @@ def _before(log_path, mode: str, stage: str):
 
 def test_the_thinned_map_takes_the_lobes_exact_pass_only_when_made_with_the_same_models(corridor_door_log):
     """The exact pass the lobe's walls were thinned with (``State.exact``) is the one ``thinning`` needs when
-    the model in use has not changed since (the whole cone learned, p_max fitted before): the same thinned map,
-    bit for bit, as a pass made afresh; a pass made with another p_max is not taken."""
+    the model in use has not changed since (the whole cone learned, p_max fitted before) and it was made of the
+    same scans: the same thinned map, bit for bit, as a pass made afresh; a pass made with another p_max is not
+    taken."""
     import dataclasses
 
     from aogm_cli.mapping.standard import exact_pass, thin_pass
 
     s = _before(corridor_door_log, "adaptive", "thinning")
-    assert s.exact is not None and s.exact.made_with(s.in_use) and s.learned.lobe_deg == 0.0
+    assert s.exact is not None and s.exact.made_with(s.in_use, s.whole, s.readings.cuts) and s.learned.lobe_deg == 0.0
+    assert not s.exact.made_with(s.in_use, dataclasses.replace(s.whole), s.readings.cuts)  # other scans: not taken
     args = (s.whole, s.grid, s.in_use, s.standard.log_odds, s.standard.observed, s.readings.cuts, s.plan.thinning)
     taken, fresh = thin_pass(*args, exact=s.exact), thin_pass(*args)
     assert all(np.array_equal(a, b) for a, b in zip(taken, fresh, strict=True))

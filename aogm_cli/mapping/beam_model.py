@@ -71,7 +71,7 @@ def lobe_walls(whole: Log, run: LaidOutReadings, params: MapParams, log_odds: np
         cuts = None if cuts is None else cuts[::every]
         walls = exact = None
     log_odds = echo_walls(whole, run.grid, params, log_odds, cuts) if walls is None else walls
-    if exact is None or not exact.made_with(params):
+    if exact is None or not exact.made_with(params, whole, cuts):
         exact = exact_pass(whole, run.grid, params, cuts)
     thinned = thin_pass(whole, run.grid, params, log_odds, observed, cuts, exact=exact).log_odds > 0
     return thinned.reshape(-1), exact if every == 1 else None

@@ -230,15 +230,18 @@ class Thinned(NamedTuple):
 
 
 class ExactPass(NamedTuple):
-    """The exact inverse model's map of a log (``exact_pass``) and the models it was made with: the lobe's walls
-    and the thinned map share one pass when their models are the same."""
+    """The exact inverse model's map of a log (``exact_pass``), the models it was made with and the scans and
+    cuts it was made of: the lobe's walls and the thinned map share one pass when all three are the same."""
 
     log_odds: np.ndarray
     observed: np.ndarray
     models: tuple
+    source: tuple  # (the log, its cuts): the very objects
 
-    def made_with(self, params: MapParams) -> bool:
-        return self.models == _exact_models(params)
+    def made_with(self, params: MapParams, log=None, cuts=None) -> bool:
+        """Made with ``params``' models (and, given, of ``log`` with ``cuts``: the same objects)."""
+        same_scans = log is None or (self.source[0] is log and self.source[1] is cuts)
+        return same_scans and self.models == _exact_models(params)
 
 
 def _exact_models(params: MapParams) -> tuple:
@@ -249,14 +252,14 @@ def _exact_models(params: MapParams) -> tuple:
 def exact_pass(log, grid: GridSpec, params: MapParams, cuts=None) -> ExactPass:
     """The exact inverse model's (log_odds, observed) of a whole log source (``standard_log_odds``)."""
     exact_params = dataclasses.replace(params, inverse_model=dataclasses.replace(params.inverse_model, model="exact"))
-    return ExactPass(*standard_log_odds(log, grid, exact_params, cuts=cuts), _exact_models(params))
+    return ExactPass(*standard_log_odds(log, grid, exact_params, cuts=cuts), _exact_models(params), (log, cuts))
 
 
 def thin_pass(log, grid: GridSpec, params: MapParams, log_odds: np.ndarray, observed: np.ndarray,
               cuts=None, margin: float = MARGIN, exact: ExactPass | None = None) -> Thinned:
     """``log_odds`` thinned by one more pass with the exact inverse model (``exact.thinned``, at ``margin``);
     ``exact``: that pass made already (taken when made with ``params``' models, of the same scans and ``cuts``)."""
-    if exact is None or not exact.made_with(params):
+    if exact is None or not exact.made_with(params, log, cuts):
         exact = exact_pass(log, grid, params, cuts)
     evidence = np.where(exact.observed, exact.log_odds - np.float32(params.exact.l0), np.float32(0.0))
     return Thinned(thinned(log_odds, observed, exact[:2], params.exact, params.inverse_model.clamp_min, margin),
