@@ -131,8 +131,8 @@ def explained_by_lobe(near, angle, z, band, theta0, log_r0, out):
     explains: the nearest of its ``nearest_surfaces`` (near[t], angle[t]) that the lobe hears lies within
     ``band`` of z[t]. A bin is heard once theta0 >= phi / sqrt(ln(R0 / r)), never when r >= R0; so the echo is
     explained from the theta0 that hears the first bin within ``band`` of z up to the one that hears the first
-    bin nearer (bins beyond decide nothing): one interval per echo and R0, added
-    as +1 and -1 at its ends and summed over theta0 at last."""
+    bin nearer (bins beyond decide nothing): one interval per echo and R0, added as +1 and -1 at its ends and
+    summed over theta0 at last."""
     n_bins = near.shape[1]
     n_theta = theta0.shape[0]
     t0 = theta0[0]
