@@ -77,7 +77,7 @@ class AdaptiveConfig:
     outside: str = "auto"
     contested: float = 0.5
     weak: float = 0.45
-    grow: int = 6
+    grow: int = 2
     scale: str = "em"
 
     def validate(self) -> AdaptiveConfig:
