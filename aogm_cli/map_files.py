@@ -124,31 +124,6 @@ def calibration_notice(path, m: OccupancyMap) -> str | None:
     return f"{path}: calibrated the sensor's model on this log ({why})"
 
 
-def learned_line(path, m: OccupancyMap) -> str | None:
-    """The one line that says what a map learned from its log and where the rest of its model came from (None:
-    a standard map, or nothing learned)."""
-    learned = m.learned or {}
-    if m.mode == "standard" or not learned:
-        return None
-    parts = []
-    lobe = learned.get("lobe")
-    if lobe is not None:
-        parts.append("lobe: the whole cone" if lobe.get("full_cone") else
-                     f"lobe theta0 {learned['lobe_deg']:g} deg, heard out to {learned['lobe_range']:.3g} m on the axis")
-    if learned.get("specular_deg") is not None:
-        parts.append(f"specular angle {learned['specular_deg']:.3g} deg")
-    sensor = learned.get("sensor") or {}
-    rates = learned.get("rates") or {}
-    keys = [k for k in ("sigma", "p_rand", "p_hit", "p_max") if k in rates or (learned.get("origin") == FROM_LOG
-                                                                               and k in sensor)]
-    parts += [f"{k} {(rates.get(k, sensor.get(k))):.3g}" for k in keys]
-    if not parts:
-        return None
-    origin = learned.get("origin", "configured")
-    rest = "" if origin == FROM_LOG else f"; the sensor's model {origin}" if sensor else ""
-    return f"{path}: learned from this log: {', '.join(parts)}{rest}"
-
-
 def learn_sensor_models(paths, params: MapParams, advance=None) -> tuple[dict, ...]:
     """The sensor models a detector trained on the logs at ``paths`` carries: one per sensor among
     them, each value the median over its logs' calibrations (an em map each, as ``aogm

@@ -120,7 +120,8 @@ def map_log(log_file, mode, output, png, detector, params_file, forward_model, r
     from aogm_cli.io.logfile import LogReader
     from aogm_cli.io.mapfile import map_bytes
     from aogm_cli.io.provenance import provenance
-    from aogm_cli.map_files import calibration_notice, learned_line, map_file, resolve_params
+    from aogm_cli.map_files import calibration_notice, map_file, resolve_params
+    from aogm_cli.report.calibration_table import learned_line
 
     params = resolve_params(params_file, parameter_overrides(resolution, calibrate, options))
     digest = hashlib.sha256()

@@ -1,11 +1,13 @@
 """The record of a calibration (``mapping.calibration.calibration_rounds``, in a map's
 ``stats["calibration"]``) as ``aogm calibrate`` and ``aogm info`` print it: one line per round, then
-what was learned and from how many readings; and the lobe that hears (``lobe_line``)."""
+what was learned and from how many readings; the lobe that hears (``lobe_line``); and the one line
+``aogm map`` prints of what a map learned from its log (``learned_line``)."""
 
 from __future__ import annotations
 
+from aogm_cli.core.occupancy_map import OccupancyMap
 from aogm_cli.mapping.calibration import LEARNED
-from aogm_cli.mapping.learned import ONCE
+from aogm_cli.mapping.learned import FROM_LOG, ONCE
 
 
 def calibration_table(record: dict) -> str:
@@ -47,11 +49,33 @@ def lobe_line(record: dict) -> str:
     hits = [sum(row) for row in record["hits"]]
     pairs = [(sum(hits[a:a + 2]), sum(chances[a:a + 2])) for a in range(0, len(chances), 2)]
     rates = " ".join(f"{h / c:.2f}" if c else "-" for h, c in pairs)
-    if record["full_cone"]:
-        learned = "the whole cone"
-    else:
-        learned = f"theta0 {record['theta0_deg']:g} deg, heard out to {record['r0_m']:.3g} m on the axis"
     return (f"the lobe: echo rate by angle off the axis at the thinned walls (2-degree bins): {rates}; of "
-            f"{record['echoes']} "
-            f"echoes the whole cone explains {record['explained_cone']}, the best lobe {record['explained_best']}"
-            f" -> {learned}")
+            f"{record['echoes']} echoes the whole cone explains {record['explained_cone']}, the best lobe "
+            f"{record['explained_best']} -> {_lobe_words(record)}")
+
+
+def _lobe_words(record: dict) -> str:
+    """The lobe of a ``Lobe.as_dict`` record in words."""
+    if record["full_cone"]:
+        return "the whole cone"
+    return f"theta0 {record['theta0_deg']:g} deg, heard out to {record['r0_m']:.3g} m on the axis"
+
+
+def learned_line(path, m: OccupancyMap) -> str | None:
+    """The one line that says what a map learned from its log and where the rest of its model came from (None:
+    a standard map, or nothing learned)."""
+    learned = m.learned or {}
+    if m.mode == "standard" or not learned:
+        return None
+    parts = [] if learned.get("lobe") is None else [f"lobe: {_lobe_words(learned['lobe'])}"]
+    if learned.get("specular_deg") is not None:
+        parts.append(f"specular angle {learned['specular_deg']:.3g} deg")
+    sensor = learned.get("sensor") or {}
+    rates = learned.get("rates") or {}
+    from_log = learned.get("origin") == FROM_LOG
+    parts += [f"{k} {rates.get(k, sensor.get(k)):.3g}" for k in ("sigma", "p_rand", "p_hit", "p_max")
+              if k in rates or (from_log and k in sensor)]
+    if not parts:
+        return None
+    rest = f"; the sensor's model {learned.get('origin', 'configured')}" if sensor and not from_log else ""
+    return f"{path}: learned from this log: {', '.join(parts)}{rest}"
