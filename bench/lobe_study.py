@@ -5,6 +5,7 @@ each log's lobe is learned at its thinned standard map (``beam_model.lobe_walls`
 
     python bench/lobe_study.py [--out /tmp/lf] [--worlds corridor_door ...] [--thetas 8 12]
     python bench/lobe_study.py --logs LOG.h5 ... --resolution 0.1      # logs as they are (a real robot's)
+    python bench/lobe_study.py --worlds corridor_door --thetas 8 12 --objective   # and each fit's objective
 
 Per log: theta0 and R0 learned (their intervals: the candidates explaining within 1% as many echoes), the
 angle a surface met head-on at 1 and 4 m is heard out to, the echoes the lobe and the whole cone explain, the
@@ -89,6 +90,16 @@ def row(name: str, simulated_deg: str, m: dict) -> str:
             f"{m['half_opening']:g} | {m['standard_s']:.3f} | {m['walls_s']:.3f} | {m['lobe_s']:.3f} |")
 
 
+def objective(lobe) -> str:
+    """The fit's objective (``Lobe.explained``): per theta0 from 4 to 20 degrees, the echoes the best R0 explains
+    and those R0 = 10 m (the simulator's head-on reach) explains."""
+    from aogm_cli.sensor_models.lobe import R0_GRID_M, THETA0_GRID_DEG
+
+    at10 = int(np.argmin(np.abs(R0_GRID_M - 10.0)))
+    return "\n".join(f"    theta0 {t:4.1f}: best R0 {lobe.explained[i].max():6.0f}, R0 10 m {lobe.explained[i, at10]:6.0f}"
+                     for i, t in enumerate(THETA0_GRID_DEG) if 4.0 <= t <= 20.0 and t == int(t))
+
+
 HEADER = ("| log | simulated theta0 | learned theta0 (interval) | R0 m (interval) | heard at 1 m / 4 m (deg) | "
           "explained: lobe / cone / echoes | half opening (deg) | standard map s | walls s | lobe s |\n"
           "|---|---|---|---|---|---|---|---|---|---|")
@@ -103,17 +114,21 @@ def main() -> None:
     ap.add_argument("--resolution", type=float, default=None, help="the grid of --logs")
     ap.add_argument("--reuse", action="store_true", help="keep logs simulated by an earlier run")
     ap.add_argument("--sub-rays", type=int, default=None, help="sub-rays a cone in the simulator (default: 11)")
+    ap.add_argument("--objective", action="store_true", help="print each fit's objective by theta0 under its row")
     a = ap.parse_args()
     print(HEADER)
     if a.logs:
         for path in a.logs:
-            print(row(str(path), "?", measured(path, a.resolution)), flush=True)
+            m = measured(path, a.resolution)
+            print(row(str(path), "?", m) + (f"\n{objective(m['lobe'])}" if a.objective else ""), flush=True)
         return
     a.out.mkdir(parents=True, exist_ok=True)
     for theta0 in [*a.thetas, None]:
         for name in a.worlds:
             log = simulated(world_variant(name, theta0, a.out, a.sub_rays), a.reuse)
-            print(row(name, "cone (default)" if theta0 is None else f"{theta0:g}", measured(log, None)), flush=True)
+            m = measured(log, None)
+            print(row(name, "cone (default)" if theta0 is None else f"{theta0:g}", m)
+                  + (f"\n{objective(m['lobe'])}" if a.objective else ""), flush=True)
 
 
 if __name__ == "__main__":

@@ -80,8 +80,7 @@ def lobe_walls(whole: Log, run: LaidOutReadings, params: MapParams, log_odds: np
 def opening_record(whole: Log, run: LaidOutReadings, params: MapParams, log_odds: np.ndarray,
                    observed: np.ndarray) -> dict:
     """The beam's effective opening learned (``calibration.opening_at``) at the thinned standard map."""
-    thin = dataclasses.replace(params, exact=dataclasses.replace(params.exact, thin=True))
-    walls = (thin_pass(whole, run.grid, thin, log_odds, observed).log_odds > 0).reshape(-1)
+    walls = (thin_pass(whole, run.grid, params, log_odds, observed).log_odds > 0).reshape(-1)
     return opening_at(run, sample_readings(run, MAX_READINGS), walls, params.em.forward)
 
 

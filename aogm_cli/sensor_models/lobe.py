@@ -212,11 +212,6 @@ class Lobe:
             return math.inf
         return self.theta0_deg * math.sqrt(max(math.log(self.r0_m / r), 0.0))
 
-    def hit_rate(self) -> np.ndarray:
-        """(A, R) hits per chance (NaN where no chance)."""
-        with np.errstate(invalid="ignore", divide="ignore"):
-            return self.counts[1] / self.counts[0]
-
     def as_dict(self) -> dict:
         """The record as JSON takes it (inf as None; the objective left out)."""
         def finite(v: float) -> float | None:
