@@ -180,3 +180,23 @@ def test_map_says_in_one_line_what_it_learned(corridor_door_log, tmp_path):
     assert "carried by the packaged detector" in line[0]
     r = CliRunner().invoke(main, ["map", str(log), "--mode", "em", "-o", str(tmp_path / "q.h5"), "--quiet"])
     assert r.exit_code == 0 and "learned from this log" not in r.output
+
+
+def test_map_says_when_the_lobe_learned_replaces_a_configured_one(corridor_door_log, tmp_path):
+    """A lobe configured (em.lobe_deg) gives way to the one learned from the log (calibration.learn has lobe_deg by
+    default), and the map says so and how to keep it; without lobe_deg in calibration.learn it is not learned."""
+    configured = tmp_path / "lobe.yaml"
+    configured.write_text("em:\n  lobe_deg: 12\n  lobe_range: 10\n")
+    r = CliRunner().invoke(main, ["map", str(corridor_door_log), "--mode", "em", "-o", str(tmp_path / "m.h5"),
+                                  "--params", str(configured)])
+    assert r.exit_code == 0, r.output
+    line = [x for x in r.output.splitlines() if "learned from this log" in x]
+    assert len(line) == 1 and "in place of the configured theta0 12 deg" in line[0], r.output
+    kept = tmp_path / "kept.yaml"
+    kept.write_text("em:\n  lobe_deg: 12\n  lobe_range: 10\ncalibration:\n  learn: sigma,p_rand,p_hit,p_max\n")
+    r = CliRunner().invoke(main, ["map", str(corridor_door_log), "--mode", "em", "-o", str(tmp_path / "k.h5"),
+                                  "--params", str(kept)])
+    assert r.exit_code == 0, r.output
+    assert "lobe:" not in r.output and "in place of" not in r.output
+    with h5py.File(tmp_path / "k.h5") as f:
+        assert json.loads(f.attrs["learned"])["lobe_deg"] is None  # the configured lobe is the one used

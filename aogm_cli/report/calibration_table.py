@@ -54,6 +54,16 @@ def lobe_line(record: dict) -> str:
             f"{record['explained_best']} -> {_lobe_words(record)}")
 
 
+def _in_place(params: dict) -> str:
+    """What a lobe learned from the log says of a lobe the map's ``params`` configured: it takes that one's place
+    (``Learned.model``), and how to keep it."""
+    configured = float((params.get("em") or {}).get("lobe_deg") or 0.0)
+    if configured <= 0.0:
+        return ""
+    return (f" (in place of the configured theta0 {configured:g} deg: calibration.learn without lobe_deg "
+            f"keeps that one)")
+
+
 def _lobe_words(record: dict) -> str:
     """The lobe of a ``Lobe.as_dict`` record in words."""
     if record["full_cone"]:
@@ -67,7 +77,7 @@ def learned_line(path, m: OccupancyMap) -> str | None:
     learned = m.learned or {}
     if m.mode == "standard" or not learned:
         return None
-    parts = [] if learned.get("lobe") is None else [f"lobe: {_lobe_words(learned['lobe'])}"]
+    parts = [] if learned.get("lobe") is None else [f"lobe: {_lobe_words(learned['lobe'])}{_in_place(m.params)}"]
     if learned.get("specular_deg") is not None:
         parts.append(f"specular angle {learned['specular_deg']:.3g} deg")
     sensor = learned.get("sensor") or {}
