@@ -97,7 +97,7 @@ def _map_lines(s: dict) -> list[str]:
     ]
     for key, title in (("plan", "plan (decided before the first stage)"), ("learned", "learned (from the log or given)")):
         if s.get(key):
-            lines += [f"{title}:", *(f"  {k}: {' > '.join(v) if k == 'stages' else _value(v)}"
+            lines += [f"{title}:", *(f"  {k}: {' > '.join(v) if k == 'stages' else _learned_value(k, v)}"
                                      for k, v in s[key].items())]
     stats = dict(s["stats"])
     calibration = stats.pop("calibration", None)
@@ -109,6 +109,19 @@ def _map_lines(s: dict) -> list[str]:
             table = _value(calibration)
         lines += ["calibration (the forward model learned from the log):", *("  " + t for t in table.splitlines())]
     return lines
+
+
+def _learned_value(key: str, value) -> str:
+    """A value of the map's plan or ``learned`` record as text: the lobe's record in words (``lobe_line``: its
+    echo rate by angle, the echoes explained, the lobe), the rest as it is (``--json`` keeps every count)."""
+    from aogm_cli.report.calibration_table import lobe_line
+
+    if key == "lobe" and isinstance(value, dict):
+        try:
+            return lobe_line(value).removeprefix("the lobe: ")
+        except (KeyError, TypeError, ValueError, ZeroDivisionError):  # a record of another shape: as it is
+            pass
+    return _value(value)
 
 
 def _detector_lines(s: dict) -> list[str]:
