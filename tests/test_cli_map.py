@@ -198,5 +198,6 @@ def test_map_says_when_the_lobe_learned_replaces_a_configured_one(corridor_door_
                                   "--params", str(kept)])
     assert r.exit_code == 0, r.output
     assert "lobe:" not in r.output and "in place of" not in r.output
-    with h5py.File(tmp_path / "k.h5") as f:
-        assert json.loads(f.attrs["learned"])["lobe_deg"] is None  # the configured lobe is the one used
+    with h5py.File(tmp_path / "k.h5") as f, h5py.File(tmp_path / "m.h5") as learned:
+        assert json.loads(f.attrs["learned"])["lobe_deg"] is None  # the configured lobe is the one used:
+        assert not np.array_equal(f["map/probability"][...], learned["map/probability"][...])  # the log's is the cone
