@@ -124,6 +124,13 @@ class ConeTemplates:
         return out_index[:n], out_range[:n]
 
 
+@numba.njit(cache=True, inline="always")
+def unheard(tpl, i):
+    """True when template entry ``i`` is a cell the sonar does not hear (``ConeTemplates.heard``; empty: all heard):
+    EM, the exact inverse model, calibration and the E-step leave it out of the reading."""
+    return tpl.heard.shape[0] > 0 and tpl.heard[i] == 0
+
+
 @numba.njit(cache=True)
 def range_search(r, index_row, resolution, v, right):
     """Compiled ``np.searchsorted(r, v, side="right" if right else "left")``, narrowed by ``range_index``."""

@@ -11,7 +11,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from aogm_cli.sensor_models.cone import cone_flat_cells, flat_offsets
+from aogm_cli.sensor_models.cone import cone_flat_cells, flat_offsets, unheard
 from aogm_cli.sensor_models.forward_model import (
     ExpectationReadings,
     ForwardModelConfig,
@@ -128,11 +128,10 @@ def _fill_index(tpl, flat, grid, readings, sigma, window, out):
         cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width)
         touches = not use_mask
         n = 0
-        heard = tpl.heard[tpl.offsets[b]:]
-        deaf = heard.shape[0] > 0
+        s0 = tpl.offsets[b]
         for j in range(m):
             c = np.int64(ib[j])
-            if c >= n_cells or (deaf and heard[j] == 0):  # unheard cells: not in the reading's cone
+            if c >= n_cells or unheard(tpl, s0 + j):  # unheard cells: not in the reading's cone
                 continue
             if use_mask and grid.mask[c]:
                 touches = True

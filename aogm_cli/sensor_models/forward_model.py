@@ -12,7 +12,7 @@ import numba
 import numpy as np
 
 from aogm_cli.core.errors import InputError
-from aogm_cli.sensor_models.cone import cone_flat_cells
+from aogm_cli.sensor_models.cone import cone_flat_cells, unheard
 
 
 # A reading has one cause: random, a max-range dropout, no obstacle detected, or the k-th obstacle of its
@@ -173,11 +173,10 @@ def cone_obstacles(tpl, flat, shape, readings, occupied, sigma, window, z_max, p
             r = ranges[tpl.offsets[b] : tpl.offsets[b + 1]]
             m = cone_entries(r, z, limit, sigma, window)
             cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width)
-            deaf = tpl.heard.shape[0] > 0  # unheard cells are no obstacles of a reading
             s0 = tpl.offsets[b]
             for j in range(m):
                 c = ib[j]
-                if c < n_cells and occupied[c] and not (deaf and tpl.heard[s0 + j] == 0):
+                if c < n_cells and occupied[c] and not unheard(tpl, s0 + j):  # unheard: no obstacle of it
                     if n < room:
                         d[n] = r[j]
                     n += 1

@@ -7,6 +7,7 @@ import numba
 import numpy as np
 
 from aogm_cli.mapping.em_kernels.layout import _columns
+from aogm_cli.sensor_models.cone import unheard
 from aogm_cli.sensor_models.forward_model import cone_entries
 
 
@@ -120,7 +121,7 @@ def _window_cells(tpl, readings, grid_shape, span, out):
         s = tpl.offsets[tpl.base_bin[k]]
         tr = _bin_transform(tpl, k)
         for j in range(rd.jlo[t], rd.m[t]):
-            if tpl.heard.shape[0] > 0 and tpl.heard[s + j] == 0:  # no window cell of the reading
+            if unheard(tpl, s + j):  # no window cell of the reading
                 continue
             c = _entry_cell(tpl, s, tr, j, np.int64(rd.row0[t]), np.int64(rd.col0[t]), height, width)
             if c >= 0:
@@ -140,9 +141,8 @@ def _far_gains(tpl, readings, grid_shape, of_cell, span, out):
         s = tpl.offsets[tpl.base_bin[k]]
         tr = _bin_transform(tpl, k)
         v = state.far_log[t, 0]
-        deaf = tpl.heard.shape[0] > 0  # unheard cells are no part of the reading
         for j in range(far):
-            if deaf and tpl.heard[s + j] == 0:
+            if unheard(tpl, s + j):  # no part of the reading
                 continue
             c = _entry_cell(tpl, s, tr, j, np.int64(rd.row0[t]), np.int64(rd.col0[t]), height, width)
             if c >= 0 and of_cell[c] >= 0:

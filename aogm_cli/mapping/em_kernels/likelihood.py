@@ -12,6 +12,7 @@ import numpy as np
 from aogm_cli.mapping.em_kernels.extents import _bin_transform, _entry_cell, _extend_box
 from aogm_cli.mapping.em_kernels.layout import _columns
 from aogm_cli.mapping.em_kernels.windows import _rank
+from aogm_cli.sensor_models.cone import unheard
 from aogm_cli.sensor_models.forward_model import gaussian_at
 
 
@@ -66,8 +67,6 @@ def _init_state(tpl, flat, readings, model, occupied, grid_shape, marks, span):
     p_hit = model.p_hit
     mark = seen.shape[0] > 0
     join = labels.shape[0] > 0
-    heard = tpl.heard
-    deaf = heard.shape[0] > 0  # some cells unheard: left out but for ``seen``
     inv_width = 1.0 / width
     for t in range(span[0], span[1]):
         state.stamp[t] = 0
@@ -98,7 +97,7 @@ def _init_state(tpl, flat, readings, model, occupied, grid_shape, marks, span):
                     continue
                 if mark:
                     seen[cell] = True
-                if deaf and heard[s0 + j] == 0:
+                if unheard(tpl, s0 + j):  # left out but for ``seen``
                     continue
                 if join and labels[cell] > 0:
                     row = np.int64(cell * inv_width)  # cell // width without a division per cell:

@@ -8,6 +8,7 @@ import numpy as np
 
 from aogm_cli.mapping.em_kernels.extents import _bin_transform, _entry_cell
 from aogm_cli.mapping.em_kernels.layout import ARENA_ENTRIES
+from aogm_cli.sensor_models.cone import unheard
 from aogm_cli.sensor_models.forward_model import gaussian_at
 
 
@@ -56,7 +57,7 @@ def _build_window(t, tpl, flat, rd, model, cand, state, work):
     for j in range(rd.jlo[t], rd.m[t]):
         cell = at + sign * np.int64(x_off[s0 + j]) if inside else _entry_cell(tpl, s0, tr, j, row0, col0, height,
                                                                               width)
-        if cell < 0 or not cand.occupied[cell] or (tpl.heard.shape[0] > 0 and tpl.heard[s0 + j] == 0):
+        if cell < 0 or not cand.occupied[cell] or unheard(tpl, s0 + j):
             continue
         g = gaussian_at(rd.z[t], tpl.ranges[s0 + j], model.sigma, model.window)
         if g == 0.0:
