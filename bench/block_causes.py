@@ -1,13 +1,17 @@
 """What blocks a planner in a map of a simulated log: cells the map shows occupied on free floor, or free floor
-it leaves unobserved (docs/algorithms.md, "The lobe that hears": office_doors theta0 12).
+it leaves unobserved (docs/algorithms.md, "The lobe that hears": office_doors theta0 12); with ``--leak``, what
+it leaks through (worlds/README.md, the Pioneer worlds).
 
-    python bench/block_causes.py LOG.h5 MAP.h5 [LOG.h5 MAP.h5 ...]
+    python bench/block_causes.py [--leak] LOG.h5 MAP.h5 [LOG.h5 MAP.h5 ...]
 
 Per map: ``block`` (``evaluation.planner.planner_metrics``, a 0.2 m disk), and the block left when the
 cells it shows occupied (p > 0.5) on truth-free floor are made free, when its unobserved truth-free cells
 are, and when both are; and how many of those occupied cells EM holds occupied (``/map/occupied``) and how
 many the view shows occupied where EM holds them free (the standard map's estimate at cells EM leaves
-undecided, ``em.hidden: unobserved``).
+undecided, ``em.hidden: unobserved``). With ``--leak``: ``leak``, and the true wall cells the map shows free
+within ``LEAK_NEAR`` of a cell the planner reaches beyond the truth's reach, with how many of them are walls
+(log-odds > 0) in the em map's standard map and how many have a surface normal (``beam_model.surfaces``: some
+reading echoed from them head-on enough to tell their direction), both as the map's own stages made them.
 """
 
 from __future__ import annotations
@@ -17,16 +21,24 @@ import argparse
 import h5py
 import numpy as np
 
+import aogm_cli
 from aogm_cli.evaluation.planner import (
     ROBOT_RADIUS,
     drivable,
     map_free,
+    map_reach,
     near_trajectory,
     reachable,
     truth_reach,
 )
 from aogm_cli.io.logfile import LogReader
 from aogm_cli.io.mapfile import read_map_file
+from aogm_cli.map_files import sensor_model
+from aogm_cli.mapping import beam_model as B
+from aogm_cli.mapping.modes import resolved_params, state_before
+from aogm_cli.mapping.params import MapParams
+
+LEAK_NEAR = 0.3  # m: a wall cell shown free this close to a leaked cell is one the leak goes through
 
 
 def causes(log_path: str, map_path: str) -> str:
@@ -52,14 +64,34 @@ def causes(log_path: str, map_path: str) -> str:
             f"the view's where EM holds free {int((shown_occupied & ~em_occupied).sum())}")
 
 
+def leak_causes(log_path: str, map_path: str) -> str:
+    log = aogm_cli.load_log(log_path)
+    m = read_map_file(map_path)
+    grid, truth, poses = m.grid, np.asarray(log.truth.occupancy), log.poses()
+    leaked = map_reach(grid, m.probability, m.observed, poses, ROBOT_RADIUS) & ~(
+        truth_reach(grid, truth, poses, ROBOT_RADIUS) & m.observed)
+    erased = (truth != 0) & m.observed & (m.probability < 0.5) & grid.within(leaked, LEAK_NEAR)
+    params = resolved_params(log, MapParams())
+    s = state_before(log, "em", params, "walls", given=sensor_model("em", params, log, log_path))
+    wall = (s.standard.log_odds > 0).reshape(grid.shape)
+    normal = np.isfinite(B.surfaces(s.readings, s.in_use, s.standard.log_odds)[0]).reshape(grid.shape)
+    n_truth = int(np.sum(truth_reach(grid, truth, poses, ROBOT_RADIUS) & m.observed))
+    return (f"{map_path}: leak {leaked.sum() / n_truth:.3f}; true wall cells shown free within {LEAK_NEAR} m of the "
+            f"leak {int(erased.sum())}: walls in the standard map {int((erased & wall).sum())}, with a surface "
+            f"normal {int((erased & normal).sum())}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("pairs", nargs="+", help="LOG.h5 MAP.h5, repeated")
+    parser.add_argument("--leak", action="store_true", help="also what the map leaks through")
     args = parser.parse_args()
     if len(args.pairs) % 2:
         parser.error("expected LOG.h5 MAP.h5 pairs")
     for log_path, map_path in zip(args.pairs[::2], args.pairs[1::2], strict=True):
         print(causes(log_path, map_path))
+        if args.leak:
+            print(leak_causes(log_path, map_path))
 
 
 if __name__ == "__main__":
