@@ -14,6 +14,7 @@ import numpy as np
 
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.sensor_models.cone import flat_offsets
+from aogm_cli.sensor_models.readings import reading_parts
 from aogm_cli.sensor_models.surface import cone_walk
 
 LOBE_BIN_DEG = 1.0  # the width of a bin of the angle off the axis (degrees)
@@ -37,7 +38,7 @@ def opening_matches(tpl, flat, bearings, shape, readings, occupied, model, out):
     A narrower opening puts the nearest surface too far, a wider one too near: the curve peaks at
     the beam's. ``readings`` = (rows, cols, bins, z); ``model`` = (band, z_max, bin) (``nearest_surfaces``)."""
     near = np.empty((readings[3].shape[0], out.shape[0]))
-    nearest_surfaces(tpl, flat, bearings, shape, readings, occupied, model, near, np.empty_like(near))
+    surfaces_in_parts(tpl, flat, bearings, shape, readings, occupied, model, near, np.empty_like(near))
     with np.errstate(invalid="ignore"):  # a reading without echo: inf - inf, no match
         within = np.abs(np.minimum.accumulate(near, axis=1) - np.asarray(readings[3])[:, None]) <= model[0]
     out += np.sum(within, axis=0)
@@ -81,17 +82,24 @@ LOBE_MIN_GAIN = 0.015
 LOBE_MIN_HEARD_AT_1M = 1.0 / 3.0
 
 
-@numba.njit(cache=True)
-def nearest_surfaces(tpl, flat, bearings, shape, readings, occupied, model, near, angle):
-    """For every echo t (z < z_max) and bin a of the angle off the axis, the nearest cell of ``occupied``
-    its cone holds up to z + band: near[t, a] its range (inf: none), angle[t, a] its |angle off the axis|
-    (rad; NaN: none). ``readings`` = (rows, cols, bins, z) of echoes; ``model`` = (band, z_max, bin width)."""
+def surfaces_in_parts(tpl, flat, bearings, shape, readings, occupied, model, near, angle) -> None:
+    """``nearest_surfaces`` of every reading, in ``readings.reading_parts`` (each reading's own rows: any thread
+    count gives the same tables)."""
+    reading_parts(readings[3].shape[0], lambda _, span: nearest_surfaces(tpl, flat, bearings, shape, readings,
+                                                                         occupied, model, near, angle, span))
+
+
+@numba.njit(cache=True, nogil=True)
+def nearest_surfaces(tpl, flat, bearings, shape, readings, occupied, model, near, angle, span):
+    """For every echo span[0] <= t < span[1] (z < z_max) and bin a of the angle off the axis, the nearest cell
+    of ``occupied`` its cone holds up to z + band: near[t, a] its range (inf: none), angle[t, a] its |angle off
+    the axis| (rad; NaN: none). ``readings`` = (rows, cols, bins, z) of echoes; ``model`` = (band, z_max, bin width)."""
     band, z_max, width = model
     rows, cols, bins, z_all = readings
     n_bins = near.shape[1]
     n_cells = shape[0] * shape[1]
     ib = np.empty(int(np.max(np.diff(tpl.offsets))), dtype=np.int32)
-    for t in range(z_all.shape[0]):
+    for t in range(span[0], span[1]):
         near[t, :] = np.inf
         angle[t, :] = np.nan
         z = z_all[t]
@@ -234,8 +242,8 @@ def surface_table(templates, grid: GridSpec, cones: tuple, occupied: np.ndarray,
     readings = (rows[echo].astype(np.int64), cols[echo].astype(np.int64), bins[echo].astype(np.int64),
                 z[echo].astype(np.float64))
     table = SurfaceTable(*(np.empty((echo.size, lobe_bins(templates.beam_width))) for _ in range(2)), readings[3])
-    nearest_surfaces(templates.kernel_arrays, flat_offsets(templates, grid.width), templates.bearings, grid.shape,
-                     readings, np.ascontiguousarray(occupied, dtype=np.bool_).reshape(-1),
+    surfaces_in_parts(templates.kernel_arrays, flat_offsets(templates, grid.width), templates.bearings, grid.shape,
+                      readings, np.ascontiguousarray(occupied, dtype=np.bool_).reshape(-1),
                      (float(band), float(z_max), math.radians(LOBE_BIN_DEG)), table.near, table.angle)
     return table
 
