@@ -82,11 +82,10 @@ LOBE_MIN_GAIN = 0.015
 LOBE_MIN_HEARD_AT_1M = 1.0 / 3.0
 
 
-def surfaces_in_parts(tpl, flat, bearings, shape, readings, occupied, model, near, angle) -> None:
-    """``nearest_surfaces`` of every reading, in ``readings.reading_parts`` (each reading's own rows: any thread
-    count gives the same tables)."""
-    reading_parts(readings[3].shape[0], lambda _, span: nearest_surfaces(tpl, flat, bearings, shape, readings,
-                                                                         occupied, model, near, angle, span))
+def surfaces_in_parts(*args) -> None:
+    """``nearest_surfaces(*args, span)`` of every reading (``args[4]``), in ``readings.reading_parts`` (each
+    reading's own rows: any thread count gives the same tables)."""
+    reading_parts(args[4][3].shape[0], lambda _, span: nearest_surfaces(*args, span))
 
 
 @numba.njit(cache=True, nogil=True)
