@@ -23,6 +23,10 @@ from aogm_cli.mapping.em import em_problem, em_readings, find_root
 from aogm_cli.mapping.view import footprint, hit_rate_curve, one_scale, pool_adjacent_violators
 from aogm_cli.sensor_models.cone_build import build_cone_templates
 
+# no beam deflected (em.specular_deg 90): adaptive's map outside the clusters is made of the same readings as the
+# standard mode's map, which stays Elfes' baseline (its beams are never stopped at a surface)
+UNDEFLECTED = {"em": {"specular_deg": 90}}
+
 
 def detector_with_threshold(tmp_path, threshold):
     path = tmp_path / f"det_{threshold}.h5"
@@ -32,7 +36,7 @@ def detector_with_threshold(tmp_path, threshold):
 
 def test_no_flagged_reading_gives_the_standard_map(corridor_door_log, tmp_path):
     # Elfes' map outside the clusters, and no contested or weak cells either
-    params = resolve_params(overrides={"adaptive": {"outside": "elfes", "contested": 0.0, "weak": 0.0}})
+    params = resolve_params(overrides={"adaptive": {"outside": "elfes", "contested": 0.0, "weak": 0.0}, **UNDEFLECTED})
     never = detector_with_threshold(tmp_path, 1.0)  # p(y = 1) stays below 1 on these readings
     adaptive = map_file(corridor_door_log, "adaptive", params, str(never))
     standard = map_file(corridor_door_log, "standard", params)
@@ -46,7 +50,7 @@ def test_no_flagged_reading_gives_the_standard_map(corridor_door_log, tmp_path):
 def test_em_changes_nothing_outside_the_clusters(corridor_door_log):
     """With Elfes' map outside the clusters and ``adaptive.scale: mixed``, the standard map's own
     probabilities outside the clusters."""
-    params = resolve_params(overrides={"adaptive": {"outside": "elfes", "scale": "mixed"}})
+    params = resolve_params(overrides={"adaptive": {"outside": "elfes", "scale": "mixed"}, **UNDEFLECTED})
     adaptive = map_file(corridor_door_log, "adaptive", params)
     standard = map_file(corridor_door_log, "standard", params)
     # outside the clusters and the robot's footprint (cleared, as EM's map is)
@@ -147,7 +151,7 @@ def test_contested_cells_alone_make_clusters(corridor_door_log, tmp_path):
     """With no flagged reading, the cells whose occupied evidence alone reaches
     ``adaptive.contested`` but which the standard map holds free are still clustered."""
     never = detector_with_threshold(tmp_path, 1.0)
-    params = resolve_params(overrides={"adaptive": {"weak": 0.0, "grow": 0}})
+    params = resolve_params(overrides={"adaptive": {"weak": 0.0, "grow": 0}, **UNDEFLECTED})
     adaptive = map_file(corridor_door_log, "adaptive", params, str(never))
     standard = map_file(corridor_door_log, "standard", params)
     assert adaptive.stats["flagged_readings"] == 0 and adaptive.stats["clusters"] > 0
@@ -159,13 +163,13 @@ def test_weak_cells_alone_make_clusters(corridor_door_log, tmp_path):
     """With no flagged reading and no contested cell, the cells whose standard log-odds lie
     within ``adaptive.weak`` of the prior are clustered, and only they."""
     never = detector_with_threshold(tmp_path, 1.0)
-    params = resolve_params(overrides={"adaptive": {"outside": "elfes", "contested": 0.0, "grow": 0}})
+    params = resolve_params(overrides={"adaptive": {"outside": "elfes", "contested": 0.0, "grow": 0}, **UNDEFLECTED})
     adaptive = map_file(corridor_door_log, "adaptive", params, str(never))
     standard = map_file(corridor_door_log, "standard", params)
     weak = standard.observed & (np.abs(standard.log_odds) < params.adaptive.weak)
     assert np.array_equal(adaptive.clusters > 0, weak)
     # grown by one cell (8-connected), within the observed cells
-    params = resolve_params(overrides={"adaptive": {"outside": "elfes", "contested": 0.0, "grow": 1}})
+    params = resolve_params(overrides={"adaptive": {"outside": "elfes", "contested": 0.0, "grow": 1}, **UNDEFLECTED})
     adaptive = map_file(corridor_door_log, "adaptive", params, str(never))
     assert np.array_equal(adaptive.clusters > 0, standard.observed & cluster.grown(weak, 1))
 
@@ -296,7 +300,7 @@ def test_readings_near_clusters_uses_the_cone_reach():
 # calibrated on the log (not carried): thinning then uses the configured forward model, as the
 # standard mode's exact.thin does
 THINNED = {"adaptive": {"outside": "thinned", "contested": 0.1, "weak": 0.0, "grow": 0},
-           "calibration": {"carried": False}}
+           "calibration": {"carried": False}, **UNDEFLECTED}
 
 
 def test_thinned_outside_keeps_clusters_small_and_reports_undecided_cells_unknown(corridor_door_log):

@@ -165,13 +165,14 @@ def test_the_fit_at_the_true_map_recovers_the_simulators_noise_and_random_rate(t
 def test_calibrated_map_records_the_learned_model_and_its_rounds(corridor_door_log, tmp_path):
     out = tmp_path / "em.h5"
     own = tmp_path / "own.yaml"  # calibrated on the log, not the model the detector carries for its sensor
-    own.write_text("calibration: {carried: false}\n")
+    # and the specular angle learned too (by default em.specular_deg, 15, is kept)
+    own.write_text("calibration: {carried: false, learn: 'sigma,p_rand,p_hit,p_max,specular_deg,lobe_deg'}\n")
     result = run("map", corridor_door_log, "--mode", "em", "--params", own, "-o", out, "-q")
     assert result.exit_code == 0, result.output
     m = read_map_file(out)
     record = m.stats["calibration"]
-    # the specular angle is learned before the rounds; the beam's opening is not learned by default
-    # (0: the log's cone)
+    # the specular angle is learned before the rounds (in place of the configured 15); the beam's opening is not
+    # learned by default (0: the log's cone)
     assert record["initial"] == {"sigma": 0.03, "p_rand": 0.05, "p_hit": 0.7, "p_max": 0.1, "specular_deg": 90.0,
                                  "opening_deg": 0.0}
     assert record["rounds"][0]["sigma"] == 0.1  # round 0 maps with the broad start
@@ -222,8 +223,9 @@ def test_calibrate_writes_the_sensors_model_that_map_and_compare_take(corridor_d
     assert m.params["em"]["sigma"] == 0.03 and m.params["calibration"]["enabled"] is True  # as configured
     # the same model as --params (the old way) makes the same map
     old = tmp_path / "old.yaml"
+    assert m.learned["specular_deg"] is None and m.params["em"]["specular_deg"] == 15.0  # kept, not learned
     old.write_text("em: {" + ", ".join(f"{k}: {v!r}" for k, v in m.learned["sensor"].items())
-                   + f", specular_deg: {m.learned['specular_deg']!r}" + "}\ncalibration: {enabled: false}\n")
+                   + "}\ncalibration: {enabled: false}\n")
     result = run("map", other, "--mode", "em", "--params", old, "-o", tmp_path / "old.h5", "-q")
     assert result.exit_code == 0, result.output
     assert np.array_equal(read_map_file(tmp_path / "old.h5").probability, m.probability)

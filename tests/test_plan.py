@@ -35,17 +35,20 @@ def test_the_plan_of_each_mode_by_hand():
     """What each plan decides from the mode, the parameters, the sensor and the model given."""
     standard = plan_map("standard", params(), SONAR, 0.1, None)
     assert (standard.sensor, standard.learns, standard.outside, standard.start) == (CONE, (), None, None)
-    # a sonar log with no model: EM calibrates every key on the log; adaptive keeps Elfes' map outside
+    # a sonar log with no model: EM calibrates every default key on the log; adaptive keeps Elfes' map outside
     em = plan_map("em", params(), SONAR, 0.1, None)
     assert em.calibrates and not em.fits_rates and em.model == "learned from this log"
-    assert em.learns == ("sigma", "p_rand", "p_hit", "p_max", "specular_deg", "lobe_deg") and em.incidence
+    assert em.learns == ("sigma", "p_rand", "p_hit", "p_max", "lobe_deg") and em.incidence
     assert em.learns_lobe
+    # the specular angle stays at em.specular_deg (15) unless calibration.learn asks for it
+    assert plan_map("em", params(calibration={"learn": "sigma,specular_deg"}), SONAR, 0.1, None).learns == (
+        "sigma", "specular_deg")
     assert (em.outside, em.thinning, em.start) == (None, None, "standard")
     adaptive = plan_map("adaptive", params(), SONAR, 0.1, None)
     assert (adaptive.outside, adaptive.thinning, adaptive.start, adaptive.decides) == ("elfes", None, "standard", False)
     # a robot's model given: only the building's part is learned, the thinned map stands outside
     given = plan_map("adaptive", params(), SONAR, 0.1, ROBOT)
-    assert given.learns == ("p_max", "specular_deg", "lobe_deg") and given.fits_rates and not given.calibrates
+    assert given.learns == ("p_max", "lobe_deg") and given.fits_rates and not given.calibrates
     assert (given.model, given.outside, given.thinning) == ("file robot.yaml", "thinned", OUTSIDE_MARGIN)
     assert given.start == "elfes in clusters" and given.decides
     # a model from another map of the same log gives everything

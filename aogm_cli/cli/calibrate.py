@@ -40,7 +40,7 @@ from aogm_cli.io.outputs import resolve_outputs
 @threads_option
 def calibrate(log_file, mode, output, detector, params_file, resolution, quiet, max_memory=16e9, max_work=None,
               threads=None, **options) -> None:
-    """Learn the forward model (sigma, p_rand, p_hit, p_max, specular_deg) from LOG.h5 and print it.
+    """Learn the forward model (sigma, p_rand, p_hit, p_max, the lobe) from LOG.h5 and print it.
 
     Thrun's EM learns its sensor model too: at a binary map, the expectations of each
     reading's cause (random, max-range dropout, the k-th obstacle of its cone, no obstacle
@@ -50,12 +50,12 @@ def calibrate(log_file, mode, output, detector, params_file, resolution, quiet, 
     map until they settle. Round 0 maps with the configured model made at least 0.1 m
     broad; each round fits at the last map and maps again, until no parameter moves by more
     than calibration.tolerance, or calibration.rounds. Every value is clipped to bounds
-    (docs/algorithms.md, "Calibration's constants"). Before the rounds,
-    a sonar log's specular angle is learned once at the standard map: the share of readings
-    that echo from a surface cell (one heard from one direction) rather than pass it, by angle
-    of incidence, and the angle where that share falls to half its head-on value (90: the walls
-    echo at any angle). Beams whose core meets a surface beyond it before their echo are taken
-    as deflected there. `aogm map` and `aogm compare` do all this by default in em and adaptive
+    (docs/algorithms.md, "Calibration's constants"). Beams whose core meets a surface (a cell
+    heard from one direction) beyond em.specular_deg (15) before their echo are taken as
+    deflected there. With specular_deg in calibration.learn, the angle is learned once, before
+    the rounds, at the standard map: the share of readings that echo from a surface cell rather
+    than pass it, by angle of incidence, and the angle where that share falls to half its
+    head-on value (90: the walls echo at any angle). `aogm map` and `aogm compare` do all this by default in em and adaptive
     modes. With opening_deg in calibration.learn, the beam's opening is learned first: the
     share of echoes the thinned standard map explains when the beam detects out to 2, 4, ...
     degrees, and the opening where that share tops out (the cone unless it explains 4% fewer);

@@ -104,7 +104,7 @@ class CalibrationConfig:
 
     enabled: bool = True
     carried: bool = True
-    learn: str = "sigma,p_rand,p_hit,p_max,specular_deg,lobe_deg"
+    learn: str = "sigma,p_rand,p_hit,p_max,lobe_deg"  # and specular_deg, opening_deg on request
     rounds: int = 4
     tolerance: float = 0.02
 

@@ -30,10 +30,12 @@ class ForwardModelConfig:
     p_hit: float = 0.7  # probability that each obstacle in the cone, nearest first, is detected
     p_max: float = 0.1  # point mass of a max-range dropout (specular reflection)
     window: float = 4.0  # sigmas beyond z up to which a cone's cells count
-    # the largest angle off a surface's normal (``surface.py``) at which it still echoes: a surface
-    # cell met more obliquely before the window is left out of the cone (a grazing pass is no
-    # evidence against it). 90: Thrun's model. Calibration learns it from the log
-    specular_deg: float = 90.0
+    # the largest angle off a surface's normal (``surface.py``) at which it still echoes: a beam whose core
+    # meets a surface more obliquely before its window is deflected there (a grazing pass is no evidence
+    # against the surface). 90: Thrun's model. 15: a 40 kHz sonar on glass or gloss paint; kept, not learned,
+    # by default (docs/algorithms.md, "The angle of incidence": the rate the log learns it from does not fall
+    # on rough walls, where 90 lets random and grazing beams erase them)
+    specular_deg: float = 15.0
     # the opening (degrees, full angle) of the cone that detects (a surface near the edge echoes too
     # weakly); 0: the log's beam width. Calibration learns it (``sensor_models.lobe``)
     opening_deg: float = 0.0
