@@ -127,6 +127,18 @@ def test_a_beam_that_grazes_a_surface_before_its_echo_is_deflected_there():
     assert reading_shadows(run, normal, ForwardModelConfig(specular_deg=90.0)) is None
 
 
+def test_by_default_a_beam_that_meets_a_surface_over_15_degrees_off_its_normal_is_deflected():
+    # the defaults a map takes (em.specular_deg 15, surface.core 0.1 of a 30-degree cone: +-1.5 deg about the
+    # axis): the wall 1.5 m away, every echo at 2.9 m beyond it. Head-on, and 11.3 deg off the normal (the
+    # axis through the wall cell 3 columns over), the beam passes it; 18.4 deg off (through the cell 5 columns
+    # over, 1.58 m away) it stops there
+    assert ForwardModelConfig().specular_deg == 15.0 and "specular_deg" not in resolve_params().calibration.learned
+    run, normal = wall_run([math.pi / 2, math.atan2(15, 3), math.atan2(15, 5)], [2.9, 2.9, 2.9], beam_deg=30.0)
+    shadow = reading_shadows(run, normal, resolve_params().em.forward, SurfaceConfig().core)
+    assert shadow[0] == np.inf and shadow[1] == np.inf
+    assert 1.5 < shadow[2] <= 1.59
+
+
 def test_deflect_makes_max_range_readings_that_end_before_the_shadow():
     z, limit = deflect(np.array([2.9, 1.5, np.nan]), np.array([1.9, np.inf, 1.0]), 3.0)
     assert z[0] == np.inf and limit[0] == np.nextafter(1.9, 0.0)
