@@ -139,6 +139,18 @@ def test_by_default_a_beam_that_meets_a_surface_over_15_degrees_off_its_normal_i
     assert 1.5 < shadow[2] <= 1.59
 
 
+def test_a_map_counts_the_readings_it_deflected(corridor_door_log):
+    # /stats deflected_readings: corridor_door's grazing and random readings met beyond 15 deg, none at 90 deg
+    # (Thrun's model), and no count in the standard mode, which stays Elfes' baseline
+    from aogm_cli.map_files import map_file
+
+    em = map_file(corridor_door_log, "em", resolve_params())
+    assert 0 < em.stats["deflected_readings"] < em.stats["em_readings"]
+    thrun = map_file(corridor_door_log, "em", resolve_params(overrides={"em": {"specular_deg": 90}}))
+    assert thrun.stats["deflected_readings"] == 0
+    assert "deflected_readings" not in map_file(corridor_door_log, "standard", resolve_params()).stats
+
+
 def test_deflect_makes_max_range_readings_that_end_before_the_shadow():
     z, limit = deflect(np.array([2.9, 1.5, np.nan]), np.array([1.9, np.inf, 1.0]), 3.0)
     assert z[0] == np.inf and limit[0] == np.nextafter(1.9, 0.0)

@@ -254,8 +254,11 @@ def finished(s: State, phases: dict) -> OccupancyMap:
 
 
 def map_stats(s: State, phases: dict, em: bool) -> dict:
-    """The map's statistics: scans, phases, EM's and the calibration's, an adaptive map's clusters'."""
+    """The map's statistics: scans, phases, the deflected readings, EM's and the calibration's, an adaptive map's clusters'."""
     stats: dict = {"scans": s.source.n_scans, "phase_seconds": phases}
+    if s.plan.incidence:  # the readings a surface met beyond the specular angle deflected (``deflections``)
+        shadow = s.readings.shadow
+        stats["deflected_readings"] = 0 if shadow is None else int(np.isfinite(shadow).sum())
     if em:
         stats |= E.em_stats(s.em)
         record = calibration_record(s.learned, s.em)
