@@ -236,20 +236,14 @@ class ExactPass(NamedTuple):
     log_odds: np.ndarray
     observed: np.ndarray
     models: tuple
-    source: tuple  # (the log, its cuts): the very objects
+    source: tuple  # (the log object, its cuts)
 
     def made_with(self, params: MapParams, log=None, cuts=None) -> bool:
-        """Made with ``params``' models (and, given, of ``log`` with ``cuts``: the same objects)."""
-        same_scans = log is None or (self.source[0] is log and _same_view(self.source[1], cuts))
+        """Made with ``params``' models (and, given, of the very ``log`` object, with equal ``cuts``)."""
+        made, made_cuts = self.source
+        same_cuts = made_cuts is cuts or (made_cuts is not None and cuts is not None and np.array_equal(made_cuts, cuts))
+        same_scans = log is None or (made is log and same_cuts)
         return same_scans and self.models == _exact_models(params)
-
-
-def _same_view(a: np.ndarray | None, b: np.ndarray | None) -> bool:
-    """Whether ``a`` and ``b`` are one array: the same object, or views of the same memory alike (``cuts`` is a new
-    view of a run's shadows at every call, and a run taken over by ``dataclasses.replace`` keeps its shadows)."""
-    if a is None or b is None:
-        return a is b
-    return a is b or (a.__array_interface__ == b.__array_interface__)
 
 
 def _exact_models(params: MapParams) -> tuple:

@@ -38,7 +38,7 @@ def opening_matches(tpl, flat, bearings, shape, readings, occupied, model, out):
     A narrower opening puts the nearest surface too far, a wider one too near: the curve peaks at
     the beam's. ``readings`` = (rows, cols, bins, z); ``model`` = (band, z_max, bin) (``nearest_surfaces``)."""
     near = np.empty((readings[3].shape[0], out.shape[0]))
-    surfaces_in_parts(tpl, flat, bearings, shape, readings, occupied, model, near, np.empty_like(near))
+    surfaces_in_parts(tpl, flat, bearings, shape, readings, occupied, model, (near, np.empty_like(near)))
     with np.errstate(invalid="ignore"):  # a reading without echo: inf - inf, no match
         within = np.abs(np.minimum.accumulate(near, axis=1) - np.asarray(readings[3])[:, None]) <= model[0]
     out += np.sum(within, axis=0)
@@ -82,10 +82,12 @@ LOBE_MIN_GAIN = 0.015
 LOBE_MIN_HEARD_AT_1M = 1.0 / 3.0
 
 
-def surfaces_in_parts(*args) -> None:
-    """``nearest_surfaces(*args, span)`` of every reading (``args[4]``), in ``readings.reading_parts`` (each
+def surfaces_in_parts(tpl, flat, bearings, shape, readings, occupied, model, out) -> None:
+    """``nearest_surfaces`` of every reading into ``out`` = (near, angle), in ``readings.reading_parts`` (each
     reading's own rows: any thread count gives the same tables)."""
-    reading_parts(args[4][3].shape[0], lambda _, span: nearest_surfaces(*args, span))
+    near, angle = out
+    reading_parts(readings[3].shape[0], lambda _, span: nearest_surfaces(tpl, flat, bearings, shape, readings,
+                                                                         occupied, model, near, angle, span))
 
 
 @numba.njit(cache=True, nogil=True)
@@ -243,7 +245,7 @@ def surface_table(templates, grid: GridSpec, cones: tuple, occupied: np.ndarray,
     table = SurfaceTable(*(np.empty((echo.size, lobe_bins(templates.beam_width))) for _ in range(2)), readings[3])
     surfaces_in_parts(templates.kernel_arrays, flat_offsets(templates, grid.width), templates.bearings, grid.shape,
                       readings, np.ascontiguousarray(occupied, dtype=np.bool_).reshape(-1),
-                     (float(band), float(z_max), math.radians(LOBE_BIN_DEG)), table.near, table.angle)
+                      (float(band), float(z_max), math.radians(LOBE_BIN_DEG)), (table.near, table.angle))
     return table
 
 
