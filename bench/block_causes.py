@@ -2,7 +2,7 @@
 it leaves unobserved (docs/algorithms.md, "The lobe that hears": office_doors theta0 12); with ``--leak``, what
 it leaks through (worlds/README.md, the Pioneer worlds).
 
-    python bench/block_causes.py [--leak] LOG.h5 MAP.h5 [LOG.h5 MAP.h5 ...]
+    python bench/block_causes.py [--leak [--region X0,X1,Y0,Y1]] LOG.h5 MAP.h5 [LOG.h5 MAP.h5 ...]
 
 Per map: ``block`` (``evaluation.planner.planner_metrics``, a 0.2 m disk), and the block left when the
 cells it shows occupied (p > 0.5) on truth-free floor are made free, when its unobserved truth-free cells
@@ -11,7 +11,8 @@ many the view shows occupied where EM holds them free (the standard map's estima
 undecided, ``em.hidden: unobserved``). With ``--leak``: ``leak``, and the true wall cells the map shows free
 within ``LEAK_NEAR`` of a cell the planner reaches beyond the truth's reach, with how many of them are walls
 (log-odds > 0) in the em map's standard map and how many have a surface normal (``beam_model.surfaces``: some
-reading echoed from them head-on enough to tell their direction), both as the map's own stages made them.
+reading echoed from them head-on enough to tell their direction), both as the map's own stages made them;
+with ``--region``, how many leaked cells lie in that box (x0, x1, y0, y1 in metres: a glass cabinet, a room).
 """
 
 from __future__ import annotations
@@ -64,7 +65,14 @@ def causes(log_path: str, map_path: str) -> str:
             f"the view's where EM holds free {int((shown_occupied & ~em_occupied).sum())}")
 
 
-def leak_causes(log_path: str, map_path: str) -> str:
+def region_cells(grid, region: tuple[float, float, float, float]) -> np.ndarray:
+    """(H, W) bool: the cells whose centre lies in ``region`` = (x0, x1, y0, y1), metres."""
+    rows, cols = np.indices(grid.shape)
+    x, y = grid.cell_centre(rows, cols)
+    return (x >= region[0]) & (x <= region[1]) & (y >= region[2]) & (y <= region[3])
+
+
+def leak_causes(log_path: str, map_path: str, region: tuple[float, float, float, float] | None = None) -> str:
     log = aogm_cli.load_log(log_path)
     m = read_map_file(map_path)
     grid, truth, poses = m.grid, np.asarray(log.truth.occupancy), log.poses()
@@ -76,22 +84,26 @@ def leak_causes(log_path: str, map_path: str) -> str:
     wall = (s.standard.log_odds > 0).reshape(grid.shape)
     normal = np.isfinite(B.surfaces(s.readings, s.in_use, s.standard.log_odds)[0]).reshape(grid.shape)
     n_truth = int(np.sum(truth_reach(grid, truth, poses, ROBOT_RADIUS) & m.observed))
+    inside = "" if region is None else (f"; leaked cells in the region {int((leaked & region_cells(grid, region)).sum())}"
+                                        f" of {int(leaked.sum())}")
     return (f"{map_path}: leak {leaked.sum() / n_truth:.3f}; true wall cells shown free within {LEAK_NEAR} m of the "
             f"leak {int(erased.sum())}: walls in the standard map {int((erased & wall).sum())}, with a surface "
-            f"normal {int((erased & normal).sum())}")
+            f"normal {int((erased & normal).sum())}{inside}")
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("pairs", nargs="+", help="LOG.h5 MAP.h5, repeated")
     parser.add_argument("--leak", action="store_true", help="also what the map leaks through")
+    parser.add_argument("--region", help="with --leak: X0,X1,Y0,Y1 (m), the leaked cells inside it counted apart")
     args = parser.parse_args()
     if len(args.pairs) % 2:
         parser.error("expected LOG.h5 MAP.h5 pairs")
     for log_path, map_path in zip(args.pairs[::2], args.pairs[1::2], strict=True):
         print(causes(log_path, map_path))
         if args.leak:
-            print(leak_causes(log_path, map_path))
+            region = None if args.region is None else tuple(float(v) for v in args.region.split(","))
+            print(leak_causes(log_path, map_path, region))
 
 
 if __name__ == "__main__":
