@@ -55,8 +55,8 @@ def calibrate(log_file, mode, output, detector, params_file, resolution, quiet, 
     deflected there. With specular_deg in calibration.learn, the angle is learned once, before
     the rounds, at the standard map: the share of readings that echo from a surface cell rather
     than pass it, by angle of incidence, and the angle where that share falls to half its
-    head-on value (90: the walls echo at any angle). `aogm map` and `aogm compare` do all this by default in em and adaptive
-    modes. With opening_deg in calibration.learn, the beam's opening is learned first: the
+    head-on value (90: the walls echo at any angle). `aogm map` and `aogm compare` do all this
+    by default in em and adaptive modes. With opening_deg in calibration.learn, the beam's opening is learned first: the
     share of echoes the thinned standard map explains when the beam detects out to 2, 4, ...
     degrees, and the opening where that share tops out (the cone unless it explains 4% fewer);
     em and adaptive then leave the cone's cells beyond it out (em.opening_deg).
