@@ -247,3 +247,52 @@ def test_a_flips_gain_is_the_change_of_the_readings_log_likelihood_by_hand(col, 
     assert occupied[cell] == (gain + CONFIG.l_prior > 0)
     if occupied[cell]:
         assert result.objective[-1] - result.objective[0] == pytest.approx(gain + CONFIG.l_prior, rel=1e-9)
+
+
+@pytest.mark.parametrize("facing, heard", [((0.0, 1.0), True), ((1.0, 0.0), False)])
+def test_a_surface_met_beyond_the_heard_incidence_is_no_obstacle_of_the_reading(facing, heard):
+    """em.heard_incidence_deg 35: the reading of the test above (z = 1.0 m along its row, an obstacle held at
+    0.8 m) and the candidate cell at 0.3 m, given a surface normal. Facing the reading (incidence 0) the cell is
+    heard: its flip scales every term behind it by q, as without the test. Along the row (incidence 90 deg) the
+    reading has no obstacle there: the flip changes nothing but the prior, and EM's residual is the prior's."""
+    fixed, cell = 10 * GRID.width + 13, 10 * GRID.width + 8
+    occupied = np.zeros(N_CELLS, dtype=bool)
+    occupied[fixed] = True
+    config = dataclasses.replace(CONFIG, forward=dataclasses.replace(FORWARD, heard_incidence_deg=35.0))
+    normals = np.full((2, N_CELLS), np.nan, dtype=np.float32)
+    normals[:, cell] = facing
+    tpl, rows, cols, bins, z = readings_for([1.0], beam_deg=1.0)
+    rd = em_readings((rows, cols, bins, z), tpl, GRID, 4.0, config.forward, far_runs=False)
+    problem = em_problem(rd, tpl, GRID.shape, occupied, config, surfaces=normals)
+    p_hit, q, w, sigma = 0.4, 0.6, 0.95, 0.05
+
+    def n(r):
+        return math.exp(-0.5 * ((1.0 - r) / sigma) ** 2) / (math.sqrt(2 * math.pi) * sigma)
+
+    const, g0 = 0.05 / 4.0, n(4.0)
+    before = p_hit * n(0.8) + q * g0
+    gain = math.log(const + w * q * before) - math.log(const + w * before) if heard else 0.0
+    assert math.isclose(problem.state.s[0], before, rel_tol=1e-12)  # the held obstacle faces no test: heard
+    result = run_em(problem, occupied, np.array([cell]), config)
+    assert result.residual[0] == pytest.approx(1.0 / (1.0 + math.exp(-(gain + CONFIG.l_prior))), rel=1e-9)
+    assert not occupied[cell]
+
+
+def test_a_wall_met_obliquely_is_no_obstacle_and_the_default_tests_nothing():
+    """The obstacle held at 0.8 m with a normal along the reading's row: under heard_incidence_deg 35 the reading
+    sees no obstacle (S = G0: the echo unexplained); at the default 90 the same surfaces change nothing."""
+    fixed = 10 * GRID.width + 13
+    occupied = np.zeros(N_CELLS, dtype=bool)
+    occupied[fixed] = True
+    normals = np.full((2, N_CELLS), np.nan, dtype=np.float32)
+    normals[:, fixed] = (1.0, 0.0)
+    tpl, rows, cols, bins, z = readings_for([1.0], beam_deg=1.0)
+    s = {}
+    for angle in (35.0, 90.0):
+        config = dataclasses.replace(CONFIG, forward=dataclasses.replace(FORWARD, heard_incidence_deg=angle))
+        rd = em_readings((rows, cols, bins, z), tpl, GRID, 4.0, config.forward, far_runs=False)
+        s[angle] = em_problem(rd, tpl, GRID.shape, occupied, config, surfaces=normals).state.s[0]
+    g0 = math.exp(-0.5 * (3.0 / 0.05) ** 2) / (math.sqrt(2 * math.pi) * 0.05)
+    n08 = math.exp(-0.5 * (0.2 / 0.05) ** 2) / (math.sqrt(2 * math.pi) * 0.05)
+    assert s[35.0] == pytest.approx(g0, rel=1e-12, abs=1e-300)
+    assert s[90.0] == pytest.approx(0.4 * n08 + 0.6 * g0, rel=1e-12)

@@ -24,6 +24,7 @@ from aogm_cli.sensor_models.readings import (
     reading_parts,
     summed_in_parts,
 )
+from aogm_cli.sensor_models.surface import cos2_of
 
 
 @dataclass
@@ -43,11 +44,16 @@ class EMResult:
     band_seconds: float = 0.0  # the sweeps' work, each band's time added up (on one thread: their wall time)
 
 
+NO_SURFACES = np.zeros((2, 0), dtype=np.float32)  # ``EMModel.normal`` without the heard test
+
 
 def em_readings(cones, templates, grid, z_max: float, config: ForwardModelConfig,
-                select: np.ndarray | None = None, shadow: np.ndarray | None = None) -> L.EMReadings:
+                select: np.ndarray | None = None, shadow: np.ndarray | None = None,
+                far_runs: bool = True) -> L.EMReadings:
     """The readings ``cones`` (those ``select`` picks, taken a column at a time without copies) as EM's kernels
-    take them: NaN left out, +inf a max-range reading, ``shadow`` cutting cones short (``cone_limits``)."""
+    take them: NaN left out, +inf a max-range reading, ``shadow`` cutting cones short (``cone_limits``). Without
+    ``far_runs`` every cone cell is listed as a pair of its own (a far one when its Gaussian is 0), as the heard
+    test of ``em_problem``'s ``surfaces`` needs: a far run adds its readings to every column alike."""
     rows, cols, bins, z = cones
     pick = (lambda a: np.asarray(a).reshape(-1)) if select is None else (lambda a: np.asarray(a).reshape(-1)[select])
     z = pick(z).astype(np.float64, copy=False)
@@ -73,6 +79,8 @@ def em_readings(cones, templates, grid, z_max: float, config: ForwardModelConfig
     floats["const"] = const
     # needs the fields above only
     reading_parts(n, lambda _, span: _window_rows(templates.kernel_arrays, rd, grid.height, span))
+    if not far_runs:
+        ints["reach2"][:, 1] = -1  # no cell before the window by ``listing._row_span``'s rule
     return _with_extent(rd, np.ascontiguousarray(ints["box"]))._replace(window_leave=_order(ints["window_hi"]))
 
 
@@ -100,16 +108,20 @@ class EMProblem:
 
 
 def em_problem(rd: L.EMReadings, templates, shape: tuple[int, int], occupied: np.ndarray, config: EMConfig,
-               labels: np.ndarray | None = None) -> EMProblem:
+               labels: np.ndarray | None = None, surfaces: np.ndarray | None = None) -> EMProblem:
     """Every reading's likelihood state under ``occupied`` and, with ``labels``, which clusters share a reading,
-    extents narrowed to their cells. Writes into ``rd``'s tables: one problem per ``em_readings`` result."""
+    extents narrowed to their cells. With ``surfaces`` (``heard_surfaces``; ``rd`` made without far runs) a reading
+    has no obstacle at a surface cell it meets beyond ``heard_incidence_deg`` of its normal. Writes into ``rd``'s
+    tables: one problem per ``em_readings`` result."""
     fwd = config.forward
     p_hit = float(fwd.p_hit)
     n = rd.ints.shape[0]
     top = int(rd.ints["m"].max()) if n else 0
     model = L.EMModel(p_hit=p_hit, l_prior=float(config.l_prior),
                       qpow=(1.0 - p_hit) ** np.arange(top + 1, dtype=np.float64), w=1.0 - fwd.p_rand - fwd.p_max,
-                      sigma=float(fwd.sigma), window=float(fwd.window))
+                      sigma=float(fwd.sigma), window=float(fwd.window),
+                      normal=NO_SURFACES if surfaces is None else np.ascontiguousarray(surfaces, dtype=np.float32),
+                      cos2=cos2_of(fwd.heard_incidence_deg))
     seen = np.zeros(shape[0] * shape[1], dtype=np.bool_)
     if labels is None:
         marks = [(seen, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 4), dtype=np.int32))]
@@ -130,6 +142,12 @@ def em_problem(rd: L.EMReadings, templates, shape: tuple[int, int], occupied: np
             _join_parents(parent, other[2])
         rd = _with_extent(rd, box)
     return EMProblem(rd, model, L.em_state(rd), templates, shape, seen, parent)
+
+
+def heard_surfaces(run: LaidOutReadings, forward: ForwardModelConfig) -> np.ndarray | None:
+    """The surfaces EM's heard test takes: the readings' (``LaidOutReadings.normals``) when ``heard_incidence_deg``
+    < 90, else None (every cell the lobe hears counts)."""
+    return run.normals if forward.heard_incidence_deg < 90.0 else None
 
 
 def find_root(parent: np.ndarray, x: int) -> int:
@@ -203,8 +221,9 @@ def _flippable(problem: EMProblem, occupied: np.ndarray, cells: np.ndarray) -> t
     ``HELD_FREE_SHARE`` are such: free cells in no reading's window while the prior is below one half.
     There an obstacle only scales each echo's chance by 1 - p_hit, so occupancy can only lower the
     objective; their gains are one walk of the far runs (``_held_free_gains``). Not in a cluster
-    problem, whose extents are narrowed already (no gain measured: docs/algorithms.md)."""
-    if problem.model.l_prior >= 0.0 or cells.size == 0 or problem.parent is not None:
+    problem, whose extents are narrowed already (no gain measured: docs/algorithms.md), nor with the heard
+    test (``em_problem``'s ``surfaces``), which that walk does not make."""
+    if problem.model.l_prior >= 0.0 or cells.size == 0 or problem.parent is not None or problem.model.normal.size:
         return cells, cells[:0]
     rd = problem.readings
     window = np.zeros(problem.shape[0] * problem.shape[1], dtype=np.bool_)
@@ -277,9 +296,11 @@ def whole_log_problems(run: LaidOutReadings) -> ProblemFor:
     """The em mode's problems: every valid reading (of a subset, if given), every cell some cone holds."""
     keep = ~np.isnan(run.z)
     def problem_for(config: EMConfig, occ: np.ndarray, subset: np.ndarray | None):
+        surfaces = heard_surfaces(run, config.forward)
         rd = em_readings(run.cones, run.templates, run.grid, run.sensor.max_range, config.forward,
-                         select=keep if subset is None else keep & subset, shadow=run.shadow)
-        problem = em_problem(rd, run.templates, run.grid.shape, occ, config)
+                         select=keep if subset is None else keep & subset, shadow=run.shadow,
+                         far_runs=surfaces is None)
+        problem = em_problem(rd, run.templates, run.grid.shape, occ, config, surfaces=surfaces)
         return problem, np.flatnonzero(problem.seen)
     return problem_for
 

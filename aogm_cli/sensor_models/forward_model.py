@@ -44,6 +44,10 @@ class ForwardModelConfig:
     # out of its reading. 0: every cell of the cone
     lobe_deg: float = 0.0
     lobe_range: float = 10.0  # m: how far a surface met head-on on the axis is heard
+    # the largest angle off a surface's normal at which EM's forward model still hears it: a reading that meets
+    # a surface cell more obliquely has no obstacle there (docs/algorithms.md, "The lobe that hears"). 90: every
+    # cell the lobe hears counts (the default: with the lobe learned today it costs rows; with the lobe known, 35)
+    heard_incidence_deg: float = 90.0
 
     def validate(self) -> ForwardModelConfig:
         def bad(key, msg):
@@ -69,6 +73,9 @@ class ForwardModelConfig:
                                   f"got {self.lobe_deg:g}")
         if not self.lobe_range > 0:
             raise bad("lobe_range", f"expected a positive range (m), got {self.lobe_range:g}")
+        if not 0 < self.heard_incidence_deg <= 90:
+            raise bad("heard_incidence_deg", f"expected an angle in (0, 90] degrees (90: every heard cell counts), "
+                                             f"got {self.heard_incidence_deg:g}")
         return self
 
     def as_dict(self) -> dict:

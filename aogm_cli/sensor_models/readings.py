@@ -99,6 +99,9 @@ class LaidOutReadings:
     z: np.ndarray
     # per reading, the range where a surface deflected its beam (+inf: none; None: no beam deflected)
     shadow: np.ndarray | None = None
+    # (2, H * W) float32: the echoes' surface normals (``surface.surface_normals``), NaN elsewhere, for EM's heard
+    # test (``em.heard_incidence_deg``); None: not taken
+    normals: np.ndarray | None = None
 
     @property
     def cones(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

@@ -110,6 +110,8 @@ class EMModel(NamedTuple):
     w: float  # 1 - p_rand - p_max
     sigma: float
     window: float  # sigmas: the Gaussian is 0 beyond
+    normal: np.ndarray  # (2, H * W) float32 surface normals (NaN: none) for the heard test; (2, 0): no test
+    cos2: float  # cos^2 of ``heard_incidence_deg``: a surface met more obliquely is no obstacle of the reading
 
 
 class EMState(NamedTuple):

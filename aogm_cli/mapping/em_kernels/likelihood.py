@@ -11,7 +11,7 @@ import numpy as np
 
 from aogm_cli.mapping.em_kernels.extents import _bin_transform, _entry_cell, _extend_box
 from aogm_cli.mapping.em_kernels.layout import _columns
-from aogm_cli.mapping.em_kernels.windows import _rank
+from aogm_cli.mapping.em_kernels.windows import _rank, not_heard
 from aogm_cli.sensor_models.cone import unheard
 from aogm_cli.sensor_models.forward_model import gaussian_at
 
@@ -114,7 +114,7 @@ def _init_state(tpl, flat, readings, model, occupied, grid_shape, marks, span):
                         if a != c:
                             parent[max(a, c)] = min(a, c)
                     last = labels[cell]
-                if not occupied[cell]:
+                if not occupied[cell] or not_heard(model, cell, row0, col0, width):
                     continue
                 g = 0.0 if j < jlo else gaussian_at(z, tpl.ranges[s0 + j], model.sigma, model.window)
                 if g == 0.0:
