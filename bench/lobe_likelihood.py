@@ -1,0 +1,68 @@
+"""Which detection lobe EM's own forward model prefers at the truth's map (docs/algorithms.md, "The lobe that
+hears"): per simulated log, the log-likelihood of every reading, sum of log p(z | m) at the truth's occupancy, for
+each lobe of a grid of theta0 and R0.
+
+    python bench/lobe_likelihood.py [--incidence DEG] [--theta0 6,8,...] [--r0 5,6.3,...] LOG.h5 [LOG.h5 ...]
+
+The readings, their deflections, surfaces and calibrated model are the em mode's up to ``index`` (``aogm map
+--mode em`` with ``em.heard_incidence_deg`` DEG, 90: no heard test); each lobe makes its heard templates
+(``heard.heard_templates``), EM's readings and problem (``em.em_readings``, ``em.em_problem``) at the truth, and
+the sum of log(C_t + w S_t). Prints the best lobes and how far each trails the first.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from aogm_cli.io.logfile import LogReader
+from aogm_cli.map_files import resolve_params, sensor_model
+from aogm_cli.mapping.em import em_problem, em_readings, heard_surfaces
+from aogm_cli.mapping.modes import resolved_params, state_before
+from aogm_cli.sensor_models.heard import heard_templates
+from aogm_cli.sensor_models.readings import forward_templates
+
+SHOWN = 6  # the best lobes printed per log
+
+
+def likelihoods(log_path: str, incidence: float, thetas: list[float], reaches: list[float]) -> list[tuple]:
+    """(log-likelihood, theta0, R0) of every lobe, best first."""
+    with LogReader(log_path) as reader:
+        log = reader.read()
+    params = resolved_params(log, resolve_params(overrides={"em": {"heard_incidence_deg": incidence}}))
+    s = state_before(log, "em", params, "index", given=sensor_model("em", params, log, log_path))
+    run, config = s.readings, s.in_use.em
+    surfaces = heard_surfaces(run, config.forward)
+    truth = (np.asarray(log.truth.occupancy) != 0).reshape(-1)
+    whole = forward_templates(run.grid, run.sensor)
+    valid = ~np.isnan(run.z)
+    out = []
+    for theta0 in thetas:
+        for r0 in reaches:
+            templates = heard_templates(whole, float(theta0), float(r0))
+            rd = em_readings(run.cones, templates, run.grid, run.sensor.max_range, config.forward, select=valid,
+                             shadow=run.shadow, far_runs=surfaces is None)
+            problem = em_problem(rd, templates, run.grid.shape, truth.copy(), config, surfaces=surfaces)
+            out.append((float(np.sum(np.log(rd.floats["const"] + problem.model.w * problem.state.s))), theta0, r0))
+    return sorted(out, reverse=True)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("logs", nargs="+")
+    parser.add_argument("--incidence", type=float, default=35.0, help="em.heard_incidence_deg (90: no heard test)")
+    parser.add_argument("--theta0", default="6,8,10,12,14,16", help="degrees, comma-separated")
+    parser.add_argument("--r0", default="5,6.3,7.9,10,12.6,15.8", help="metres, comma-separated")
+    args = parser.parse_args()
+    thetas = [float(v) for v in args.theta0.split(",")]
+    reaches = [float(v) for v in args.r0.split(",")]
+    for path in args.logs:
+        ranked = likelihoods(path, args.incidence, thetas, reaches)
+        best = ranked[0][0]
+        shown = ", ".join(f"{t:g} / {r:g} ({ll - best:+.1f})" for ll, t, r in ranked[:SHOWN])
+        print(f"{path}: theta0 / R0 (log-likelihood against the best): {shown}")
+
+
+if __name__ == "__main__":
+    main()
