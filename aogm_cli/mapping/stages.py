@@ -26,6 +26,7 @@ from aogm_cli.mapping.standard import (
 )
 from aogm_cli.mapping.state import Clusters, EMRegion, StandardMap, State, View
 from aogm_cli.mapping.view import decided_free, em_view, joined_view
+from aogm_cli.sensor_models.forward_model import with_surfaces
 from aogm_cli.sensor_models.readings import lay_out_readings
 
 RATES_START = 0.05  # the fit of p_max starts from at least this share (from 0 it would get no weight)
@@ -139,8 +140,8 @@ def rates(s: State) -> State:
     config = dataclasses.replace(s.params.calibration, learn="p_max")
     forward = s.in_use.em.forward
     start = dataclasses.replace(forward, p_max=max(forward.p_max, RATES_START))
-    fit = fit_at_map(s.readings, sample_readings(s.readings, RATES_READINGS), np.ascontiguousarray(walls.reshape(-1)),
-                     start, config, loglik=False).forward
+    readings = with_surfaces(sample_readings(s.readings, RATES_READINGS), s.readings.normals, forward)
+    fit = fit_at_map(s.readings, readings, np.ascontiguousarray(walls.reshape(-1)), start, config, loglik=False).forward
     values = {"p_max": float(fit.p_max)}
     return s.but(learned=dataclasses.replace(s.learned, sensor=dataclasses.replace(s.learned.sensor, **values),
                                              rates=values))

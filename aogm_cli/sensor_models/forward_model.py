@@ -13,6 +13,7 @@ import numpy as np
 
 from aogm_cli.core.errors import InputError
 from aogm_cli.sensor_models.cone import cone_flat_cells, unheard
+from aogm_cli.sensor_models.surface import cos2_of, hidden
 
 
 # A reading has one cause: random, a max-range dropout, no obstacle detected, or the k-th obstacle of its
@@ -87,6 +88,9 @@ class ForwardModelConfig:
                 float(z_max))
 
 
+NO_SURFACES = np.zeros((2, 0), dtype=np.float32)  # ``ExpectationReadings.surfaces`` without the heard test
+
+
 class ExpectationReadings(NamedTuple):
     """Readings as the forward model's kernels take them: flat arrays, NaN readings left out."""
 
@@ -95,6 +99,19 @@ class ExpectationReadings(NamedTuple):
     bins: np.ndarray  # heading bin (int64)
     z: np.ndarray  # float64 range in template ranges; +inf (or >= z_max): a max-range reading
     limit: np.ndarray  # float64 template range beyond which the cone holds no cell (``cone_limits``; +inf: none)
+    # (2, H * W) float32 surface normals for the heard test (``em.heard_incidence_deg``; (2, 0): none) and the
+    # cos^2 of that angle: a surface a reading meets more obliquely is no obstacle of it
+    surfaces: np.ndarray = NO_SURFACES
+    cos2: float = 0.0
+
+
+def with_surfaces(readings: ExpectationReadings, surfaces: np.ndarray | None,
+                  config: ForwardModelConfig) -> ExpectationReadings:
+    """``readings`` with the heard test of ``config.heard_incidence_deg`` at ``surfaces`` (none at 90 or None)."""
+    if surfaces is None or config.heard_incidence_deg >= 90.0:
+        return readings
+    return readings._replace(surfaces=np.ascontiguousarray(surfaces, dtype=np.float32),
+                             cos2=cos2_of(config.heard_incidence_deg))
 
 
 def gaussian(z, d, sigma):
@@ -185,7 +202,8 @@ def cone_obstacles(tpl, flat, shape, readings, occupied, sigma, window, z_max, p
             s0 = tpl.offsets[b]
             for j in range(m):
                 c = ib[j]
-                if c < n_cells and occupied[c] and not unheard(tpl, s0 + j):  # unheard: no obstacle of it
+                if c < n_cells and occupied[c] and not unheard(tpl, s0 + j) and not (  # unheard: no obstacle of it
+                        readings.surfaces.shape[1] > 0 and hidden(readings.surfaces, readings.cos2, c, row0, col0, width)):
                     if n < room:
                         d[n] = r[j]
                     n += 1
