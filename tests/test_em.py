@@ -296,3 +296,29 @@ def test_a_wall_met_obliquely_is_no_obstacle_and_the_default_tests_nothing():
     n08 = math.exp(-0.5 * (0.2 / 0.05) ** 2) / (math.sqrt(2 * math.pi) * 0.05)
     assert s[35.0] == pytest.approx(g0, rel=1e-12, abs=1e-300)
     assert s[90.0] == pytest.approx(0.4 * n08 + 0.6 * g0, rel=1e-12)
+
+
+@pytest.mark.parametrize("facing, heard", [((0.0, 1.0), True), ((1.0, 0.0), False)])
+def test_the_decided_pass_takes_the_heard_test(facing, heard):
+    """``exact.map_evidence`` (adaptive's ``decided`` pass) scores the cell of the flip test above as EM does: the
+    reading's evidence at a surface it meets beyond heard_incidence_deg 35 is 0, facing it the hand-computed one."""
+    from aogm_cli.core.log import SensorSpec
+    from aogm_cli.mapping.exact import map_evidence
+    from aogm_cli.sensor_models.readings import LaidOutReadings
+
+    fixed, cell = 10 * GRID.width + 13, 10 * GRID.width + 8
+    occupied = np.zeros(N_CELLS, dtype=bool)
+    occupied[fixed] = True
+    normals = np.full((2, N_CELLS), np.nan, dtype=np.float32)
+    normals[:, cell] = facing
+    tpl, rows, cols, bins, z = readings_for([1.0], beam_deg=1.0)
+    sensor = SensorSpec(mount=np.zeros((1, 3)), beam_width=math.radians(1.0), max_range=4.0)
+    run = LaidOutReadings(GRID, sensor, tpl, z.reshape(1, 1), rows, cols, bins, z, normals=normals)
+    evidence = map_evidence(run, dataclasses.replace(FORWARD, heard_incidence_deg=35.0), occupied).reshape(-1)
+
+    def n(r):
+        return math.exp(-0.5 * ((1.0 - r) / 0.05) ** 2) / (math.sqrt(2 * math.pi) * 0.05)
+
+    const, w, before = 0.05 / 4.0, 0.95, 0.4 * n(0.8) + 0.6 * n(4.0)
+    expected = math.log(const + w * 0.6 * before) - math.log(const + w * before) if heard else 0.0
+    assert evidence[cell] == pytest.approx(expected, rel=1e-6, abs=1e-12)

@@ -14,6 +14,7 @@ import numpy as np
 from aogm_cli.core.errors import InputError
 from aogm_cli.sensor_models.cone import cone_flat_cells, range_search
 from aogm_cli.sensor_models.forward_model import cone_entries, cone_reach, gaussian_at
+from aogm_cli.sensor_models.surface import hidden
 
 BOUND = 7.0  # the exact model's log-odds stay within +-BOUND (the standard map's clamps starve it)
 MARGIN = 0.5  # log-odds below the prior at which the thinning frees a cell
@@ -145,6 +146,25 @@ def _heard_only(heard, rk, ib, m, j0, ranges):
     return n, n0, ranges
 
 
+@numba.njit(cache=True, inline="always")
+def _audible_only(readings, ib, rk, m, j0, ranges, row0, col0, shape):
+    """The first ``m`` cells of a cone (``ib``, ranges ``rk``) without the surfaces the reading meets beyond the
+    heard incidence (``ExpectationReadings.surfaces``): (m, j0, their ranges in ``ranges``)."""
+    n_cells = np.uint64(shape[0] * shape[1])
+    n = 0
+    n0 = 0
+    for j in range(m):
+        c = np.uint64(np.uint32(ib[j]))
+        if c < n_cells and hidden(readings.surfaces, readings.cos2, np.int64(c), row0, col0, shape[1]):
+            continue
+        ib[n] = ib[j]
+        ranges[n] = rk[j]
+        n += 1
+        if j < j0:
+            n0 += 1
+    return n, n0, ranges
+
+
 @numba.njit(cache=True, _nrt=False, error_model="numpy")
 def _reading_cone(tpl, flat, shape, readings, t, state, prior, model, ib, fl):
     """Reading t's cone under ``state`` (negative: ``prior``): flat ids in ``ib``, occupancy in
@@ -171,6 +191,8 @@ def _reading_cone(tpl, flat, shape, readings, t, state, prior, model, ib, fl):
     g = fl[1]
     if tpl.heard.shape[0] > 0:  # the cone's heard cells only, in order (``ConeTemplates.heard``)
         m, j0, rk = _heard_only(tpl.heard[tpl.offsets[b]:], rk, ib, m, j0, fl[2])
+    if readings.surfaces.shape[1] > 0:  # and of those, no surface met beyond the heard incidence
+        m, j0, rk = _audible_only(readings, ib, rk, m, j0, fl[2], row0, col0, shape)
     for j in range(m):
         v = state[np.uint64(np.uint32(ib[j]))]
         p[j] = prior if v < 0.0 else v
