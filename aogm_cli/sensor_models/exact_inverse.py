@@ -147,22 +147,14 @@ def _heard_only(heard, rk, ib, m, j0, ranges):
 
 
 @numba.njit(cache=True, inline="always")
-def _audible_only(readings, ib, rk, m, j0, ranges, row0, col0, shape):
-    """The first ``m`` cells of a cone (``ib``, ranges ``rk``) without the surfaces the reading meets beyond the
-    heard incidence (``ExpectationReadings.surfaces``): (m, j0, their ranges in ``ranges``)."""
+def _audible(readings, ib, m, row0, col0, shape, out):
+    """out[j] = 0 for the first ``m`` cells of a cone (``ib``) that are surfaces the reading meets beyond the heard
+    incidence (``ExpectationReadings.surfaces``), 1 for the others: ``_heard_only``'s marks."""
     n_cells = np.uint64(shape[0] * shape[1])
-    n = 0
-    n0 = 0
     for j in range(m):
         c = np.uint64(np.uint32(ib[j]))
-        if c < n_cells and hidden(readings.surfaces, readings.cos2, np.int64(c), row0, col0, shape[1]):
-            continue
-        ib[n] = ib[j]
-        ranges[n] = rk[j]
-        n += 1
-        if j < j0:
-            n0 += 1
-    return n, n0, ranges
+        out[j] = 0.0 if c < n_cells and hidden(readings.surfaces, readings.cos2, np.int64(c), row0, col0, shape[1]) else 1.0
+    return out
 
 
 @numba.njit(cache=True, _nrt=False, error_model="numpy")
@@ -192,7 +184,7 @@ def _reading_cone(tpl, flat, shape, readings, t, state, prior, model, ib, fl):
     if tpl.heard.shape[0] > 0:  # the cone's heard cells only, in order (``ConeTemplates.heard``)
         m, j0, rk = _heard_only(tpl.heard[tpl.offsets[b]:], rk, ib, m, j0, fl[2])
     if readings.surfaces.shape[1] > 0:  # and of those, no surface met beyond the heard incidence
-        m, j0, rk = _audible_only(readings, ib, rk, m, j0, fl[2], row0, col0, shape)
+        m, j0, rk = _heard_only(_audible(readings, ib, m, row0, col0, shape, fl[3]), rk, ib, m, j0, fl[2])
     for j in range(m):
         v = state[np.uint64(np.uint32(ib[j]))]
         p[j] = prior if v < 0.0 else v
