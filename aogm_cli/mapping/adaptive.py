@@ -7,7 +7,7 @@ import numpy as np
 
 from aogm_cli.core.log import Log
 from aogm_cli.mapping.cluster import grown, label_clusters, near_occupied, readings_near_clusters
-from aogm_cli.mapping.em import EMProblem, ProblemFor, em_problem, em_readings, find_root, heard_surfaces
+from aogm_cli.mapping.em import EMProblem, ProblemFor, find_root, run_problem
 from aogm_cli.mapping.params import EMConfig, MapParams
 from aogm_cli.mapping.plan import CONE, Plan
 from aogm_cli.mapping.standard import occupied_evidence
@@ -23,11 +23,7 @@ def cluster_problem(run: LaidOutReadings, clusters: np.ndarray, occupied: np.nda
     near = readings_near_clusters(clusters, run.rows, run.cols, run.z, run.grid, run.sensor.max_range, config.forward)
     if subset is not None:
         near = near[subset[near]]
-    surfaces = heard_surfaces(run, config.forward)
-    rd = em_readings(run.cones, run.templates, run.grid, run.sensor.max_range,
-                     config.forward, select=near, shadow=run.shadow, far_runs=surfaces is None)
-    return em_problem(rd, run.templates, run.grid.shape, occupied, config, labels=clusters.reshape(-1),
-                      surfaces=surfaces)
+    return run_problem(run, config, near, occupied, labels=clusters.reshape(-1))
 
 
 def coupled_groups(problem: EMProblem, n_clusters: int) -> int:

@@ -47,13 +47,6 @@ def deflected_run(run: LaidOutReadings, normals: np.ndarray, params: MapParams) 
     return dataclasses.replace(run, shadow=shadow)
 
 
-def with_surfaces(run: LaidOutReadings, normals: np.ndarray, params: MapParams) -> LaidOutReadings:
-    """``run`` with the surfaces ``normals`` for EM's heard test when ``em.heard_incidence_deg`` < 90, else ``run``."""
-    if params.em.forward.heard_incidence_deg >= 90.0:
-        return run
-    return dataclasses.replace(run, normals=normals)
-
-
 def with_opening(whole: Log, opening_deg: float) -> Log:
     """``whole`` with its beam narrowed to ``opening_deg``, or ``whole`` itself when that is not narrower."""
     sensor = whole.sensor

@@ -16,7 +16,7 @@ from aogm_cli.mapping.em_kernels.likelihood import _find, _init_state, _join_par
 from aogm_cli.mapping.params import EMConfig
 from aogm_cli.mapping.sweeps import Sweeps
 from aogm_cli.sensor_models.cone import flat_offsets
-from aogm_cli.sensor_models.forward_model import ForwardModelConfig, cone_limits, reading_constants
+from aogm_cli.sensor_models.forward_model import NO_SURFACES, ForwardModelConfig, cone_limits, reading_constants
 from aogm_cli.sensor_models.readings import (
     READING_PARTS,
     LaidOutReadings,
@@ -42,9 +42,6 @@ class EMResult:
     scratch_bytes: int  # the tiles' scratch (of one thread) at its largest
     threads: int = 1  # the sweeps' threads (mapping.sweeps: several where the grid holds bands)
     band_seconds: float = 0.0  # the sweeps' work, each band's time added up (on one thread: their wall time)
-
-
-NO_SURFACES = np.zeros((2, 0), dtype=np.float32)  # ``EMModel.normal`` without the heard test
 
 
 def em_readings(cones, templates, grid, z_max: float, config: ForwardModelConfig,
@@ -148,6 +145,16 @@ def heard_surfaces(run: LaidOutReadings, forward: ForwardModelConfig) -> np.ndar
     """The surfaces EM's heard test takes: the readings' (``LaidOutReadings.normals``) when ``heard_incidence_deg``
     < 90, else None (every cell the lobe hears counts)."""
     return run.normals if forward.heard_incidence_deg < 90.0 else None
+
+
+def run_problem(run: LaidOutReadings, config: EMConfig, select: np.ndarray, occupied: np.ndarray,
+                labels: np.ndarray | None = None) -> EMProblem:
+    """EM's problem of ``run``'s readings ``select`` picks under ``occupied`` (``em_readings``, ``em_problem``), with
+    the heard test when ``heard_incidence_deg`` < 90 (and then every cone cell listed as a pair)."""
+    surfaces = heard_surfaces(run, config.forward)
+    rd = em_readings(run.cones, run.templates, run.grid, run.sensor.max_range, config.forward, select=select,
+                     shadow=run.shadow, far_runs=surfaces is None)
+    return em_problem(rd, run.templates, run.grid.shape, occupied, config, labels=labels, surfaces=surfaces)
 
 
 def find_root(parent: np.ndarray, x: int) -> int:
@@ -296,11 +303,7 @@ def whole_log_problems(run: LaidOutReadings) -> ProblemFor:
     """The em mode's problems: every valid reading (of a subset, if given), every cell some cone holds."""
     keep = ~np.isnan(run.z)
     def problem_for(config: EMConfig, occ: np.ndarray, subset: np.ndarray | None):
-        surfaces = heard_surfaces(run, config.forward)
-        rd = em_readings(run.cones, run.templates, run.grid, run.sensor.max_range, config.forward,
-                         select=keep if subset is None else keep & subset, shadow=run.shadow,
-                         far_runs=surfaces is None)
-        problem = em_problem(rd, run.templates, run.grid.shape, occ, config, surfaces=surfaces)
+        problem = run_problem(run, config, keep if subset is None else keep & subset, occ)
         return problem, np.flatnonzero(problem.seen)
     return problem_for
 

@@ -114,17 +114,16 @@ def lobe(s: State) -> State:
 
 
 def deflections(s: State) -> State:
-    """The echoes' surfaces (kept with the readings for EM's heard test when ``em.heard_incidence_deg`` < 90), the
-    specular angle if learned, beams met beyond it stopped (standard map taken away)."""
+    """The echoes' surfaces (kept with the readings: ``em.heard_incidence_deg``), the specular angle if learned,
+    beams met beyond it stopped (standard map taken away)."""
     normals = B.surfaces(s.readings, s.in_use, s.standard.log_odds)
     if "specular_deg" in s.plan.learns:
         record = B.specular_record(s.readings, s.in_use, s.standard.log_odds, normals)
         s = s.but(learned=dataclasses.replace(s.learned, specular_deg=record["specular_deg"], incidence=record))
     run = B.deflected_run(s.readings, normals, s.in_use)
-    heard = B.with_surfaces(run or s.readings, normals, s.in_use)
     if run is None:
-        return s if heard is s.readings else s.but(readings=heard)
-    return s.but(readings=heard, standard=None)
+        return s.but(readings=dataclasses.replace(s.readings, normals=normals))
+    return s.but(readings=dataclasses.replace(run, normals=normals), standard=None)
 
 
 def walls(s: State) -> State:

@@ -202,8 +202,9 @@ def cone_obstacles(tpl, flat, shape, readings, occupied, sigma, window, z_max, p
             s0 = tpl.offsets[b]
             for j in range(m):
                 c = ib[j]
-                if c < n_cells and occupied[c] and not unheard(tpl, s0 + j) and not (  # unheard: no obstacle of it
-                        readings.surfaces.shape[1] > 0 and hidden(readings.surfaces, readings.cos2, c, row0, col0, width)):
+                # unheard, or met beyond the heard incidence: no obstacle of the reading
+                if c < n_cells and occupied[c] and not unheard(tpl, s0 + j) and not hidden(
+                        readings.surfaces, readings.cos2, c, row0, col0, width):
                     if n < room:
                         d[n] = r[j]
                     n += 1

@@ -11,9 +11,10 @@ import numpy as np
 
 from aogm_cli.mapping.em_kernels.extents import _bin_transform, _entry_cell, _extend_box
 from aogm_cli.mapping.em_kernels.layout import _columns
-from aogm_cli.mapping.em_kernels.windows import _rank, not_heard
+from aogm_cli.mapping.em_kernels.windows import _rank
 from aogm_cli.sensor_models.cone import unheard
 from aogm_cli.sensor_models.forward_model import gaussian_at
+from aogm_cli.sensor_models.surface import hidden
 
 
 @numba.njit(cache=True, inline="always")
@@ -114,7 +115,7 @@ def _init_state(tpl, flat, readings, model, occupied, grid_shape, marks, span):
                         if a != c:
                             parent[max(a, c)] = min(a, c)
                     last = labels[cell]
-                if not occupied[cell] or not_heard(model, cell, row0, col0, width):
+                if not occupied[cell] or hidden(model.normal, model.cos2, cell, row0, col0, width):  # heard test
                     continue
                 g = 0.0 if j < jlo else gaussian_at(z, tpl.ranges[s0 + j], model.sigma, model.window)
                 if g == 0.0:

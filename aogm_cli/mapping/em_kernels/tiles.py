@@ -22,8 +22,9 @@ from aogm_cli.mapping.em_kernels.listing import (
     _row_unchanged,
     _span_at,
 )
-from aogm_cli.mapping.em_kernels.windows import _build_window, _make_room, _room, not_heard
+from aogm_cli.mapping.em_kernels.windows import _build_window, _make_room, _room
 from aogm_cli.sensor_models.forward_model import gaussian_at
+from aogm_cli.sensor_models.surface import hidden
 
 
 @numba.njit(cache=True, inline="always")
@@ -35,7 +36,6 @@ def _window_pairs(i, t, span, r, c0, c1, c_start, fill, tpl, groups, rd, model, 
     gj = groups.j[span.kind]
     s0 = tpl.offsets[tpl.base_bin[rd.bin[t]]]
     n = 0
-    heard_test = model.normal.shape[1] > 0
     for side in range(2):
         if span.f_lo > span.f_hi:  # no far run: one run, the whole cone row
             if side == 1:
@@ -48,7 +48,7 @@ def _window_pairs(i, t, span, r, c0, c1, c_start, fill, tpl, groups, rd, model, 
         lo, hi = _o_range(span, col0, c0, c1, lo, hi)
         for o in range(lo, hi + 1):
             ci = cand.of_cell[at + span.sign * o]
-            if ci < 0 or heard_test and not_heard(model, at + span.sign * o, rd.row0[t], col0, width):
+            if ci < 0 or hidden(model.normal, model.cos2, at + span.sign * o, rd.row0[t], col0, width):
                 continue
             n += 1
             local = ci - c_start

@@ -14,13 +14,6 @@ from aogm_cli.sensor_models.surface import hidden
 
 
 @numba.njit(cache=True, inline="always")
-def not_heard(model, cell, row0, col0, width):
-    """True when the reading from (row0, col0) meets the surface at ``cell`` beyond ``heard_incidence_deg`` of its
-    normal (``EMModel.normal``; never without surfaces): no obstacle of that reading."""
-    return model.normal.shape[1] > 0 and hidden(model.normal, model.cos2, cell, row0, col0, width)
-
-
-@numba.njit(cache=True, inline="always")
 def _row_group(tpl, groups, k, v):
     """(kind, stored bin, group value, column sign) of row offset v of heading bin k's cone."""
     b = tpl.base_bin[k]
@@ -65,7 +58,8 @@ def _build_window(t, tpl, flat, rd, model, cand, state, work):
     for j in range(rd.jlo[t], rd.m[t]):
         cell = at + sign * np.int64(x_off[s0 + j]) if inside else _entry_cell(tpl, s0, tr, j, row0, col0, height,
                                                                               width)
-        if cell < 0 or not cand.occupied[cell] or unheard(tpl, s0 + j) or not_heard(model, cell, row0, col0, width):
+        if cell < 0 or not cand.occupied[cell] or unheard(tpl, s0 + j) or hidden(model.normal, model.cos2, cell, row0, col0,
+                                                                                          width):
             continue
         g = gaussian_at(rd.z[t], tpl.ranges[s0 + j], model.sigma, model.window)
         if g == 0.0:
