@@ -18,7 +18,7 @@ from aogm_cli.sensor_models.exact_inverse import (
     exact_inverse_updates,
     map_evidence_sums,
 )
-from aogm_cli.sensor_models.forward_model import ExpectationReadings, ForwardModelConfig, deflect, with_surfaces
+from aogm_cli.sensor_models.forward_model import ExpectationReadings, ForwardModelConfig, deflect
 from aogm_cli.sensor_models.readings import (
     READING_PARTS,
     LaidOutReadings,
@@ -73,7 +73,7 @@ def map_evidence(run: LaidOutReadings, forward: ForwardModelConfig, occupied: np
     occupancy = np.zeros(n + SPARE_MASK + 1, dtype=np.float32)
     occupancy[:n] = np.asarray(occupied, dtype=bool).reshape(-1)
     z, limit = deflect(run.z, run.shadow, run.sensor.max_range)
-    readings = with_surfaces(ExpectationReadings(run.rows, run.cols, run.bins, z, limit), run.normals, forward)
+    readings = ExpectationReadings(run.rows, run.cols, run.bins, z, limit)  # no heard test: docs/algorithms.md
     model, flat = forward.kernel_model(run.sensor.max_range), flat_offsets(templates, grid.width)
     scratch = [cone_scratch(templates) for _ in range(READING_PARTS)]
     total = np.zeros(n)

@@ -14,7 +14,6 @@ import numpy as np
 from aogm_cli.core.errors import InputError
 from aogm_cli.sensor_models.cone import cone_flat_cells, range_search
 from aogm_cli.sensor_models.forward_model import cone_entries, cone_reach, gaussian_at
-from aogm_cli.sensor_models.surface import hidden
 
 BOUND = 7.0  # the exact model's log-odds stay within +-BOUND (the standard map's clamps starve it)
 MARGIN = 0.5  # log-odds below the prior at which the thinning frees a cell
@@ -146,17 +145,6 @@ def _heard_only(heard, rk, ib, m, j0, ranges):
     return n, n0, ranges
 
 
-@numba.njit(cache=True, inline="always")
-def _audible(readings, ib, m, row0, col0, shape, out):
-    """out[j] = 0 for the first ``m`` cells of a cone (``ib``) that are surfaces the reading meets beyond the heard
-    incidence (``ExpectationReadings.surfaces``), 1 for the others: ``_heard_only``'s marks."""
-    n_cells = np.uint64(shape[0] * shape[1])
-    for j in range(m):
-        c = np.uint64(np.uint32(ib[j]))
-        out[j] = 0.0 if c < n_cells and hidden(readings.surfaces, readings.cos2, np.int64(c), row0, col0, shape[1]) else 1.0
-    return out
-
-
 @numba.njit(cache=True, _nrt=False, error_model="numpy")
 def _reading_cone(tpl, flat, shape, readings, t, state, prior, model, ib, fl):
     """Reading t's cone under ``state`` (negative: ``prior``): flat ids in ``ib``, occupancy in
@@ -183,8 +171,6 @@ def _reading_cone(tpl, flat, shape, readings, t, state, prior, model, ib, fl):
     g = fl[1]
     if tpl.heard.shape[0] > 0:  # the cone's heard cells only, in order (``ConeTemplates.heard``)
         m, j0, rk = _heard_only(tpl.heard[tpl.offsets[b]:], rk, ib, m, j0, fl[2])
-    if readings.surfaces.shape[1] > 0:  # and of those, no surface met beyond the heard incidence
-        m, j0, rk = _heard_only(_audible(readings, ib, m, row0, col0, shape, fl[3]), rk, ib, m, j0, fl[2])
     for j in range(m):
         v = state[np.uint64(np.uint32(ib[j]))]
         p[j] = prior if v < 0.0 else v
