@@ -6,19 +6,20 @@ each lobe of a grid of theta0 and R0.
 
 The readings, their deflections, surfaces and calibrated model are the em mode's up to ``index`` (``aogm map
 --mode em`` with ``em.heard_incidence_deg`` DEG, 90: no heard test); each lobe makes its heard templates
-(``heard.heard_templates``), EM's readings and problem (``em.em_readings``, ``em.em_problem``) at the truth, and
+(``heard.heard_templates``), EM's problem (``em.run_problem``) at the truth, and
 the sum of log(C_t + w S_t). Prints the best lobes and how far each trails the first.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 
 import numpy as np
 
 from aogm_cli.io.logfile import LogReader
 from aogm_cli.map_files import resolve_params, sensor_model
-from aogm_cli.mapping.em import em_problem, em_readings, heard_surfaces
+from aogm_cli.mapping.em import run_problem
 from aogm_cli.mapping.modes import resolved_params, state_before
 from aogm_cli.sensor_models.heard import heard_templates
 from aogm_cli.sensor_models.readings import forward_templates
@@ -33,18 +34,16 @@ def likelihoods(log_path: str, incidence: float, thetas: list[float], reaches: l
     params = resolved_params(log, resolve_params(overrides={"em": {"heard_incidence_deg": incidence}}))
     s = state_before(log, "em", params, "index", given=sensor_model("em", params, log, log_path))
     run, config = s.readings, s.in_use.em
-    surfaces = heard_surfaces(run, config.forward)
     truth = (np.asarray(log.truth.occupancy) != 0).reshape(-1)
     whole = forward_templates(run.grid, run.sensor)
     valid = ~np.isnan(run.z)
     out = []
     for theta0 in thetas:
         for r0 in reaches:
-            templates = heard_templates(whole, float(theta0), float(r0))
-            rd = em_readings(run.cones, templates, run.grid, run.sensor.max_range, config.forward, select=valid,
-                             shadow=run.shadow, far_runs=surfaces is None)
-            problem = em_problem(rd, templates, run.grid.shape, truth.copy(), config, surfaces=surfaces)
-            out.append((float(np.sum(np.log(rd.floats["const"] + problem.model.w * problem.state.s))), theta0, r0))
+            lobe = dataclasses.replace(run, templates=heard_templates(whole, float(theta0), float(r0)))
+            problem = run_problem(lobe, config, valid, truth.copy())
+            const = problem.readings.floats["const"]
+            out.append((float(np.sum(np.log(const + problem.model.w * problem.state.s))), theta0, r0))
     return sorted(out, reverse=True)
 
 
