@@ -76,14 +76,14 @@ def leak_causes(log_path: str, map_path: str, region: tuple[float, float, float,
     log = aogm_cli.load_log(log_path)
     m = read_map_file(map_path)
     grid, truth, poses = m.grid, np.asarray(log.truth.occupancy), log.poses()
-    leaked = map_reach(grid, m.probability, m.observed, poses, ROBOT_RADIUS) & ~(
-        truth_reach(grid, truth, poses, ROBOT_RADIUS) & m.observed)
+    in_truth = truth_reach(grid, truth, poses, ROBOT_RADIUS) & m.observed
+    leaked = map_reach(grid, m.probability, m.observed, poses, ROBOT_RADIUS) & ~in_truth
     erased = (truth != 0) & m.observed & (m.probability < 0.5) & grid.within(leaked, LEAK_NEAR)
     params = resolved_params(log, MapParams())
     s = state_before(log, "em", params, "walls", given=sensor_model("em", params, log, log_path))
     wall = (s.standard.log_odds > 0).reshape(grid.shape)
     normal = np.isfinite(B.surfaces(s.readings, s.in_use, s.standard.log_odds)[0]).reshape(grid.shape)
-    n_truth = int(np.sum(truth_reach(grid, truth, poses, ROBOT_RADIUS) & m.observed))
+    n_truth = int(in_truth.sum())
     inside = "" if region is None else (f"; leaked cells in the region {int((leaked & region_cells(grid, region)).sum())}"
                                         f" of {int(leaked.sum())}")
     return (f"{map_path}: leak {leaked.sum() / n_truth:.3f}; true wall cells shown free within {LEAK_NEAR} m of the "
