@@ -262,7 +262,7 @@ def test_a_surface_met_beyond_the_heard_incidence_is_no_obstacle_of_the_reading(
     normals = np.full((2, N_CELLS), np.nan, dtype=np.float32)
     normals[:, cell] = facing
     tpl, rows, cols, bins, z = readings_for([1.0], beam_deg=1.0)
-    rd = em_readings((rows, cols, bins, z), tpl, GRID, 4.0, config.forward, far_runs=False)
+    rd = em_readings((rows, cols, bins, z), tpl, GRID, 4.0, config.forward)
     problem = em_problem(rd, tpl, GRID.shape, occupied, config, surfaces=normals)
     p_hit, q, w, sigma = 0.4, 0.6, 0.95, 0.05
 
@@ -278,6 +278,44 @@ def test_a_surface_met_beyond_the_heard_incidence_is_no_obstacle_of_the_reading(
     assert not occupied[cell]
 
 
+def test_a_far_surface_the_reading_does_not_hear_keeps_the_prior_after_a_flip_before_it():
+    """heard_incidence_deg 35, the reading of the tests above (z = 1.0 m, an obstacle held at 0.8 m) and two
+    candidates in its far run: A at 0.2 m, occupied at the start and heard, and B at 0.3 m, a surface met at 90 deg.
+    EM frees A (the echo explained again); the reading's far ratios move for every cell behind A but B, whose
+    flip still changes nothing but the prior: its residual is the prior's, and B held occupied and freed leaves the
+    reading's S as it was."""
+    fixed, a, b = (10 * GRID.width + c for c in (13, 7, 8))
+    normals = np.full((2, N_CELLS), np.nan, dtype=np.float32)
+    normals[:, b] = (1.0, 0.0)
+    config = dataclasses.replace(CONFIG, forward=dataclasses.replace(FORWARD, heard_incidence_deg=35.0))
+    tpl, rows, cols, bins, z = readings_for([1.0], beam_deg=1.0)
+    p_hit, q, w, sigma = 0.4, 0.6, 0.95, 0.05
+
+    def n(r):
+        return math.exp(-0.5 * ((1.0 - r) / sigma) ** 2) / (math.sqrt(2 * math.pi) * sigma)
+
+    const, before = 0.05 / 4.0, p_hit * n(0.8) + q * n(4.0)
+    occupied = np.zeros(N_CELLS, dtype=bool)
+    occupied[[fixed, a]] = True
+    problem = em_problem(em_readings((rows, cols, bins, z), tpl, GRID, 4.0, config.forward), tpl, GRID.shape,
+                         occupied, config, surfaces=normals)
+    # one sweep, its gains kept: B is scored after A's flip in the same tile, not in a fresh sweep
+    result = run_em(problem, occupied, np.array([a, b]), dataclasses.replace(config, max_sweeps=1), final=False)
+    freed = math.log(const + w * before) - math.log(const + w * q * before)
+    assert not occupied[a] and not occupied[b]
+    assert result.objective[-1] - result.objective[0] == pytest.approx(freed - CONFIG.l_prior, rel=1e-9)
+    assert result.residual[1] == pytest.approx(1.0 / (1.0 + math.exp(-CONFIG.l_prior)), rel=1e-12)
+
+    occupied = np.zeros(N_CELLS, dtype=bool)
+    occupied[[fixed, b]] = True
+    problem = em_problem(em_readings((rows, cols, bins, z), tpl, GRID, 4.0, config.forward), tpl, GRID.shape,
+                         occupied, config, surfaces=normals)
+    result = run_em(problem, occupied, np.array([b]), config)
+    assert not occupied[b]
+    assert result.objective[-1] - result.objective[0] == pytest.approx(-CONFIG.l_prior, rel=1e-12)
+    assert problem.state.s[0] == pytest.approx(before, rel=1e-12)
+
+
 def test_a_wall_met_obliquely_is_no_obstacle_and_the_default_tests_nothing():
     """The obstacle held at 0.8 m with a normal along the reading's row: under heard_incidence_deg 35 the reading
     sees no obstacle (S = G0: the echo unexplained); at the default 90 the same surfaces change nothing."""
@@ -290,7 +328,7 @@ def test_a_wall_met_obliquely_is_no_obstacle_and_the_default_tests_nothing():
     s = {}
     for angle in (35.0, 90.0):
         config = dataclasses.replace(CONFIG, forward=dataclasses.replace(FORWARD, heard_incidence_deg=angle))
-        rd = em_readings((rows, cols, bins, z), tpl, GRID, 4.0, config.forward, far_runs=False)
+        rd = em_readings((rows, cols, bins, z), tpl, GRID, 4.0, config.forward)
         s[angle] = em_problem(rd, tpl, GRID.shape, occupied, config, surfaces=normals).state.s[0]
     g0 = math.exp(-0.5 * (3.0 / 0.05) ** 2) / (math.sqrt(2 * math.pi) * 0.05)
     n08 = math.exp(-0.5 * (0.2 / 0.05) ** 2) / (math.sqrt(2 * math.pi) * 0.05)

@@ -45,12 +45,9 @@ class EMResult:
 
 
 def em_readings(cones, templates, grid, z_max: float, config: ForwardModelConfig,
-                select: np.ndarray | None = None, shadow: np.ndarray | None = None,
-                far_runs: bool = True) -> L.EMReadings:
+                select: np.ndarray | None = None, shadow: np.ndarray | None = None) -> L.EMReadings:
     """The readings ``cones`` (those ``select`` picks, taken a column at a time without copies) as EM's kernels
-    take them: NaN left out, +inf a max-range reading, ``shadow`` cutting cones short (``cone_limits``). Without
-    ``far_runs`` every cone cell is listed as a pair of its own (a far one when its Gaussian is 0), as the heard
-    test of ``em_problem``'s ``surfaces`` needs: a far run adds its readings to every column alike."""
+    take them: NaN left out, +inf a max-range reading, ``shadow`` cutting cones short (``cone_limits``)."""
     rows, cols, bins, z = cones
     pick = (lambda a: np.asarray(a).reshape(-1)) if select is None else (lambda a: np.asarray(a).reshape(-1)[select])
     z = pick(z).astype(np.float64, copy=False)
@@ -76,8 +73,6 @@ def em_readings(cones, templates, grid, z_max: float, config: ForwardModelConfig
     floats["const"] = const
     # needs the fields above only
     reading_parts(n, lambda _, span: _window_rows(templates.kernel_arrays, rd, grid.height, span))
-    if not far_runs:
-        ints["reach2"][:, 1] = -1  # no cell before the window by ``listing._row_span``'s rule
     return _with_extent(rd, np.ascontiguousarray(ints["box"]))._replace(window_leave=_order(ints["window_hi"]))
 
 
@@ -107,8 +102,9 @@ class EMProblem:
 def em_problem(rd: L.EMReadings, templates, shape: tuple[int, int], occupied: np.ndarray, config: EMConfig,
                labels: np.ndarray | None = None, surfaces: np.ndarray | None = None) -> EMProblem:
     """Every reading's likelihood state under ``occupied`` and, with ``labels``, which clusters share a reading,
-    extents narrowed to their cells. With ``surfaces`` (``heard_surfaces``; ``rd`` made without far runs) a reading
-    has no obstacle at a surface cell it meets beyond ``heard_incidence_deg`` of its normal. Writes into ``rd``'s
+    extents narrowed to their cells. With ``surfaces`` (``heard_surfaces``) a reading has no obstacle at a surface
+    cell it meets beyond ``heard_incidence_deg`` of its normal (the sweep's far runs leave such cells out:
+    ``tiles._unheard_far``). Writes into ``rd``'s
     tables: one problem per ``em_readings`` result."""
     fwd = config.forward
     p_hit = float(fwd.p_hit)
@@ -150,11 +146,11 @@ def heard_surfaces(run: LaidOutReadings, forward: ForwardModelConfig) -> np.ndar
 def run_problem(run: LaidOutReadings, config: EMConfig, select: np.ndarray, occupied: np.ndarray,
                 labels: np.ndarray | None = None) -> EMProblem:
     """EM's problem of ``run``'s readings ``select`` picks under ``occupied`` (``em_readings``, ``em_problem``), with
-    the heard test when ``heard_incidence_deg`` < 90 (and then every cone cell listed as a pair)."""
-    surfaces = heard_surfaces(run, config.forward)
+    the heard test when ``heard_incidence_deg`` < 90."""
     rd = em_readings(run.cones, run.templates, run.grid, run.sensor.max_range, config.forward, select=select,
-                     shadow=run.shadow, far_runs=surfaces is None)
-    return em_problem(rd, run.templates, run.grid.shape, occupied, config, labels=labels, surfaces=surfaces)
+                     shadow=run.shadow)
+    return em_problem(rd, run.templates, run.grid.shape, occupied, config, labels=labels,
+                      surfaces=heard_surfaces(run, config.forward))
 
 
 def find_root(parent: np.ndarray, x: int) -> int:
