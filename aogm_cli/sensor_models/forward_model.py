@@ -105,13 +105,19 @@ class ExpectationReadings(NamedTuple):
     cos2: float = 0.0
 
 
+def heard_test(surfaces: np.ndarray | None, config: ForwardModelConfig) -> tuple[np.ndarray, float]:
+    """(normals, cos^2 of the angle) of the heard test of ``config.heard_incidence_deg`` at ``surfaces``, as the
+    kernels take them (``surface.hidden``); ``NO_SURFACES`` (no test) at 90 or without surfaces."""
+    if surfaces is None or config.heard_incidence_deg >= 90.0:
+        return NO_SURFACES, 0.0
+    return np.ascontiguousarray(surfaces, dtype=np.float32), cos2_of(config.heard_incidence_deg)
+
+
 def with_surfaces(readings: ExpectationReadings, surfaces: np.ndarray | None,
                   config: ForwardModelConfig) -> ExpectationReadings:
-    """``readings`` with the heard test of ``config.heard_incidence_deg`` at ``surfaces`` (none at 90 or None)."""
-    if surfaces is None or config.heard_incidence_deg >= 90.0:
-        return readings
-    return readings._replace(surfaces=np.ascontiguousarray(surfaces, dtype=np.float32),
-                             cos2=cos2_of(config.heard_incidence_deg))
+    """``readings`` with the heard test of ``config.heard_incidence_deg`` at ``surfaces`` (``heard_test``)."""
+    normal, cos2 = heard_test(surfaces, config)
+    return readings._replace(surfaces=normal, cos2=cos2) if normal.size else readings
 
 
 def gaussian(z, d, sigma):

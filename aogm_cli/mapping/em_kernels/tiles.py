@@ -143,8 +143,9 @@ def _count_pairs(tpl, groups, rd, model, cand, state, work, r, c0, c1, c_start, 
             work.far_sum[0, b - c0 + 1] -= state.far_log[t, 0]
             work.far_sum[1, a - c0] += state.far_log[t, 1]
             work.far_sum[1, b - c0 + 1] -= state.far_log[t, 1]
-            if surfaces & _span_mask(a, b, c0 // SEGMENT):
-                work.far_hid[li] = _unheard_far(surfaces & _span_mask(a, b, c0 // SEGMENT), t, r, c0, rd, model, cand)
+            in_run = surfaces & _span_mask(a, b, c0 // SEGMENT)
+            if in_run:
+                work.far_hid[li] = _unheard_far(in_run, t, r, c0, rd, model, cand)
                 _move_far(work, work.far_hid[li], 0, SEGMENT - 1, -state.far_log[t, 0], -state.far_log[t, 1])
         k = _window_pairs(li, t, span, r, c0, c1, c_start, False, tpl, groups, rd, model, cand, work)
         n_pairs += k

@@ -58,8 +58,9 @@ def _build_window(t, tpl, flat, rd, model, cand, state, work):
     for j in range(rd.jlo[t], rd.m[t]):
         cell = at + sign * np.int64(x_off[s0 + j]) if inside else _entry_cell(tpl, s0, tr, j, row0, col0, height,
                                                                               width)
-        if cell < 0 or not cand.occupied[cell] or unheard(tpl, s0 + j) or hidden(model.normal, model.cos2, cell, row0, col0,
-                                                                                          width):
+        if cell < 0 or not cand.occupied[cell] or unheard(tpl, s0 + j):
+            continue
+        if hidden(model.normal, model.cos2, cell, row0, col0, width):  # the heard test: no obstacle of the reading
             continue
         g = gaussian_at(rd.z[t], tpl.ranges[s0 + j], model.sigma, model.window)
         if g == 0.0:
