@@ -20,21 +20,52 @@ from aogm_cli.io.detectorfile import BASELINE_DETECTORS, file_sha256, load_detec
 from aogm_cli.io.logfile import LogReader
 from aogm_cli.io.modelfile import MODEL_KEYS, check_sensor, model_for, read_model, sensor_record
 from aogm_cli.io.yamlfile import read_yaml
-from aogm_cli.mapping.learned import FROM_LOG, Learned, SensorModel
+from aogm_cli.mapping.learned import FROM_LOG, SENSOR_KEYS, Learned, SensorModel
 from aogm_cli.mapping.map_cost import map_estimate
-from aogm_cli.mapping.params import MapParams, params_from
-from aogm_cli.mapping.pipeline import Progress
-from aogm_cli.mapping.plan import auto_outside
+from aogm_cli.mapping.params import LEARNABLE, MapParams, params_from
+from aogm_cli.mapping.pipeline import Progress, log_grid
+from aogm_cli.mapping.plan import auto_outside, plan_map
 from aogm_cli.sensor_models import cone_build
 
 __all__ = ["BASELINE_DETECTORS", "NamedSource", "calibration_notice", "carried_model", "check_logs", "given_model",
-           "learn_sensor_models", "map_file", "resolve_detector", "resolve_params", "sensor_model"]
+           "learn_sensor_models", "learned_over", "map_file", "resolve_detector", "resolve_params", "sensor_model",
+           "set_em_keys"]
 
 
 def resolve_params(params_file: str | Path | None = None, overrides: dict[str, dict[str, Any]] | None = None) -> MapParams:
     """Defaults, then the ``--params`` YAML file's values, then ``overrides`` (``mapping.params.params_from``)."""
     raw = (read_yaml(params_file)[1] or {}) if params_file else {}
     return params_from(raw, None if params_file is None else str(params_file), overrides)
+
+
+def set_em_keys(params_file: str | Path | None = None, overrides: dict[str, dict[str, Any]] | None = None) -> set[str]:
+    """The keys of section ``em`` that the ``--params`` file or ``overrides`` (an option given) set."""
+    raw = (read_yaml(params_file)[1] or {}) if params_file else {}
+    em = raw.get("em") if isinstance(raw, dict) else None
+    return set(em or {}) | {k for k, v in ((overrides or {}).get("em") or {}).items() if v is not None}
+
+
+def learned_over(mode: str, params: MapParams, keys: set[str], log, model: str | Path | None = None,
+                 detector: str | None = None) -> list[str]:
+    """One warning per forward-model key of ``keys`` (set by the user: ``set_em_keys``) whose value a ``mode`` map of
+    ``log`` does not map with: one ``calibration.learn`` lists learns it from the log (``Plan.learns``; the value set
+    only starts the fit, a lobe's is replaced), or a sensor model given or carried (``sensor_model``) replaces it."""
+    if mode == "standard" or not keys & {*LEARNABLE, "lobe_range"}:
+        return []
+    given = sensor_model(mode, params, log, str(getattr(log, "path", "")), model, detector)
+    learns = plan_map(mode, params, log.sensor, log_grid(log, params.resolution).resolution, given).learns
+    forward, out = params.em.forward, []
+    for key in (k for k in (*LEARNABLE, "lobe_range") if k in keys):
+        learned = "lobe_deg" if key == "lobe_range" else key
+        with_value = f"to map with {getattr(forward, key):g}"
+        if learned in learns:
+            out.append(f"warning: em.{key} is learned from the log (calibration.learn lists {learned}); take "
+                       f"{learned} out of calibration.learn {with_value}")
+        elif given is not None and key in SENSOR_KEYS:
+            fix = ("map without --forward-model" if given.origin.startswith("file ") else "set calibration.carried: false")
+            out.append(f"warning: em.{key} is the sensor model's, {given.origin}; {fix} and take {key} out of "
+                       f"calibration.learn {with_value}")
+    return out
 
 
 def resolve_detector(spec: str | None):
@@ -104,8 +135,7 @@ def carried_model(detector: str | None, sensor, simulated: bool, loaded=None) ->
     if model is None:
         return None
     values = model["model"]
-    return Learned(sensor=SensorModel(**values), origin=f"carried by the {'packaged' if spec is None else spec} detector",
-                   opening_deg=values["opening_deg"])
+    return Learned(sensor=SensorModel(**values), origin=f"carried by the {'packaged' if spec is None else spec} detector")
 
 
 def calibration_notice(path, m: OccupancyMap) -> str | None:
@@ -150,7 +180,7 @@ def given_model(path: str | Path, sensor, log: str | Path) -> Learned:
     was learned for another sensor."""
     values, record = read_model(path)
     check_sensor(record, sensor, str(path), str(log))
-    return Learned(sensor=SensorModel(**values), origin=f"file {path}", opening_deg=values["opening_deg"])
+    return Learned(sensor=SensorModel(**values), origin=f"file {path}")
 
 
 class NamedSource:

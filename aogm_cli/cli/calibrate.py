@@ -29,7 +29,7 @@ from aogm_cli.io.outputs import resolve_outputs
 @click.option("--mode", type=click.Choice(["em", "adaptive"]), default="em", show_default=True,
               help="Whose maps the model is fitted at.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False),
-              help="Also write the sensor's learned model (sigma, p_rand, p_hit, p_max, the beam's opening, the "
+              help="Also write the sensor's learned model (sigma, p_rand, p_hit, p_max, the "
                    "sensor it fits) as a model file for `aogm map/compare --forward-model`.")
 @detector_option
 @params_option
@@ -49,17 +49,11 @@ def calibrate(log_file, mode, output, detector, params_file, resolution, quiet, 
     examined, sigma^2 the expected squared range error of the detections), iterated at that
     map until they settle. Round 0 maps with the configured model made at least 0.1 m
     broad; each round fits at the last map and maps again, until no parameter moves by more
-    than calibration.tolerance, or calibration.rounds. Every value is clipped to bounds
-    (docs/algorithms.md, "Calibration's constants"). Beams whose core meets a surface (a cell
-    heard from one direction) beyond em.specular_deg (15) before their echo are taken as
-    deflected there. With specular_deg in calibration.learn, the angle is learned once, before
-    the rounds, at the standard map: the share of readings that echo from a surface cell rather
-    than pass it, by angle of incidence, and the angle where that share falls to half its
-    head-on value (90: the walls echo at any angle). `aogm map` and `aogm compare` do all this
-    by default in em and adaptive modes. With opening_deg in calibration.learn, the beam's opening is learned first: the
-    share of echoes the thinned standard map explains when the beam detects out to 2, 4, ...
-    degrees, and the opening where that share tops out (the cone unless it explains 4% fewer);
-    em and adaptive then leave the cone's cells beyond it out (em.opening_deg).
+    than 2% (sigma: 2% of itself), or 4 rounds. Every value is clipped to bounds. Beams whose
+    core meets a surface (a cell heard from one direction) beyond em.specular_deg (15) before
+    their echo are taken as deflected there. `aogm map` and `aogm compare` do all this by
+    default in em and adaptive modes. A value --params or an option sets for a key that
+    calibration.learn lists only starts the fit (a warning says so).
 
     \b
     Example:
@@ -71,14 +65,19 @@ def calibrate(log_file, mode, output, detector, params_file, resolution, quiet, 
     from aogm_cli.io.logfile import LogReader
     from aogm_cli.io.modelfile import model_bytes
     from aogm_cli.io.provenance import provenance
-    from aogm_cli.map_files import map_file, resolve_params
+    from aogm_cli.map_files import learned_over, map_file, resolve_params, set_em_keys
+    from aogm_cli.mapping.calibration import TUNING
     from aogm_cli.report.calibration_table import calibration_table, lobe_line
 
     made = provenance(inputs) if output else None  # the inputs as read, the time the run starts
-    params = resolve_params(params_file, parameter_overrides(resolution, True, options))
+    overrides = parameter_overrides(resolution, True, options)
+    params = resolve_params(params_file, overrides)
     params = dataclasses.replace(params, calibration=dataclasses.replace(params.calibration, carried=False))
     refuse_huge_grids([log_file], params, params_file, resolution is not None, max_memory)
-    with progress_bar(params.em.max_sweeps * (params.calibration.rounds + 1), f"calibrate ({mode})", quiet,
+    with LogReader(log_file) as reader:
+        for warning in learned_over(mode, params, set_em_keys(params_file, overrides), reader, None, detector):
+            click.echo(warning, err=True)
+    with progress_bar(params.em.max_sweeps * (TUNING.rounds + 1), f"calibrate ({mode})", quiet,
                       unit="sweep") as advance:
         result = map_file(log_file, mode, params, detector, lambda phase, done, total: advance(1),
                           limits=limits_of(max_memory, max_work, threads))

@@ -130,10 +130,9 @@ def compare(inputs, modes_text, detector, params_file, forward_model, json_out, 
     value does not apply: log, world, mode, truth, runtime_s, runtime_vs_standard, accuracy,
     occupied_precision, occupied_recall, occupied_f1, brier, ece, checks_passed, leak, block,
     surface_recall (truth), walls_kept, leak_vs_standard, far_leak (no truth), consistency_* (logs
-    without truth), holdout_* (--holdout), learned_sigma, learned_p_rand,
-    learned_p_hit, learned_p_max, learned_specular_deg, learned_opening_deg, learned_from_readings (the forward
-    model an em or adaptive map's calibration learned); then one check:NAME column
-    (true/false) per world check.
+    without truth), holdout_* (--holdout), learned_sigma, learned_p_rand, learned_p_hit,
+    learned_p_max, learned_from_readings (the forward model an em or adaptive map's
+    calibration learned); then one check:NAME column (true/false) per world check.
 
     \b
     Merging (--from-json): the arguments are --json files of earlier runs; their results are
@@ -202,6 +201,7 @@ def compare(inputs, modes_text, detector, params_file, forward_model, json_out, 
                           maps_dir)
     record = provenance(read)  # the inputs as read, the time the run starts
     _check_budget(entries, modes, job, params_file)
+    _warn_learned_over(entries, modes, job, params_file)
     n_tasks = sum(mode not in e.maps for e in entries for mode in modes)
     with progress_bar(n_tasks, "compare", quiet, unit="map") as advance:
         results, failures = lib.run_comparison(entries, modes, job, jobs, scheduler, maps_dir, keep_maps=bool(figure_out),
@@ -295,6 +295,22 @@ MAPPING_OPTIONS = {"figure_out": "--figure", "maps_dir": "--maps-dir", "modes_te
                    "params_file": "--params", "forward_model": "--forward-model", "jobs": "--jobs", "scheduler": "--scheduler", "resume": "--resume", "holdout": "--holdout", "robot_radius": "--robot-radius", "calibrate": "--calibrate/--no-calibrate",
                    "seed": "--seed", "max_memory": "--max-memory", "max_work": "--max-work",
                    "threads": "--threads"}
+
+
+def _warn_learned_over(entries, modes, job, params_file: str | None) -> None:
+    """``map_files.learned_over``'s warnings for the first em or adaptive map to make of each log, each printed once."""
+    from aogm_cli.io.logfile import LogReader
+    from aogm_cli.map_files import learned_over, set_em_keys
+
+    keys = set_em_keys(params_file)
+    warnings: dict[str, None] = {}
+    for e in entries:
+        mode = next((m for m in modes if m != "standard" and m not in e.maps), None)
+        if keys and mode is not None:
+            with LogReader(e.path) as reader:
+                warnings |= dict.fromkeys(learned_over(mode, job.params, keys, reader, job.forward_model, job.detector))
+    for warning in warnings:
+        click.echo(warning, err=True)
 
 
 def _refuse_mapping_options(ctx: click.Context) -> None:

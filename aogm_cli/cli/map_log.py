@@ -120,14 +120,17 @@ def map_log(log_file, mode, output, png, detector, params_file, forward_model, r
     from aogm_cli.io.logfile import LogReader
     from aogm_cli.io.mapfile import map_bytes
     from aogm_cli.io.provenance import provenance
-    from aogm_cli.map_files import calibration_notice, map_file, resolve_params
+    from aogm_cli.map_files import calibration_notice, learned_over, map_file, resolve_params, set_em_keys
     from aogm_cli.report.calibration_table import learned_line
 
-    params = resolve_params(params_file, parameter_overrides(resolution, calibrate, options))
+    overrides = parameter_overrides(resolution, calibrate, options)
+    params = resolve_params(params_file, overrides)
     digest = hashlib.sha256()
     with LogReader(log_file, digest) as reader:  # one read of the log checks its seal and hashes it
         record = provenance(inputs, hashed={log_file: digest.hexdigest()})  # the inputs as read, the run's start
         refuse_huge_grid(reader, params, params_file, resolution is not None, max_memory)
+        for warning in learned_over(mode, params, set_em_keys(params_file, overrides), reader, forward_model, detector):
+            click.echo(warning, err=True)
         with progress_bar(params.em.max_sweeps, f"map ({mode})", quiet, unit="sweep") as advance:
             def progress(phase, done, total):
                 advance(1)

@@ -102,7 +102,7 @@ params_option = click.option(
 forward_model_option = click.option(
     "--forward-model", "forward_model", type=click.Path(dir_okay=False),
     help="A sensor model file written by `aogm calibrate -o`: em and adaptive map with its sigma, p_rand, p_hit, "
-         "p_max and beam opening instead of calibrating (the building's part, the lobe and p_max, is still learned from each log). "
+         "p_max instead of calibrating (the building's part, the lobe and p_max, is still learned from each log). "
          "Refused when learned for another sensor.",
 )
 resolution_option = click.option(

@@ -12,4 +12,4 @@ CONSISTENCY_KEYS = ("method", "readings", "endpoint_occupied", "endpoint_occupie
                     "free_contradicted")  # ``evaluation.consistency.summarize``: a log without truth
 SCORE_KEYS = ("holdout_auc", "holdout_auc_band", "holdout_loglik", "holdout_readings", "holdout_scans")  # ``evaluation.holdout``
 # ``mapping.calibration.model_values``: stats["calibration"]["final"]
-LEARNED_KEYS = ("sigma", "p_rand", "p_hit", "p_max", "specular_deg", "opening_deg")
+LEARNED_KEYS = ("sigma", "p_rand", "p_hit", "p_max")

@@ -1,6 +1,6 @@
 """The sensor model file (YAML) that ``aogm calibrate -o MODEL`` writes and ``--forward-model MODEL``
-reads: the forward model's sensor part (sigma, p_rand, p_hit, p_max, the beam's opening) and the
-sensor it was learned for, checked against every log it is used with."""
+reads: the forward model's sensor part (sigma, p_rand, p_hit, p_max) and the sensor it was learned
+for, checked against every log it is used with."""
 
 from __future__ import annotations
 
@@ -17,7 +17,8 @@ from aogm_cli.io.yamlfile import read_yaml
 
 FORMAT = "aogm-sensor-model"
 FORMAT_VERSION = 1
-MODEL_KEYS = ("sigma", "p_rand", "p_hit", "p_max", "opening_deg")  # ``mapping.learned.SensorModel``'s fields
+# ``mapping.learned.SensorModel``'s fields; the ``opening_deg`` that older files and detectors carry is not read
+MODEL_KEYS = ("sigma", "p_rand", "p_hit", "p_max")
 MOUNT_TOLERANCE = 1e-6  # m and rad: mounts that differ by less are the same sensor
 ANGLE_TOLERANCE = 1e-6  # degrees
 
@@ -75,8 +76,7 @@ def read_model(path: str | Path) -> tuple[dict, dict]:
 
 def model_values(values: dict, file: str, key: str) -> dict:
     """``MODEL_KEYS``' values of a model (the mapping at ``key`` of ``file``), checked."""
-    bounds = {"sigma": (1e-6, 10.0), "p_rand": (1e-9, 1.0), "p_hit": (1e-9, 1.0), "p_max": (0.0, 1.0),
-              "opening_deg": (0.0, 180.0)}
+    bounds = {"sigma": (1e-6, 10.0), "p_rand": (1e-9, 1.0), "p_hit": (1e-9, 1.0), "p_max": (0.0, 1.0)}
     model = {k: _number(values.get(k), file, f"{key}.{k}", *bounds[k]) for k in MODEL_KEYS}
     if model["p_rand"] + model["p_max"] >= 1:
         raise InputError(f"expected p_rand + p_max < 1, got {model['p_rand'] + model['p_max']:g}", file=file,

@@ -1,6 +1,5 @@
-"""What the log says of its beam before EM: its effective opening (``opening_record``, ``with_opening``), its
-detection lobe (``lobe_record``, ``heard_run``) and the angle of incidence: echo surfaces, specular angle,
-deflected beams (``specular_record``, ``deflected_run``)."""
+"""What the log says of its beam before EM: its detection lobe (``lobe_record``, ``heard_run``) and the angle of
+incidence: the echoes' surfaces and the beams deflected beyond ``em.specular_deg`` (``surfaces``, ``deflected_run``)."""
 
 from __future__ import annotations
 
@@ -10,7 +9,6 @@ import math
 import numpy as np
 
 from aogm_cli.core.log import Log
-from aogm_cli.mapping.calibration import MAX_READINGS, incidence_at, opening_at, sample_readings
 from aogm_cli.mapping.params import MapParams
 from aogm_cli.mapping.standard import ExactPass, echo_walls, exact_pass, thin_pass
 from aogm_cli.sensor_models.cone import flat_offsets
@@ -33,26 +31,12 @@ def surfaces(run: LaidOutReadings, params: MapParams, log_odds: np.ndarray) -> n
                            run.cones, run.sensor.max_range, grid.resolution, params.surface, believed)
 
 
-def specular_record(run: LaidOutReadings, params: MapParams, log_odds: np.ndarray, normals: np.ndarray) -> dict:
-    """The specular angle learned at the standard map ``log_odds`` (``calibration.incidence_at``)."""
-    believed = (np.asarray(log_odds) > 0).reshape(-1)
-    return incidence_at(run, sample_readings(run, MAX_READINGS), believed, params.em.forward, normals)
-
-
 def deflected_run(run: LaidOutReadings, normals: np.ndarray, params: MapParams) -> LaidOutReadings | None:
     """``run`` with beams that met a surface beyond the specular angle stopped there (None: no such beam)."""
     shadow = reading_shadows(run, normals, params.em.forward, params.surface.core)
     if shadow is None or not np.isfinite(shadow).any():
         return None
     return dataclasses.replace(run, shadow=shadow)
-
-
-def with_opening(whole: Log, opening_deg: float) -> Log:
-    """``whole`` with its beam narrowed to ``opening_deg``, or ``whole`` itself when that is not narrower."""
-    sensor = whole.sensor
-    if not 0 < math.radians(opening_deg) < sensor.beam_width - 1e-9:
-        return whole
-    return dataclasses.replace(whole, sensor=dataclasses.replace(sensor, beam_width=math.radians(opening_deg)))
 
 
 def lobe_walls(whole: Log, run: LaidOutReadings, params: MapParams, log_odds: np.ndarray,
@@ -75,13 +59,6 @@ def lobe_walls(whole: Log, run: LaidOutReadings, params: MapParams, log_odds: np
         exact = exact_pass(whole, run.grid, params, cuts)
     thinned = thin_pass(whole, run.grid, params, log_odds, observed, cuts, exact=exact).log_odds > 0
     return thinned.reshape(-1), exact if every == 1 else None
-
-
-def opening_record(whole: Log, run: LaidOutReadings, params: MapParams, log_odds: np.ndarray,
-                   observed: np.ndarray) -> dict:
-    """The beam's effective opening learned (``calibration.opening_at``) at the thinned standard map."""
-    walls = (thin_pass(whole, run.grid, params, log_odds, observed).log_odds > 0).reshape(-1)
-    return opening_at(run, sample_readings(run, MAX_READINGS), walls, params.em.forward)
 
 
 def lobe_record(run: LaidOutReadings, params: MapParams, walls: np.ndarray) -> Lobe:

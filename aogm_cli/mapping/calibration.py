@@ -10,13 +10,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from aogm_cli.mapping.learned import ONCE, SENSOR_KEYS
+from aogm_cli.mapping.learned import SENSOR_KEYS
 from aogm_cli.mapping.params import CalibrationConfig, EMConfig
 from aogm_cli.sensor_models import forward_model as F
 from aogm_cli.sensor_models.cone import flat_offsets
-from aogm_cli.sensor_models.lobe import LOBE_BIN_DEG, cone_deg, learned_opening, lobe_bins, opening_matches
 from aogm_cli.sensor_models.readings import LaidOutReadings
-from aogm_cli.sensor_models.surface import INCIDENCE_BINS, incidence_counts, specular_angle
 
 LEARNED = SENSOR_KEYS  # the forward model's parameters calibration sets
 CAL_BLOCKS = 4  # a long log's calibration maps this many runs of consecutive scans (``_scan_blocks``)
@@ -24,9 +22,11 @@ CAL_BLOCKS = 4  # a long log's calibration maps this many runs of consecutive sc
 
 @dataclass(frozen=True)
 class Tuning:
-    """How calibration works inside, fixed by measurement (docs/algorithms.md, "Calibration's constants"):
+    """How calibration works inside, fixed by measurement (docs/algorithms.md, "Where the defaults come from"):
     not a user's setting. ``TUNING`` is what every map uses; tests make their own."""
 
+    rounds: int = 4  # rounds of an EM map and a fit at it, at most (``calibration_rounds``)
+    tolerance: float = 0.02  # the rounds stop once no parameter moves by more (sigma relative; ``settled``)
     fit_iterations: int = 30  # updates of the parameters at one map (``fit_at_map``)
     max_readings: int = 200_000  # the readings fitted on (every n-th beyond: ``sample_readings``)
     start_sigma: float = 0.1  # the first EM map's sigma is at least this broad (m)
@@ -37,8 +37,6 @@ class Tuning:
     max_scans: int = 2000  # a longer log calibrates on this many scans, in CAL_BLOCKS runs
     # and on at most this many readings (a sensor of more than 32 beams: a laser's 180 a scan, 355 scans)
     max_mapped_readings: int = 64_000
-    pass_margin: float = 0.3  # m: a reading passed a surface cell when its echo lies this far beyond
-    specular_rate: float = 0.5  # the specular angle: where the echo rate falls below this share of head-on
     # bounds: sigma from a tenth of a 5 cm cell to half a metre; p_rand, p_max below one half (a model
     # calling most readings random or dropped explains nothing); p_hit away from 0 and 1 (EM needs
     # 1 - p_hit > 0; a wall every reading misses is no wall)
@@ -126,7 +124,7 @@ class Fit:
 def fit_at_map(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: np.ndarray, forward: F.ForwardModelConfig,
                config: CalibrationConfig, tuning: Tuning = TUNING, loglik: bool = True) -> Fit:
     """EM over the parameters alone at a fixed map: expectations, then ``m_step``, until they settle
-    (``config.tolerance`` / 10); with ``loglik``, one more pass for the sample's mean log-likelihood."""
+    (``tuning.tolerance`` / 10); with ``loglik``, one more pass for the sample's mean log-likelihood."""
     iterations = 0
     # obstacles found once at twice the starting sigma serve every iteration below it: one cone walk
     obstacles = F.find_obstacles(*_cones(run), readings, _flat_bool(occupied), min(2.0 * forward.sigma, tuning.sigma_max),
@@ -135,7 +133,7 @@ def fit_at_map(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: 
         iterations += 1
         sums, obstacles = expectations(run, readings, occupied, forward, obstacles)
         new = m_step(sums, forward, config.learned, tuning)
-        done = settled(new, forward, config.tolerance / 10)
+        done = settled(new, forward, tuning.tolerance / 10)
         forward = new
         if done:
             break
@@ -146,35 +144,9 @@ def fit_at_map(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: 
     return Fit(forward, iterations, float(sums[F.E_LOGLIK] / n))
 
 
-def incidence_at(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: np.ndarray,
-                 forward: F.ForwardModelConfig, normals: np.ndarray, tuning: Tuning = TUNING) -> dict:
-    """The specular angle learned at ``occupied`` (the standard map's: grazing passes would make EM erase walls)."""
-    counts = np.zeros((2, INCIDENCE_BINS))
-    incidence_counts(*_cones(run), (readings.rows, readings.cols, readings.bins, readings.z), _flat_bool(occupied), normals,
-                     (float(forward.sigma), float(forward.window), float(run.sensor.max_range), tuning.pass_margin), counts)
-    return {"echoes": counts[0].astype(int).tolist(), "passes": counts[1].astype(int).tolist(),
-            "specular_deg": specular_angle(counts, tuning.specular_rate)}
-
-
-def opening_at(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: np.ndarray,
-               forward: F.ForwardModelConfig) -> dict:
-    """The beam's effective opening learned at ``occupied`` (the thinned map: Elfes' smear would make every
-    opening wider than the axis look wrong), from the echoes explained per opening (``lobe.opening_matches``)."""
-    tpl, flat, shape = _cones(run)
-    matches = np.zeros(lobe_bins(run.sensor.beam_width))
-    z_max = float(run.sensor.max_range)
-    opening_matches(tpl, flat, run.templates.bearings, shape, (readings.rows, readings.cols, readings.bins, readings.z),
-                    _flat_bool(occupied), (float(forward.window * forward.sigma), z_max, math.radians(LOBE_BIN_DEG)),
-                    matches)
-    echoes = int(np.sum(readings.z < z_max))
-    return {"echoes": echoes, "explained": matches.astype(int).tolist(), "bin_deg": LOBE_BIN_DEG,
-            "cone_deg": cone_deg(run.sensor.beam_width),
-            "opening_deg": learned_opening(matches, echoes, run.sensor.beam_width)}
-
-
 def model_values(forward: F.ForwardModelConfig) -> dict:
-    """The learned parameters' values (LEARNED, and those learned once, ONCE)."""
-    return {k: float(getattr(forward, k)) for k in (*LEARNED, *ONCE)}
+    """The learned parameters' values (LEARNED)."""
+    return {k: float(getattr(forward, k)) for k in LEARNED}
 
 
 # (config, flat occupied updated in place, reading mask or None) -> (EM's last objective, sweeps, the result)
@@ -186,9 +158,9 @@ def calibration_rounds(run: LaidOutReadings, occupied: np.ndarray, em: EMConfig,
                        tuning: Tuning = TUNING) -> tuple[EMConfig, dict]:
     """Alternate EM maps of part of the log with fits of the forward model at them (``fit_at_map``); the
     final map is the caller's. Round 0 maps with a broad model (a broad model puts each wall at the readings'
-    mean), later rounds with the last fit, until it settles or ``config.rounds``. Every run starts from
+    mean), later rounds with the last fit, until it settles or ``tuning.rounds``. Every run starts from
     ``occupied`` as given, left as it was: a warm start from a broad or half-made map keeps walls thick
-    (docs/algorithms.md, "Calibration's constants"). Returns (the last fit's EM config, the record)."""
+    (docs/algorithms.md, "Where the defaults come from"). Returns (the last fit's EM config, the record)."""
     max_scans = calibration_scans(run, tuning)
     blocks = _scan_blocks(run, max_scans)
     if blocks is not None:  # a long log: the rounds map (and fit on) blocks of its scans only
@@ -204,7 +176,7 @@ def calibration_rounds(run: LaidOutReadings, occupied: np.ndarray, em: EMConfig,
     step = dataclasses.replace(used, max_sweeps=min(em.max_sweeps, tuning.start_sweeps))
     entry = {"round": 0, **model_values(used.forward)}
     record["rounds"].append(entry)
-    for round_no in range(1, config.rounds + 1):
+    for round_no in range(1, tuning.rounds + 1):
         objective, sweeps, _ = em_step(step, occupied, first_scans if round_no == 1 else scans)
         entry.update(em_objective=float(objective), em_sweeps=int(sweeps))
         # fitted on every reading, not only those the map was made from, which it explains too well
@@ -215,7 +187,7 @@ def calibration_rounds(run: LaidOutReadings, occupied: np.ndarray, em: EMConfig,
         entry = {"round": round_no, **model_values(fit.forward), "fit_iterations": fit.iterations,
                  "loglik_per_reading": fit.loglik_per_reading}
         record["rounds"].append(entry)
-        settled_now = settled(fit.forward, used.forward, config.tolerance)
+        settled_now = settled(fit.forward, used.forward, tuning.tolerance)
         used = dataclasses.replace(em, forward=fit.forward)
         step = dataclasses.replace(used, max_sweeps=min(em.max_sweeps, tuning.fit_sweeps))
         if settled_now:

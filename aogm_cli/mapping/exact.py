@@ -12,8 +12,9 @@ from aogm_cli.core.log import SensorSpec
 from aogm_cli.sensor_models.cone import SPARE_MASK, ConeTemplates, flat_offsets, reading_geometry
 from aogm_cli.sensor_models.exact_inverse import (
     BOUND,
+    L0,
     MARGIN,
-    ExactModelConfig,
+    PRIOR,
     cone_scratch,
     exact_inverse_updates,
     map_evidence_sums,
@@ -31,15 +32,14 @@ from aogm_cli.sensor_models.readings import (
 class ExactMapper:
     """``update`` with chunks of scans, then ``result``, as ``standard.StandardMapper``, on EM's cones."""
 
-    def __init__(self, sensor: SensorSpec, grid: GridSpec, config: ExactModelConfig, forward: ForwardModelConfig,
-                 templates: ConeTemplates | None = None):
-        config.validate()
+    def __init__(self, sensor: SensorSpec, grid: GridSpec, forward: ForwardModelConfig,
+                 templates: ConeTemplates | None = None, prior: float = PRIOR):
         forward.validate()
-        self.sensor, self.grid, self.config = sensor, grid, config
+        self.sensor, self.grid, self.prior = sensor, grid, prior
         self.templates = forward_templates(grid, sensor) if templates is None else templates
         self.flat = flat_offsets(self.templates, grid.width)
         self.model = forward.kernel_model(sensor.max_range)
-        self.bounds = (_sigmoid(-BOUND), _sigmoid(BOUND), float(config.prior))
+        self.bounds = (_sigmoid(-BOUND), _sigmoid(BOUND), float(prior))
         self.scratch = cone_scratch(self.templates)
         n = grid.height * grid.width
         self._flat = np.zeros(n + SPARE_MASK + 1, dtype=np.float32)
@@ -59,10 +59,10 @@ class ExactMapper:
                                   self.model, self.bounds, self.scratch, span)
 
     def result(self) -> tuple[np.ndarray, np.ndarray]:
-        """(log_odds float32 (H, W), observed bool (H, W)); unobserved cells hold the prior l0."""
+        """(log_odds float32 (H, W), observed bool (H, W)); unobserved cells hold the prior's log-odds."""
         p = self.state.reshape(self.grid.shape).astype(np.float64)
         observed = p >= 0.0
-        p[~observed] = self.config.prior
+        p[~observed] = self.prior
         return np.log(p / (1.0 - p)).astype(np.float32), observed
 
 
@@ -86,10 +86,10 @@ def _sigmoid(x: float) -> float:
     return 1.0 / (1.0 + math.exp(-x))
 
 
-def thinned(log_odds: np.ndarray, observed: np.ndarray, exact: tuple[np.ndarray, np.ndarray], config: ExactModelConfig,
-            free: float, margin: float = MARGIN) -> np.ndarray:
+def thinned(log_odds: np.ndarray, observed: np.ndarray, exact: tuple[np.ndarray, np.ndarray], free: float,
+            margin: float = MARGIN) -> np.ndarray:
     """``log_odds`` with the cells the exact map ``exact`` holds free (``margin`` below its prior) set to ``free``."""
     exact_log_odds, exact_observed = exact
     out = log_odds.copy()
-    out[observed & exact_observed & (exact_log_odds < config.l0 - margin)] = np.float32(free)
+    out[observed & exact_observed & (exact_log_odds < L0 - margin)] = np.float32(free)
     return out

@@ -1,5 +1,5 @@
 """What a map learns from its log, apart from what was configured: the sensor's forward model (once per robot) and
-the building's part (per log: specular angle, p_max, the lobe that hears), each with where it came from, and the
+the building's part (per log: p_max, the lobe that hears), each with where it came from, and the
 model EM uses made of both."""
 
 from __future__ import annotations
@@ -10,10 +10,9 @@ from dataclasses import dataclass
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig
 
 SENSOR_KEYS = ("sigma", "p_rand", "p_hit", "p_max")  # the forward model's parameters calibration sets
-ONCE = ("specular_deg", "opening_deg")  # learned once, before EM (``calibration.incidence_at``, ``opening_at``)
-# what a robot's model leaves to each log: the building's specular angle, max-range share (``stages.rates``) and the
-# lobe that hears (``stages.lobe``)
-BUILDING = ("specular_deg", "p_max", "lobe_deg")
+# what a robot's model leaves to each log: the building's max-range share (``stages.rates``) and the lobe that hears
+# (``stages.lobe``)
+BUILDING = ("p_max", "lobe_deg")
 
 # where a sensor model came from (``Learned.origin``)
 CONFIGURED = "configured"  # the values of --params / the defaults: nothing learned
@@ -28,11 +27,15 @@ class SensorModel:
     p_rand: float
     p_hit: float
     p_max: float
-    opening_deg: float = 0.0
 
     @classmethod
     def of(cls, forward: ForwardModelConfig) -> SensorModel:
-        return cls(*(float(getattr(forward, k)) for k in (*SENSOR_KEYS, "opening_deg")))
+        return cls(*(float(getattr(forward, k)) for k in SENSOR_KEYS))
+
+    @classmethod
+    def read(cls, values: dict) -> SensorModel:
+        """The model of a map's, model file's or detector's record (an ``opening_deg`` older ones carry: ignored)."""
+        return cls(*(float(values[k]) for k in SENSOR_KEYS))
 
     def as_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -45,10 +48,6 @@ class Learned:
 
     sensor: SensorModel | None = None
     origin: str = CONFIGURED
-    specular_deg: float | None = None
-    opening_deg: float | None = None
-    opening: dict | None = None  # ``calibration.opening_at``'s record
-    incidence: dict | None = None  # ``calibration.incidence_at``'s record
     calibration: dict | None = None  # ``calibration.calibration_rounds``' record
     seconds: float = 0.0
     made_by: str | None = None  # the mode of the map of the same log that learned it (``carried``)
@@ -60,11 +59,6 @@ class Learned:
     def model(self, configured: ForwardModelConfig) -> ForwardModelConfig:
         """The forward model EM uses: ``configured`` with what was learned in its place."""
         values = {} if self.sensor is None else {k: getattr(self.sensor, k) for k in SENSOR_KEYS}
-        if self.specular_deg is not None:
-            values["specular_deg"] = self.specular_deg
-        # a carried or given opening, unless the user configured one (an opening learned from this log wins)
-        if self.opening_deg is not None and (self.opening is not None or configured.opening_deg == 0.0):
-            values["opening_deg"] = self.opening_deg
         if self.lobe_deg is not None:  # learned from this log: it wins over a configured lobe
             values["lobe_deg"], values["lobe_range"] = self.lobe_deg, self.lobe_range
         return dataclasses.replace(configured, **values)
@@ -77,16 +71,13 @@ class Learned:
     def of_map(cls, learned: dict, calibration: dict | None) -> Learned:
         """What a finished map learned (its ``learned`` record and ``stats["calibration"]``)."""
         sensor = learned.get("sensor")
-        records = {k: (calibration or {}).get(k) for k in ("opening", "incidence")}
         rounds = None if calibration is None else {k: v for k, v in calibration.items()
-                                                    if k not in ("opening", "incidence", "final_em", "made_by")}
-        return cls(None if sensor is None else SensorModel(**sensor), learned.get("origin", CONFIGURED),
-                   learned.get("specular_deg"), learned.get("opening_deg"), calibration=rounds,
-                   lobe_deg=learned.get("lobe_deg"), lobe_range=learned.get("lobe_range"), lobe=learned.get("lobe"),
-                   **records)
+                                                    if k not in ("final_em", "made_by")}
+        return cls(None if sensor is None else SensorModel.read(sensor), learned.get("origin", CONFIGURED),
+                   calibration=rounds, lobe_deg=learned.get("lobe_deg"), lobe_range=learned.get("lobe_range"),
+                   lobe=learned.get("lobe"))
 
     def as_dict(self) -> dict:
         """What the map file records beside its params (root attribute ``learned``)."""
-        return {"sensor": None if self.sensor is None else self.sensor.as_dict(), "origin": self.origin,
-                "specular_deg": self.specular_deg, "opening_deg": self.opening_deg, "rates": self.rates,
+        return {"sensor": None if self.sensor is None else self.sensor.as_dict(), "origin": self.origin, "rates": self.rates,
                 "lobe_deg": self.lobe_deg, "lobe_range": self.lobe_range, "lobe": self.lobe}

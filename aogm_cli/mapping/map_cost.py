@@ -74,7 +74,7 @@ def map_estimate(reader, mode: str, params: MapParams) -> Estimate:
         if mode == "em":  # adaptive's problems are its clusters', which hold no cell free (``em._flippable``)
             reading_bytes += readings * BYTES_PER_HELD_READING
             grid_bytes += cells * BYTES_PER_HELD_CELL
-        if not narrow and params.surface.enabled:
+        if not narrow and params.em.forward.specular_deg < 90.0:  # the angle of incidence (``plan.incidence``)
             reading_bytes += readings * BYTES_PER_SHADOW
             grid_bytes += cells * BYTES_PER_SURFACE_CELL
         if not narrow and mode == "adaptive":

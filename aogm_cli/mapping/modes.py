@@ -35,7 +35,6 @@ READ = Stage("read", S.read, writes=("whole",), timed=False)
 SET_UP = Stage("set_up", S.set_up_em, ("whole",), timed=False)
 READINGS = Stage("readings", S.readings, ("whole",), ("readings",), when=lacks("readings"))
 STANDARD = Stage("standard", S.standard, ("whole", "readings"), ("standard",), when=lacks("standard"))
-OPENING = Stage("opening", S.opening, ("whole", "readings", "standard"), ("learned", "whole", "readings", "standard"))
 WALLS = Stage("walls", S.walls, ("whole", "readings", "standard"), ("echo_walls",))
 LOBE = Stage("lobe", S.lobe, ("whole", "readings", "standard", "echo_walls", "exact?"), ("learned", "readings", "exact"))
 DEFLECTIONS = Stage("deflections", S.deflections, ("readings", "standard"), ("learned", "readings", "standard"))
@@ -55,7 +54,7 @@ ADAPTIVE_VIEW = Stage("view", S.adaptive_view, ("whole", "standard", "clusters",
 
 def mode_stages(plan: Plan) -> tuple[Stage, ...]:
     """The stages of ``plan.mode`` as its plan has them; READINGS and STANDARD run again after a stage drops them."""
-    opening, incidence = plan.learns_opening, plan.incidence
+    incidence = plan.incidence
     thinned = plan.thinning is not None
     if plan.mode == "standard":
         return _present(SET_UP_CONES,
@@ -63,7 +62,6 @@ def mode_stages(plan: Plan) -> tuple[Stage, ...]:
                         thinned and THINNING_STREAMED,
                         STANDARD_VIEW)
     prepared = (READ, SET_UP, READINGS, STANDARD,  # the em and adaptive modes alike
-                opening and OPENING, opening and READINGS, opening and STANDARD,
                 incidence and DEFLECTIONS, incidence and STANDARD,
                 (plan.learns_lobe or plan.fits_rates) and WALLS,
                 plan.fits_rates and RATES,  # at the whole cones; again in LOBE when its lobe narrows them
@@ -170,11 +168,9 @@ def warm_up(sensor: SensorSpec, params: MapParams, mode: str) -> None:
     log = tiny_log(sensor)
     map_in_mode(log, mode, params)
     if mode != "standard":
-        # stopped by the sweep limit, with a specular angle given (the tiny log learns none): deflected beams
+        # stopped by the sweep limit, with a specular angle of 30 degrees: deflected beams
         forward = dataclasses.replace(params.em.forward, specular_deg=30.0)
-        learn = ",".join(k for k in params.calibration.learned if k != "specular_deg") or "sigma"
         # and, for adaptive, the thinned map outside the clusters ("auto" chose Elfes' map above)
         one_sweep = dataclasses.replace(params, em=dataclasses.replace(params.em, forward=forward, max_sweeps=1),
-                                        calibration=dataclasses.replace(params.calibration, learn=learn),
                                         adaptive=dataclasses.replace(params.adaptive, outside="thinned"))
         map_in_mode(log, mode, one_sweep)

@@ -97,28 +97,24 @@ class AdaptiveConfig:
         return asdict(self)
 
 
+LEARNABLE = ("sigma", "p_rand", "p_hit", "p_max", "lobe_deg")  # the keys ``calibration.learn`` accepts
+
+
 @dataclass(frozen=True)
 class CalibrationConfig:
     """Whether em and adaptive learn the forward model from their log; with ``carried``, a simulated log of a
-    sensor the detector carries a model of learns only the building's part (specular angle; p_max)."""
+    sensor the detector carries a model of learns only the building's part (p_max, the lobe)."""
 
     enabled: bool = True
     carried: bool = True
-    learn: str = "sigma,p_rand,p_hit,p_max,lobe_deg"  # and specular_deg, opening_deg on request
-    rounds: int = 4
-    tolerance: float = 0.02
+    learn: str = ",".join(LEARNABLE)
 
     def validate(self) -> CalibrationConfig:
         check_field_types(self)
-        unknown = set(self.learned) - {"sigma", "p_rand", "p_hit", "p_max", "specular_deg", "opening_deg", "lobe_deg"}
+        unknown = set(self.learned) - set(LEARNABLE)
         if unknown or not self.learned:
-            raise InputError("expected a comma-separated list of sigma, p_rand, p_hit, p_max, specular_deg, opening_deg, "
-                             "lobe_deg, "
-                             f"got {self.learn!r}", key="learn")
-        if self.rounds < 1:
-            raise InputError(f"expected a whole number >= 1, got {self.rounds}", key="rounds")
-        if not 0 < self.tolerance < 1:
-            raise InputError(f"expected a number in (0, 1), got {self.tolerance:g}", key="tolerance")
+            raise InputError(f"expected a comma-separated list of {', '.join(LEARNABLE)}, got {self.learn!r}",
+                             key="learn")
         return self
 
     @property

@@ -37,10 +37,6 @@ class Plan:
     stages: tuple[str, ...] = ()
 
     @property
-    def learns_opening(self) -> bool:
-        return "opening_deg" in self.learns
-
-    @property
     def learns_lobe(self) -> bool:
         return "lobe_deg" in self.learns
 
@@ -75,10 +71,8 @@ def plan_map(mode: str, params: MapParams, sensor: SensorSpec, resolution: float
     if mode == "standard":
         return Plan(mode, kind, CONFIGURED, (), False, False, False, None,
                     MARGIN if thinnable and params.exact.thin else None, None)
-    incidence = params.surface.enabled and kind == CONE
-    # what this log can teach: no specular angle without surfaces, no opening of a ray
-    learns = tuple(k for k in learned_keys(params, given)
-                   if (k != "specular_deg" or incidence) and (k not in ("opening_deg", "lobe_deg") or kind == CONE))
+    incidence = params.em.forward.specular_deg < 90.0 and kind == CONE  # at 90 no beam is deflected
+    learns = tuple(k for k in learned_keys(params, given) if k != "lobe_deg" or kind == CONE)  # no lobe of a ray
     calibrates = params.calibration.enabled and given is None
     robots = given is not None and given.made_by is None and given.sensor is not None
     model = given.origin if given is not None else FROM_LOG if calibrates else CONFIGURED

@@ -16,7 +16,6 @@ from aogm_cli.mapping.calibration import calibration_rounds, fit_at_map, sample_
 from aogm_cli.mapping.exact import map_evidence
 from aogm_cli.mapping.learned import FROM_LOG, Learned, SensorModel
 from aogm_cli.mapping.pipeline import params_json
-from aogm_cli.mapping.plan import CONE
 from aogm_cli.mapping.standard import (
     echo_walls,
     probability_from_log_odds,
@@ -64,11 +63,8 @@ def standard_view(s: State) -> State:
 
 
 def read(s: State) -> State:
-    """The scans in memory, the sensor narrowed to the opening configured or given unless it is learned."""
-    whole = s.source.read()
-    if not s.plan.learns_opening and s.plan.sensor == CONE:
-        whole = B.with_opening(whole, s.in_use.em.forward.opening_deg)
-    return s.but(whole=whole)
+    """The scans in memory."""
+    return s.but(whole=s.source.read())
 
 
 def set_up_em(s: State) -> State:
@@ -89,14 +85,6 @@ def standard(s: State) -> State:
     return s.but(standard=StandardMap(*standard_log_odds(s.whole, s.grid, s.in_use, cuts=s.readings.cuts)))
 
 
-def opening(s: State) -> State:
-    """The beam's opening learned at the thinned map; if narrower, the sensor narrowed, readings and map taken away."""
-    record = B.opening_record(s.whole, s.readings, s.in_use, s.standard.log_odds, s.standard.observed)
-    s = s.but(learned=dataclasses.replace(s.learned, opening_deg=record["opening_deg"], opening=record))
-    narrowed = B.with_opening(s.whole, record["opening_deg"])
-    return s if narrowed is s.whole else s.but(whole=narrowed, readings=None, standard=None)
-
-
 def lobe(s: State) -> State:
     """The lobe that hears (``beam_model.lobe_record``), learned at the standard map's walls thinned (their exact
     pass kept for ``thinning``); the readings' cones keep the cells it hears (the whole cone when it explains the
@@ -114,12 +102,9 @@ def lobe(s: State) -> State:
 
 
 def deflections(s: State) -> State:
-    """The echoes' surfaces (kept with the readings: ``em.heard_incidence_deg``), the specular angle if learned,
-    beams met beyond it stopped (standard map taken away)."""
+    """The echoes' surfaces (kept with the readings: ``em.heard_incidence_deg``), beams met beyond ``em.specular_deg``
+    stopped (standard map taken away)."""
     normals = B.surfaces(s.readings, s.in_use, s.standard.log_odds)
-    if "specular_deg" in s.plan.learns:
-        record = B.specular_record(s.readings, s.in_use, s.standard.log_odds, normals)
-        s = s.but(learned=dataclasses.replace(s.learned, specular_deg=record["specular_deg"], incidence=record))
     run = B.deflected_run(s.readings, normals, s.in_use)
     if run is None:
         return s.but(readings=dataclasses.replace(s.readings, normals=normals))
@@ -279,15 +264,12 @@ def map_stats(s: State, phases: dict, em: bool) -> dict:
 
 
 def calibration_record(learned: Learned, outcome: E.EMOutcome | None) -> dict | None:
-    """What the map records of its calibration (None: nothing): rounds, final EM run, opening, incidence, maker."""
+    """What the map records of its calibration (None: nothing): rounds, final EM run, maker."""
     if learned.calibration is None:
         return None
     record = dict(learned.calibration)
     if outcome is not None:
         record["final_em"] = {"em_objective": float(outcome.result.objective[-1]), "em_sweeps": int(outcome.result.sweeps)}
-    for key in ("opening", "incidence"):
-        if getattr(learned, key) is not None:
-            record[key] = getattr(learned, key)
     if learned.made_by is not None:
         record["made_by"] = learned.made_by
     return record

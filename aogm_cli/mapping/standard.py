@@ -26,7 +26,7 @@ from aogm_cli.sensor_models.cone import (
     range_search,
     reading_geometry,
 )
-from aogm_cli.sensor_models.exact_inverse import MARGIN, ExactModelConfig
+from aogm_cli.sensor_models.exact_inverse import L0, MARGIN
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig
 from aogm_cli.sensor_models.heard import heard_templates
 from aogm_cli.sensor_models.inverse_model import (
@@ -145,11 +145,10 @@ class StandardMapper:
 
 
 def _mapper_for(sensor: SensorSpec, grid: GridSpec, config: InverseModelConfig, templates: ConeTemplates | None,
-                narrow: bool, models: tuple[ForwardModelConfig, ExactModelConfig] | None = None):
+                narrow: bool, forward: ForwardModelConfig | None = None):
     """The mapper: ``ExactMapper`` for the exact model, else ``BeamMapper`` if ``narrow``, else ``StandardMapper``."""
     if config.model == "exact":
-        forward, exact = models or (ForwardModelConfig(), ExactModelConfig())
-        return ExactMapper(sensor, grid, exact, forward, templates)
+        return ExactMapper(sensor, grid, forward or ForwardModelConfig(), templates)
     if narrow:
         return BeamMapper(sensor, grid, config)
     return StandardMapper(sensor, grid, config, templates=templates)
@@ -164,16 +163,16 @@ def standard_map(
     templates: ConeTemplates | None = None,
     narrow: bool | None = None,
     cuts: np.ndarray | None = None,
-    models: tuple[ForwardModelConfig, ExactModelConfig] | None = None,
+    forward: ForwardModelConfig | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Standard log-odds map of logged scans: (log_odds float32 (H, W), observed bool (H, W)).
     ``chunks`` yields (start, time, pose (T, 3), ranges (T, S)) as logged (``LogReader.chunks()``). Cones
     take ``readings.echo_ranges``; rays the logged range, the hit being the endpoint's cell (OctoMap's
     convention: docs/algorithms.md, "Where the defaults come from"). Memory: grid, templates, one chunk.
-    ``cuts`` stop deflected beams; ``models``: the exact inverse model's forward model and settings."""
+    ``cuts`` stop deflected beams; ``forward``: the exact inverse model's forward model."""
     if narrow is None:
         narrow = is_narrow_beam(sensor, grid.resolution)
-    mapper = _mapper_for(sensor, grid, config, templates, narrow, models)
+    mapper = _mapper_for(sensor, grid, config, templates, narrow, forward)
     exact = isinstance(mapper, ExactMapper)
     for start, _time, pose, ranges in chunks:
         z = np.asarray(ranges, dtype=np.float32) if narrow and not exact else echo_ranges(ranges, grid).astype(np.float32)
@@ -189,7 +188,7 @@ def set_up(sensor: SensorSpec, grid: GridSpec, params: MapParams) -> ConeTemplat
     narrow = is_narrow_beam(sensor, grid.resolution)
     templates = None if narrow else cone_templates(grid, sensor, narrow=narrow)
     standard_map([], sensor, grid, params.inverse_model, templates=templates, narrow=narrow,
-                 models=(params.em.forward, params.exact))
+                 forward=params.em.forward)
     return templates
 
 
@@ -200,7 +199,7 @@ def standard_log_odds(log, grid: GridSpec, params: MapParams, cuts=None, chunk: 
     if templates is not None and params.inverse_model.model == "exact":  # it hears what EM hears
         templates = heard_templates(templates, params.em.forward.lobe_deg, params.em.forward.lobe_range)
     return standard_map(log.chunks(chunk), log.sensor, grid, params.inverse_model, templates=templates,
-                        narrow=narrow, cuts=cuts, models=(params.em.forward, params.exact))
+                        narrow=narrow, cuts=cuts, forward=params.em.forward)
 
 
 # log-odds of occupied evidence alone that make a cell a wall (``echo_walls``): the standard map loses walls that
@@ -247,8 +246,8 @@ class ExactPass(NamedTuple):
 
 
 def _exact_models(params: MapParams) -> tuple:
-    """What an exact pass depends on besides the log: the inverse model's settings, the forward model, the prior."""
-    return params.inverse_model, params.em.forward, params.exact.prior
+    """What an exact pass depends on besides the log: the inverse model's settings and the forward model."""
+    return params.inverse_model, params.em.forward
 
 
 def exact_pass(log, grid: GridSpec, params: MapParams, cuts=None) -> ExactPass:
@@ -263,8 +262,8 @@ def thin_pass(log, grid: GridSpec, params: MapParams, log_odds: np.ndarray, obse
     ``exact``: that pass made already (taken when made with ``params``' models, of the same scans and ``cuts``)."""
     if exact is None or not exact.made_with(params, log, cuts):
         exact = exact_pass(log, grid, params, cuts)
-    evidence = np.where(exact.observed, exact.log_odds - np.float32(params.exact.l0), np.float32(0.0))
-    return Thinned(thinned(log_odds, observed, exact[:2], params.exact, params.inverse_model.clamp_min, margin),
+    evidence = np.where(exact.observed, exact.log_odds - np.float32(L0), np.float32(0.0))
+    return Thinned(thinned(log_odds, observed, exact[:2], params.inverse_model.clamp_min, margin),
                    evidence)
 
 

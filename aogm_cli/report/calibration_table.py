@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from aogm_cli.core.occupancy_map import OccupancyMap
 from aogm_cli.mapping.calibration import LEARNED
-from aogm_cli.mapping.learned import FROM_LOG, ONCE
+from aogm_cli.mapping.learned import FROM_LOG
 
 
 def calibration_table(record: dict) -> str:
@@ -24,20 +24,8 @@ def calibration_table(record: dict) -> str:
     if "final_em" in record:
         lines.append(f"final map, every scan with the last fit: EM objective {record['final_em']['em_objective']:.2f}, "
                      f"{record['final_em']['em_sweeps']} sweeps (the rounds' maps: {record['fitted_at']})")
-    if "incidence" in record:
-        inc = record["incidence"]
-        lines.append("echo rate by angle of incidence at the standard map's surfaces (10-degree bins): "
-                     + " ".join(f"{e / (e + p):.2f}" if e + p else "-" for e, p in zip(inc["echoes"], inc["passes"],
-                                                                                      strict=True))
-                     + f" -> specular_deg {inc['specular_deg']:.1f}")
-    if "opening" in record:
-        op = record["opening"]
-        lines.append(f"echoes the thinned standard map explains by the beam's opening ({op['echoes']} echoes; "
-                     f"{2 * op['bin_deg']:g}, {4 * op['bin_deg']:g}, ... {op['cone_deg']:.0f} degrees): "
-                     + " ".join(f"{e / max(op['echoes'], 1):.2f}" for e in op["explained"])
-                     + f" -> opening_deg {op['opening_deg']:.1f}")
     lines.append(f"learned from {record['readings_used']} readings: "
-                 + ", ".join(f"{k} {final[k]:.4g}" for k in (*LEARNED, *ONCE) if k in final))
+                 + ", ".join(f"{k} {final[k]:.4g}" for k in LEARNED if k in final))
     return "\n".join(lines)
 
 
@@ -78,8 +66,6 @@ def learned_line(path, m: OccupancyMap) -> str | None:
     if m.mode == "standard" or not learned:
         return None
     parts = [] if learned.get("lobe") is None else [f"lobe: {_lobe_words(learned['lobe'])}{_in_place(m.params)}"]
-    if learned.get("specular_deg") is not None:
-        parts.append(f"specular angle {learned['specular_deg']:.3g} deg")
     sensor = learned.get("sensor") or {}
     rates = learned.get("rates") or {}
     from_log = learned.get("origin") == FROM_LOG

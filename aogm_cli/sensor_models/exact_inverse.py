@@ -11,7 +11,6 @@ from dataclasses import asdict, dataclass
 import numba
 import numpy as np
 
-from aogm_cli.core.errors import InputError
 from aogm_cli.sensor_models.cone import cone_flat_cells, range_search
 from aogm_cli.sensor_models.forward_model import cone_entries, cone_reach, gaussian_at
 
@@ -20,32 +19,23 @@ MARGIN = 0.5  # log-odds below the prior at which the thinning frees a cell
 # ``map_evidence_sums`` skips a reading whose ratios lie within this of 1 (a million such readings
 # add < 0.001 to a cell's evidence, against HIDDEN_GAIN's 0.05)
 NEGLIGIBLE = 1e-9
+# the occupancy each cell starts at: from a prior of 0.5 the exact map learns nothing (a beam's chance to reach a
+# cell is the product of 1 - p_hit P before it), hence 0.1 (docs/algorithms.md, "The exact inverse model")
+PRIOR = 0.1
+L0 = math.log(PRIOR / (1.0 - PRIOR))  # the prior as log-odds
 
 
 @dataclass(frozen=True)
 class ExactModelConfig:
-    """The exact inverse model's own settings (section ``exact:``). From a prior of 0.5 the exact
-    map learns nothing (a beam's chance to reach a cell is the product of 1 - p_hit P before it),
-    hence 0.1 (docs/algorithms.md, "The exact inverse model").
-    """
+    """The exact inverse model's own setting (section ``exact:``; its prior is ``PRIOR``)."""
 
-    prior: float = 0.1  # the occupancy each cell starts at
     # thin: the standard map's cells that the exact model holds MARGIN below its prior are set free
     # (clamp_min): wall thickness towards the robot and arcs across doorways go
     thin: bool = False
 
     def validate(self) -> ExactModelConfig:
-        """Return self, or raise ``InputError(key=<field>)`` for an impossible value."""
-        if not 0 < self.prior < 1:
-            raise InputError(f"expected a probability in (0, 1), got {self.prior:g}", key="prior")
-        if not BOUND > abs(self.l0):
-            raise InputError(f"expected a prior whose log-odds lie within +-{BOUND:g}, got {self.prior:g}", key="prior")
+        """Return self (``thin``'s type is checked with every section's)."""
         return self
-
-    @property
-    def l0(self) -> float:
-        """The prior as log-odds."""
-        return math.log(self.prior / (1.0 - self.prior))
 
     def as_dict(self) -> dict:
         return asdict(self)

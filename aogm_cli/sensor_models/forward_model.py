@@ -33,13 +33,10 @@ class ForwardModelConfig:
     window: float = 4.0  # sigmas beyond z up to which a cone's cells count
     # the largest angle off a surface's normal (``surface.py``) at which it still echoes: a beam whose core
     # meets a surface more obliquely before its window is deflected there (a grazing pass is no evidence
-    # against the surface). 90: Thrun's model. 15: a 40 kHz sonar on glass or gloss paint; kept, not learned,
-    # by default (docs/algorithms.md, "The angle of incidence": the rate the log learns it from does not fall
-    # on rough walls, where 90 lets random and grazing beams erase them)
+    # against the surface). 90: Thrun's model, no beam deflected (the angle of incidence off). 15: a 40 kHz sonar
+    # on glass or gloss paint; fixed, not learned (docs/algorithms.md, "Why 15 degrees, and not learned": the
+    # rate a log would learn it from does not fall on rough walls, where 90 lets random and grazing beams erase them)
     specular_deg: float = 15.0
-    # the opening (degrees, full angle) of the cone that detects (a surface near the edge echoes too
-    # weakly); 0: the log's beam width. Calibration learns it (``sensor_models.lobe``)
-    opening_deg: float = 0.0
     # the lobe that hears (``heard``): a cell at range r, phi off the axis, is heard when
     # r <= lobe_range * exp(-(phi / lobe_deg)^2); EM, the exact inverse model and calibration leave the others
     # out of its reading. 0: every cell of the cone
@@ -66,9 +63,6 @@ class ForwardModelConfig:
             raise bad("window", f"expected a positive number, got {self.window:g}")
         if not 0 < self.specular_deg <= 90:
             raise bad("specular_deg", f"expected an angle in (0, 90] degrees, got {self.specular_deg:g}")
-        if not 0 <= self.opening_deg < 180:
-            raise bad("opening_deg", f"expected an angle in [0, 180) degrees (0: the log's beam width), "
-                                     f"got {self.opening_deg:g}")
         if not 0 <= self.lobe_deg <= 90:
             raise bad("lobe_deg", f"expected an angle in [0, 90] degrees (0: every cell of the cone heard), "
                                   f"got {self.lobe_deg:g}")

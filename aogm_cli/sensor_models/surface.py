@@ -1,6 +1,6 @@
 """The surfaces a sonar's readings meet: each wall cell's normal, from the directions it echoed in
-(``surface_normals``), the angle of incidence beyond which they stop echoing (``incidence_counts``),
-and where a reading's beam met one at a grazing angle and was deflected (``reading_shadows``)."""
+(``surface_normals``), and where a reading's beam met one beyond the specular angle and was deflected
+(``reading_shadows``)."""
 
 from __future__ import annotations
 
@@ -26,11 +26,10 @@ HEAD_ON_DEG = 20.0
 
 @dataclass(frozen=True)
 class SurfaceConfig:
-    """Whether the angle of incidence plays a part (sonar logs only): a smooth surface echoes only near
-    its normal; corners and clutter keep Thrun's model. A beam is deflected where the ``core`` of its
-    cone meets a surface at a grazing angle (an edge clipping a door frame passes it; docs/algorithms.md)."""
+    """The angle of incidence (sonar logs, ``em.specular_deg`` below 90): a smooth surface echoes only near its
+    normal; corners and clutter keep Thrun's model. A beam is deflected where the ``core`` of its cone meets a
+    surface at a grazing angle (an edge clipping a door frame passes it; docs/algorithms.md)."""
 
-    enabled: bool = True
     core: float = 0.1
 
     def validate(self) -> SurfaceConfig:
@@ -155,73 +154,6 @@ def hidden(normal, cos2, cell, row0, col0, width):
     d_r, d_c = _offset(cell, row0, col0, width)
     dot = d_r * n_r + d_c * normal[1, cell]
     return dot * dot < cos2 * (d_r * d_r + d_c * d_c)
-
-
-INCIDENCE_BINS = 9  # of 10 degrees, 0-90: ``incidence_counts``
-
-
-@numba.njit(cache=True, nogil=True)
-def incidence_kernel(tpl, flat, shape, readings, occupied, normal, model, out, span):
-    """``incidence_counts`` of the readings span[0] <= t < span[1]."""
-    sigma, window, z_max, margin = model
-    rows, cols, bins, z_all = readings
-    n_cells = shape[0] * shape[1]
-    ib = np.empty(int(np.max(np.diff(tpl.offsets))), dtype=np.int32)
-    passed = np.zeros(INCIDENCE_BINS, dtype=np.bool_)
-    for t in range(span[0], span[1]):
-        z = z_all[t]
-        if not z == z:  # NaN
-            continue
-        at_max = not z < z_max
-        m, r = cone_walk(tpl, flat, shape, rows[t], cols[t], bins[t], z_max if at_max else min(z + window * sigma, z_max),
-                         True, ib)
-        passed[:] = False
-        for j in range(m):
-            c = np.int64(ib[j])
-            if c >= n_cells or not occupied[c]:
-                continue
-            in_window = not at_max and abs(r[j] - z) <= window * sigma
-            d_r, d_c = _offset(c, rows[t], cols[t], shape[1])
-            d2 = d_r * d_r + d_c * d_c
-            if normal[0, c] == normal[0, c] and d2 > 0.0:
-                cos_i = min(abs(d_r * normal[0, c] + d_c * normal[1, c]) / math.sqrt(d2), 1.0)
-                a = min(int(math.degrees(math.acos(cos_i)) / 10.0), INCIDENCE_BINS - 1)
-                if in_window:
-                    out[0, a] += 1.0
-                elif not passed[a] and (at_max or r[j] < z - margin):
-                    passed[a] = True
-                    out[1, a] += 1.0
-            if in_window:
-                break
-
-
-def incidence_counts(tpl, flat, shape, readings, occupied, normal, model, out):
-    """How often the readings echoed from (row 0 of ``out``) and passed (row 1, at least ``margin``
-    before the range, once per reading and bin) the occupied surface cells, per 10-degree bin of
-    the angle of incidence. ``model`` = (sigma, window, z_max, margin)."""
-    summed_in_parts(readings[3].shape[0], out,
-                    lambda _, part, span: incidence_kernel(tpl, flat, shape, readings, occupied, normal, model, part, span))
-
-
-def specular_angle(counts: np.ndarray, fraction: float = 0.5, min_readings: int = 30) -> float:
-    """The incidence angle (degrees) beyond which surfaces stop echoing, from ``incidence_counts``."""
-    total = counts[0] + counts[1]
-    ok = total >= min_readings
-    with np.errstate(invalid="ignore", divide="ignore"):
-        rate = np.where(ok, counts[0] / total, np.nan)
-    if not ok[:3].any():
-        return 90.0
-    half = fraction * np.nanmax(rate[:3])
-    centres = 10.0 * np.arange(INCIDENCE_BINS) + 5.0
-    prev = None
-    for a in np.flatnonzero(ok):
-        if rate[a] < half:
-            if prev is None:
-                return float(centres[a])
-            x0, y0, x1, y1 = centres[prev], rate[prev], centres[a], rate[a]
-            return float(x0 + (y0 - half) * (x1 - x0) / (y0 - y1))
-        prev = a
-    return 90.0
 
 
 @numba.njit(cache=True, nogil=True)
