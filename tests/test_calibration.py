@@ -188,24 +188,18 @@ def test_the_fit_at_the_true_map_recovers_the_simulators_noise_and_random_rate(t
 def test_calibrated_map_records_the_learned_model_and_its_rounds(corridor_door_log, tmp_path):
     out = tmp_path / "em.h5"
     own = tmp_path / "own.yaml"  # calibrated on the log, not the model the detector carries for its sensor
-    # and the specular angle learned too (by default em.specular_deg, 15, is kept)
-    own.write_text("calibration: {carried: false, learn: 'sigma,p_rand,p_hit,p_max,specular_deg,lobe_deg'}\n")
+    own.write_text("calibration: {carried: false}\n")
     result = run("map", corridor_door_log, "--mode", "em", "--params", own, "-o", out, "-q")
     assert result.exit_code == 0, result.output
     m = read_map_file(out)
     record = m.stats["calibration"]
-    # the specular angle is learned before the rounds (in place of the configured 15); the beam's opening is not
-    # learned by default (0: the log's cone)
-    assert record["initial"] == {"sigma": 0.03, "p_rand": 0.05, "p_hit": 0.7, "p_max": 0.1, "specular_deg": 90.0,
-                                 "opening_deg": 0.0}
+    assert record["initial"] == {"sigma": 0.03, "p_rand": 0.05, "p_hit": 0.7, "p_max": 0.1}  # as configured
     assert record["rounds"][0]["sigma"] == 0.1  # round 0 maps with the broad start
     # the map records what it learned apart from its params, which stay as configured
     assert {k: m.learned["sensor"][k] for k in ("sigma", "p_rand", "p_hit", "p_max")} == {
         k: record["final"][k] for k in ("sigma", "p_rand", "p_hit", "p_max")}
-    assert m.learned["origin"] == "learned from this log" and m.learned["specular_deg"] == record["final"]["specular_deg"]
+    assert m.learned["origin"] == "learned from this log" and "incidence" not in record
     assert m.params["em"]["sigma"] == 0.03 and m.params["calibration"]["enabled"] is True
-    # corridor_door's walls are rough: they echo at every angle, so nothing is deflected
-    assert record["incidence"]["specular_deg"] == 90.0
     # the learned noise is the simulator's 0.02 m and the grid's quantisation (0.05 / sqrt 12)
     assert 0.015 < record["final"]["sigma"] < 0.04
     fits = [r["loglik_per_reading"] for r in record["rounds"][1:]]
@@ -215,8 +209,8 @@ def test_calibrated_map_records_the_learned_model_and_its_rounds(corridor_door_l
     assert run("map", corridor_door_log, "--mode", "em", "-o", off, "--no-calibrate", "-q").exit_code == 0
     m = read_map_file(off)
     assert "calibration" not in m.stats and m.params["em"]["sigma"] == 0.03
-    assert m.learned == {"sensor": None, "origin": "configured", "specular_deg": None, "opening_deg": None,
-                         "rates": None, "lobe_deg": None, "lobe_range": None, "lobe": None}
+    assert m.learned == {"sensor": None, "origin": "configured", "rates": None, "lobe_deg": None, "lobe_range": None,
+                         "lobe": None}
 
 
 def test_calibrate_writes_the_sensors_model_that_map_and_compare_take(corridor_door_log, tmp_path):
@@ -246,7 +240,7 @@ def test_calibrate_writes_the_sensors_model_that_map_and_compare_take(corridor_d
     assert m.params["em"]["sigma"] == 0.03 and m.params["calibration"]["enabled"] is True  # as configured
     # the same model as --params (the old way) makes the same map
     old = tmp_path / "old.yaml"
-    assert m.learned["specular_deg"] is None and m.params["em"]["specular_deg"] == 15.0  # kept, not learned
+    assert m.params["em"]["specular_deg"] == 15.0 and "opening_deg" not in written["model"]
     old.write_text("em: {" + ", ".join(f"{k}: {v!r}" for k, v in m.learned["sensor"].items())
                    + "}\ncalibration: {enabled: false}\n")
     result = run("map", other, "--mode", "em", "--params", old, "-o", tmp_path / "old.h5", "-q")
@@ -305,10 +299,8 @@ def test_a_model_file_that_is_not_yaml_is_refused(corridor_door_log, tmp_path):
 
 
 @pytest.mark.parametrize("text, key", [
-    ("calibration: {rounds: 0}\n", "calibration.rounds"),
     ("calibration: {learn: 'sigma,p_foo'}\n", "calibration.learn"),
     ("calibration: {enabled: 3}\n", "calibration.enabled"),
-    ("calibration: {tolerance: 2}\n", "calibration.tolerance"),
     ("calibration: {sigma_min: 0.2}\n", "calibration.sigma_min"),  # calibration's constants are no settings
     ("calibration: {speed: 1}\n", "calibration.speed"),
 ])
@@ -340,8 +332,8 @@ def test_calibration_maps_the_whole_log_once_and_part_of_it_before(corridor_door
 
     truth = log.truth.occupancy.reshape(-1).astype(bool)
     occupied = np.zeros(grid.height * grid.width, dtype=bool)
-    config, tuning = CalibrationConfig(rounds=3), C.TUNING
-    used, record = C.calibration_rounds(run_, occupied, EMConfig(), config, em_step)
+    tuning = C.TUNING
+    used, record = C.calibration_rounds(run_, occupied, EMConfig(), CalibrationConfig(), em_step)
     assert record["final"] == C.model_values(used.forward)
     assert len(calls) == 2  # the broad map, a map for the second fit (at which the model settles)
     assert [c[2] is None for c in calls] == [False] * len(calls)  # the final run over every scan is the caller's
@@ -400,9 +392,9 @@ def test_a_long_log_calibrates_on_runs_of_consecutive_scans(corridor_door_log):
         calls.append(None if subset is None else subset.reshape(scans, width)[:, 0].copy())
         return 1.0, 1, "result"
 
-    tuning = C.Tuning(max_scans=40, subsample=1)
+    tuning = C.Tuning(max_scans=40, subsample=1, rounds=2)
     _, record = C.calibration_rounds(run_, np.zeros(grid.height * grid.width, dtype=bool), EMConfig(),
-                                     CalibrationConfig(rounds=2), em_step, tuning=tuning)
+                                     CalibrationConfig(), em_step, tuning=tuning)
     blocks = calls[1]  # the second round: every scan of the runs (subsample 1)
     starts = np.flatnonzero(np.diff(np.concatenate([[0], blocks.astype(int)])) == 1)
     assert blocks.sum() == 40 and len(starts) == C.CAL_BLOCKS and starts[0] == 0 and starts[-1] == scans - 10
@@ -435,9 +427,9 @@ def test_a_wide_sensor_calibrates_on_a_bounded_number_of_readings(corridor_door_
         calls.append(subset.reshape(scans, width)[:, 0].copy())
         return 1.0, 1, "result"
 
-    tuning = C.Tuning(max_scans=100, max_mapped_readings=40 * width, subsample=1)
+    tuning = C.Tuning(max_scans=100, max_mapped_readings=40 * width, subsample=1, rounds=2)
     _, record = C.calibration_rounds(run_, np.zeros(grid.height * grid.width, dtype=bool), EMConfig(),
-                                     CalibrationConfig(rounds=2), em_step, tuning=tuning)
+                                     CalibrationConfig(), em_step, tuning=tuning)
     assert calls[1].sum() == 40 and record["readings_used"] <= 40 * width
     assert "4 runs of 10 consecutive scans" in record["fitted_at"]
 

@@ -95,8 +95,13 @@ def test_threads_below_one_exit_2(corridor_door_log, tmp_path):
 
 @pytest.mark.parametrize(
     "text, key", [("inverse_model: {l_ocq: 1}\n", "inverse_model.l_ocq"), ("em: {p_hit: 2}\n", "em.p_hit"), ("[1, 2\n", "p.yaml"),
-                  ("exact: {prior: 1.5}\n", "exact.prior"), ("exact: {thin: 1}\n", "exact.thin"),
-                  ("exact: {prior: 0.9999}\n", "exact.prior"), ("exact: {bound: 7}\n", "exact.bound"),
+                  ("exact: {thin: 1}\n", "exact.thin"), ("exact: {bound: 7}\n", "exact.bound"),
+                  # settings removed (docs/decisions/calibration.md), even at their old defaults
+                  ("em: {opening_deg: 0}\n", "em.opening_deg"), ("calibration: {rounds: 4}\n", "calibration.rounds"),
+                  ("calibration: {tolerance: 0.02}\n", "calibration.tolerance"), ("exact: {prior: 0.1}\n", "exact.prior"),
+                  ("surface: {enabled: true}\n", "surface.enabled"),
+                  ("calibration: {learn: 'sigma,specular_deg'}\n", "calibration.learn"),
+                  ("calibration: {learn: 'sigma,opening_deg'}\n", "calibration.learn"),
                   ("em: {heard_incidence_deg: 0}\n", "em.heard_incidence_deg"),
                   ("em: {heard_incidence_deg: 120}\n", "em.heard_incidence_deg")]
 )
@@ -218,3 +223,39 @@ def test_em_heard_incidence_changes_the_map_and_is_recorded(corridor_door_log, t
         assert json.loads(f.attrs["params"])["em"]["heard_incidence_deg"] == 35
         assert json.loads(d.attrs["params"])["em"]["heard_incidence_deg"] == 90
         assert not np.array_equal(f["map/probability"][...], d["map/probability"][...])
+
+
+LOBE_LEARNED = ("warning: em.lobe_deg is learned from the log (calibration.learn lists lobe_deg); take lobe_deg out of "
+                "calibration.learn to map with 12")
+
+
+@pytest.mark.parametrize("command", ["map", "compare", "calibrate"])
+def test_a_set_key_that_calibration_learns_or_a_carried_model_replaces_is_warned_of(corridor_door_log, tmp_path,
+                                                                                  command):
+    """A forward-model key set in --params (or by an option) that the map does not map with: the lobe learned from
+    the log replaces a configured one, a learned sigma only starts at the one set, and the packaged detector's model
+    replaces sigma, p_rand, p_hit and p_max. One warning each; none once calibration.learn omits the key or
+    calibration is off. (aogm calibrate never takes a carried model, so it learns sigma from the log.)"""
+    def warnings(text, *extra):
+        params = tmp_path / "p.yaml"
+        params.write_text(text)
+        args = {"map": ("map", corridor_door_log, "--mode", "em", "-o", tmp_path / "m.h5"),
+                "compare": ("compare", corridor_door_log, "--modes", "em"), "calibrate": ("calibrate", corridor_door_log)}
+        result = run(*args[command], "--params", params, "-q", *extra)
+        assert result.exit_code == 0, result.output
+        return [line for line in result.output.splitlines() if line.startswith("warning: ")]
+
+    assert warnings("em: {lobe_deg: 12}\n") == [LOBE_LEARNED]
+    assert warnings("em: {lobe_deg: 12}\ncalibration: {learn: 'sigma,p_rand,p_hit,p_max'}\n") == []
+    sigma = warnings("em: {sigma: 0.05}\n")
+    if command == "calibrate":
+        assert sigma == ["warning: em.sigma is learned from the log (calibration.learn lists sigma); take sigma out of "
+                         "calibration.learn to map with 0.05"]
+        return
+    assert sigma == ["warning: em.sigma is the sensor model's, carried by the packaged detector; set calibration.carried: "
+                     "false and take sigma out of calibration.learn to map with 0.05"]
+    assert warnings("em: {lobe_deg: 12, sigma: 0.05}\ncalibration: {enabled: false}\n") == []
+    if command == "map":  # an option sets a key as --params does
+        assert warnings("calibration: {carried: false}\n", "--p-hit", "0.8") == [
+            "warning: em.p_hit is learned from the log (calibration.learn lists p_hit); take p_hit out of "
+            "calibration.learn to map with 0.8"]

@@ -87,7 +87,7 @@ def test_json_follows_the_contract_and_matches_the_map_files(logs, compared):
         assert set(r) == {"log", "world", "mode", "truth", "runtime_s", "metrics", "params", "detector", "calibration"}
         assert r["truth"] is True
         if r["mode"] == "em":  # the forward model learned from the log; the map's parameters stay as configured
-            assert set(r["calibration"]["final"]) == {"sigma", "p_rand", "p_hit", "p_max", "specular_deg", "opening_deg"}
+            assert set(r["calibration"]["final"]) == {"sigma", "p_rand", "p_hit", "p_max"}
             assert r["params"]["em"]["sigma"] == 0.03
         else:
             assert r["calibration"] is None

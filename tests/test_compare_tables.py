@@ -44,8 +44,8 @@ FIXED = ["log", "world", "mode", "truth", "runtime_s", "runtime_vs_standard", "a
          "consistency_endpoint_occupied", "consistency_endpoint_occupied_8", "consistency_endpoint_free",
          "consistency_free_cells", "consistency_free_contradicted", "holdout_auc", "holdout_auc_band", "holdout_loglik",
          "holdout_readings", "holdout_scans", "learned_sigma", "learned_p_rand", "learned_p_hit", "learned_p_max",
-         "learned_specular_deg", "learned_opening_deg", "learned_from_readings"]
-LEARNED = ("sigma", "p_rand", "p_hit", "p_max", "specular_deg", "opening_deg")
+         "learned_from_readings"]
+LEARNED = ("sigma", "p_rand", "p_hit", "p_max")
 FAILING = "em.accuracy >= standard.accuracy + 2"
 
 

@@ -12,7 +12,8 @@ from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import SensorSpec
 from aogm_cli.mapping.exact import ExactMapper
 from aogm_cli.mapping.standard import standard_map
-from aogm_cli.sensor_models.exact_inverse import ExactModelConfig, cone_ratios
+from aogm_cli.sensor_models.exact_inverse import L0 as PRIOR_L0
+from aogm_cli.sensor_models.exact_inverse import PRIOR, cone_ratios
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig
 from aogm_cli.sensor_models.inverse_model import InverseModelConfig
 
@@ -119,12 +120,11 @@ def test_two_cells_by_hand():
 SONAR = SensorSpec(mount=np.zeros((1, 3)), beam_width=math.radians(30.0), min_range=0.05, max_range=2.0)
 GRID = GridSpec(0.0, 0.0, 0.1, 11, 21)
 FORWARD = ForwardModelConfig(sigma=0.05, p_rand=0.05, p_hit=0.7, p_max=0.1)
-CONFIG = ExactModelConfig(prior=1.0 / (1.0 + math.exp(2.0)))  # log-odds -2
-MODELS = (FORWARD, CONFIG)
+L0 = -2.0  # the log-odds of the prior the tests below give the mapper (the maps': exact_inverse.PRIOR)
 
 
 def one_reading(z, prior=None):
-    mapper = ExactMapper(SONAR, GRID, CONFIG, FORWARD)
+    mapper = ExactMapper(SONAR, GRID, FORWARD, prior=1.0 / (1.0 + math.exp(-L0)))
     if prior is not None:  # log-odds, -inf unobserved
         mapper.state[:] = np.where(np.isfinite(prior), 1.0 / (1.0 + np.exp(-prior)), -1.0).reshape(-1)
     # the sensor at the centre of cell (row 5, col 1), pointing +x
@@ -136,10 +136,10 @@ def test_one_reading_frees_before_the_echo_and_marks_it():
     log_odds, observed = one_reading(1.0)  # a template range: the echo at col 11
     axis = log_odds[5]
     assert observed[5, 1:13].all() and not observed[5, 15:].any()  # the cone ends 4 sigma beyond z
-    assert (axis[2:9] < CONFIG.l0).all()  # free before the echo
+    assert (axis[2:9] < L0).all()  # free before the echo
     # occupied at it; the echo's credit shared by the arc's five cells at that range
-    assert axis[11] > CONFIG.l0 + 0.5
-    assert axis[11] == log_odds.max() and (log_odds[3:8, 11] > CONFIG.l0 + 0.5).all()
+    assert axis[11] > L0 + 0.5
+    assert axis[11] == log_odds.max() and (log_odds[3:8, 11] > L0 + 0.5).all()
 
 
 def test_nothing_learned_behind_a_believed_obstacle():
@@ -147,14 +147,16 @@ def test_nothing_learned_behind_a_believed_obstacle():
     prior[:, 6] = 4.0  # a wall the map is sure of, at col 6
     log_odds, _ = one_reading(1.0, prior)
     # the reading most likely echoed off the wall... or is random: cells behind it barely move
-    assert abs(log_odds[5, 8] - CONFIG.l0) < abs(one_reading(1.0)[0][5, 8] - CONFIG.l0)
+    assert abs(log_odds[5, 8] - L0) < abs(one_reading(1.0)[0][5, 8] - L0)
 
 
 def test_the_standard_mode_takes_the_exact_model():
     ranges = np.full((1, 1), 1.0, dtype=np.float32)
     chunks = [(0, np.zeros(1), np.array([[0.15, 0.55, 0.0]]), ranges)]
-    log_odds, observed = standard_map(chunks, SONAR, GRID, InverseModelConfig(model="exact"), models=MODELS)
-    assert observed[5, 5] and log_odds[5, 5] < CONFIG.l0
+    log_odds, observed = standard_map(chunks, SONAR, GRID, InverseModelConfig(model="exact"), forward=FORWARD)
+    assert observed[5, 5] and log_odds[5, 5] < PRIOR_L0
+    # every map's prior (exact_inverse.PRIOR, 0.1) where no reading reached
+    assert PRIOR == 0.1 and (~observed).any() and np.all(log_odds[~observed] == np.float32(math.log(0.1 / 0.9)))
 
 
 def test_thinning_frees_what_the_exact_model_holds_free(corridor_door_log, tmp_path):

@@ -1,7 +1,5 @@
-"""The beam's effective opening (``sensor_models.lobe``, ``calibration.opening_at``): how many echoes
-a map explains at each opening, by hand on a tiny grid, the opening learned from that curve, and
-what a simulated sonar with a known beam pattern learns; the detection lobe (``learn_lobe``) given
-back from readings of a wall made with a known one, or the full cone."""
+"""The detection lobe (``sensor_models.lobe.learn_lobe``) given back from readings of a wall made with a known
+one, or the full cone, and the cones' cells it hears."""
 
 import json
 import math
@@ -12,7 +10,6 @@ import pytest
 import yaml
 
 from aogm_cli.core.grid import GridSpec
-from aogm_cli.sensor_models.cone import flat_offsets
 from aogm_cli.sensor_models.cone_build import build_cone_templates
 from aogm_cli.sensor_models.lobe import (
     LOBE_MIN_GAIN,
@@ -22,9 +19,7 @@ from aogm_cli.sensor_models.lobe import (
     explained_by_lobe,
     hits_and_chances,
     learn_lobe,
-    learned_opening,
     lobe_bins,
-    opening_matches,
 )
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -32,157 +27,10 @@ GRID = GridSpec(0.0, 0.0, 0.05, 120, 160)
 WALL_ROW = 100  # a wall along the columns, 5 m up the rows
 
 
-def matches_at_wall(yaw_deg, z, band=0.05, beam_deg=30.0, cols=range(20, 141, 4), row=60):
-    """opening_matches for one reading per column of ``cols`` at ``row``, heading ``yaw_deg`` (from
-    +cols towards +rows), range ``z``, against the wall at WALL_ROW."""
-    tpl = build_cone_templates(GRID.resolution, math.radians(beam_deg), 5.0)
-    cols = np.array(list(cols))
-    readings = (np.full(cols.size, row, dtype=np.int64), cols.astype(np.int64),
-                tpl.heading_bin(np.full(cols.size, math.radians(yaw_deg))).astype(np.int64),
-                np.full(cols.size, float(z)))
-    occupied = np.zeros(GRID.height * GRID.width, dtype=bool)
-    occupied[WALL_ROW * GRID.width:(WALL_ROW + 1) * GRID.width] = True
-    out = np.zeros(lobe_bins(math.radians(beam_deg)))
-    opening_matches(tpl.kernel_arrays, flat_offsets(tpl, GRID.width), tpl.bearings, GRID.shape, readings, occupied,
-                    (band, 5.0, math.radians(1.0)), out)
-    return out, cols.size
-
-
 def test_lobe_bins():
     assert lobe_bins(math.radians(30.0)) == 15
     assert lobe_bins(math.radians(20.0)) == 10
     assert lobe_bins(math.radians(7.0)) == 4  # 3.5 degrees each side: four 1-degree bins
-
-
-def test_a_wall_met_head_on_is_explained_at_every_opening():
-    # the wall 2 m ahead (40 rows), met square on: every sub-cone's nearest wall cell is within
-    # 2 / cos(15 deg) - 2 = 0.07 m of 2 m, so a 0.1 m band explains every reading at every opening
-    out, n = matches_at_wall(90.0, 40 * GRID.resolution, band=0.1)
-    assert out.tolist() == [n] * 15
-
-
-def test_an_oblique_wall_shows_how_wide_the_beam_detects():
-    # the wall 2 m away (cell centres), met 40 degrees off its normal (yaw 50 deg): the nearest wall
-    # cell within a degrees of the axis lies 2 / cos(40 - a) m away. The readings say 2 / cos(34 deg)
-    # = 2.412 m: a beam that detects 6 degrees off its axis. Within 0.04 m of that lie the openings
-    # of 5-7 degrees (2.39, 2.41, 2.43 m, up to the cells' quantisation); the axis (2.61 m) and the
-    # cone's edge (2.21 m) explain none
-    z = 2.0 / math.cos(math.radians(34.0))
-    out, n = matches_at_wall(50.0, z, band=0.04)
-    assert out[0] == 0 and out[-1] == 0 and out[:3].sum() == 0 and out[9:].sum() == 0
-    assert int(np.argmax(out)) + 1 in (5, 6, 7)
-    assert out.max() >= 0.8 * n
-
-
-def test_readings_without_echo_are_left_out():
-    out, _ = matches_at_wall(50.0, np.inf)
-    assert not out.any()
-    out, _ = matches_at_wall(50.0, np.nan)
-    assert not out.any()
-
-
-def test_learned_opening_by_hand():
-    cone = math.radians(30.0)
-    # the cone explains as many echoes as any opening: it stays
-    assert learned_opening(np.array([50, 80, 90, 100, 100.0]), 1000, math.radians(10.0)) == 10.0
-    flat = np.linspace(600, 1000, 15)
-    assert learned_opening(flat, 1000, cone) == 30.0
-    # within CONE_TOLERANCE (4%) of the best: the cone stays
-    curve = np.array([500, 700, 800, 900, 1000, 990, 985, 980, 975, 970, 965, 962, 961, 960, 961.0])
-    assert learned_opening(curve, 2000, cone) == 30.0
-    # 6% short: the widest opening within 1% of the best (bins 5 and 6: 990 >= 990), 2 x 6 degrees
-    curve[-1] = 940.0
-    assert learned_opening(curve, 2000, cone) == 12.0
-    # too few echoes to say
-    assert learned_opening(curve, 99, cone) == 30.0
-
-
-@pytest.mark.parametrize(("beam_deg", "expect"), [(8.0, (10.0, 22.0)), (15.0, (24.0, 30.0))])
-def test_a_simulated_beam_pattern_is_learned(beam_deg, expect, tmp_path):
-    """corridor_door_real with its sonars' Kuc & Siegel pattern theta0 = ``beam_deg`` in a 30-degree
-    cone (echoes below 0.01 / m^2 lost): the learned opening's half lies within 3 degrees of the
-    pattern's theta0 (where the beam is at e^-2 of its axis strength), or at the cone for theta0 15,
-    which detects a wall square on across the whole cone out to 3.7 m."""
-    import aogm_cli
-
-    world = yaml.safe_load(aogm_cli.bundled_world("corridor_door_real").read_text())
-    world["errors"]["echo_strength"]["beam_deg"] = beam_deg
-    path = tmp_path / "world.yaml"
-    path.write_text(yaml.safe_dump(world))
-    log = aogm_cli.simulate(path, seed=1)
-    m = aogm_cli.map_log(log, "em", em={"max_sweeps": 1},
-                         calibration={"rounds": 1, "learn": "sigma,p_rand,p_hit,p_max,specular_deg,opening_deg",
-                                      "carried": False})  # learned from the log, not the detector's model
-    record = m.stats["calibration"]["opening"]
-    low, high = expect
-    assert low <= record["opening_deg"] <= high
-    if beam_deg < 15.0:
-        assert abs(0.5 * record["opening_deg"] - beam_deg) <= 3.0
-    assert m.learned["opening_deg"] == record["opening_deg"] and m.params["em"]["opening_deg"] == 0.0
-    assert record["cone_deg"] == pytest.approx(30.0) and len(record["explained"]) == 15
-
-
-LEARN = "sigma,p_rand,p_hit,p_max,specular_deg,opening_deg"
-
-
-def run(*args):
-    from click.testing import CliRunner
-
-    from aogm_cli.cli import main
-
-    return CliRunner().invoke(main, [str(a) for a in args])
-
-
-def import_udacity(require, tmp_path, beam_deg):
-    u = require.shared("data/sonar/udacity_8sonar")
-    out = tmp_path / f"u{beam_deg}.h5"
-    result = run("import", "text", "--ranges", u / "measurement.txt", "--poses", u / "poses.txt",
-                 "--range-time-column", "1", "--range-columns", "2-9", "--pose-time-column", "1", "--pose-columns",
-                 "2,3,4", "--time-unit", "ms", "--range-unit", "mm", "--position-unit", "mm", "--angle-unit", "ddeg",
-                 "--no-echo", "5110", "--bearings=-90,-37.5,-22.5,-7.5,7.5,22.5,37.5,90", "--max-range", "5.0",
-                 "--beam-width", str(beam_deg), "-o", out, "-q")
-    assert result.exit_code == 0, result.output
-    return out
-
-
-def test_the_real_ring_learns_one_opening_whatever_width_it_was_imported_at(require, tmp_path):
-    """The real 8-sonar log imported at 20 and at 30 degrees: calibration learns the same opening
-    (14 degrees), so em maps both logs alike; `aogm calibrate` prints the curve and writes the
-    opening, and a map given that opening (`em.opening_deg`) is the map that learned it."""
-    import aogm_cli
-
-    params = tmp_path / "learn.yaml"
-    params.write_text(f"resolution: 0.1\ncalibration: {{learn: '{LEARN}'}}\n")
-    maps = {}
-    for beam in (20, 30):
-        log = import_udacity(require, tmp_path, beam)
-        out = tmp_path / f"em{beam}.h5"
-        assert run("map", log, "--mode", "em", "--params", params, "-o", out, "-q").exit_code == 0
-        maps[beam] = aogm_cli.load_map(out)
-        assert maps[beam].learned["opening_deg"] == 14.0
-        assert maps[beam].stats["calibration"]["opening"]["cone_deg"] == pytest.approx(beam)
-    assert np.array_equal(maps[20].probability, maps[30].probability)
-    model = tmp_path / "model.yaml"
-    result = run("calibrate", tmp_path / "u30.h5", "--params", params, "-o", model, "-q")
-    assert result.exit_code == 0, result.output
-    assert "by the beam's opening" in result.output and "-> opening_deg 14.0" in result.output
-    assert "  opening_deg: 14.0" in model.read_text()
-    given = tmp_path / "given.yaml"
-    given.write_text(f"resolution: 0.1\nem: {{opening_deg: 14}}\ncalibration: {{learn: '{LEARN.replace(',opening_deg', '')}'}}\n")
-    out = tmp_path / "given.h5"
-    assert run("map", tmp_path / "u30.h5", "--mode", "em", "--params", given, "-o", out, "-q").exit_code == 0
-    m = aogm_cli.load_map(out)
-    assert "opening" not in m.stats["calibration"]
-    assert np.array_equal(m.probability, maps[30].probability)
-
-
-@pytest.mark.parametrize("value", ["200", "-1", "wide"])
-def test_a_bad_opening_exits_2_naming_the_key(corridor_door_log, tmp_path, value):
-    params = tmp_path / "p.yaml"
-    params.write_text(f"em: {{opening_deg: {value}}}\n")
-    result = run("map", corridor_door_log, "--mode", "em", "--params", params, "-o", tmp_path / "m.h5", "-q")
-    assert result.exit_code == 2 and "opening_deg" in result.output and "Traceback" not in result.output
-    assert not (tmp_path / "m.h5").exists()
 
 
 # --- the detection lobe (``learn_lobe``) ---------------------------------------------------------

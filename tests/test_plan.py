@@ -40,9 +40,9 @@ def test_the_plan_of_each_mode_by_hand():
     assert em.calibrates and not em.fits_rates and em.model == "learned from this log"
     assert em.learns == ("sigma", "p_rand", "p_hit", "p_max", "lobe_deg") and em.incidence
     assert em.learns_lobe
-    # the specular angle stays at em.specular_deg (15) unless calibration.learn asks for it
-    assert plan_map("em", params(calibration={"learn": "sigma,specular_deg"}), SONAR, 0.1, None).learns == (
-        "sigma", "specular_deg")
+    # at em.specular_deg 90 no beam is deflected: the angle of incidence is off
+    assert not plan_map("em", params(em={"specular_deg": 90}), SONAR, 0.1, None).incidence
+    assert plan_map("em", params(em={"specular_deg": 89.5}), SONAR, 0.1, None).incidence
     assert (em.outside, em.thinning, em.start) == (None, None, "standard")
     adaptive = plan_map("adaptive", params(), SONAR, 0.1, None)
     assert (adaptive.outside, adaptive.thinning, adaptive.start, adaptive.decides) == ("elfes", None, "standard", False)
@@ -54,12 +54,12 @@ def test_the_plan_of_each_mode_by_hand():
     # a model from another map of the same log gives everything
     carried = plan_map("em", params(), SONAR, 0.1, dataclasses.replace(ROBOT, made_by="em"))
     assert carried.learns == () and not carried.fits_rates and not carried.calibrates
-    # a laser: no angle of incidence, no opening, never thinned
+    # a laser: no angle of incidence, never thinned
     laser = plan_map("adaptive", params(exact={"thin": True}, adaptive={"outside": "thinned"}), LASER, 0.1, ROBOT)
-    assert (laser.sensor, laser.incidence, laser.thinning, laser.learns_opening, laser.learns_lobe) == (
-        NARROW_BEAM, False, None, False, False)  # nor a lobe
-    assert plan_map("em", params(calibration={"learn": "sigma,specular_deg,opening_deg"}), LASER, 0.1, None).learns == (
-        "sigma",)  # a ray has no opening to learn, and no surfaces to learn a specular angle at
+    assert (laser.sensor, laser.incidence, laser.thinning, laser.learns_lobe) == (
+        NARROW_BEAM, False, None, False)  # nor a lobe
+    assert plan_map("em", params(calibration={"learn": "sigma,lobe_deg"}), LASER, 0.1, None).learns == (
+        "sigma",)  # a ray has no lobe to learn
     assert plan_map("em", params(exact={"thin": True}), SONAR, 0.1, None).thinning == MARGIN
     assert plan_map("em", params(em={"start": "empty"}), SONAR, 0.1, None).start == "empty"
     off = plan_map("em", params(calibration={"enabled": False}), SONAR, 0.1, None)
@@ -74,10 +74,10 @@ def test_each_mode_lists_the_stages_its_plan_asks_for():
     assert {"detector", "clusters", "calibration", "index", "sweeps"} <= set(learned) and "region" not in learned
     robots = [s.name for s in mode_stages(plan_map("adaptive", params(), SONAR, 0.1, ROBOT))]
     assert {"rates", "thinning", "decided"} <= set(robots) and "calibration" not in robots
-    opening = params(calibration={"learn": "sigma,opening_deg"})
-    assert "opening" in [s.name for s in mode_stages(plan_map("em", opening, SONAR, 0.1, None))]
-    assert "opening" not in [s.name for s in mode_stages(plan_map("em", opening, LASER, 0.1, None))]
+    assert "deflections" in [s.name for s in mode_stages(plan_map("em", params(), SONAR, 0.1, None))]
     assert "deflections" not in [s.name for s in mode_stages(plan_map("em", params(), LASER, 0.1, None))]
+    at_90 = params(em={"specular_deg": 90})
+    assert "deflections" not in [s.name for s in mode_stages(plan_map("em", at_90, SONAR, 0.1, None))]
 
 
 def _state(fields=None) -> State:
@@ -109,7 +109,7 @@ def test_a_stage_made_once_runs_again_only_when_taken_away():
     calls = []
     make = Stage("standard", lambda s: calls.append(1) or s.but(standard=len(calls)), writes=("standard",),
                  when=lacks("standard"))
-    take = Stage("opening", lambda s: s.but(standard=None), writes=("standard",))
+    take = Stage("deflections", lambda s: s.but(standard=None), writes=("standard",))
     state, _ = run_stages((make, make, take, make), _state())
     assert state.standard == 2 and len(calls) == 2
 
@@ -143,12 +143,12 @@ def test_the_grid_of_a_plan_is_the_logs():
     assert state.plan.stages == tuple(s.name for s in stages) and state.grid.resolution == 0.5
 
 
-def test_a_configured_opening_wins_over_a_carried_one():
-    """A robot's model carries its opening; the user's em.opening_deg wins, one learned from this log wins over both."""
-    carried = dataclasses.replace(ROBOT, opening_deg=24.0)
-    configured = params(em={"opening_deg": 16.0}).em.forward
-    assert carried.model(configured).opening_deg == 16.0
-    assert carried.model(params().em.forward).opening_deg == 24.0  # none configured: the carried one
-    learned = dataclasses.replace(carried, opening_deg=20.0, opening={"opening_deg": 20.0})
-    assert learned.model(configured).opening_deg == 20.0
-    assert carried.model(configured).p_hit == 0.9  # the rest of the robot's model stays
+def test_a_robots_model_replaces_the_sensor_keys_configured_and_a_learned_lobe_the_configured_one():
+    """``Learned.model``: a robot's model given sets sigma, p_rand, p_hit, p_max; a lobe learned from the log
+    replaces the one configured (``map_files.learned_over`` warns of both)."""
+    configured = params(em={"sigma": 0.2, "lobe_deg": 12.0, "lobe_range": 5.0}).em.forward
+    assert (ROBOT.model(configured).sigma, ROBOT.model(configured).lobe_deg) == (0.05, 12.0)
+    learned = dataclasses.replace(ROBOT, lobe_deg=0.0, lobe_range=10.0)
+    assert (learned.model(configured).lobe_deg, learned.model(configured).lobe_range) == (0.0, 10.0)
+    assert SensorModel.read({"sigma": 0.05, "p_rand": 0.05, "p_hit": 0.9, "p_max": 0.01, "opening_deg": 0.0}) == (
+        ROBOT.sensor)  # an older model's opening_deg is not read

@@ -15,13 +15,10 @@ from aogm_cli.sensor_models.cone_build import build_cone_templates
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig, cone_limits, deflect
 from aogm_cli.sensor_models.readings import LaidOutReadings
 from aogm_cli.sensor_models.surface import (
-    INCIDENCE_BINS,
     SurfaceConfig,
     cos2_of,
     hidden,
-    incidence_counts,
     reading_shadows,
-    specular_angle,
     surface_normals,
 )
 
@@ -87,7 +84,7 @@ def test_min_echoes_and_no_echo():
 
 
 @pytest.mark.parametrize("key,value", [("core", 1.5), ("core", -0.1), ("min_echoes", 1),  # a constant, no setting
-                                       ("enabled", "yes"), ("core", True)])
+                                       ("enabled", True), ("core", True)])  # enabled: em.specular_deg 90 turns it off
 def test_bad_surface_config_names_the_file_and_key(key, value, tmp_path):
     params = tmp_path / "p.yaml"
     params.write_text(f"surface:\n  {key}: {value!r}\n".replace("True", "true"))
@@ -140,14 +137,14 @@ def test_by_default_a_beam_that_meets_a_surface_over_15_degrees_off_its_normal_i
 
 
 def test_a_map_counts_the_readings_it_deflected(corridor_door_log):
-    # /stats deflected_readings: corridor_door's grazing and random readings met beyond 15 deg, none at 90 deg
-    # (Thrun's model), and no count in the standard mode, which stays Elfes' baseline
+    # /stats deflected_readings: corridor_door's grazing and random readings met beyond 15 deg; at 90 deg (Thrun's
+    # model) the angle of incidence is off (no deflections stage, no count), as in the standard mode, Elfes' baseline
     from aogm_cli.map_files import map_file
 
     em = map_file(corridor_door_log, "em", resolve_params())
     assert 0 < em.stats["deflected_readings"] < em.stats["em_readings"]
     thrun = map_file(corridor_door_log, "em", resolve_params(overrides={"em": {"specular_deg": 90}}))
-    assert thrun.stats["deflected_readings"] == 0
+    assert "deflected_readings" not in thrun.stats and "deflections" not in thrun.plan["stages"]
     assert "deflected_readings" not in map_file(corridor_door_log, "standard", resolve_params()).stats
 
 
@@ -159,35 +156,6 @@ def test_deflect_makes_max_range_readings_that_end_before_the_shadow():
     z, limits = cone_limits(np.array([2.9, 1.5]), 3.0, ForwardModelConfig(sigma=0.05, window=4.0),
                             np.array([1.9, np.inf]))
     assert limits[0] == np.nextafter(1.9, 0.0) and limits[1] == pytest.approx(1.7)
-
-
-def test_the_echo_rate_by_angle_and_where_it_halves():
-    # echoes 50 of 100 within 30 deg of the normal, then 40, 20, 10 and 0 of 100
-    counts = np.zeros((2, 9))
-    counts[0] = [50, 50, 50, 40, 20, 10, 0, 0, 0]
-    counts[1] = 100 - counts[0]
-    # half the head-on rate (0.25) falls between 35 deg (0.40) and 45 deg (0.20): 42.5 deg
-    assert specular_angle(counts) == pytest.approx(42.5)
-    rough = np.array([[50.0] * 9, [50.0] * 9])
-    assert specular_angle(rough) == 90.0
-    sparse = counts.copy()
-    sparse[:, :3] = 5  # too few readings within 30 deg of the normal to say
-    assert specular_angle(sparse) == 90.0
-
-
-def test_incidence_counts_by_hand():
-    # the wall of wall_run occupied: the head-on reading echoes from it (bin 0); the 40-deg reading
-    # at 2.9 m passes it at 35-45 deg (bins 3 and 4, once each); the reading without echo at yaw 30
-    # deg passes it where its cone's near edge reaches it, 55-60 deg off the normal (bin 5)
-    run, normal = wall_run([math.pi / 2, math.radians(50), math.radians(30)], [1.5, 2.9, np.inf])
-    occupied = np.zeros(GRID.height * GRID.width, dtype=bool)
-    occupied[20 * GRID.width:21 * GRID.width] = True
-    out = np.zeros((2, INCIDENCE_BINS))
-    incidence_counts(run.templates.kernel_arrays, flat_offsets(run.templates, GRID.width), GRID.shape,
-                     (run.rows.astype(np.int64), run.cols.astype(np.int64), run.bins.astype(np.int64), run.z),
-                     occupied, normal, (0.05, 4.0, 3.0, 0.3), out)
-    assert out[0].tolist() == [1, 0, 0, 0, 0, 0, 0, 0, 0]
-    assert out[1].tolist() == [0, 0, 0, 1, 1, 1, 0, 0, 0]
 
 
 def test_a_doorway_passed_head_on_is_no_surface():
@@ -217,11 +185,3 @@ def test_only_the_core_of_a_cone_is_deflected():
     forward = ForwardModelConfig(specular_deg=30.0)
     assert 2.3 < reading_shadows(run, normal, forward)[0] < 2.58
     assert reading_shadows(run, normal, forward, core=0.25)[0] == np.inf
-
-
-def test_the_specular_angle_at_a_smaller_share_of_the_head_on_rate():
-    counts = np.zeros((2, 9))
-    counts[0] = [50, 50, 50, 40, 20, 10, 0, 0, 0]
-    counts[1] = 100 - counts[0]
-    # a tenth of the head-on rate (0.05) falls between 55 deg (0.10) and 65 deg (0.00): 60 deg
-    assert specular_angle(counts, 0.1) == pytest.approx(60.0)

@@ -37,12 +37,9 @@ def warm_em(folder: str) -> None:
 
     warm_up(sonar(), resolve_params(), "adaptive")
     path = handed(folder, "corridor_door")  # simulated by the other process (the simulator compiled once)
-    # learning the beam's opening and the specular angle at walls, calibrated on the log (the
-    # detector carries a model for this ring: with it the log would not calibrate)
-    learn = {"calibration": {"learn": "sigma,p_rand,p_hit,p_max,specular_deg,opening_deg", "rounds": 1,
-                             "carried": False}}
+    # calibrated on the log (the detector carries a model for this ring: with it the log would not calibrate)
     with LogReader(path) as reader:
-        map_in_mode(reader, "em", resolve_params(None, learn))
+        map_in_mode(reader, "em", resolve_params(None, {"calibration": {"carried": False}}))
 
 
 def warm_standard(path: Path) -> None:
