@@ -50,7 +50,6 @@ class Tuning:
 
 
 TUNING = Tuning()
-MAX_READINGS = TUNING.max_readings
 
 
 def sample_readings(run: LaidOutReadings, max_readings: int, select: np.ndarray | None = None) -> F.ExpectationReadings:

@@ -65,7 +65,7 @@ class State:
     detector_record: dict | None = None  # what the map's params record of it
     progress: Progress | None = None
     learned: Learned = Learned()  # a model given, then what the stages learn
-    whole: Log | None = None  # the scans in memory, the sensor with the beam's opening
+    whole: Log | None = None  # the scans in memory
     readings: LaidOutReadings | None = None
     standard: StandardMap | None = None
     echo_walls: np.ndarray | None = None  # (H, W): the standard map with the walls echoes alone make (``walls``)
