@@ -75,10 +75,11 @@ def wait_for_no_processes(folder: Path, seconds: float = 5.0) -> list[str]:
     return left
 
 
-def interrupt(args, folder: Path, sig: int, delay: float, group: bool = False, processes: int = 1):
-    """Run ``aogm ARGS`` in ``folder``, send ``sig`` after ``delay`` s (to the whole process group,
-    as a terminal's Ctrl-C, when ``group``) once ``processes`` run there; the CompletedProcess."""
-    cmd = [sys.executable, "-m", "aogm_cli", *map(str, args)]
+def interrupt(args, folder: Path, sig: int, delay: float, group: bool = False, processes: int = 1,
+              lead: tuple[str, ...] = ("-m", "aogm_cli")):
+    """Run ``aogm ARGS`` in ``folder`` (``python LEAD ARGS``), send ``sig`` after ``delay`` s (to the whole process
+    group, as a terminal's Ctrl-C, when ``group``) once ``processes`` run there; the CompletedProcess."""
+    cmd = [sys.executable, *lead, *map(str, args)]
     proc = subprocess.Popen(cmd, cwd=folder, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             start_new_session=True)
     time.sleep(delay)
@@ -129,9 +130,13 @@ def test_a_signal_during_em_sweeps_ends_the_map_within_seconds(data, tmp_path):
     # took 7.5 s, and had ended before a signal at 8 s); the bound is generous for a loaded machine
     os.symlink(data / "dense.h5", tmp_path / "dense.h5")
     (tmp_path / "p.yaml").write_text("calibration: {carried: false}\n")
+    # all 12 rounds (calibration's constants, set in the process as aogm's entry point would run it)
+    longer = ("-c", "import sys; from aogm_cli.core import interrupts; interrupts.install(); "
+                    "from aogm_cli.mapping.calibration import TUNING; object.__setattr__(TUNING, 'rounds', 12); "
+                    "object.__setattr__(TUNING, 'tolerance', 1e-9); from aogm_cli.cli import main; sys.exit(main())")
     start = time.monotonic()
     res = interrupt(["map", "dense.h5", "--mode", "em", "--params", "p.yaml", "--threads", "1", "-o", "m.h5"], tmp_path,
-                    signal.SIGINT, 5.0)
+                    signal.SIGINT, 5.0, lead=longer)
     ended = time.monotonic() - start - 5.0
     check_interrupted(res, signal.SIGINT, tmp_path, ["m.h5"])
     assert ended < 3.0
