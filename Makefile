@@ -62,14 +62,16 @@ FUZZ_EXAMPLES ?= 2000
 fuzz: $(DEV)
 	AOGM_FUZZ_EXAMPLES=$(FUZZ_EXAMPLES) $(BIN)/python -m pytest -q -s -p no:cacheprovider tests/test_fuzz.py
 
+# Throughput against a ceiling measured in the same run: the simulator, the standard mapper, EM and
+# adaptive mapping (docs/benchmarks.md, "Throughput against a ceiling")
 bench: $(STAMP)
 	$(BIN)/python bench/bench_simulate.py
 	$(BIN)/python bench/bench_standard.py
 	$(BIN)/python bench/bench_em.py
 	$(BIN)/python bench/bench_adaptive.py
 
-# Benchmarks at building scale (not part of test or bench; README "Benchmarks at scale"): adaptive
-# mapping on the two seed worlds (best of BENCH_RUNS, one process), then the generated office floor at
+# Benchmarks at building scale (not part of test or bench; docs/benchmarks.md, "Benchmarks at scale"): each
+# mode on the two seed worlds (best of BENCH_RUNS, one process), then the generated office floor at
 # SCALE_SIZES scans in every mode of SCALE_MODES (/1: on one thread), each map in its own process under SCALE_MEMORY of
 # address space (a run that does not fit is a failed row). Worlds, logs, maps and JSON: out/bench-scale/.
 SCALE_SIZES  ?= 2000,10000,50000,200000

@@ -11,9 +11,8 @@ maps the log in this process (``map_files.map_file``) in the standard mode (for 
 of ``--modes``, with ``--params`` (default: the defaults). Every map is scored as ``aogm compare``
 scores it: accuracy and the world's checks (``evaluation.metrics.evaluate``), and leak and block for a
 robot of radius 0.2 m (``evaluation.planner.planner_metrics``, ``ROBOT_RADIUS``); and what it learned
-of the beam (its ``learned`` record, ``mapping.learned.Learned``: the lobe, theta0/R0 or the whole cone; the opening, 0 being the log's
-whole 30-degree cone, and the forward model's p_hit, p_max, sigma, p_rand and specular angle, with
-where they came from). Each mode's map is made on its own (``aogm compare`` lets the em map take
+of the beam (its ``learned`` record, ``mapping.learned.Learned``: the lobe, theta0/R0 or the whole cone,
+and the forward model's p_hit, p_max, sigma, p_rand and specular angle, with where they came from). Each mode's map is made on its own (``aogm compare`` lets the em map take
 what the adaptive map learned). Worlds and logs go to a temporary folder unless ``--keep DIR``.
 """
 
@@ -21,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import tempfile
 from pathlib import Path
@@ -44,7 +42,7 @@ WORLDS = ("corridor_door", "office_doors", "cluttered_lab", "furnished_room", "t
 MODES = ("standard", "em", "adaptive")
 DEFAULT = "default"  # --beam-deg's name for the world's own pattern
 HEADER = (f"{'world':<18} {'theta0':>7} {'mode':<9} {'leak':>6} {'block':>6} {'accuracy':>8} {'checks':>6} "
-          f"{'lobe':>9} {'opening':>8} {'p_hit':>6} {'p_max':>6} {'sigma':>6} {'p_rand':>6} {'spec.':>5} {'s':>6}  model from")
+          f"{'lobe':>9} {'p_hit':>6} {'p_max':>6} {'sigma':>6} {'p_rand':>6} {'spec.':>5} {'s':>6}  model from")
 
 
 def beam_list(text: str) -> list[str]:
@@ -77,25 +75,19 @@ def causes(cause: np.ndarray) -> dict[str, float]:
             (("echo", CAUSE_ECHO), ("no_echo", CAUSE_NO_ECHO), ("specular", CAUSE_SPECULAR))}
 
 
-def beam_learned(m, cone_deg: float) -> dict:
-    """What map ``m`` learned of the beam: its ``learned`` record flattened (the opening in degrees, the
-    log's cone for 0 or nothing learned), with the opening's record (``stats["calibration"]["opening"]``)."""
+def beam_learned(m) -> dict:
+    """What map ``m`` learned of the beam: its ``learned`` record flattened."""
     learned = m.learned or {}
     sensor = learned.get("sensor") or {}
-    opening = learned.get("opening_deg")
-    record = (m.stats.get("calibration") or {}).get("opening")
     return {"origin": learned.get("origin"), "lobe_deg": learned.get("lobe_deg"), "lobe_range": learned.get("lobe_range"),
-            "opening_deg": None if m.mode == "standard" else (opening or cone_deg),
-            "opening_learned": record is not None, "specular_deg": learned.get("specular_deg"),
-            **{k: sensor.get(k) for k in ("p_hit", "p_max", "sigma", "p_rand")},
-            "opening_record": record, "learned": learned}
+            "specular_deg": learned.get("specular_deg"),
+            **{k: sensor.get(k) for k in ("p_hit", "p_max", "sigma", "p_rand")}, "learned": learned}
 
 
 def scored(log_path: Path, modes: list[str], params) -> list[dict]:
     """Per mode: the map of the log scored as ``aogm compare`` scores it, and what it learned."""
     with LogReader(log_path) as reader:
         truth, poses = reader.truth(), reader.poses()
-        cone_deg = math.degrees(reader.sensor.beam_width)
     rows = []
     for mode in modes:
         m = map_file(log_path, mode, params)
@@ -105,7 +97,7 @@ def scored(log_path: Path, modes: list[str], params) -> list[dict]:
                      "surface_recall": planner["surface_recall"], "accuracy": metrics["accuracy"],
                      "occupied_f1": metrics["occupied_f1"],
                      "checks": {c["name"]: c["passed"] for c in metrics["checks"]},
-                     "runtime_s": m.runtime_s, **beam_learned(m, cone_deg)})
+                     "runtime_s": m.runtime_s, **beam_learned(m)})
     return rows
 
 
@@ -115,10 +107,9 @@ def number(value, fmt: str) -> str:
 
 def line(world: str, theta0: str, r: dict) -> str:
     checks = f"{sum(r['checks'].values())}/{len(r['checks'])}"
-    opening = number(r["opening_deg"], "g") + ("*" if r["opening_learned"] else "")
     lobe = "-" if r["lobe_deg"] is None else "cone" if r["lobe_deg"] == 0 else f"{r['lobe_deg']:g}/{r['lobe_range']:.2g}"
     return (f"{world:<18} {theta0:>7} {r['mode']:<9} {r['leak']:>6.3f} {r['block']:>6.3f} {r['accuracy']:>8.4f} "
-            f"{checks:>6} {lobe:>9} {opening:>8} {number(r['p_hit'], '.3f'):>6} {number(r['p_max'], '.3f'):>6} "
+            f"{checks:>6} {lobe:>9} {number(r['p_hit'], '.3f'):>6} {number(r['p_max'], '.3f'):>6} "
             f"{number(r['sigma'], '.3f'):>6} {number(r['p_rand'], '.3f'):>6} {number(r['specular_deg'], '.0f'):>5} "
             f"{r['runtime_s']:>6.1f}  {r['origin'] or '-'}")
 
@@ -128,8 +119,8 @@ def run(args, folder: Path) -> list[dict]:
     modes = list(dict.fromkeys(["standard", *args.modes]))
     print(f"Seed {args.seed}; variants with echo_strength {{min_strength: {MIN_STRENGTH}, beam_deg: THETA0}} and "
           f"random_rate {RANDOM_RATE}; params: {args.params or 'defaults'}; leak/block at robot radius {ROBOT_RADIUS} m")
-    print("opening: degrees of the cone the map's forward model detects across (the log's 30-degree cone unless "
-          "learned; * learned from this log); no echo: the log's readings without an echo")
+    print("lobe: theta0/R0 of the detection lobe the map's forward model uses, or cone (the whole cone); "
+          "no echo: the log's readings without an echo")
     print(HEADER)
     doc = []
     for world in args.worlds:

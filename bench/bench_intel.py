@@ -1,4 +1,4 @@
-"""Issue 36's targets on a real laser log: the intel log (Intel Research Lab, ../shared/data) at
+"""The modes' costs and targets on a real laser log: the intel log (Intel Research Lab, ../shared/data) at
 0.1 m with its sensor's model learned once (``aogm calibrate -o``) and given (``--forward-model``).
 
     python bench/bench_intel.py [--runs 3] [--workdir out/bench-intel]

@@ -9,10 +9,10 @@ one process with ``aogm_cli.map_files.map_file`` (which compiles every kernel fi
 mode's best ``runtime_s``. Each map is evaluated against its log's truth as ``aogm compare`` does
 (``evaluation.metrics.evaluate``, and the planner's leak and block). ``standard:thin`` is the
 standard mode with ``exact.thin`` (the Elfes map thinned by the exact inverse model); ``--params``
-maps every mode with a parameter file. Then, per world, issue 29's targets: adaptive at most 10 x
-the standard map and at least 5 x faster than EM, its accuracy within 0.005 of EM's and its leak
-and block within 0.01 of EM's, EM at most 40 x the standard map; and issue 13's: the packaged
-detector at least 1.5 x faster than ``--detector all`` with accuracy within 0.002 of it.
+maps every mode with a parameter file. Then, per world, the targets: adaptive at most 10 x the
+standard map and at least 5 x faster than EM, its accuracy within 0.005 of EM's and its leak and
+block within 0.01 of EM's, EM at most 40 x the standard map; the packaged detector at least 1.5 x
+faster than ``--detector all`` with accuracy within 0.002 of it.
 """
 
 from __future__ import annotations

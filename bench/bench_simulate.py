@@ -17,7 +17,7 @@ import numba
 import numpy as np
 
 from aogm_cli.simulation.raycast import geometry
-from aogm_cli.simulation.sonar import BLOCK_SCANS, echo_block, simulate, sub_ray_offsets
+from aogm_cli.simulation.sonar import BLOCK_SCANS, NO_ERRORS, echo_block, simulate, sub_ray_offsets
 from aogm_cli.world.loader import parse_world
 from aogm_cli.world.scene import build_scene
 from aogm_cli.world.trajectory import trajectory_poses
@@ -146,7 +146,8 @@ def run_kernel(world, bucket_size):
     start = time.perf_counter()
     for a in range(0, n, BLOCK_SCANS):
         b = min(n, a + BLOCK_SCANS)
-        echo_block(pose[a:b], mount, cos_off, sin_off, sonar.max_range, sonar.max_bounces, geo, echo[a:b], ideal[a:b], multi[a:b])
+        echo_block(pose[a:b], mount, cos_off, sin_off, float(sonar.max_range), int(sonar.max_bounces), geo, echo[a:b],
+                   ideal[a:b], multi[a:b], *NO_ERRORS)  # every echo heard, no side lobes: the clean kernel
     elapsed = time.perf_counter() - start
     seg = np.array([pose[:, 0].max() + 3.0, -1e3, pose[:, 0].max() + 3.0, 1e3])
     out = np.empty((n, s))
