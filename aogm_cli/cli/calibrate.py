@@ -29,7 +29,7 @@ from aogm_cli.io.outputs import resolve_outputs
 @click.option("--mode", type=click.Choice(["em", "adaptive"]), default="em", show_default=True,
               help="Whose maps the model is fitted at.")
 @click.option("-o", "--output", type=click.Path(dir_okay=False),
-              help="Also write the sensor's learned model (sigma, p_rand, p_hit, p_max, the beam's opening, the "
+              help="Also write the sensor's learned model (sigma, p_rand, p_hit, p_max, the "
                    "sensor it fits) as a model file for `aogm map/compare --forward-model`.")
 @detector_option
 @params_option
@@ -49,17 +49,13 @@ def calibrate(log_file, mode, output, detector, params_file, resolution, quiet, 
     examined, sigma^2 the expected squared range error of the detections), iterated at that
     map until they settle. Round 0 maps with the configured model made at least 0.1 m
     broad; each round fits at the last map and maps again, until no parameter moves by more
-    than calibration.tolerance, or calibration.rounds. Every value is clipped to bounds
-    (docs/algorithms.md, "Calibration's constants"). Beams whose core meets a surface (a cell
-    heard from one direction) beyond em.specular_deg (15) before their echo are taken as
-    deflected there. With specular_deg in calibration.learn, the angle is learned once, before
-    the rounds, at the standard map: the share of readings that echo from a surface cell rather
-    than pass it, by angle of incidence, and the angle where that share falls to half its
-    head-on value (90: the walls echo at any angle). `aogm map` and `aogm compare` do all this
-    by default in em and adaptive modes. With opening_deg in calibration.learn, the beam's opening is learned first: the
-    share of echoes the thinned standard map explains when the beam detects out to 2, 4, ...
-    degrees, and the opening where that share tops out (the cone unless it explains 4% fewer);
-    em and adaptive then leave the cone's cells beyond it out (em.opening_deg).
+    than 2%, or after 4 rounds. Every value is clipped to bounds (docs/algorithms.md,
+    "Calibration's constants"). calibration.learn lists what is learned (any of sigma, p_rand,
+    p_hit, p_max, lobe_deg; all five by default): a value it lists is learned even when --params
+    sets it. The lobe (lobe_deg, lobe_range) is learned from the echoes at the thinned walls
+    before the rounds. Beams whose core meets a surface (a cell heard from one direction) more
+    obliquely than em.specular_deg (15; 90: never) before their echo are taken as deflected there.
+    `aogm map` and `aogm compare` do all this by default in em and adaptive modes.
 
     \b
     Example:
