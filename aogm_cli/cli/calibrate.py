@@ -49,11 +49,13 @@ def calibrate(log_file, mode, output, detector, params_file, resolution, quiet, 
     examined, sigma^2 the expected squared range error of the detections), iterated at that
     map until they settle. Round 0 maps with the configured model made at least 0.1 m
     broad; each round fits at the last map and maps again, until no parameter moves by more
-    than 2% (sigma: 2% of itself), or 4 rounds. Every value is clipped to bounds. Beams whose
-    core meets a surface (a cell heard from one direction) beyond em.specular_deg (15) before
-    their echo are taken as deflected there. `aogm map` and `aogm compare` do all this by
-    default in em and adaptive modes. A value --params or an option sets for a key that
-    calibration.learn lists only starts the fit (a warning says so).
+    than 2%, or after 4 rounds. Every value is clipped to bounds (docs/algorithms.md,
+    "Calibration's constants"). calibration.learn lists what is learned (any of sigma, p_rand,
+    p_hit, p_max, lobe_deg; all five by default): a value it lists is learned even when --params
+    sets it (a warning says so; the value only starts the fit). The lobe (lobe_deg, lobe_range) is learned from the echoes at the thinned walls
+    before the rounds. Beams whose core meets a surface (a cell heard from one direction) more
+    obliquely than em.specular_deg (15; 90: never) before their echo are taken as deflected there.
+    `aogm map` and `aogm compare` do all this by default in em and adaptive modes.
 
     \b
     Example:

@@ -74,8 +74,8 @@ def compare(inputs, modes_text, detector, params_file, forward_model, json_out, 
             require_checks, jobs, scheduler, resume, holdout, robot_radius, calibrate, seed, quiet, max_memory=16e9,
             max_work=None, threads=None):
     """Map every log in every mode, evaluate each map against the log's truth, and print a table
-    (accuracy, occupied F1, Brier, checks passed, leak, block, surface recall, runtime, runtime
-    relative to the standard map of the same log). em and adaptive learn their forward model from each log (--calibrate,
+    (accuracy, occupied F1, Brier, ECE, checks passed, leak, block, surface recall, runtime, runtime
+    relative to the standard map of the same log; every metric is defined in docs/comparing.md). em and adaptive learn their forward model from each log (--calibrate,
     the default; `aogm calibrate --help`), or take a robot's from --forward-model MODEL.
 
     A log without truth (an imported real log) is scored by re-casting its in-range readings
@@ -107,8 +107,8 @@ def compare(inputs, modes_text, detector, params_file, forward_model, json_out, 
       is made from the other scans and scored on the held-out readings: holdout_auc, the ROC
       AUC of its occupancy at each echo's cell on the sensor's axis against the cells that axis
       crosses up to two cells short of it (Hilbert maps' protocol); holdout_auc_band, the same
-      with a reading's largest occupancy within 0.1 m of its range and its whole cone (the
-      definition before issue 28; README); holdout_loglik, their mean log-likelihood under one
+      with a reading's largest occupancy within 0.1 m of its range and its whole cone (the one
+      to read for sonar; docs/comparing.md, Metrics); holdout_loglik, their mean log-likelihood under one
       fixed reference forward model (sigma 0.1 m, p_rand 0.1, p_hit 0.5, p_max 0.1; higher is
       better); holdout_readings and holdout_scans. The truth metrics (accuracy, ...) of a simulated
       log are then those of the map made from the kept scans. Map files given must have been

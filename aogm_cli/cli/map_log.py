@@ -97,8 +97,11 @@ def map_log(log_file, mode, output, png, detector, params_file, forward_model, r
     beyond it) marks the cells there that the standard map holds occupied and not at its free
     clamp; with the contested and weak cells (section adaptive: of --params) they form
     clusters (8-connected). EM runs over each group of clusters that share a reading, with every
-    other cell held at the standard map thresholded at p = 0.5; cluster cells get EM's
-    residual probability, all others keep the standard map's.
+    other cell held at the map outside them thresholded at p = 0.5; cluster cells get EM's
+    residual probability. Outside the clusters the map is the standard map thinned by the exact
+    inverse model where the sensor's model is known before mapping (the packaged detector's
+    ring, --forward-model), its free cells that no reading holds free unobserved, else the
+    standard map; its probabilities on EM's scale (adaptive.outside; docs/algorithms.md).
 
     em and adaptive learn their forward model from the log itself (--calibrate, the default;
     `aogm calibrate --help`), or take a robot's from --forward-model MODEL: the map's params hold

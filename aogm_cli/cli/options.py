@@ -97,7 +97,8 @@ modes_option = click.option(
 )
 params_option = click.option(
     "--params", "params_file", type=click.Path(dir_okay=False),
-    help="YAML with sections inverse_model:, em:, adaptive: and key resolution:, used by every map made.",
+    help="YAML with sections inverse_model:, em:, adaptive:, calibration:, surface:, exact: and key resolution:, "
+         "used by every map made (every setting: docs/settings.md).",
 )
 forward_model_option = click.option(
     "--forward-model", "forward_model", type=click.Path(dir_okay=False),
@@ -112,8 +113,8 @@ resolution_option = click.option(
 
 calibrate_option = click.option(
     "--calibrate/--no-calibrate", "calibrate", default=None,
-    help="em and adaptive: learn the forward model's sigma, p_rand, p_hit and p_max from the log being mapped"
-         " (section calibration: of --params).  [default: on]",
+    help="em and adaptive: learn the forward model's sigma, p_rand, p_hit, p_max and lobe_deg from the log being"
+         " mapped (which of them: calibration.learn in --params).  [default: on]",
 )
 
 
@@ -162,7 +163,7 @@ def jobs_option(help_text: str):
 scheduler_option = click.option(
     "--scheduler", metavar="ADDRESS", envvar=SCHEDULER_ENV, show_envvar=True,
     help="Run every task on the Dask cluster whose scheduler is at ADDRESS (tcp://host:8786) instead of"
-         " --jobs local processes; needs pip install aogm[dask] (see Running on a cluster in README.md).",
+         " --jobs local processes; needs pip install aogm[dask] (see docs/cluster.md).",
 )
 
 
@@ -269,7 +270,7 @@ def png_option(help_text: str):
 
 
 class DetectorParam(click.ParamType):
-    """A detector file, or the name of a baseline of ``mapping.modes.BASELINE_DETECTORS`` (read
+    """A detector file, or the name of a baseline of ``io.detectorfile.BASELINE_DETECTORS`` (read
     only when needed: that module loads every mapper)."""
 
     name = "detector"
