@@ -1,5 +1,6 @@
 """The README is short and its links hold: at most 250 lines, its picture at the top, every
-relative link in it and in docs/ a file of the repository, and its quick start runs as written."""
+relative link in it and in docs/ a file of the repository, and its quick start (a bundled world)
+and its robot-log commands run as written."""
 
 import re
 import shlex
@@ -39,20 +40,37 @@ def indented_blocks(section: str) -> list[str]:
     return [re.sub(r"^    ", "", b, flags=re.M) for b in re.findall(r"(?:^    .*\n)+", text, re.M)]
 
 
-def quick_start() -> list[list[str]]:
-    """The README's quick-start commands as argument lists (continuation lines joined)."""
-    block = indented_blocks("## Quick start")[0].replace("\\\n", " ")
+def commands_of(section: str) -> list[list[str]]:
+    """The first indented block of a README section as argument lists (continuation lines joined)."""
+    block = indented_blocks(section)[0].replace("\\\n", " ")
     return [shlex.split(line, comments=True) for line in block.splitlines() if line.strip()]
 
 
-def test_the_quick_start_runs_as_written(corridor_door_log, tmp_path, monkeypatch):
+def quick_start() -> list[list[str]]:
+    """Every command line the README's two runnable sections hold (the quick start, your robot's log)."""
+    return commands_of("## Quick start") + commands_of("## Your own robot's log")
+
+
+def test_the_quick_start_runs_as_written_on_a_bundled_world(tmp_path, monkeypatch):
+    (tmp_path / "worlds").symlink_to(ROOT / "worlds")
+    monkeypatch.chdir(tmp_path)
+    commands = commands_of("## Quick start")
+    assert [c[:2] for c in commands] == [["aogm", "simulate"], ["aogm", "map"], ["aogm", "compare"]]
+    for args in commands:
+        result = CliRunner().invoke(main, args[1:])
+        assert result.exit_code == 0, (args, result.output)
+    for name in ("door.h5", "door_truth.png", "door_map.h5", "door_map.png", "report.json", "report.png"):
+        assert (tmp_path / name).is_file(), name
+
+
+def test_the_robot_log_commands_run_as_written(corridor_door_log, tmp_path, monkeypatch):
     # a text log of eight sonars made from a simulated one: time and ranges, time and poses
     log = read_log(corridor_door_log)
     ranges = np.where(np.isfinite(log.ranges[:, :8]), log.ranges[:, :8], 5.0)
     np.savetxt(tmp_path / "ranges.txt", np.column_stack([log.time, ranges]))
     np.savetxt(tmp_path / "poses.txt", np.column_stack([log.time, log.pose]))
     monkeypatch.chdir(tmp_path)
-    commands = quick_start()
+    commands = commands_of("## Your own robot's log")
     assert [c[:2] for c in commands] == [["aogm", "import"], ["aogm", "check"], ["aogm", "map"],
                                          ["echo", "resolution: 0.1"], ["aogm", "compare"]]
     for args in commands:
