@@ -226,3 +226,11 @@ def test_cli_tolerance_without_baseline_and_a_bad_aggregate_exit_2(tmp_path):
     r = CliRunner().invoke(main, ["compare", "--from-json", str(run), "--json", str(out), "--require",
                                   "mean(em.holdout_auc) > 0.5"])
     assert r.exit_code == 2 and not out.exists()
+
+
+def test_check_counts_per_mode():
+    rs = results()
+    rs[0].metrics = {**rs[0].metrics, "checks": [{"name": "door_passable", "passed": False}]}
+    s = summarize(rs)
+    assert s.all.checks == {"standard": {"door_passable": (2, 3)}, "em": {"door_passable": (3, 3)}}
+    assert s.as_dict()["worlds"]["corridor_door"]["checks"]["standard"]["door_passable"] == {"passed": 2, "logs": 3}

@@ -5,6 +5,7 @@ log's standard map."""
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from dataclasses import dataclass
@@ -124,11 +125,14 @@ class GroupSummary:
     logs: int
     modes: dict[str, dict[str, Estimate]]
     differences: list[Difference]
+    checks: dict[str, dict[str, tuple[int, int]]] = dataclasses.field(default_factory=dict)  # mode -> check ->
+    # (logs where it passed, logs that have it)
 
     def as_dict(self) -> dict:
         return {"logs": self.logs,
                 "modes": {m: {k: e.as_dict() for k, e in by.items()} for m, by in self.modes.items()},
-                "differences": [d.as_dict() for d in self.differences]}
+                "differences": [d.as_dict() for d in self.differences],
+                "checks": {m: {c: {"passed": p, "logs": n} for c, (p, n) in by.items()} for m, by in self.checks.items()}}
 
 
 def summarize_group(name: str, logs: list[dict[tuple[str, str], float | None]]) -> GroupSummary:
@@ -165,6 +169,17 @@ class Summary:
         return {"interval": INTERVAL, "worlds": {g.name: g.as_dict() for g in self.worlds}, "all": self.all.as_dict()}
 
 
+def check_counts(results: list[ModeResult]) -> dict[str, dict[str, tuple[int, int]]]:
+    """mode -> world check -> (logs on which it passed, logs that have it), of ``results`` with truth."""
+    out: dict[str, dict[str, list[int]]] = {}
+    for r in sorted(results, key=lambda r: MODES.index(r.mode)):
+        for c in (r.metrics or {}).get("checks", []):
+            count = out.setdefault(r.mode, {}).setdefault(c["name"], [0, 0])
+            count[0] += bool(c["passed"])
+            count[1] += 1
+    return {m: {c: (p, n) for c, (p, n) in by.items()} for m, by in out.items()}
+
+
 def summarize(results: list[ModeResult]) -> Summary:
     """The ``Summary`` of a comparison's ``results``."""
     values = log_values(results)
@@ -172,4 +187,7 @@ def summarize(results: list[ModeResult]) -> Summary:
     worlds: dict[str, list] = {}
     for log, v in values.items():
         worlds.setdefault(world_of[log], []).append(v)
-    return Summary([summarize_group(w, logs) for w, logs in worlds.items()], summarize_group(ALL, list(values.values())))
+    groups = [dataclasses.replace(summarize_group(w, logs), checks=check_counts([r for r in results if r.world == w]))
+              for w, logs in worlds.items()]
+    return Summary(groups, dataclasses.replace(summarize_group(ALL, list(values.values())),
+                                               checks=check_counts(results)))

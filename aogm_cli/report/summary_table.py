@@ -68,6 +68,7 @@ def _difference_text(d, n: int) -> str:
 def print_summary(summary: Summary, quiet: bool) -> None:
     """Print the summary: per group each mode's means with their 95% intervals, then the paired differences with
     wins/ties/losses."""
+    import click
     from rich.console import Console
     from rich.table import Table
 
@@ -88,6 +89,18 @@ def print_summary(summary: Summary, quiet: bool) -> None:
             table.add_row(*row)
         if rows:
             console.print(table)
+    for line in check_lines(summary):
+        click.echo(line)
+
+
+def check_lines(summary: Summary) -> list[str]:
+    """One line per group: on how many of its logs each mode passes each world check."""
+    lines = []
+    for g in groups(summary):
+        found = [f"{mode} {name} {p}/{n}" for mode, by in g.checks.items() for name, (p, n) in by.items()]
+        if found:
+            lines.append(f"checks passed, {group_label(g)}: {', '.join(found)}")
+    return lines
 
 
 def csv_rows(summary: Summary) -> list[dict]:
@@ -142,6 +155,8 @@ def markdown(summary: Summary, report: BaselineReport | None) -> str:
     rule = "|" + "---|" * (3 + len(metrics))
     lines = ["## Summary over logs", "", "Mean ± half-width of the 95% interval (Student t), (n) logs.", "",
              head.format("Mode"), rule, *("| " + " | ".join(r) + " |" for r in per_mode), ""]
+    if checks := check_lines(summary):
+        lines += ["Logs on which each mode passes each world check:", "", *(f"* {c}" for c in checks), ""]
     if per_pair:
         lines += ["## Paired differences", "", "Mean difference on the same logs ± 95% half-width, then "
                   "wins/ties/losses of the first mode.", "", head.format("Difference"), rule,
