@@ -139,12 +139,14 @@ def tiny_room_world() -> str:
 
 @pytest.fixture(scope="session")
 def read_csv():
-    """``read_csv(path)``: (header, rows as dicts keyed by the header) of a CSV file."""
+    """``read_csv(path, summary=False)``: (header, rows as dicts keyed by the header) of a CSV file; of ``aogm
+    compare --csv`` the rows of each log and mode only (``statistic`` empty), or with ``summary`` the summary's."""
 
-    def read(path) -> tuple[list[str], list[dict[str, str]]]:
+    def read(path, summary: bool = False) -> tuple[list[str], list[dict[str, str]]]:
         with open(path, newline="") as fh:
             rows = list(csv.reader(fh))
-        return rows[0], [dict(zip(rows[0], row, strict=True)) for row in rows[1:]]
+        found = [dict(zip(rows[0], row, strict=True)) for row in rows[1:]]
+        return rows[0], [r for r in found if bool(r.get("statistic")) == summary]
 
     return read
 

@@ -104,8 +104,12 @@ def test_the_csv_has_a_row_per_log_and_mode_equal_to_the_json(runs, read_csv):
     out, _ = runs
     doc = json.loads((out / "a.json").read_text())
     header, rows = read_csv(out / "a.csv")
-    assert header == [*FIXED, "check:along", "check:into_the_wall"]
+    assert header == [*FIXED, "check:along", "check:into_the_wall", "statistic"]
     assert [(r["log"], r["mode"]) for r in rows] == [(r["log"], r["mode"]) for r in doc["results"]]
+    _, summary = read_csv(out / "a.csv", summary=True)  # the summary's rows: here of one log
+    mean = next(r for r in summary if (r["world"], r["mode"], r["statistic"]) == ("tiny_hall", "em", "mean"))
+    assert float(mean["accuracy"]) == doc["results"][1]["metrics"]["accuracy"] == doc["summary"]["all"]["modes"][
+        "em"]["accuracy"]["mean"]
     standard_runtime = doc["results"][0]["runtime_s"]
     for row, result in zip(rows, doc["results"], strict=True):
         metrics = result["metrics"]
@@ -144,7 +148,9 @@ def test_from_json_merges_prints_and_gates_without_mapping(logs, runs, tmp_path,
     assert "gates: 4 of 6 passed" in result.output
     merged = json.loads((tmp_path / "merged.json").read_text())
     assert merged["results"] == a["results"] + b["results"]  # the union, unchanged
-    assert without_provenance({**merged, "results": []}) == without_provenance({**a, "results": []})
+    assert merged["summary"]["all"]["logs"] == 2 and a["summary"]["all"]["logs"] == 1  # the summary of the union
+    assert without_provenance({**merged, "results": [], "summary": None}) == without_provenance(
+        {**a, "results": [], "summary": None})
     assert merged["provenance"]["inputs"] == [{"path": str(out / n), "sha256": sha256(out / n)} for n in ("a.json", "b.json")]
     assert a["provenance"]["inputs"][0]["sha256"] == sha256(logs[0])
     header, rows = read_csv(tmp_path / "merged.csv")
@@ -180,7 +186,7 @@ def test_without_truth_and_with_holdout_the_csv_and_json_come_back_the_same(logs
     with h5py.File(tmp_path / "maps" / "bare_em.h5") as f:  # the maps record the run's provenance too
         assert {"path": str(bare), "sha256": sha256(bare)} in json.loads(f.attrs["provenance"])["inputs"]
     header, rows = read_csv(tmp_path / "h.csv")
-    assert header == FIXED  # no truth: no check columns
+    assert header == [*FIXED, "statistic"]  # no truth: no check columns
     for row in rows:
         assert row["truth"] == "false" and row["accuracy"] == "" and row["checks_passed"] == "" and row["leak"] == ""
         assert 0 < number(row["walls_kept"]) <= 1 and number(row["leak_vs_standard"]) >= number(row["far_leak"]) >= 0

@@ -4,6 +4,7 @@ table and gates from the JSON of earlier runs (``--from-json``), merged, without
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import click
@@ -51,9 +52,20 @@ from aogm_cli.io.outputs import resolve_outputs
               help="The arguments are --json files of earlier runs: merge their results, print the table and "
                    "apply the gates without mapping (see Merging above).")
 @click.option("--require", "requires", multiple=True, metavar="EXPR",
-              help="Gate, evaluated per log, e.g. 'adaptive.accuracy >= em.accuracy - 0.005'. Repeatable.")
+              help="Gate, evaluated per log, e.g. 'adaptive.accuracy >= em.accuracy - 0.005', or once over the "
+                   "logs when it aggregates, e.g. 'ci_low(adaptive.accuracy - em.accuracy) > -0.002'. Repeatable.")
 @click.option("--require-checks", multiple=True, type=mode_choice,
               help="Gate: every world check of every log passes in this mode. Repeatable.")
+@click.option("--summary-only", is_flag=True,
+              help="Print the summary over the logs (and the baseline's findings) without the per-log tables.")
+@click.option("--baseline", type=click.Path(dir_okay=False), metavar="OLD.json",
+              help="Compare every log, mode and metric with an earlier run's --json file; exit 1 on a regression "
+                   "beyond its tolerance (see Baseline above).")
+@click.option("--tolerance", metavar="METRIC=X,...",
+              help="With --baseline: how far each metric may get worse, e.g. accuracy=0.005,leak=0.01,runtime=1.25 "
+                   "(runtime: a factor on its ratio to the standard map); the others keep their defaults.")
+@click.option("--markdown", "markdown_out", type=click.Path(dir_okay=False), metavar="OUT.md",
+              help="Write the summary and the baseline's findings as Markdown tables.")
 @jobs_option("Map in this many worker processes (see Timings above).")
 @scheduler_option
 @resume_option("With --maps-dir: take the maps already there that are complete and valid for their log, mode and "
@@ -72,7 +84,7 @@ from aogm_cli.io.outputs import resolve_outputs
 @threads_option
 def compare(inputs, modes_text, detector, params_file, forward_model, json_out, csv_out, figure_out, maps_dir, from_json, requires,
             require_checks, jobs, scheduler, resume, holdout, robot_radius, calibrate, seed, quiet, max_memory=16e9,
-            max_work=None, threads=None):
+            max_work=None, threads=None, summary_only=False, baseline=None, tolerance=None, markdown_out=None):
     """Map every log in every mode, evaluate each map against the log's truth, and print a table
     (accuracy, occupied F1, Brier, ECE, checks passed, leak, block, surface recall, runtime, runtime
     relative to the standard map of the same log; every metric is defined in docs/comparing.md). em and adaptive learn their forward model from each log (--calibrate,
@@ -124,6 +136,34 @@ def compare(inputs, modes_text, detector, params_file, forward_model, json_out, 
                            with --holdout: holdout_auc, holdout_auc_band, holdout_loglik,
                            holdout_readings, holdout_scans
       --require-checks M   every check of every log passes in mode M
+      aggregates           mean, sd, ci_low, ci_high, min, max, median of an expression
+                           per log, evaluated once over the logs of the run, e.g.
+                           "mean(adaptive.accuracy - em.accuracy) >= 0",
+                           "min(em.checks_passed) == 1", "median(adaptive.runtime_ratio) <= 60"
+                           (runtime_ratio: runtime over the same log's standard map); every
+                           name of such a gate inside an aggregate, every log must have it
+
+    \b
+    Summary, printed after the per-log tables (--summary-only: alone), in --json ("summary"),
+    --csv (rows with a "statistic" column) and --markdown: per world (its logs at several
+    seeds) and over all logs, for each mode and metric the count, mean, standard deviation and
+    the 95% confidence interval of the mean (Student t: mean +- t(0.975, n-1) sd/sqrt(n));
+    for each pair of modes the paired difference on the logs both have (the later mode minus
+    the earlier: em - standard, adaptive - standard, adaptive - em), its interval, and on how
+    many logs the first is better, equal or worse (wins/ties/losses); runtime as the ratio to
+    the same log's standard map.
+
+    \b
+    Baseline (--baseline OLD.json [--tolerance METRIC=X,...]): every log, mode and metric in
+    both this run and OLD.json (an earlier --json) is compared; logs are matched by file name
+    and content (a log whose data changed is named as changed and not compared); a metric
+    worse by more than its tolerance is a regression, better by more an improvement; each
+    world's means over its matched logs are compared alike. Default tolerances: accuracy
+    0.005, brier 0.005, ece 0.01, occupied_precision/recall/f1 0.02, checks_passed 0 (no check
+    may be lost), leak 0.01, block 0.01, surface_recall 0.02, walls_kept 0.01,
+    leak_vs_standard 0.01, far_leak 0.005, holdout_auc(_band) 0.005, holdout_loglik 0.01,
+    runtime 1.25 (a factor on the ratio to the same run's standard map, so a slower machine
+    is not a regression). Exit 1 on a regression, after the outputs are written.
 
     \b
     CSV (--csv): one row per log and mode, always these columns in this order, empty where a
@@ -170,13 +210,16 @@ def compare(inputs, modes_text, detector, params_file, forward_model, json_out, 
       aogm compare maps/door_standard.h5 maps/door_em.h5 --require-checks em
       aogm compare door.h5 --holdout 0.1 --require "em.holdout_loglik >= standard.holdout_loglik"
       aogm compare --from-json door.json hall.json --csv all.csv --require-checks em
+      aogm compare logs/*.h5 --summary-only --require "ci_low(adaptive.accuracy - em.accuracy) > -0.002"
+      aogm compare logs/*.h5 --json new.json --baseline old.json --markdown report.md
     """
     from aogm_cli.report.gates import parse_gate
 
     gates = [parse_gate(text) for text in requires]  # malformed -> exit 2 before any work
+    against = _Against.read(baseline, tolerance, markdown_out, summary_only)
     if from_json:
         _refuse_mapping_options(click.get_current_context())
-        _compare_results_files(list(inputs), gates, require_checks, json_out, csv_out, quiet)
+        _compare_results_files(list(inputs), gates, require_checks, json_out, csv_out, quiet, against)
         return
 
     from aogm_cli.evaluation.holdout import HoldoutSplit
@@ -196,9 +239,9 @@ def compare(inputs, modes_text, detector, params_file, forward_model, json_out, 
     modes = lib.parse_modes(modes_text) if modes_text else lib.default_modes(entries)
     _check_gates(gates, require_checks, modes, split is not None)
     resumed = _resume(entries, modes, maps_dir, job, resume, quiet)
-    outputs = [("--json", json_out), ("--csv", csv_out), ("--figure", figure_out)]
-    read = _check_outputs(inputs, entries, modes, (params_file, detector_file(detector, modes), forward_model), outputs,
-                          maps_dir)
+    outputs = [("--json", json_out), ("--csv", csv_out), ("--figure", figure_out), ("--markdown", markdown_out)]
+    read = _check_outputs(inputs, entries, modes, (params_file, detector_file(detector, modes), forward_model, baseline),
+                          outputs, maps_dir)
     record = provenance(read)  # the inputs as read, the time the run starts
     _check_budget(entries, modes, job, params_file)
     _warn_learned_over(entries, modes, job, params_file)
@@ -210,15 +253,18 @@ def compare(inputs, modes_text, detector, params_file, forward_model, json_out, 
         click.echo(f"aogm: note: {path} was made with other {', '.join(differs)} parameters than "
                    "this comparison's; it is reported as it is", err=True)
     labels = log_labels(entries)
-    print_table(results, labels, quiet)
-    files = lib.output_files(results, record, json_out, csv_out)
+    analysis, gated = against.analyse(results, gates, require_checks, labels)  # bad aggregates: exit 2, no output
+    if not summary_only:
+        print_table(results, labels, quiet)
+    against.show(analysis, quiet)
+    files = lib.output_files(results, record, json_out, csv_out, analysis=analysis)
     if figure_out:
         from aogm_cli.report.figure import comparison_figure_png
 
         files.append((Path(figure_out), comparison_figure_png(entries, results, labels, radius)))
-    _commit_outputs(files, maps_dir, [json_out, csv_out, figure_out], quiet)
-    gate_failed = _report_gates(gates, require_checks, results, labels, exit_now=not failures)
-    report_failures(failures, lambda key: f"{key[0]} ({key[1]})", gate_failed)
+    _commit_outputs(files, maps_dir, [json_out, csv_out, figure_out, markdown_out], quiet)
+    failed = _report_gates(gated, analysis, exit_now=not failures)
+    report_failures(failures, lambda key: f"{key[0]} ({key[1]})", failed)
 
 
 def _threads(threads: int | None, jobs: int) -> int | None:
@@ -340,7 +386,7 @@ def _check_gates(gates, require_checks, modes, holdout: bool) -> None:
             raise InputError(f"mode {mode!r} is not among the modes compared ({', '.join(modes)})", key="--require-checks")
 
 
-def _compare_results_files(paths, gates, require_checks, json_out, csv_out, quiet) -> None:
+def _compare_results_files(paths, gates, require_checks, json_out, csv_out, quiet, against: _Against) -> None:
     """--from-json: merge the results of the --json files ``paths``, print, write and gate them."""
     from aogm_cli.io.provenance import provenance
     from aogm_cli.io.results import merge_results_files
@@ -350,12 +396,59 @@ def _compare_results_files(paths, gates, require_checks, json_out, csv_out, quie
     record = provenance(paths)  # the files as read, the time the run starts
     merged = merge_results_files(paths)
     _check_gates(gates, require_checks, merged.modes, merged.holdout is not None)
-    resolve_outputs(paths, [("--json", json_out), ("--csv", csv_out)])
+    resolve_outputs([*paths, *([against.baseline] if against.baseline else [])],
+                    [("--json", json_out), ("--csv", csv_out), ("--markdown", against.markdown_out)])
     labels = result_labels(merged.results)
-    print_table(merged.results, labels, quiet)
-    _commit_outputs(output_files(merged.results, record, json_out, csv_out, merged.holdout), None, [json_out, csv_out],
-                    quiet)
-    _report_gates(gates, require_checks, merged.results, labels)
+    analysis, gated = against.analyse(merged.results, gates, require_checks, labels)
+    if not against.summary_only:
+        print_table(merged.results, labels, quiet)
+    against.show(analysis, quiet)
+    files = output_files(merged.results, record, json_out, csv_out, merged.holdout, analysis)
+    _commit_outputs(files, None, [json_out, csv_out, against.markdown_out], quiet)
+    _report_gates(gated, analysis)
+
+
+@dataclass(frozen=True)
+class _Against:
+    """What a comparison is held against besides its gates: the --baseline file's results (read before any work,
+    so a bad one exits 2 first) and its tolerances; and where its conclusions go (--markdown, --summary-only)."""
+
+    baseline: str | None
+    old: list | None
+    tolerances: dict
+    markdown_out: str | None
+    summary_only: bool
+
+    @classmethod
+    def read(cls, baseline: str | None, tolerance: str | None, markdown_out: str | None, summary_only: bool) -> _Against:
+        from aogm_cli.core.errors import InputError
+        from aogm_cli.io.results import read_results_file
+        from aogm_cli.report.baseline import parse_tolerances
+
+        if tolerance is not None and baseline is None:
+            raise InputError("is given without --baseline; expected --baseline OLD.json beside it", key="--tolerance")
+        tolerances = parse_tolerances(tolerance)
+        old = read_results_file(baseline)[0] if baseline else None
+        return cls(baseline, old, tolerances, markdown_out, summary_only)
+
+    def analyse(self, results, gates, require_checks, labels):
+        """(the ``report.compare.Analysis`` of ``results``, the gates evaluated: (count, failures)); InputError
+        (exit 2) from an aggregate that cannot be computed, before anything is written."""
+        from aogm_cli.report.baseline import compare_to_baseline
+        from aogm_cli.report.compare import Analysis
+        from aogm_cli.report.gates import evaluate_comparison_gates
+        from aogm_cli.report.summary import summarize
+
+        found = None if self.old is None else compare_to_baseline(results, self.old, self.baseline, self.tolerances)
+        gated = evaluate_comparison_gates(gates, require_checks, results, labels)
+        return Analysis(summarize(results), found, self.markdown_out), gated
+
+    def show(self, analysis, quiet: bool) -> None:
+        from aogm_cli.report.summary_table import print_baseline, print_summary
+
+        print_summary(analysis.summary, quiet)
+        if analysis.baseline is not None:
+            print_baseline(analysis.baseline)
 
 
 def _commit_outputs(files: list[tuple[Path, bytes]], maps_dir: str | None, written: list[str | None],
@@ -381,18 +474,20 @@ def _commit_outputs(files: list[tuple[Path, bytes]], maps_dir: str | None, writt
                 click.echo(f"wrote {path}", err=True)
 
 
-def _report_gates(gates, require_checks, results, labels, exit_now: bool = True) -> bool:
-    """Evaluate --require and --require-checks per log, print each failure and the count; exit 1
-    when one fails (``exit_now``), else leave the exit to the failed tasks' report."""
-    from aogm_cli.report.gates import evaluate_comparison_gates
-
-    total, failures = evaluate_comparison_gates(gates, require_checks, results, labels)
+def _report_gates(gated, analysis, exit_now: bool = True) -> bool:
+    """Print each failed gate of ``gated`` ((count, failures) of --require and --require-checks) and the count, and
+    the baseline's regressions' count; exit 1 when a gate failed or a value regressed (``exit_now``), else leave the
+    exit to the failed tasks' report."""
+    total, failures = gated
     for failure in failures:
         click.echo(str(failure))
     if total:
         click.echo(f"gates: {total - len(failures)} of {total} passed")
     if failures:
         click.echo(f"aogm: {len(failures)} of {total} gates failed", err=True)
-        if exit_now:
-            click.get_current_context().exit(1)
-    return bool(failures)
+    regressions = 0 if analysis.baseline is None else len(analysis.baseline.regressions)
+    if regressions:
+        click.echo(f"aogm: {regressions} regressions against the baseline {analysis.baseline.baseline}", err=True)
+    if (failures or regressions) and exit_now:
+        click.get_current_context().exit(1)
+    return bool(failures or regressions)

@@ -38,6 +38,20 @@ def file_sha256(path: str | Path) -> str | None:
     return digest.hexdigest()
 
 
+def content_sha256(path: str | Path) -> str:
+    """The sha256 of an HDF5 file's data: every dataset's name, dtype, shape and bytes, in name order. The same for
+    the same data whatever the attributes (a log simulated again with the same seed has another provenance)."""
+    digest = hashlib.sha256()
+    with h5py.File(path, "r") as f:
+        names: list[str] = []
+        f.visititems(lambda name, obj: names.append(name) if isinstance(obj, h5py.Dataset) else None)
+        for name in sorted(names):
+            data = f[name][()]
+            digest.update(f"{name}|{getattr(data, 'dtype', '')}|{getattr(data, 'shape', '')}|".encode())
+            digest.update(data.tobytes() if hasattr(data, "tobytes") else repr(data).encode())
+    return digest.hexdigest()
+
+
 def provenance(inputs, argv: list[str] | None = None, hashed: dict | None = None) -> dict:
     """What makes an output from ``inputs`` (paths; None entries are skipped, a folder stands for
     the files in it) by the command line ``argv`` (default ``sys.argv``, as run): a JSON-able dict

@@ -52,6 +52,7 @@ class ModeResult:
     calibration: dict | None = None  # the map's stats["calibration"]: the forward model it learned
     results_file: str | None = None  # the --json file it was read back from
     planner: dict | None = None  # ``core.scores.PLANNER_KEYS`` -> value (NaN: nothing to measure)
+    log_content: str | None = None  # ``io.provenance.content_sha256`` of the log: what --baseline matches logs by
 
     @property
     def truth(self) -> bool:
@@ -86,7 +87,8 @@ def consistency_json(consistency: dict | None) -> dict | None:
     return {k: _finite(float(v)) if isinstance(v, float) else v for k, v in consistency.items()}
 
 
-def results_json(results: list[ModeResult], holdout: dict | None = None, provenance: dict | None = None) -> dict:
+def results_json(results: list[ModeResult], holdout: dict | None = None, provenance: dict | None = None,
+                 extra: dict | None = None) -> dict:
     """``{"aogm_version", "results": [{log, world, mode, runtime_s, metrics}]}`` as in CONTRACT.md,
     plus ``format`` ("aogm-compare") and ``format_version`` (1) for reading it back
     (``read_results_file``), and ``provenance`` when given. Each result also has ``truth``
@@ -111,6 +113,8 @@ def results_json(results: list[ModeResult], holdout: dict | None = None, provena
                 "calibration": r.calibration}
         if r.consistency is not None:
             item["consistency"] = consistency_json(r.consistency)
+        if r.log_content is not None:
+            item["log_content"] = r.log_content
         out.append(item)
     doc = {"format": RESULTS_FORMAT, "format_version": RESULTS_FORMAT_VERSION, "aogm_version": __version__,
            "results": out}
@@ -118,12 +122,15 @@ def results_json(results: list[ModeResult], holdout: dict | None = None, provena
         doc["holdout"] = holdout
     if provenance is not None:
         doc["provenance"] = provenance
+    doc.update(extra or {})  # the summary over the logs, the baseline's findings
     return doc
 
 
-def json_bytes(results: list[ModeResult], holdout: dict | None = None, provenance: dict | None = None) -> bytes:
+def json_bytes(results: list[ModeResult], holdout: dict | None = None, provenance: dict | None = None,
+               extra: dict | None = None) -> bytes:
     """``results_json`` as the bytes of ``--json`` (committed with the command's other outputs)."""
-    return (json.dumps(results_json(results, holdout, provenance), indent=2, allow_nan=False) + "\n").encode("utf-8")
+    doc = results_json(results, holdout, provenance, extra)
+    return (json.dumps(doc, indent=2, allow_nan=False) + "\n").encode("utf-8")
 
 
 # --- results read back from --json files ---------------------------------------------------------
@@ -297,9 +304,11 @@ class _ResultsReader:
         # (and those written before far_leak lack far_leak alone)
         found = {k: get(metrics, k, f"{where}.metrics", _number_or_null, "a number or null")
                  for k in (TRUTH_KEYS if truth else STANDARD_KEYS) if k in (metrics or {})}
+        content = get(item, "log_content", where, lambda v: isinstance(v, str), "a sha256 (hex)", required=False)
         return ModeResult(log, world, mode, _nan(runtime), truth_metrics, None, consistency=consistency,
                           detector=detector, holdout=scores, params=params, calibration=calibration,
-                          results_file=self.path, planner={k: _nan(v) for k, v in found.items()} or None)
+                          results_file=self.path, planner={k: _nan(v) for k, v in found.items()} or None,
+                          log_content=content)
 
     def truth_metrics(self, metrics: dict, where: str) -> dict:
         out = {k: _nan(self.get(metrics, k, where, _number_or_null, "a number or null",

@@ -23,10 +23,12 @@ from aogm_cli.io.logfile import LogReader
 from aogm_cli.io.mapfile import FORMAT as MAP_FORMAT
 from aogm_cli.io.mapfile import FORMAT_VERSION as MAP_FORMAT_VERSION
 from aogm_cli.io.mapfile import is_map_file, map_bytes, read_map_file, read_map_header
-from aogm_cli.io.provenance import file_sha256, read_provenance
+from aogm_cli.io.provenance import content_sha256, file_sha256, read_provenance
 from aogm_cli.io.results import ModeResult, json_bytes
 from aogm_cli.mapping.params import MapParams
+from aogm_cli.report.baseline import BaselineReport
 from aogm_cli.report.scoring import CompareJob, ScoredLog, map_and_score, map_and_score_calibrated_once, score_map
+from aogm_cli.report.summary import Summary
 from aogm_cli.report.table import csv_bytes
 
 
@@ -224,6 +226,9 @@ def run_comparison(entries: list[LogEntry], modes: tuple[str, ...], job: Compare
                 if (i, mode) in targets:
                     result.map_file = str(targets[(i, mode)])
                 results.append(result)
+    contents = {e.path: content_sha256(e.path) for e in entries if Path(e.path).is_file()}
+    for r in results:
+        r.log_content = contents.get(r.log)
     order = {key: n for n, key in enumerate(tasks)}
     failures = [Failure((entries[f.key[0]].path, f.key[1]), f.message, f.bad_input)
                 for f in sorted(failed, key=lambda f: order[f.key])]
@@ -338,17 +343,40 @@ def maps_dir_outputs(results: list[ModeResult], provenance: dict | None = None) 
 
 
 def output_files(results: list[ModeResult], provenance: dict | None, json_out: str | None = None,
-                 csv_out: str | None = None, holdout: dict | None = None) -> list[tuple[Path, bytes]]:
+                 csv_out: str | None = None, holdout: dict | None = None,
+                 analysis: Analysis | None = None) -> list[tuple[Path, bytes]]:
     """(path, bytes) of the files a comparison writes but its figure, to commit together: the
     --maps-dir maps made here, the --json results file (``holdout``: the object merged results
-    share, see ``holdout_object``) and the --csv table. The maps and the JSON record the
+    share, see ``holdout_object``), the --csv table and the --markdown page; ``analysis``: the summary
+    over the logs and the baseline's findings they hold. The maps and the JSON record the
     ``provenance``; the CSV stays a plain table."""
+    from aogm_cli.report.summary_table import csv_rows, markdown
+
     files = maps_dir_outputs(results, provenance)
+    extra = {} if analysis is None else analysis.json()
     if json_out:
-        files.append((Path(json_out), json_bytes(results, holdout_object(results, holdout), provenance)))
+        files.append((Path(json_out), json_bytes(results, holdout_object(results, holdout), provenance, extra)))
     if csv_out:
-        files.append((Path(csv_out), csv_bytes(results)))
+        files.append((Path(csv_out), csv_bytes(results, None if analysis is None else csv_rows(analysis.summary))))
+    if analysis is not None and analysis.markdown_out:
+        files.append((Path(analysis.markdown_out), markdown(analysis.summary, analysis.baseline).encode("utf-8")))
     return files
+
+
+@dataclasses.dataclass(frozen=True)
+class Analysis:
+    """What a comparison concludes over its logs: the ``report.summary.Summary``, the baseline's findings
+    (``report.baseline.BaselineReport``, None without --baseline), and where --markdown writes them."""
+
+    summary: Summary
+    baseline: BaselineReport | None = None
+    markdown_out: str | None = None
+
+    def json(self) -> dict:
+        out = {"summary": self.summary.as_dict()}
+        if self.baseline is not None:
+            out["baseline"] = self.baseline.as_dict()
+        return out
 
 
 def given_maps_differences(results: list[ModeResult], params: MapParams, resumed: set[str]) -> list[tuple[str, list[str]]]:

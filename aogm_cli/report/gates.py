@@ -1,26 +1,30 @@
 """Quality gates of ``aogm compare``: ``--require`` expressions over ``mode.metric`` names, read by a
-tiny parser (no eval: numbers, names, + - * /, parentheses and exactly one comparison); each gate is
-evaluated per log, and a failure reads with the numbers substituted."""
+tiny parser (no eval: numbers, names, + - * /, parentheses, aggregates such as ``mean(...)`` and exactly one
+comparison); a gate is evaluated per log, or once over every log when it aggregates, and a failure reads with
+the numbers substituted."""
 
 from __future__ import annotations
 
 import math
 import re
+import statistics
 from collections.abc import Mapping
 from dataclasses import dataclass
 
 from aogm_cli.core.errors import InputError
 from aogm_cli.core.occupancy_map import MODES
-from aogm_cli.core.scores import METRIC_KEYS, PLANNER_KEYS, SCORE_KEYS, STANDARD_KEYS, TRUTH_KEYS
+from aogm_cli.core.scores import SCORE_KEYS, STANDARD_KEYS, TRUTH_KEYS
 from aogm_cli.io.results import ModeResult
-from aogm_cli.report.table import checks_passed
+from aogm_cli.report import summary
 
 # metric names of a gate -> what they mean; runtime is runtime_s, checks_passed a fraction; what a
 # planner sees (``evaluation.planner``: leak, block, surface_recall with truth, walls_kept,
 # leak_vs_standard and far_leak without); the held-out scores (``evaluation.holdout``) exist only with --holdout
 HOLDOUT_METRICS = SCORE_KEYS
-METRICS = ("accuracy", "occupied_precision", "occupied_recall", "occupied_f1", "brier", "ece", "runtime", "checks_passed",
-           *TRUTH_KEYS, *STANDARD_KEYS, *HOLDOUT_METRICS)
+METRICS = ("accuracy", "occupied_precision", "occupied_recall", "occupied_f1", "brier", "ece", "runtime",
+           summary.RUNTIME_RATIO, "checks_passed", *TRUTH_KEYS, *STANDARD_KEYS, *HOLDOUT_METRICS)
+# aggregates over the logs of a run: FUNCTION(expression of mode.metric names), the expression evaluated per log
+AGGREGATES = ("mean", "sd", "ci_low", "ci_high", "min", "max", "median")
 COMPARISONS = ("<=", ">=", "==", "!=", "<", ">")
 OPTION = "--require"
 MAX_LENGTH = 500  # characters of one expression
@@ -44,12 +48,14 @@ class Token:
 
 
 # Expression nodes: ("num", value) | ("name", (mode, metric)) | ("neg", node) | (op, left, right)
+# | ("agg", function, inner node, (start, end) of the aggregate's text)
 Node = tuple
 
 
 @dataclass(frozen=True)
 class GateOutcome:
-    """The result of one gate on one log: passed, and the expression with numbers substituted."""
+    """The result of one gate on one log (or over the logs, when it aggregates): passed, and the expression
+    with numbers substituted."""
 
     passed: bool
     substituted: str
@@ -60,7 +66,8 @@ class GateOutcome:
 
 @dataclass(frozen=True)
 class Gate:
-    """A parsed ``--require`` expression: ``left OP right``."""
+    """A parsed ``--require`` expression: ``left OP right``; ``aggregates``: the spans of its aggregates (none:
+    a gate per log; some: one gate over every log, each name inside an aggregate)."""
 
     text: str
     left: Node
@@ -68,10 +75,16 @@ class Gate:
     right: Node
     names: tuple[tuple[str, str], ...]  # (mode, metric) in order of appearance, with the token spans
     spans: tuple[tuple[int, int], ...]
+    aggregates: tuple[tuple[int, int], ...] = ()
 
     @property
     def modes(self) -> set[str]:
         return {mode for mode, _ in self.names}
+
+    @property
+    def over_logs(self) -> bool:
+        """Whether the gate aggregates over the logs of the run (evaluated once, by ``evaluate_over``)."""
+        return bool(self.aggregates)
 
     def evaluate(self, values: Mapping[tuple[str, str], float | None]) -> GateOutcome:
         """Evaluate on one log; ``values[(mode, metric)]`` is None when unavailable (no truth)."""
@@ -79,9 +92,23 @@ class Gate:
         missing = [f"{m}.{k}" for m, k in self.names if values.get((m, k)) is None]
         if missing:
             return GateOutcome(False, substituted, math.nan, math.nan, f"{', '.join(dict.fromkeys(missing))} not available")
+        return self._outcome(self.left, self.right, values, substituted)
+
+    def evaluate_over(self, logs: list[tuple[str, Mapping[tuple[str, str], float | None]]]) -> GateOutcome:
+        """Evaluate an aggregating gate once over ``logs`` ((label, values) each). InputError (exit 2) when there
+        is no log, when a log lacks a value an aggregate names, or when an aggregate needs more logs."""
+        found: dict[tuple[int, int], float] = {}
+        left, right = _resolved(self.left, logs, self.text, found), _resolved(self.right, logs, self.text, found)
+        out, last = [], 0
+        for start, end in self.aggregates:
+            out += [self.text[last:start], format_number(found[(start, end)])]
+            last = end
+        return self._outcome(left, right, {}, "".join([*out, self.text[last:]]).strip())
+
+    def _outcome(self, left_node: Node, right_node: Node, values, substituted: str) -> GateOutcome:
         try:
-            left = _value(self.left, values)
-            right = _value(self.right, values)
+            left = _value(left_node, values)
+            right = _value(right_node, values)
         except ZeroDivisionError:
             return GateOutcome(False, substituted, math.nan, math.nan, "division by zero")
         if math.isnan(left) or math.isnan(right):
@@ -104,9 +131,56 @@ class Gate:
         detail = outcome.substituted
         if outcome.reason:
             detail += f"; {outcome.reason}"
-        elif self.left[0] not in ("num", "name") or self.right[0] not in ("num", "name"):
+        elif self.left[0] not in ("num", "name", "agg") or self.right[0] not in ("num", "name", "agg"):
             detail += f"; {format_number(outcome.left)} {self.op} {format_number(outcome.right)}"
         return f"{self.text.strip()}  ({detail})"
+
+
+def _names_in(node: Node) -> list[tuple[str, str]]:
+    if node[0] == "num":
+        return []
+    if node[0] == "name":
+        return [node[1]]
+    return [n for child in node[1:] if isinstance(child, tuple) and child and isinstance(child[0], str)
+            for n in _names_in(child)]
+
+
+def _aggregate(node: Node, logs, text: str) -> float:
+    """The value of one aggregate node over ``logs``; InputError (exit 2) when it cannot be computed."""
+    function, inner, (start, end) = node[1], node[2], node[3]
+    shown = text[start:end]
+    if not logs:
+        raise _error(text, f"{shown}: no log to aggregate over; expected at least one")
+    xs = []
+    for label, values in logs:
+        missing = [f"{m}.{k}" for m, k in _names_in(inner) if not summary.known(values.get((m, k)))]
+        if missing:
+            raise _error(text, f"{shown}: the log {label} has no {', '.join(dict.fromkeys(missing))}; expected every "
+                               "log of the run to have it (leave that log out, or gate per log)")
+        try:
+            xs.append(_value(inner, values))
+        except ZeroDivisionError:
+            raise _error(text, f"{shown}: division by zero on the log {label}") from None
+    if function in ("sd", "ci_low", "ci_high") and len(xs) < 2:
+        raise _error(text, f"{shown}: {len(xs)} log; expected at least two for {function}")
+    if function in ("min", "max"):
+        return min(xs) if function == "min" else max(xs)
+    if function == "median":
+        return float(statistics.median(xs))
+    return getattr(summary.estimate(xs), function)
+
+
+def _resolved(node: Node, logs, text: str, found: dict) -> Node:
+    """``node`` with each aggregate replaced by its value over ``logs`` (recorded in ``found`` by its span)."""
+    kind = node[0]
+    if kind == "agg":
+        found[node[3]] = _aggregate(node, logs, text)
+        return ("num", found[node[3]])
+    if kind in ("num", "name"):
+        return node
+    if kind == "neg":
+        return ("neg", _resolved(node[1], logs, text, found))
+    return (kind, _resolved(node[1], logs, text, found), _resolved(node[2], logs, text, found))
 
 
 def format_number(v: float) -> str:
@@ -161,7 +235,8 @@ def _error(text: str, message: str) -> InputError:
 
 class _Parser:
     """Recursive descent: gate := expr CMP expr; expr := term (+|- term)*; term := factor (*|/ factor)*;
-    factor := (+|-) factor | number | mode.metric | ( expr )."""
+    factor := (+|-) factor | number | mode.metric | ( expr ) | AGGREGATE ( expr ); a gate with an aggregate has
+    every name inside one, and aggregates do not nest."""
 
     def __init__(self, text: str):
         self.text = text
@@ -170,6 +245,9 @@ class _Parser:
         self.depth = 0
         self.names: list[tuple[str, str]] = []
         self.spans: list[tuple[int, int]] = []
+        self.aggregates: list[tuple[int, int]] = []
+        self.inside = False  # parsing an aggregate's expression
+        self.outside: list[str] = []  # names met outside any aggregate
 
     def peek(self) -> Token:
         return self.tokens[self.i]
@@ -194,7 +272,10 @@ class _Parser:
             raise _error(self.text, "expected exactly one comparison, found a second one")
         if end.kind != "end":
             raise self.unexpected(end, "an operator or the end")
-        return Gate(self.text, left, tok.text, right, tuple(self.names), tuple(self.spans))
+        if self.aggregates and self.outside:
+            raise _error(self.text, f"{self.outside[0]} is outside an aggregate in a gate that aggregates; expected "
+                                    f"every name inside one of {', '.join(AGGREGATES)}, e.g. mean(em.accuracy)")
+        return Gate(self.text, left, tok.text, right, tuple(self.names), tuple(self.spans), tuple(self.aggregates))
 
     def expr(self) -> Node:
         node = self.term()
@@ -226,10 +307,14 @@ class _Parser:
             return inner if tok.text == "+" else ("neg", inner)
         if tok.kind == "number":
             return ("num", float(tok.text))
+        if tok.kind == "name" and tok.text in AGGREGATES and self.peek().text == "(":
+            return self.aggregate(tok)
         if tok.kind == "name":
             name = self.name(tok)
             self.names.append(name)
             self.spans.append((tok.start, tok.end))
+            if not self.inside:
+                self.outside.append(tok.text)
             return ("name", name)
         if tok.kind == "op" and tok.text == "(":
             node = self.expr()
@@ -239,10 +324,25 @@ class _Parser:
             return node
         raise self.unexpected(tok, "a number, a name such as em.accuracy, or '('")
 
+    def aggregate(self, tok: Token) -> Node:
+        """``FUNCTION ( expr )`` after its name ``tok``: an aggregate over the logs of the run."""
+        if self.inside:
+            raise _error(self.text, f"{tok.text}( inside another aggregate; expected aggregates that do not nest")
+        self.take()  # "("
+        self.inside = True
+        inner = self.expr()
+        self.inside = False
+        close = self.take()
+        if close.kind != "op" or close.text != ")":
+            raise self.unexpected(close, "')'")
+        self.aggregates.append((tok.start, close.end))
+        return ("agg", tok.text, inner, (tok.start, close.end))
+
     def name(self, tok: Token) -> tuple[str, str]:
         parts = tok.text.split(".")
         if len(parts) != 2:
-            raise _error(self.text, f"unknown name {tok.text!r}; expected MODE.METRIC, e.g. em.accuracy")
+            raise _error(self.text, f"unknown name {tok.text!r}; expected MODE.METRIC, e.g. em.accuracy, or an "
+                                    f"aggregate ({', '.join(AGGREGATES)}) of them")
         mode, metric = parts
         if mode not in MODES:
             raise _error(self.text, f"unknown mode {mode!r} in {tok.text!r}; expected one of {', '.join(MODES)}")
@@ -287,17 +387,29 @@ class GateFailure:
         return f"FAILED {self.log_label}: {self.message}"
 
 
+ALL_LOGS = "all logs"  # the label of a failed gate that aggregates over the logs
+
+
 def evaluate_gates(
     gates: list[Gate], logs: list[tuple[str, Mapping[tuple[str, str], float | None]]]
 ) -> tuple[int, list[GateFailure]]:
-    """Evaluate every gate on every log ``(label, values)``: (number evaluated, failures)."""
+    """Evaluate every gate per log ``(label, values)``, or once over them when it aggregates: (number evaluated,
+    failures)."""
     failures, count = [], 0
     for label, values in logs:
         for gate in gates:
+            if gate.over_logs:
+                continue
             count += 1
             outcome = gate.evaluate(values)
             if not outcome.passed:
                 failures.append(GateFailure(label, gate.describe_failure(outcome)))
+    for gate in gates:
+        if gate.over_logs:
+            count += 1
+            outcome = gate.evaluate_over(logs)
+            if not outcome.passed:
+                failures.append(GateFailure(ALL_LOGS, gate.describe_failure(outcome)))
     return count, failures
 
 
@@ -321,26 +433,9 @@ def evaluate_required_checks(
     return count, failures
 
 
-def metric_values(result: ModeResult) -> dict[str, float | None]:
-    """The values a gate can name for one (log, mode): metrics, runtime, checks_passed, what a
-    planner sees and the held-out scores (None when not computed)."""
-    values: dict[str, float | None] = {k: (result.metrics or {}).get(k) for k in METRIC_KEYS}
-    values["runtime"] = result.runtime_s
-    values["checks_passed"] = checks_passed(result.metrics)
-    values.update({k: (result.planner or {}).get(k) for k in PLANNER_KEYS})
-    for k in SCORE_KEYS:
-        values[k] = None if result.holdout is None else result.holdout[k]
-    return values
-
-
 def gate_values(results: list[ModeResult]) -> list[tuple[str, dict[tuple[str, str], float | None]]]:
-    """Per log (in order): (log path, {(mode, metric): value})."""
-    by_log: dict[str, dict[tuple[str, str], float | None]] = {}
-    for r in results:
-        values = by_log.setdefault(r.log, {})
-        for metric, v in metric_values(r).items():
-            values[(r.mode, metric)] = v
-    return list(by_log.items())
+    """Per log (in order): (log path, {(mode, metric): value}) (``summary.log_values``)."""
+    return list(summary.log_values(results).items())
 
 
 def evaluate_comparison_gates(gates: list[Gate], require_checks: list[str], results: list[ModeResult],

@@ -192,7 +192,7 @@ def csv_table(results: list[ModeResult]) -> tuple[list[str], list[dict]]:
                "learned_from_readings": calibration.get("readings_used")}
         row.update({f"check:{c['name']}": bool(c["passed"]) for c in (r.metrics or {}).get("checks", [])})
         rows.append(row)
-    return [*CSV_COLUMNS, *checks], rows
+    return [*CSV_COLUMNS, *checks, "statistic"], rows
 
 
 def csv_cell(value) -> str:
@@ -206,9 +206,11 @@ def csv_cell(value) -> str:
     return repr(value) if isinstance(value, float) else str(value)
 
 
-def csv_bytes(results: list[ModeResult]) -> bytes:
-    """``csv_table`` as the bytes of ``--csv`` (header line, then one line per log and mode)."""
+def csv_bytes(results: list[ModeResult], summary_rows: list[dict] | None = None) -> bytes:
+    """``csv_table`` as the bytes of ``--csv`` (header line, then one line per log and mode), then the summary's
+    rows (``report.summary_table.csv_rows``: their ``statistic`` column says what they hold)."""
     columns, rows = csv_table(results)
+    rows += summary_rows or []
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
     writer.writerow(columns)
