@@ -9,7 +9,6 @@ import pytest
 from click.testing import CliRunner
 
 from aogm_cli.cli import main
-from aogm_cli.core.errors import InputError
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.evaluation.planner import ROBOT_RADIUS, planner_metrics
 from aogm_cli.io.detectorfile import load_detector, save_detector
@@ -47,53 +46,29 @@ def test_no_flagged_reading_gives_the_standard_map(corridor_door_log, tmp_path):
     assert np.array_equal(adaptive.occupied, (standard.log_odds > 0) & standard.observed)
 
 
-def test_em_changes_nothing_outside_the_clusters(corridor_door_log):
-    """With Elfes' map outside the clusters and ``adaptive.scale: mixed``, the standard map's own
-    probabilities outside the clusters."""
-    params = resolve_params(overrides={"adaptive": {"outside": "elfes", "scale": "mixed"}, **UNDEFLECTED})
+def test_em_changes_nothing_outside_the_clusters_but_the_scale(corridor_door_log):
+    """With Elfes' map outside the clusters, the cells outside them (and the robot's footprint, cleared as EM's
+    map is) keep the standard map's occupancy, each its side of 0.5 and its order: only the scale (the hit
+    rates', ``view.one_scale``) moves them; EM reports the cells it cannot decide (and the standard map holds
+    free) unobserved, inside the clusters only."""
+    params = resolve_params(overrides={"adaptive": {"outside": "elfes"}, **UNDEFLECTED})
     adaptive = map_file(corridor_door_log, "adaptive", params)
     standard = map_file(corridor_door_log, "standard", params)
-    # outside the clusters and the robot's footprint (cleared, as EM's map is)
     with LogReader(corridor_door_log) as r:
         body = footprint(standard.grid, r.poses(), r.sensor)
+    inside = adaptive.clusters > 0
     outside = (adaptive.clusters == 0) & ~body
     assert adaptive.stats["clusters"] > 0
-    assert np.array_equal(adaptive.probability[outside], standard.probability[outside])
     assert np.array_equal(adaptive.occupied[outside], ((standard.log_odds > 0) & standard.observed)[outside])
-    # clusters lie in cells the standard map observed; EM reports the cells it cannot decide
-    # (and the standard map holds free) unobserved
-    inside = adaptive.clusters > 0
-    assert np.all(standard.observed[inside])
+    assert np.array_equal(adaptive.observed[outside], standard.observed[outside])
+    seen = outside & standard.observed
+    ours, theirs = adaptive.probability[seen], standard.probability[seen]
+    np.testing.assert_array_equal(np.sign(ours - 0.5), np.sign(theirs - 0.5))
+    assert np.all(np.diff(ours[np.argsort(theirs, kind="stable")]) >= 0) and not np.array_equal(ours, theirs)
+    assert np.all(standard.observed[inside])  # clusters lie in cells the standard map observed
     unseen = standard.observed & ~adaptive.observed
     assert unseen.any() and np.all(inside[unseen]) and np.all(standard.probability[unseen] <= 0.5)
     assert np.all(adaptive.observed[body]) and np.all(adaptive.probability[body] < 0.5)
-
-
-def test_one_scale_keeps_what_the_map_believes_and_the_order_outside(corridor_door_log):
-    """The default scale changes only the probabilities outside the clusters: every cell keeps
-    its side of 0.5 (and so accuracy, checks and what a planner sees), the cells inside keep
-    EM's residuals; with Elfes' map outside (the hit rates' scale) the cells outside keep their
-    order, with the thinned map (EM's residuals at the final map) they rank by their evidence."""
-    for outside_map in ("elfes", "thinned"):
-        mixed = map_file(corridor_door_log, "adaptive",
-                         resolve_params(overrides={"adaptive": {"outside": outside_map, "scale": "mixed"}}))
-        one = map_file(corridor_door_log, "adaptive", resolve_params(overrides={"adaptive": {"outside": outside_map}}))
-        assert one.params["adaptive"]["scale"] == "em" and mixed.params["adaptive"]["scale"] == "mixed"
-        assert np.array_equal(one.observed, mixed.observed) and np.array_equal(one.occupied, mixed.occupied)
-        np.testing.assert_array_equal(np.sign(one.probability - 0.5), np.sign(mixed.probability - 0.5))
-        inside = mixed.clusters > 0
-        np.testing.assert_array_equal(one.probability[inside], mixed.probability[inside])
-        outside = mixed.observed & ~inside
-        assert not np.array_equal(one.probability[outside], mixed.probability[outside])
-        if outside_map == "elfes":
-            order = np.argsort(mixed.probability[outside], kind="stable")
-            assert np.all(np.diff(one.probability[outside][order]) >= 0)
-
-
-def test_a_bad_scale_is_refused_naming_it():
-    with pytest.raises(InputError) as err:
-        resolve_params(overrides={"adaptive": {"scale": "standard"}})
-    assert err.value.key.endswith("scale")
 
 
 def test_pool_adjacent_violators_pools_what_does_not_rise():

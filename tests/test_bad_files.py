@@ -273,7 +273,6 @@ def test_a_bad_detector_is_refused(good, tmp_path, edit, key):
         ("adaptive: {contested: -1}", "adaptive.contested"),
         ("adaptive: {weak: .nan}", "adaptive.weak"),
         ("adaptive: {grow: 1.5}", "adaptive.grow"),
-        ("em: {hidden: sometimes}", "em.hidden"),
         ("resolution: .nan", "resolution"),
     ],
 )

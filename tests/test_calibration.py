@@ -127,29 +127,6 @@ def test_one_reading_one_obstacle_by_hand():
     assert out[F.E_EXAMINED] == pytest.approx(1.0 - 0.025 / p)  # one obstacle examined, detected or not
 
 
-@pytest.mark.parametrize("normal, heard", [((0.0, 1.0), True), ((1.0, 0.0), False)])
-def test_the_e_step_takes_the_heard_test(normal, heard):
-    """The reading of the test above with the obstacle given a surface normal and em.heard_incidence_deg 35:
-    facing the reading the obstacle is examined as before; along the reading's row (90 deg off its normal) it
-    is no obstacle of the reading, whose echo is then random or missed (``forward_model.with_surfaces``)."""
-    grid = GridSpec(0.0, 0.0, 0.1, 21, 41)
-    tpl = build_cone_templates(grid.resolution, math.radians(2), 4.0)
-    occupied = np.zeros(grid.height * grid.width, dtype=bool)
-    occupied[10 * grid.width + 15] = True
-    surfaces = np.full((2, grid.height * grid.width), np.nan, dtype=np.float32)
-    surfaces[:, 10 * grid.width + 15] = normal
-    readings = F.ExpectationReadings(np.array([10]), np.array([5]), tpl.heading_bin(np.zeros(1)), np.array([1.02]),
-                                     np.array([np.inf]))
-    assert F.with_surfaces(readings, surfaces, F.ForwardModelConfig()) is readings  # 90 by default: no test
-    readings = F.with_surfaces(readings, surfaces, F.ForwardModelConfig(heard_incidence_deg=35.0))
-    out = np.zeros(F.E_SIZE)
-    F.expectation_sums(tpl.kernel_arrays, flat_offsets(tpl, grid.width), grid.shape, readings, occupied,
-                       (0.1, 0.0, 0.5, 0.05, 4.0, 4.0), out)
-    assert (out[F.E_DETECTED] > 0) == heard
-    assert (out[F.E_EXAMINED] > 0) == heard
-    assert out[F.E_READINGS] == 1.0
-
-
 def test_m_step_is_the_closed_form_clipped_to_its_bounds():
     sums = np.zeros(F.E_SIZE)
     sums[[F.E_READINGS, F.E_RANDOM, F.E_DROPOUT, F.E_DETECTED, F.E_EXAMINED, F.E_SQUARED]] = [100, 8, 12, 60, 80, 60 * 0.07**2]

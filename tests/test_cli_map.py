@@ -96,14 +96,15 @@ def test_threads_below_one_exit_2(corridor_door_log, tmp_path):
 @pytest.mark.parametrize(
     "text, key", [("inverse_model: {l_ocq: 1}\n", "inverse_model.l_ocq"), ("em: {p_hit: 2}\n", "em.p_hit"), ("[1, 2\n", "p.yaml"),
                   ("exact: {thin: 1}\n", "exact.thin"), ("exact: {bound: 7}\n", "exact.bound"),
-                  # settings removed (docs/decisions/calibration.md), even at their old defaults
+                  # settings removed (docs/decisions/), even at their old defaults
                   ("em: {opening_deg: 0}\n", "em.opening_deg"), ("calibration: {rounds: 4}\n", "calibration.rounds"),
                   ("calibration: {tolerance: 0.02}\n", "calibration.tolerance"), ("exact: {prior: 0.1}\n", "exact.prior"),
                   ("surface: {enabled: true}\n", "surface.enabled"),
                   ("calibration: {learn: 'sigma,specular_deg'}\n", "calibration.learn"),
                   ("calibration: {learn: 'sigma,opening_deg'}\n", "calibration.learn"),
-                  ("em: {heard_incidence_deg: 0}\n", "em.heard_incidence_deg"),
-                  ("em: {heard_incidence_deg: 120}\n", "em.heard_incidence_deg")]
+                  ("em: {heard_incidence_deg: 35}\n", "em.heard_incidence_deg"), ("em: {start: empty}\n", "em.start"),
+                  ("em: {hidden: prior}\n", "em.hidden"), ("em: {window: 4}\n", "em.window"),
+                  ("adaptive: {scale: mixed}\n", "adaptive.scale")]
 )
 def test_bad_params_exit_2_without_output(corridor_door_log, tmp_path, text, key):
     params = tmp_path / "p.yaml"
@@ -208,21 +209,6 @@ def test_map_says_when_the_lobe_learned_replaces_a_configured_one(corridor_door_
     with h5py.File(tmp_path / "k.h5") as f, h5py.File(tmp_path / "m.h5") as learned:
         assert json.loads(f.attrs["learned"])["lobe_deg"] is None  # the configured lobe is the one used:
         assert not np.array_equal(f["map/probability"][...], learned["map/probability"][...])  # the log's is the cone
-
-
-def test_em_heard_incidence_changes_the_map_and_is_recorded(corridor_door_log, tmp_path):
-    """em.heard_incidence_deg below 90 takes the echoes' surfaces into EM's heard test: the map differs from the
-    default one, which tests nothing, and its parameters say so."""
-    params = tmp_path / "p.yaml"
-    params.write_text("em: {heard_incidence_deg: 35}\n")
-    for name, extra in (("d.h5", []), ("h.h5", ["--params", str(params)])):
-        r = CliRunner().invoke(main, ["map", str(corridor_door_log), "--mode", "em", "-o", str(tmp_path / name), "-q",
-                                      *extra])
-        assert r.exit_code == 0, r.output
-    with h5py.File(tmp_path / "h.h5") as f, h5py.File(tmp_path / "d.h5") as d:
-        assert json.loads(f.attrs["params"])["em"]["heard_incidence_deg"] == 35
-        assert json.loads(d.attrs["params"])["em"]["heard_incidence_deg"] == 90
-        assert not np.array_equal(f["map/probability"][...], d["map/probability"][...])
 
 
 LOBE_LEARNED = ("warning: em.lobe_deg is learned from the log (calibration.learn lists lobe_deg); take lobe_deg out of "

@@ -1,6 +1,5 @@
 """EM with forward models on hand-computable cases: obstacles where readings say, openings kept."""
 
-import dataclasses
 import math
 
 import numpy as np
@@ -15,7 +14,7 @@ from aogm_cli.sensor_models.forward_model import ForwardModelConfig
 
 GRID = GridSpec(0.0, 0.0, 0.1, 21, 41)
 FORWARD = ForwardModelConfig(sigma=0.05, p_rand=0.05, p_hit=0.4, p_max=0.0)
-CONFIG = EMConfig(forward=FORWARD, start="empty")
+CONFIG = EMConfig(forward=FORWARD)
 N_CELLS = GRID.height * GRID.width
 
 
@@ -139,7 +138,7 @@ def test_residual_from_the_last_sweep_equals_a_fresh_pass():
     assert result.flips[-1] == 0
     # a new problem set up under EM's map: its one sweep scores every candidate afresh, flips none
     fresh_problem, fresh_map, _ = problem_for(ranges, occupied.copy())
-    fresh = run_em(fresh_problem, fresh_map, result.candidates, EMConfig(forward=FORWARD, start="empty", max_sweeps=1))
+    fresh = run_em(fresh_problem, fresh_map, result.candidates, EMConfig(forward=FORWARD, max_sweeps=1))
     assert fresh.flips == [0] and np.array_equal(fresh_map, occupied)
     assert np.allclose(result.residual, fresh.residual, rtol=1e-9, atol=1e-12)
 
@@ -176,12 +175,11 @@ def test_leaving_out_cells_held_free_changes_no_likelihood():
         assert np.array_equal(log_likelihoods(full, m), log_likelihoods(small, m))
 
 
-def test_hidden_cells_keep_the_standard_estimate_only_when_asked():
-    """EM's residual at the candidates the data decides; a cell EM leaves free though occupancy
-    costs the data nothing (evidence 0, residual = the prior 0.3) or next to nothing keeps what
-    the probability held (the standard map's) with hidden: standard, gets the prior with
-    hidden: prior, and with hidden: unobserved (the default) keeps a standard estimate above 0.5
-    and is returned to be reported unobserved otherwise; one the data objects to never is."""
+def test_hidden_cells_are_reported_unobserved_unless_the_standard_map_holds_them():
+    """EM's residual at the candidates the data decides (occupied, or occupancy lowering the likelihood by over
+    ``view.HIDDEN_GAIN``); a cell EM leaves free though occupancy costs the data nothing (evidence 0, residual =
+    the prior 0.3) or next to nothing (0.01) keeps a standard estimate above 0.5 and is returned to be reported
+    unobserved otherwise; one the data objects to (evidence -3) is never hidden."""
     from aogm_cli.mapping.em import EMResult
     from aogm_cli.mapping.view import decided, residual_into
 
@@ -189,20 +187,11 @@ def test_hidden_cells_keep_the_standard_estimate_only_when_asked():
     logistic = lambda x: 1 / (1 + math.exp(-x))  # noqa: E731
     residual = np.array([prior, logistic(CONFIG.l_prior - 3.0), 0.9, logistic(CONFIG.l_prior - 0.01)])
     result = EMResult(1, [0], [0.0, 0.0], np.array([0, 1, 2, 3]), residual, [4], [0], 0, 0)
-    hidden = dataclasses.replace(CONFIG, hidden="standard")
-    assert decided(result, hidden).tolist() == [False, True, True, False]
-    probability = np.full(5, 0.8)
-    assert residual_into(probability, result, hidden).size == 0
-    np.testing.assert_allclose(probability, [0.8, residual[1], 0.9, 0.8, 0.8])
-    probability = np.full(5, 0.8)
-    assert residual_into(probability, result, dataclasses.replace(CONFIG, hidden="prior")).size == 0
-    np.testing.assert_allclose(probability, [*residual, 0.8])
-    assert EMConfig().hidden == "unobserved"
+    assert decided(result, CONFIG).tolist() == [False, True, True, False]
     probability = np.array([0.8, 0.8, 0.8, 0.4, 0.8])  # cell 3: hidden, the standard map has it free
-    unseen = residual_into(probability, result, dataclasses.replace(CONFIG, hidden="unobserved"))
+    unseen = residual_into(probability, result, CONFIG)
     assert unseen.tolist() == [3]
     np.testing.assert_allclose(probability, [0.8, residual[1], 0.9, 0.4, 0.8])
-
 
 
 def test_planner_view_reports_unseen_cells_unobserved_and_clears_the_footprint():
@@ -249,98 +238,9 @@ def test_a_flips_gain_is_the_change_of_the_readings_log_likelihood_by_hand(col, 
         assert result.objective[-1] - result.objective[0] == pytest.approx(gain + CONFIG.l_prior, rel=1e-9)
 
 
-@pytest.mark.parametrize("facing, heard", [((0.0, 1.0), True), ((1.0, 0.0), False)])
-def test_a_surface_met_beyond_the_heard_incidence_is_no_obstacle_of_the_reading(facing, heard):
-    """em.heard_incidence_deg 35: the reading of the test above (z = 1.0 m along its row, an obstacle held at
-    0.8 m) and the candidate cell at 0.3 m, given a surface normal. Facing the reading (incidence 0) the cell is
-    heard: its flip scales every term behind it by q, as without the test. Along the row (incidence 90 deg) the
-    reading has no obstacle there: the flip changes nothing but the prior, and EM's residual is the prior's."""
-    fixed, cell = 10 * GRID.width + 13, 10 * GRID.width + 8
-    occupied = np.zeros(N_CELLS, dtype=bool)
-    occupied[fixed] = True
-    config = dataclasses.replace(CONFIG, forward=dataclasses.replace(FORWARD, heard_incidence_deg=35.0))
-    normals = np.full((2, N_CELLS), np.nan, dtype=np.float32)
-    normals[:, cell] = facing
-    tpl, rows, cols, bins, z = readings_for([1.0], beam_deg=1.0)
-    rd = em_readings((rows, cols, bins, z), tpl, GRID, 4.0, config.forward)
-    problem = em_problem(rd, tpl, GRID.shape, occupied, config, surfaces=normals)
-    p_hit, q, w, sigma = 0.4, 0.6, 0.95, 0.05
-
-    def n(r):
-        return math.exp(-0.5 * ((1.0 - r) / sigma) ** 2) / (math.sqrt(2 * math.pi) * sigma)
-
-    const, g0 = 0.05 / 4.0, n(4.0)
-    before = p_hit * n(0.8) + q * g0
-    gain = math.log(const + w * q * before) - math.log(const + w * before) if heard else 0.0
-    assert math.isclose(problem.state.s[0], before, rel_tol=1e-12)  # the held obstacle faces no test: heard
-    result = run_em(problem, occupied, np.array([cell]), config)
-    assert result.residual[0] == pytest.approx(1.0 / (1.0 + math.exp(-(gain + CONFIG.l_prior))), rel=1e-9)
-    assert not occupied[cell]
-
-
-def test_a_far_surface_the_reading_does_not_hear_keeps_the_prior_after_a_flip_before_it():
-    """heard_incidence_deg 35, the reading of the tests above (z = 1.0 m, an obstacle held at 0.8 m) and two
-    candidates in its far run: A at 0.2 m, occupied at the start and heard, and B at 0.3 m, a surface met at 90 deg.
-    EM frees A (the echo explained again); the reading's far ratios move for every cell behind A but B, whose
-    flip still changes nothing but the prior: its residual is the prior's, and B held occupied and freed leaves the
-    reading's S as it was."""
-    fixed, a, b = (10 * GRID.width + c for c in (13, 7, 8))
-    normals = np.full((2, N_CELLS), np.nan, dtype=np.float32)
-    normals[:, b] = (1.0, 0.0)
-    config = dataclasses.replace(CONFIG, forward=dataclasses.replace(FORWARD, heard_incidence_deg=35.0))
-    tpl, rows, cols, bins, z = readings_for([1.0], beam_deg=1.0)
-    p_hit, q, w, sigma = 0.4, 0.6, 0.95, 0.05
-
-    def n(r):
-        return math.exp(-0.5 * ((1.0 - r) / sigma) ** 2) / (math.sqrt(2 * math.pi) * sigma)
-
-    const, before = 0.05 / 4.0, p_hit * n(0.8) + q * n(4.0)
-    occupied = np.zeros(N_CELLS, dtype=bool)
-    occupied[[fixed, a]] = True
-    problem = em_problem(em_readings((rows, cols, bins, z), tpl, GRID, 4.0, config.forward), tpl, GRID.shape,
-                         occupied, config, surfaces=normals)
-    # one sweep, its gains kept: B is scored after A's flip in the same tile, not in a fresh sweep
-    result = run_em(problem, occupied, np.array([a, b]), dataclasses.replace(config, max_sweeps=1), final=False)
-    freed = math.log(const + w * before) - math.log(const + w * q * before)
-    assert not occupied[a] and not occupied[b]
-    assert result.objective[-1] - result.objective[0] == pytest.approx(freed - CONFIG.l_prior, rel=1e-9)
-    assert result.residual[1] == pytest.approx(1.0 / (1.0 + math.exp(-CONFIG.l_prior)), rel=1e-12)
-
-    occupied = np.zeros(N_CELLS, dtype=bool)
-    occupied[[fixed, b]] = True
-    problem = em_problem(em_readings((rows, cols, bins, z), tpl, GRID, 4.0, config.forward), tpl, GRID.shape,
-                         occupied, config, surfaces=normals)
-    result = run_em(problem, occupied, np.array([b]), config)
-    assert not occupied[b]
-    assert result.objective[-1] - result.objective[0] == pytest.approx(-CONFIG.l_prior, rel=1e-12)
-    assert problem.state.s[0] == pytest.approx(before, rel=1e-12)
-
-
-def test_a_wall_met_obliquely_is_no_obstacle_and_the_default_tests_nothing():
-    """The obstacle held at 0.8 m with a normal along the reading's row: under heard_incidence_deg 35 the reading
-    sees no obstacle (S = G0: the echo unexplained); at the default 90 the same surfaces change nothing."""
-    fixed = 10 * GRID.width + 13
-    occupied = np.zeros(N_CELLS, dtype=bool)
-    occupied[fixed] = True
-    normals = np.full((2, N_CELLS), np.nan, dtype=np.float32)
-    normals[:, fixed] = (1.0, 0.0)
-    tpl, rows, cols, bins, z = readings_for([1.0], beam_deg=1.0)
-    s = {}
-    for angle in (35.0, 90.0):
-        config = dataclasses.replace(CONFIG, forward=dataclasses.replace(FORWARD, heard_incidence_deg=angle))
-        rd = em_readings((rows, cols, bins, z), tpl, GRID, 4.0, config.forward)
-        s[angle] = em_problem(rd, tpl, GRID.shape, occupied, config, surfaces=normals).state.s[0]
-    g0 = math.exp(-0.5 * (3.0 / 0.05) ** 2) / (math.sqrt(2 * math.pi) * 0.05)
-    n08 = math.exp(-0.5 * (0.2 / 0.05) ** 2) / (math.sqrt(2 * math.pi) * 0.05)
-    assert s[35.0] == pytest.approx(g0, rel=1e-12, abs=1e-300)
-    assert s[90.0] == pytest.approx(0.4 * n08 + 0.6 * g0, rel=1e-12)
-
-
-@pytest.mark.parametrize("facing", [(0.0, 1.0), (1.0, 0.0)])
-def test_the_decided_pass_keeps_every_heard_readings_evidence(facing):
-    """``exact.map_evidence`` (adaptive's ``decided`` pass) scores the cell of the flip test above by hand, facing
-    the reading or met at 90 deg alike: it does not take the heard test of heard_incidence_deg 35, which left
-    oblique surface cells undecided, unobserved to a planner, and cost 2 of 24 beam rows (docs/algorithms.md)."""
+def test_the_decided_pass_scores_a_far_cell_by_hand():
+    """``exact.map_evidence`` (adaptive's ``decided`` pass) scores the cell of the flip test above (0.3 m, before
+    the window of the reading at 1.0 m, an obstacle held at 0.8 m) by hand: every term behind it scaled by q."""
     from aogm_cli.core.log import SensorSpec
     from aogm_cli.mapping.exact import map_evidence
     from aogm_cli.sensor_models.readings import LaidOutReadings
@@ -348,12 +248,10 @@ def test_the_decided_pass_keeps_every_heard_readings_evidence(facing):
     fixed, cell = 10 * GRID.width + 13, 10 * GRID.width + 8
     occupied = np.zeros(N_CELLS, dtype=bool)
     occupied[fixed] = True
-    normals = np.full((2, N_CELLS), np.nan, dtype=np.float32)
-    normals[:, cell] = facing
     tpl, rows, cols, bins, z = readings_for([1.0], beam_deg=1.0)
     sensor = SensorSpec(mount=np.zeros((1, 3)), beam_width=math.radians(1.0), max_range=4.0)
-    run = LaidOutReadings(GRID, sensor, tpl, z.reshape(1, 1), rows, cols, bins, z, normals=normals)
-    evidence = map_evidence(run, dataclasses.replace(FORWARD, heard_incidence_deg=35.0), occupied).reshape(-1)
+    run = LaidOutReadings(GRID, sensor, tpl, z.reshape(1, 1), rows, cols, bins, z)
+    evidence = map_evidence(run, FORWARD, occupied).reshape(-1)
 
     def n(r):
         return math.exp(-0.5 * ((1.0 - r) / 0.05) ** 2) / (math.sqrt(2 * math.pi) * 0.05)

@@ -61,7 +61,6 @@ def test_the_plan_of_each_mode_by_hand():
     assert plan_map("em", params(calibration={"learn": "sigma,lobe_deg"}), LASER, 0.1, None).learns == (
         "sigma",)  # a ray has no lobe to learn
     assert plan_map("em", params(exact={"thin": True}), SONAR, 0.1, None).thinning == MARGIN
-    assert plan_map("em", params(em={"start": "empty"}), SONAR, 0.1, None).start == "empty"
     off = plan_map("em", params(calibration={"enabled": False}), SONAR, 0.1, None)
     assert (off.learns, off.calibrates, off.model) == ((), False, "configured")
 

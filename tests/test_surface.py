@@ -153,7 +153,7 @@ def test_deflect_makes_max_range_readings_that_end_before_the_shadow():
     assert z[0] == np.inf and limit[0] == np.nextafter(1.9, 0.0)
     assert z[1] == 1.5 and limit[1] == np.inf
     assert np.isnan(z[2]) and limit[2] == np.inf  # a NaN reading stays out
-    z, limits = cone_limits(np.array([2.9, 1.5]), 3.0, ForwardModelConfig(sigma=0.05, window=4.0),
+    z, limits = cone_limits(np.array([2.9, 1.5]), 3.0, ForwardModelConfig(sigma=0.05),
                             np.array([1.9, np.inf]))
     assert limits[0] == np.nextafter(1.9, 0.0) and limits[1] == pytest.approx(1.7)
 

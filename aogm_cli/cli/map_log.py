@@ -40,7 +40,6 @@ PARAMETER_OPTIONS = (
     ("--p-max", "em", "p_max", float, "EM: point mass of max-range dropouts."),
     ("--prior", "em", "prior_occupied", float, "EM: prior occupancy of a cell."),
     ("--max-sweeps", "em", "max_sweeps", click.IntRange(min=1), "EM: sweep limit."),
-    ("--em-start", "em", "start", click.Choice(["standard", "empty"]), "EM: start map."),
 )
 
 

@@ -41,7 +41,7 @@ MAX_FRACTION = 0.5  # at most every second scan held out: the map keeps at least
 # trade-off values). EM's own defaults are fitted to our simulator; scoring with them would favour the
 # EM maps that maximise them. The same model for every mode and every run, independent of the modes'
 # own parameters and of any calibration, so that modes compare fairly.
-REFERENCE_MODEL = ForwardModelConfig(sigma=0.1, p_rand=0.1, p_hit=0.5, p_max=0.1, window=4.0).validate()
+REFERENCE_MODEL = ForwardModelConfig(sigma=0.1, p_rand=0.1, p_hit=0.5, p_max=0.1).validate()
 REFERENCE_ALPHA = 2 * REFERENCE_MODEL.sigma  # m: the arc band z -/+ sigma of the reference model
 READING_CHUNK = 8192  # held-out readings per forward-model index: bounds the index's memory
 SCAN_CHUNK = 4096  # scans read from the log at a time

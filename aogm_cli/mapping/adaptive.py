@@ -72,8 +72,6 @@ def cluster_problems(run: LaidOutReadings, clusters: np.ndarray) -> ProblemFor:
     """EM over every cluster cell at once, the others held; clusters sharing no reading are independent results."""
     cells = np.flatnonzero(clusters.reshape(-1) > 0)
     def problem_for(config: EMConfig, occ: np.ndarray, subset: np.ndarray | None):
-        if config.start == "empty":
-            occ[cells] = False
         return cluster_problem(run, clusters, occ, config, subset), cells
     return problem_for
 

@@ -164,7 +164,7 @@ def calibration_rounds(run: LaidOutReadings, occupied: np.ndarray, em: EMConfig,
     blocks = _scan_blocks(run, max_scans)
     if blocks is not None:  # a long log: the rounds map (and fit on) blocks of its scans only
         select = blocks if select is None else select & blocks
-    readings = F.with_surfaces(sample_readings(run, tuning.max_readings, select), run.normals, em.forward)
+    readings = sample_readings(run, tuning.max_readings, select)
     scans, first_scans = (_and(_every_nth_scan(run, n), blocks) for n in (tuning.subsample, tuning.start_subsample))
     start = occupied.copy()
     record = {"initial": model_values(em.forward), "readings_used": int(readings.z.shape[0]),

@@ -16,7 +16,7 @@ from aogm_cli.mapping.em_kernels.likelihood import _find, _init_state, _join_par
 from aogm_cli.mapping.params import EMConfig
 from aogm_cli.mapping.sweeps import Sweeps
 from aogm_cli.sensor_models.cone import flat_offsets
-from aogm_cli.sensor_models.forward_model import ForwardModelConfig, cone_limits, heard_test, reading_constants
+from aogm_cli.sensor_models.forward_model import ForwardModelConfig, cone_limits, reading_constants
 from aogm_cli.sensor_models.readings import (
     READING_PARTS,
     LaidOutReadings,
@@ -99,20 +99,16 @@ class EMProblem:
 
 
 def em_problem(rd: L.EMReadings, templates, shape: tuple[int, int], occupied: np.ndarray, config: EMConfig,
-               labels: np.ndarray | None = None, surfaces: np.ndarray | None = None) -> EMProblem:
+               labels: np.ndarray | None = None) -> EMProblem:
     """Every reading's likelihood state under ``occupied`` and, with ``labels``, which clusters share a reading,
-    extents narrowed to their cells. With ``surfaces`` (``LaidOutReadings.normals``) and ``heard_incidence_deg`` below
-    90, a reading has no obstacle at a surface cell it meets beyond that angle of its normal (``heard_test``; the
-    sweep's far runs leave such cells out: ``tiles._unheard_far``). Writes into ``rd``'s tables: one problem per
-    ``em_readings`` result."""
+    extents narrowed to their cells. Writes into ``rd``'s tables: one problem per ``em_readings`` result."""
     fwd = config.forward
     p_hit = float(fwd.p_hit)
     n = rd.ints.shape[0]
     top = int(rd.ints["m"].max()) if n else 0
-    normal, cos2 = heard_test(surfaces, fwd)
     model = L.EMModel(p_hit=p_hit, l_prior=float(config.l_prior),
                       qpow=(1.0 - p_hit) ** np.arange(top + 1, dtype=np.float64), w=1.0 - fwd.p_rand - fwd.p_max,
-                      sigma=float(fwd.sigma), window=float(fwd.window), normal=normal, cos2=cos2)
+                      sigma=float(fwd.sigma), window=float(fwd.window))
     seen = np.zeros(shape[0] * shape[1], dtype=np.bool_)
     if labels is None:
         marks = [(seen, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 4), dtype=np.int32))]
@@ -137,11 +133,10 @@ def em_problem(rd: L.EMReadings, templates, shape: tuple[int, int], occupied: np
 
 def run_problem(run: LaidOutReadings, config: EMConfig, select: np.ndarray, occupied: np.ndarray,
                 labels: np.ndarray | None = None) -> EMProblem:
-    """EM's problem of ``run``'s readings ``select`` picks under ``occupied`` (``em_readings``, ``em_problem``), with
-    the heard test when ``heard_incidence_deg`` < 90."""
+    """EM's problem of ``run``'s readings ``select`` picks under ``occupied`` (``em_readings``, ``em_problem``)."""
     rd = em_readings(run.cones, run.templates, run.grid, run.sensor.max_range, config.forward, select=select,
                      shadow=run.shadow)
-    return em_problem(rd, run.templates, run.grid.shape, occupied, config, labels=labels, surfaces=run.normals)
+    return em_problem(rd, run.templates, run.grid.shape, occupied, config, labels=labels)
 
 
 def find_root(parent: np.ndarray, x: int) -> int:
@@ -215,9 +210,8 @@ def _flippable(problem: EMProblem, occupied: np.ndarray, cells: np.ndarray) -> t
     ``HELD_FREE_SHARE`` are such: free cells in no reading's window while the prior is below one half.
     There an obstacle only scales each echo's chance by 1 - p_hit, so occupancy can only lower the
     objective; their gains are one walk of the far runs (``_held_free_gains``). Not in a cluster
-    problem, whose extents are narrowed already (no gain measured: docs/algorithms.md), nor with the heard
-    test (``em_problem``'s ``surfaces``), which that walk does not make."""
-    if problem.model.l_prior >= 0.0 or cells.size == 0 or problem.parent is not None or problem.model.normal.size:
+    problem, whose extents are narrowed already (no gain measured: docs/algorithms.md)."""
+    if problem.model.l_prior >= 0.0 or cells.size == 0 or problem.parent is not None:
         return cells, cells[:0]
     rd = problem.readings
     window = np.zeros(problem.shape[0] * problem.shape[1], dtype=np.bool_)

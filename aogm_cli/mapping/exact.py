@@ -73,7 +73,7 @@ def map_evidence(run: LaidOutReadings, forward: ForwardModelConfig, occupied: np
     occupancy = np.zeros(n + SPARE_MASK + 1, dtype=np.float32)
     occupancy[:n] = np.asarray(occupied, dtype=bool).reshape(-1)
     z, limit = deflect(run.z, run.shadow, run.sensor.max_range)
-    readings = ExpectationReadings(run.rows, run.cols, run.bins, z, limit)  # no heard test: docs/algorithms.md
+    readings = ExpectationReadings(run.rows, run.cols, run.bins, z, limit)
     model, flat = forward.kernel_model(run.sensor.max_range), flat_offsets(templates, grid.width)
     scratch = [cone_scratch(templates) for _ in range(READING_PARTS)]
     total = np.zeros(n)

@@ -32,16 +32,13 @@ def check_field_types(config) -> None:
 
 @dataclass(frozen=True)
 class EMConfig:
-    """EM parameters: the forward model, the occupancy prior, the sweep limit and the start."""
+    """EM parameters: the forward model, the occupancy prior and the sweep limit. EM starts from the thresholded
+    standard map and reports unobserved the cells it leaves free though no reading decides them
+    (``view.residual_into``)."""
 
     forward: ForwardModelConfig = field(default_factory=ForwardModelConfig)
     prior_occupied: float = 0.3  # prior p(m_x = 1) of every cell
     max_sweeps: int = 20
-    start: str = "standard"  # "standard": the thresholded standard map; "empty": all free
-    # What EM reports at cells it leaves free though no reading objects to an obstacle (view.HIDDEN_GAIN):
-    # "prior" (Thrun's residual, which a planner reads as free), "standard" (the standard map's estimate) or
-    # "unobserved" (that estimate above 0.5, else unobserved); docs/algorithms.md measures them
-    hidden: str = "unobserved"
 
     def validate(self) -> EMConfig:
         check_field_types(self.forward)
@@ -53,10 +50,6 @@ class EMConfig:
             raise InputError(f"expected a probability in (0, 1), got {self.prior_occupied:g}", key="prior_occupied")
         if self.max_sweeps < 1:
             raise InputError(f"expected a whole number >= 1, got {self.max_sweeps}", key="max_sweeps")
-        if self.hidden not in ("unobserved", "standard", "prior"):
-            raise InputError(f"expected 'unobserved', 'standard' or 'prior', got {self.hidden!r}", key="hidden")
-        if self.start not in ("standard", "empty"):
-            raise InputError(f"expected 'standard' or 'empty', got {self.start!r}", key="start")
         return self
 
     @property
@@ -72,20 +65,17 @@ class EMConfig:
 @dataclass(frozen=True)
 class AdaptiveConfig:
     """What the adaptive map is outside its clusters and where they lie (``adaptive.find_clusters``,
-    ``plan.auto_outside``; docs/algorithms.md, "The adaptive mapper"); ``scale``: ``view.one_scale``."""
+    ``plan.auto_outside``; docs/algorithms.md, "The adaptive mapper")."""
 
     outside: str = "auto"
     contested: float = 0.5
     weak: float = 0.45
     grow: int = 2
-    scale: str = "em"
 
     def validate(self) -> AdaptiveConfig:
         check_field_types(self)
         if self.outside not in ("auto", "elfes", "thinned"):
             raise InputError(f"expected 'auto', 'elfes' or 'thinned', got {self.outside!r}", key="outside")
-        if self.scale not in ("em", "mixed"):
-            raise InputError(f"expected 'em' or 'mixed', got {self.scale!r}", key="scale")
         if isinstance(self.grow, bool) or not isinstance(self.grow, int) or self.grow < 0:
             raise InputError(f"expected a whole number >= 0, got {self.grow!r}", key="grow")
         for key in ("contested", "weak"):
@@ -146,7 +136,7 @@ class MapParams:
 SECTIONS = {
     "inverse_model": {f.name for f in dataclasses.fields(InverseModelConfig)},
     "em": {f.name for f in dataclasses.fields(EMConfig) if f.name != "forward"}
-    | {f.name for f in dataclasses.fields(ForwardModelConfig)} - {"window"},  # the window is the model's own
+    | {f.name for f in dataclasses.fields(ForwardModelConfig)},
     "adaptive": {f.name for f in dataclasses.fields(AdaptiveConfig)},
     "calibration": {f.name for f in dataclasses.fields(CalibrationConfig)},
     "surface": {f.name for f in dataclasses.fields(SurfaceConfig)},

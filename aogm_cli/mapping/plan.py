@@ -78,9 +78,8 @@ def plan_map(mode: str, params: MapParams, sensor: SensorSpec, resolution: float
     model = given.origin if given is not None else FROM_LOG if calibrates else CONFIGURED
     if mode == "em":
         thinning = MARGIN if thinnable and params.exact.thin else None
-        start = "standard" if params.em.start == "standard" else "empty"
         return Plan(mode, kind, model, learns, calibrates, robots and "p_max" in learns, incidence, None, thinning,
-                    start)
+                    "standard")
     outside = params.adaptive.outside
     if outside == "auto":
         outside = auto_outside(given is not None and given.sensor is not None, kind)

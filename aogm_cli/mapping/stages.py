@@ -25,7 +25,6 @@ from aogm_cli.mapping.standard import (
 )
 from aogm_cli.mapping.state import Clusters, EMRegion, StandardMap, State, View
 from aogm_cli.mapping.view import decided_free, em_view, joined_view
-from aogm_cli.sensor_models.forward_model import with_surfaces
 from aogm_cli.sensor_models.readings import lay_out_readings
 
 RATES_START = 0.05  # the fit of p_max starts from at least this share (from 0 it would get no weight)
@@ -102,13 +101,10 @@ def lobe(s: State) -> State:
 
 
 def deflections(s: State) -> State:
-    """The echoes' surfaces (kept with the readings: ``em.heard_incidence_deg``), beams met beyond ``em.specular_deg``
-    stopped (standard map taken away)."""
+    """The echoes' surfaces, beams met beyond ``em.specular_deg`` stopped (standard map taken away)."""
     normals = B.surfaces(s.readings, s.in_use, s.standard.log_odds)
     run = B.deflected_run(s.readings, normals, s.in_use)
-    if run is None:
-        return s.but(readings=dataclasses.replace(s.readings, normals=normals))
-    return s.but(readings=dataclasses.replace(run, normals=normals), standard=None)
+    return s if run is None else s.but(readings=run, standard=None)
 
 
 def walls(s: State) -> State:
@@ -124,7 +120,7 @@ def rates(s: State) -> State:
     config = dataclasses.replace(s.params.calibration, learn="p_max")
     forward = s.in_use.em.forward
     start = dataclasses.replace(forward, p_max=max(forward.p_max, RATES_START))
-    readings = with_surfaces(sample_readings(s.readings, RATES_READINGS), s.readings.normals, forward)
+    readings = sample_readings(s.readings, RATES_READINGS)
     fit = fit_at_map(s.readings, readings, np.ascontiguousarray(walls.reshape(-1)), start, config, loglik=False).forward
     values = {"p_max": float(fit.p_max)}
     return s.but(learned=dataclasses.replace(s.learned, sensor=dataclasses.replace(s.learned.sensor, **values),
@@ -165,8 +161,7 @@ def clusters(s: State) -> State:
 def start(s: State) -> State:
     """EM's start (``Plan.start``); with the thinned map outside the clusters, Elfes' inside, so that EM thins
     a wall's inner layers as from Elfes' map (from the thinned map it keeps single cells of them)."""
-    empty = s.plan.start == "empty"
-    flat = np.zeros(s.grid.height * s.grid.width, bool) if empty else (s.standard.log_odds > 0).reshape(-1)
+    flat = (s.standard.log_odds > 0).reshape(-1)
     if s.plan.start == "elfes in clusters":
         inside = s.clusters.ids.reshape(-1) > 0
         flat[inside] = s.standard.elfes.reshape(-1)[inside] > 0

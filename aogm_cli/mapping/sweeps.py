@@ -35,7 +35,7 @@ def _work(readings: L.EMReadings, n_seg: int) -> L.TileWork:
         seg_list=np.empty(listed, dtype=np.int64), count=_apart(L.SEGMENT + 1),
         pair_pos=np.empty(pairs, dtype=np.int64), pair_j=np.empty(pairs, dtype=np.int64), pair_g=np.empty(pairs),
         obs_j=np.empty(room, dtype=np.int64), obs_g=np.empty(room), pre=np.empty(room), seg_fill=_apart(n_seg),
-        tile_t=_apart(1024), far_lo=_apart(1024), far_hi=_apart(1024), far_hid=_apart(1024),
+        tile_t=_apart(1024), far_lo=_apart(1024), far_hi=_apart(1024),
         far_sum=_apart((2, L.SEGMENT + 1), np.float64),
         spans=np.empty(listed, dtype=listing.SPAN), seg_mask=_apart(n_seg), members=none, enter=none, leave=none,
         window_leave=none)
@@ -106,7 +106,7 @@ def _grown(work: L.TileWork) -> L.TileWork:
         grow["spans"] = np.empty(int(ctl["need_list"] * 1.5) + 1, dtype=listing.SPAN)
     if ctl["need_list"] > work.far_lo.shape[0]:
         size = int(ctl["need_list"] * 1.5) + 1
-        grow |= {name: np.empty(size, dtype=np.int64) for name in ("tile_t", "far_lo", "far_hi", "far_hid")}
+        grow |= {name: np.empty(size, dtype=np.int64) for name in ("tile_t", "far_lo", "far_hi")}
     if ctl["need_pairs"] > work.pair_pos.shape[0]:
         size = int(ctl["need_pairs"] * 1.5) + 1
         grow |= {"pair_pos": np.empty(size, dtype=np.int64), "pair_j": np.empty(size, dtype=np.int64),

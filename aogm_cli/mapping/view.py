@@ -22,7 +22,7 @@ def decided_free(evidence: np.ndarray) -> np.ndarray:
 
 
 def decided(result: EMResult, config: EMConfig) -> np.ndarray:
-    """``result``'s candidates the data decides: occupied or ``decided_free`` (the others are ``em.hidden``)."""
+    """``result``'s candidates the data decides: occupied or ``decided_free`` (the others are hidden)."""
     with np.errstate(divide="ignore"):
         evidence = np.log(result.residual) - np.log1p(-result.residual) - config.l_prior  # log p(Z|occ) - log p(Z|free)
     return (result.residual > 0.5) | decided_free(evidence)
@@ -30,15 +30,10 @@ def decided(result: EMResult, config: EMConfig) -> np.ndarray:
 
 def residual_into(probability: np.ndarray, result: EMResult, config: EMConfig) -> np.ndarray:
     """Write EM's residuals into ``probability`` at the ``decided`` candidates; returns the hidden cells to report
-    unobserved ("unobserved": standard estimate <= 0.5; a planner must not drive where no reading says free)."""
-    none = np.zeros(0, dtype=np.int64)
-    if config.hidden == "prior":
-        probability[result.candidates] = result.residual
-        return none
+    unobserved, those whose standard estimate is at most 0.5 (a planner must not drive where no reading says free;
+    Thrun's residual there reads as free, and the standard map's estimate erases walls)."""
     keep = decided(result, config)
     probability[result.candidates[keep]] = result.residual[keep]
-    if config.hidden == "standard":
-        return none
     hidden = result.candidates[~keep]
     return hidden[probability[hidden] <= 0.5]
 
@@ -85,11 +80,11 @@ SIDE = 1e-3  # a cell the scale would move across 0.5 stops this far short of it
 
 def joined_view(log_odds: np.ndarray, observed: np.ndarray, outcome: EMOutcome | None, clusters: np.ndarray,
                 whole: Log, grid, params: MapParams, evidence: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """``em_view`` of an adaptive map, the cells outside the clusters on EM's scale unless ``adaptive.scale``
-    is "mixed": by final ``evidence`` if given (``residual_scale``), else by hit rates (``one_scale``)."""
+    """``em_view`` of an adaptive map, the cells outside the clusters on EM's scale: by final ``evidence`` if
+    given (``residual_scale``), else by hit rates (``one_scale``)."""
     robot = footprint(grid, whole.pose, whole.sensor) if outcome is not None or evidence is not None else None
     probability, observed = em_view(log_odds, observed, outcome, grid, whole.pose, whole.sensor, params, robot)
-    if params.adaptive.scale == "mixed" or (outcome is None and evidence is None):
+    if outcome is None and evidence is None:
         return probability, observed
     inside = clusters > 0
     if evidence is not None:

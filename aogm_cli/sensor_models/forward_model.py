@@ -13,15 +13,16 @@ import numpy as np
 
 from aogm_cli.core.errors import InputError
 from aogm_cli.sensor_models.cone import cone_flat_cells, unheard
-from aogm_cli.sensor_models.surface import cos2_of, hidden
-
 
 # A reading has one cause: random, a max-range dropout, no obstacle detected, or the k-th obstacle of its
 # cone (d_1 <= ... <= d_K), each detected with p_hit; q = 1 - p_hit, g(d) = N(z; d, sigma^2), G0 = g(z_max):
 #     p(z | m) = C + w * S,   C = p_rand / z_max + p_max * G0,   w = 1 - p_rand - p_max,
 #     S = sum_k q^(k-1) p_hit g(d_k) + q^K G0.
-# g is truncated at ``window`` sigmas, and so is a cone beyond z (a max-range reading's reaches z_max):
+# g is truncated at WINDOW sigmas, and so is a cone beyond z (a max-range reading's reaches z_max):
 # cells before the window change p only through the factor q, which EM scores in O(1) per reading.
+WINDOW = 4.0
+
+
 @dataclass(frozen=True)
 class ForwardModelConfig:
     """Parameters of the forward model (the comment above; defaults: docs/algorithms.md)."""
@@ -30,7 +31,6 @@ class ForwardModelConfig:
     p_rand: float = 0.05  # prior of a random reading
     p_hit: float = 0.7  # probability that each obstacle in the cone, nearest first, is detected
     p_max: float = 0.1  # point mass of a max-range dropout (specular reflection)
-    window: float = 4.0  # sigmas beyond z up to which a cone's cells count
     # the largest angle off a surface's normal (``surface.py``) at which it still echoes: a beam whose core
     # meets a surface more obliquely before its window is deflected there (a grazing pass is no evidence
     # against the surface). 90: Thrun's model, no beam deflected (the angle of incidence off). 15: a 40 kHz sonar
@@ -42,10 +42,7 @@ class ForwardModelConfig:
     # out of its reading. 0: every cell of the cone
     lobe_deg: float = 0.0
     lobe_range: float = 10.0  # m: how far a surface met head-on on the axis is heard
-    # the largest angle off a surface's normal at which EM's forward model still hears it: a reading that meets
-    # a surface cell more obliquely has no obstacle there (docs/algorithms.md, "The lobe that hears"). 90: every
-    # cell the lobe hears counts (the default: with the lobe learned today it costs rows; with the lobe known, 35)
-    heard_incidence_deg: float = 90.0
+    window = WINDOW  # sigmas beyond z up to which a cone's cells count: the model's own, no setting
 
     def validate(self) -> ForwardModelConfig:
         def bad(key, msg):
@@ -59,8 +56,6 @@ class ForwardModelConfig:
             raise bad("p_hit", f"expected a probability in (0, 1], got {self.p_hit:g}")
         if not 0 <= self.p_max < 1 or self.p_rand + self.p_max >= 1:
             raise bad("p_max", f"expected p_max in [0, 1) with p_rand + p_max < 1, got {self.p_max:g}")
-        if not self.window > 0:
-            raise bad("window", f"expected a positive number, got {self.window:g}")
         if not 0 < self.specular_deg <= 90:
             raise bad("specular_deg", f"expected an angle in (0, 90] degrees, got {self.specular_deg:g}")
         if not 0 <= self.lobe_deg <= 90:
@@ -68,9 +63,6 @@ class ForwardModelConfig:
                                   f"got {self.lobe_deg:g}")
         if not self.lobe_range > 0:
             raise bad("lobe_range", f"expected a positive range (m), got {self.lobe_range:g}")
-        if not 0 < self.heard_incidence_deg <= 90:
-            raise bad("heard_incidence_deg", f"expected an angle in (0, 90] degrees (90: every heard cell counts), "
-                                             f"got {self.heard_incidence_deg:g}")
         return self
 
     def as_dict(self) -> dict:
@@ -82,9 +74,6 @@ class ForwardModelConfig:
                 float(z_max))
 
 
-NO_SURFACES = np.zeros((2, 0), dtype=np.float32)  # ``ExpectationReadings.surfaces`` without the heard test
-
-
 class ExpectationReadings(NamedTuple):
     """Readings as the forward model's kernels take them: flat arrays, NaN readings left out."""
 
@@ -93,25 +82,6 @@ class ExpectationReadings(NamedTuple):
     bins: np.ndarray  # heading bin (int64)
     z: np.ndarray  # float64 range in template ranges; +inf (or >= z_max): a max-range reading
     limit: np.ndarray  # float64 template range beyond which the cone holds no cell (``cone_limits``; +inf: none)
-    # (2, H * W) float32 surface normals for the heard test (``em.heard_incidence_deg``; (2, 0): none) and the
-    # cos^2 of that angle: a surface a reading meets more obliquely is no obstacle of it
-    surfaces: np.ndarray = NO_SURFACES
-    cos2: float = 0.0
-
-
-def heard_test(surfaces: np.ndarray | None, config: ForwardModelConfig) -> tuple[np.ndarray, float]:
-    """(normals, cos^2 of the angle) of the heard test of ``config.heard_incidence_deg`` at ``surfaces``, as the
-    kernels take them (``surface.hidden``); ``NO_SURFACES`` (no test) at 90 or without surfaces."""
-    if surfaces is None or config.heard_incidence_deg >= 90.0:
-        return NO_SURFACES, 0.0
-    return np.ascontiguousarray(surfaces, dtype=np.float32), cos2_of(config.heard_incidence_deg)
-
-
-def with_surfaces(readings: ExpectationReadings, surfaces: np.ndarray | None,
-                  config: ForwardModelConfig) -> ExpectationReadings:
-    """``readings`` with the heard test of ``config.heard_incidence_deg`` at ``surfaces`` (``heard_test``)."""
-    normal, cos2 = heard_test(surfaces, config)
-    return readings._replace(surfaces=normal, cos2=cos2) if normal.size else readings
 
 
 def gaussian(z, d, sigma):
@@ -202,9 +172,7 @@ def cone_obstacles(tpl, flat, shape, readings, occupied, sigma, window, z_max, p
             s0 = tpl.offsets[b]
             for j in range(m):
                 c = ib[j]
-                # unheard, or met beyond the heard incidence: no obstacle of the reading
-                if c < n_cells and occupied[c] and not unheard(tpl, s0 + j) and not hidden(
-                        readings.surfaces, readings.cos2, c, row0, col0, width):
+                if c < n_cells and occupied[c] and not unheard(tpl, s0 + j):  # unheard: no obstacle of the reading
                     if n < room:
                         d[n] = r[j]
                     n += 1

@@ -99,9 +99,6 @@ class LaidOutReadings:
     z: np.ndarray
     # per reading, the range where a surface deflected its beam (+inf: none; None: no beam deflected)
     shadow: np.ndarray | None = None
-    # (2, H * W) float32: the echoes' surface normals (``surface.surface_normals``), NaN elsewhere, for the heard
-    # test of EM and the E-step when ``em.heard_incidence_deg`` < 90; None: not found (no ``deflections`` stage)
-    normals: np.ndarray | None = None
 
     @property
     def cones(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

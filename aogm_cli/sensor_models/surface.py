@@ -144,10 +144,7 @@ def cos2_of(specular_deg: float) -> float:
 
 @numba.njit(cache=True, inline="always")
 def hidden(normal, cos2, cell, row0, col0, width):
-    """True when a reading from (row0, col0) meets the surface ``cell`` beyond the specular angle; never with
-    ``normal`` of shape (2, 0) (no surfaces: EM's and the E-step's heard test off)."""
-    if normal.shape[1] == 0:
-        return False
+    """True when a reading from (row0, col0) meets the surface ``cell`` beyond the specular angle."""
     n_r = normal[0, cell]
     if not n_r == n_r:  # NaN: no surface there
         return False

@@ -110,8 +110,6 @@ class EMModel(NamedTuple):
     w: float  # 1 - p_rand - p_max
     sigma: float
     window: float  # sigmas: the Gaussian is 0 beyond
-    normal: np.ndarray  # (2, H * W) float32 surface normals (NaN: none) for the heard test; (2, 0): no test
-    cos2: float  # cos^2 of ``heard_incidence_deg``: a surface met more obliquely is no obstacle of the reading
 
 
 class EMState(NamedTuple):
@@ -187,7 +185,6 @@ class TileWork(NamedTuple):
     tile_t: np.ndarray  # int64 per listing: its reading
     far_lo: np.ndarray  # int64 per listing: the tile columns where the cone's cells lie before its window
     far_hi: np.ndarray  # (far_hi < far_lo: none)
-    far_hid: np.ndarray  # int64 per listing: bit x set when tile column x of its far run is a surface it does not hear
     far_sum: np.ndarray  # (2, SEGMENT + 1) float64 differences of sum_t log far ratio along the tile (add, remove)
     spans: np.ndarray  # listing.SPAN the row's listed readings (seg_list points into it)
     seg_mask: np.ndarray  # (n_seg,) int64 bit k of segment s: column s * SEGMENT + k holds a candidate

@@ -10,11 +10,10 @@ import numba
 import numpy as np
 
 from aogm_cli.mapping.em_kernels.extents import _bin_transform, _entry_cell, _extend_box
-from aogm_cli.mapping.em_kernels.layout import _columns, _trailing_zeros
+from aogm_cli.mapping.em_kernels.layout import _columns
 from aogm_cli.mapping.em_kernels.windows import _rank
 from aogm_cli.sensor_models.cone import unheard
 from aogm_cli.sensor_models.forward_model import gaussian_at
-from aogm_cli.sensor_models.surface import hidden
 
 
 @numba.njit(cache=True, inline="always")
@@ -115,7 +114,7 @@ def _init_state(tpl, flat, readings, model, occupied, grid_shape, marks, span):
                         if a != c:
                             parent[max(a, c)] = min(a, c)
                     last = labels[cell]
-                if not occupied[cell] or hidden(model.normal, model.cos2, cell, row0, col0, width):  # heard test
+                if not occupied[cell]:
                     continue
                 g = 0.0 if j < jlo else gaussian_at(z, tpl.ranges[s0 + j], model.sigma, model.window)
                 if g == 0.0:
@@ -175,8 +174,7 @@ def _flip_gain(c, x, lo_pair, hi_pair, rd, model, cand, state, work):
 
 @numba.njit(cache=True, inline="always")
 def _far_changed(li, t, x, old_add, old_rem, state, work):
-    """Reading t changed after a flip at column x: move its log far ratios in the tile's sums beyond x (but at
-    the surfaces it does not hear, ``far_hid``)."""
+    """Reading t changed after a flip at column x: move its log far ratios in the tile's sums beyond x."""
     lo = max(work.far_lo[li], x + 1)
     hi = work.far_hi[li]
     if lo > hi:
@@ -187,21 +185,6 @@ def _far_changed(li, t, x, old_add, old_rem, state, work):
     work.far_sum[0, hi + 1] -= d_add
     work.far_sum[1, lo] += d_rem
     work.far_sum[1, hi + 1] -= d_rem
-    if work.far_hid[li]:
-        _move_far(work, work.far_hid[li], lo, hi, -d_add, -d_rem)
-
-
-@numba.njit(cache=True, inline="always")
-def _move_far(work, bits, lo, hi, d_add, d_rem):
-    """Add (d_add, d_rem) to the tile's far sums at the single columns lo..hi of ``bits``."""
-    while bits != 0:
-        x = np.int64(_trailing_zeros(np.uint64(bits)))
-        bits &= bits - 1
-        if lo <= x <= hi:
-            work.far_sum[0, x] += d_add
-            work.far_sum[0, x + 1] -= d_add
-            work.far_sum[1, x] += d_rem
-            work.far_sum[1, x + 1] -= d_rem
 
 
 @numba.njit(cache=True, inline="always")

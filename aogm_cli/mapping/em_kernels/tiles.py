@@ -11,10 +11,9 @@ each flip kept when it raises the objective (``_sweep_tiles``)."""
 from __future__ import annotations
 
 import numba
-import numpy as np
 
-from aogm_cli.mapping.em_kernels.layout import DONE, NEED_BUFFERS, PAUSED, SEGMENT, SWEEP, _columns, _trailing_zeros
-from aogm_cli.mapping.em_kernels.likelihood import _far_changed, _flip_gain, _move_far, _set_sum, _update_reading
+from aogm_cli.mapping.em_kernels.layout import DONE, NEED_BUFFERS, PAUSED, SEGMENT, SWEEP, _columns
+from aogm_cli.mapping.em_kernels.likelihood import _far_changed, _flip_gain, _set_sum, _update_reading
 from aogm_cli.mapping.em_kernels.listing import (
     _active_words,
     _advance,
@@ -22,11 +21,9 @@ from aogm_cli.mapping.em_kernels.listing import (
     _o_range,
     _row_unchanged,
     _span_at,
-    _span_mask,
 )
 from aogm_cli.mapping.em_kernels.windows import _build_window, _make_room, _room
 from aogm_cli.sensor_models.forward_model import gaussian_at
-from aogm_cli.sensor_models.surface import hidden
 
 
 @numba.njit(cache=True, inline="always")
@@ -50,7 +47,7 @@ def _window_pairs(i, t, span, r, c0, c1, c_start, fill, tpl, groups, rd, model, 
         lo, hi = _o_range(span, col0, c0, c1, lo, hi)
         for o in range(lo, hi + 1):
             ci = cand.of_cell[at + span.sign * o]
-            if ci < 0 or hidden(model.normal, model.cos2, at + span.sign * o, rd.row0[t], col0, width):
+            if ci < 0:
                 continue
             n += 1
             local = ci - c_start
@@ -64,35 +61,6 @@ def _window_pairs(i, t, span, r, c0, c1, c_start, fill, tpl, groups, rd, model, 
             work.pair_j[pos] = j
             work.pair_g[pos] = gaussian_at(rd.z[t], tpl.ranges[s0 + j], model.sigma, model.window)
     return n
-
-
-@numba.njit(cache=True, inline="always")
-def _surface_columns(model, cand, r, c0, c_start, c_stop):
-    """Bits of the tile's columns (from c0 in row r) whose candidates have a surface normal: where a far run may
-    hold a cell its reading does not hear (the heard test); 0 without it."""
-    if model.normal.shape[1] == 0:
-        return np.int64(0)
-    width = cand.of_cell.shape[0] // cand.tile_clock.shape[0]
-    bits = np.int64(0)
-    for c in range(c_start, c_stop):
-        cell = cand.cell[c]
-        if model.normal[0, cell] == model.normal[0, cell]:  # not NaN
-            bits |= np.int64(1) << np.int64(cell - r * width - c0)
-    return bits
-
-
-@numba.njit(cache=True, inline="always")
-def _unheard_far(bits, t, r, c0, rd, model, cand):
-    """Of the tile columns ``bits`` (surface cells in reading t's far run), those t meets beyond the heard
-    incidence (``surface.hidden``): cells that are no obstacle of t, whose flips leave it as it is."""
-    width = cand.of_cell.shape[0] // cand.tile_clock.shape[0]
-    out = np.int64(0)
-    while bits != 0:
-        x = np.int64(_trailing_zeros(np.uint64(bits)))
-        bits &= bits - 1
-        if hidden(model.normal, model.cos2, r * width + c0 + x, rd.row0[t], rd.col0[t], width):
-            out |= np.int64(1) << x
-    return out
 
 
 @numba.njit(cache=True, inline="always")
@@ -122,7 +90,6 @@ def _count_pairs(tpl, groups, rd, model, cand, state, work, r, c0, c1, c_start, 
         work.far_sum[1, k] = 0.0
     room = 0
     n_pairs = 0
-    surfaces = _surface_columns(model, cand, r, c0, c_start, c_start + nc)
     for i in range(list_lo, list_hi):
         span = _span_at(work, work.seg_list[i])
         t = work.spans[work.seg_list[i]].t
@@ -130,7 +97,6 @@ def _count_pairs(tpl, groups, rd, model, cand, state, work, r, c0, c1, c_start, 
         work.tile_t[li] = t
         work.far_lo[li] = 1
         work.far_hi[li] = 0
-        work.far_hid[li] = 0
         if span.o_hi < span.o_lo:
             continue
         f_lo, f_hi = _o_range(span, rd.col0[t], c0, c1, span.f_lo, span.f_hi)
@@ -143,10 +109,6 @@ def _count_pairs(tpl, groups, rd, model, cand, state, work, r, c0, c1, c_start, 
             work.far_sum[0, b - c0 + 1] -= state.far_log[t, 0]
             work.far_sum[1, a - c0] += state.far_log[t, 1]
             work.far_sum[1, b - c0 + 1] -= state.far_log[t, 1]
-            in_run = surfaces & _span_mask(a, b, c0 // SEGMENT)
-            if in_run:
-                work.far_hid[li] = _unheard_far(in_run, t, r, c0, rd, model, cand)
-                _move_far(work, work.far_hid[li], 0, SEGMENT - 1, -state.far_log[t, 0], -state.far_log[t, 1])
         k = _window_pairs(li, t, span, r, c0, c1, c_start, False, tpl, groups, rd, model, cand, work)
         n_pairs += k
         if k > 0 and state.slot[t] < 0:
@@ -179,8 +141,8 @@ def _flip(c, x, lo_pair, hi_pair, n_list, rd, model, cand, state, work):
     ctl.budget -= n_list + hi_pair - lo_pair
     adding = occupied[cell]
     now = ctl.clock
-    for i in range(n_list):  # the readings that hold the cell before their windows (and hear it)
-        if work.far_lo[i] <= x <= work.far_hi[i] and not (work.far_hid[i] >> np.int64(x)) & 1:
+    for i in range(n_list):  # the readings that hold the cell before their windows
+        if work.far_lo[i] <= x <= work.far_hi[i]:
             t = work.tile_t[i]
             old_add, old_rem = state.far_log[t, 0], state.far_log[t, 1]
             state.nfar[t] += 1 if adding else -1

@@ -10,7 +10,6 @@ from aogm_cli.mapping.em_kernels.extents import _bin_transform, _entry_cell
 from aogm_cli.mapping.em_kernels.layout import ARENA_ENTRIES
 from aogm_cli.sensor_models.cone import unheard
 from aogm_cli.sensor_models.forward_model import gaussian_at
-from aogm_cli.sensor_models.surface import hidden
 
 
 @numba.njit(cache=True, inline="always")
@@ -59,8 +58,6 @@ def _build_window(t, tpl, flat, rd, model, cand, state, work):
         cell = at + sign * np.int64(x_off[s0 + j]) if inside else _entry_cell(tpl, s0, tr, j, row0, col0, height,
                                                                               width)
         if cell < 0 or not cand.occupied[cell] or unheard(tpl, s0 + j):
-            continue
-        if hidden(model.normal, model.cos2, cell, row0, col0, width):  # the heard test: no obstacle of the reading
             continue
         g = gaussian_at(rd.z[t], tpl.ranges[s0 + j], model.sigma, model.window)
         if g == 0.0:
