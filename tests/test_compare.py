@@ -77,14 +77,15 @@ def independent_metrics(map_path, log_path):
 
 def test_json_follows_the_contract_and_matches_the_map_files(logs, compared):
     out, data, _ = compared
-    assert set(data) == {"format", "format_version", "aogm_version", "results", "provenance"}
+    assert set(data) == {"format", "format_version", "aogm_version", "results", "provenance", "summary"}
     assert data["aogm_version"] == "0.1.0"
     assert (data["format"], data["format_version"]) == ("aogm-compare", 1)
     assert [(r["log"], r["mode"]) for r in data["results"]] == [
         (str(logs[0]), "standard"), (str(logs[0]), "em"), (str(logs[1]), "standard"), (str(logs[1]), "em")
     ]
     for r in data["results"]:
-        assert set(r) == {"log", "world", "mode", "truth", "runtime_s", "metrics", "params", "detector", "calibration"}
+        assert set(r) == {"log", "world", "mode", "truth", "runtime_s", "metrics", "params", "detector", "calibration",
+                          "log_content"}
         assert r["truth"] is True
         if r["mode"] == "em":  # the forward model learned from the log; the map's parameters stay as configured
             assert set(r["calibration"]["final"]) == {"sigma", "p_rand", "p_hit", "p_max"}

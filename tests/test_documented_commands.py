@@ -7,6 +7,7 @@ page runner covers fails the first test, naming its page and line."""
 from __future__ import annotations
 
 import glob
+import json
 import math
 import re
 import shlex
@@ -262,7 +263,18 @@ def test_benchmarks_page(workspace):
     assert (workspace / "out" / "bench-scale" / "scale.json").is_file()
 
 
-PAGE_RUNNERS = {"README.md": test_readme_make_demo, "commands.md": test_commands_page,
+def test_comparing_page(workspace):
+    """docs/comparing.md: the claims' command at two seeds of each seed world, the aggregate gates (made to hold on
+    two seeds) and the baseline against the claims' own JSON (runtimes of tiny maps: any ratio)."""
+    ws = Workspace(workspace, {"worlds/": f"{ROOT}/worlds/", "--seeds 1-20": "--seeds 1-2", ">= 0\"": ">= -1\"",
+                               "> -0.002": "> -1", "accepted.json": "claims.json", "runtime=1.5": "runtime=1000"})
+    run_page(ws, lines_of("comparing.md"))
+    doc = json.loads((workspace / "new.json").read_text())
+    assert doc["summary"]["all"]["logs"] == 4 and doc["baseline"]["regressions"] == []
+    assert "## Summary over logs" in (workspace / "claims.md").read_text()
+
+
+PAGE_RUNNERS = {"README.md": test_readme_make_demo, "comparing.md": test_comparing_page, "commands.md": test_commands_page,
                 "your-robot.md": test_your_robot_page, "cluster.md": test_cluster_page, "json.md": test_json_page,
                 "benchmarks.md": test_benchmarks_page}
 

@@ -234,3 +234,8 @@ def test_check_counts_per_mode():
     s = summarize(rs)
     assert s.all.checks == {"standard": {"door_passable": (2, 3)}, "em": {"door_passable": (3, 3)}}
     assert s.as_dict()["worlds"]["corridor_door"]["checks"]["standard"]["door_passable"] == {"passed": 2, "logs": 3}
+
+
+def test_an_estimate_has_its_median_and_range():
+    e = estimate([10.0, 15.0, 5.0, 40.0])
+    assert (e.median, e.min, e.max) == (12.5, 5.0, 40.0)

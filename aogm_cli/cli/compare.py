@@ -172,7 +172,11 @@ def compare(inputs, modes_text, detector, params_file, forward_model, json_out, 
     surface_recall (truth), walls_kept, leak_vs_standard, far_leak (no truth), consistency_* (logs
     without truth), holdout_* (--holdout), learned_sigma, learned_p_rand, learned_p_hit,
     learned_p_max, learned_from_readings (the forward model an em or adaptive map's
-    calibration learned); then one check:NAME column (true/false) per world check.
+    calibration learned); then one check:NAME column (true/false) per world check, and
+    statistic (empty on these rows). The summary's rows follow: log empty, world the world or
+    "all logs", mode the mode or MODE-OTHER (a paired difference), statistic one of n, mean, sd,
+    ci_low, ci_high, median, min, max (and wins, ties, losses of a difference), the metric
+    columns holding that number.
 
     \b
     Merging (--from-json): the arguments are --json files of earlier runs; their results are

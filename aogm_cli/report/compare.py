@@ -226,13 +226,21 @@ def run_comparison(entries: list[LogEntry], modes: tuple[str, ...], job: Compare
                 if (i, mode) in targets:
                     result.map_file = str(targets[(i, mode)])
                 results.append(result)
-    contents = {e.path: content_sha256(e.path) for e in entries if Path(e.path).is_file()}
+    contents = {e.path: _content(e.path) for e in entries}
     for r in results:
         r.log_content = contents.get(r.log)
     order = {key: n for n, key in enumerate(tasks)}
     failures = [Failure((entries[f.key[0]].path, f.key[1]), f.message, f.bad_input)
                 for f in sorted(failed, key=lambda f: order[f.key])]
     return results, failures
+
+
+def _content(path: str) -> str | None:
+    """``content_sha256`` of a log, None when it cannot be read (its maps failed, and say why)."""
+    try:
+        return content_sha256(path)
+    except (OSError, KeyError, ValueError):
+        return None
 
 
 def compute_maps(entries: list[LogEntry], tasks: list[tuple[int, str]], job: CompareJob, jobs: int = 1,

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import math
 import re
-import statistics
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -163,10 +162,6 @@ def _aggregate(node: Node, logs, text: str) -> float:
             raise _error(text, f"{shown}: division by zero on the log {label}") from None
     if function in ("sd", "ci_low", "ci_high") and len(xs) < 2:
         raise _error(text, f"{shown}: {len(xs)} log; expected at least two for {function}")
-    if function in ("min", "max"):
-        return min(xs) if function == "min" else max(xs)
-    if function == "median":
-        return float(statistics.median(xs))
     return getattr(summary.estimate(xs), function)
 
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+import statistics
 from dataclasses import dataclass
 
 from aogm_cli.core.occupancy_map import MODES
@@ -58,16 +59,20 @@ def log_values(results: list[ModeResult]) -> dict[str, dict[tuple[str, str], flo
 @dataclass(frozen=True)
 class Estimate:
     """A mean over ``n`` values with its standard deviation (n - 1 in the denominator) and ``INTERVAL``'s bounds
-    (None for n < 2)."""
+    (None for n < 2), and the values' median, least and greatest."""
 
     n: int
     mean: float
     sd: float | None
     ci_low: float | None
     ci_high: float | None
+    median: float = math.nan
+    min: float = math.nan
+    max: float = math.nan
 
     def as_dict(self) -> dict:
-        return {"n": self.n, "mean": self.mean, "sd": self.sd, "ci_low": self.ci_low, "ci_high": self.ci_high}
+        return {"n": self.n, "mean": self.mean, "sd": self.sd, "ci_low": self.ci_low, "ci_high": self.ci_high,
+                "median": self.median, "min": self.min, "max": self.max}
 
 
 @functools.cache
@@ -82,11 +87,12 @@ def estimate(values: list[float]) -> Estimate:
     """The ``Estimate`` of ``values`` (at least one)."""
     n = len(values)
     mean = math.fsum(values) / n
+    spread = {"median": statistics.median(values), "min": min(values), "max": max(values)}
     if n < 2:
-        return Estimate(n, mean, None, None, None)
+        return Estimate(n, mean, None, None, None, **spread)
     sd = math.sqrt(math.fsum((v - mean) ** 2 for v in values) / (n - 1))
     half = t_quantile(n) * sd / math.sqrt(n)
-    return Estimate(n, mean, sd, mean - half, mean + half)
+    return Estimate(n, mean, sd, mean - half, mean + half, **spread)
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ HEADERS = {"accuracy": "Accuracy", "occupied_f1": "Occ. F1", "ece": "ECE", "leak
            "checks_passed": "Checks", "walls_kept": "Walls kept", "far_leak": "Far leak", "holdout_auc": "Held-out AUC",
            RUNTIME_RATIO: "vs standard"}
 CSV_COLUMN = {RUNTIME_RATIO: "runtime_vs_standard"}  # a metric -> its column of --csv, when not its own name
-STATISTICS = ("n", "mean", "sd", "ci_low", "ci_high")
+STATISTICS = ("n", "mean", "sd", "ci_low", "ci_high", "median", "min", "max")
 ALL_LABEL = "all logs"
 
 
