@@ -314,7 +314,9 @@ def test_thinned_outside_clusters_the_contested_cells(corridor_door_log):
     """With no flagged reading, the thinned design's clusters are exactly the cells the thinned
     map holds free and the exact model holds occupied by ``adaptive.contested`` or more, and the
     wall layers next to them that the thinning freed."""
-    from aogm_cli.mapping.modes import resolved_params, state_before
+    from cone_views import state_before
+
+    from aogm_cli.mapping.modes import resolved_params
 
     with LogReader(corridor_door_log) as r:
         log = r.read()
@@ -332,9 +334,11 @@ def test_thinned_outside_clusters_the_contested_cells(corridor_door_log):
 def test_map_evidence_is_ems_evidence_at_the_map(corridor_door_log):
     """``exact.map_evidence`` (one pass over the cones) gives each cell the evidence EM's
     scoring gives a candidate at the same binary map: log p(Z | m, occupied) - log p(Z | m, free)."""
+    from cone_views import state_before
+
     from aogm_cli.mapping import em as E
     from aogm_cli.mapping.exact import map_evidence
-    from aogm_cli.mapping.modes import resolved_params, state_before
+    from aogm_cli.mapping.modes import resolved_params
 
     with LogReader(corridor_door_log) as r:
         log = r.read()

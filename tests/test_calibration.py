@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import yaml
 from click.testing import CliRunner
+from cone_views import reading_cells
 
 from aogm_cli.cli import main
 from aogm_cli.core.grid import GridSpec
@@ -37,7 +38,7 @@ def reference_sums(tpl, rows, cols, bins, z, occupied, model):
         at_max = not zt < z_max
         zt = min(zt, z_max)
         limit = z_max if at_max else min(zt + window * sigma, z_max)
-        cells, ranges = tpl.reading_cells(GRID, row, col, k, limit)
+        cells, ranges = reading_cells(tpl, GRID, row, col, k, limit)
         g = np.array([F.gaussian(zt, r, sigma) if abs(zt - r) <= window * sigma else 0.0 for r in ranges])
         while len(ranges) and ranges[-1] > zt and g[-1] == 0.0:  # the cone ends where the Gaussian does
             cells, ranges, g = cells[:-1], ranges[:-1], g[:-1]

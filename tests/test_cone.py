@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 import pytest
+from cone_views import bin_heading, cells, reading_cells
 
 from aogm_cli.core.errors import InputError
 from aogm_cli.core.grid import GridSpec
@@ -47,27 +48,27 @@ def test_heading_bins_quantisation_below_a_quarter_cell():
 def test_template_is_the_cone_for_every_heading_bin(n_bins):
     tpl = build_cone_templates(0.1, BEAM, 1.0, n_bins=n_bins)
     for k in range(n_bins):
-        drow, dcol, rng, bearing = tpl.cells(k)
+        drow, dcol, rng, bearing = cells(tpl, k)
         got = set(zip(drow.tolist(), dcol.tolist(), strict=True))
         assert len(got) == drow.size  # each cell once
-        assert got == brute_force_cone(0.1, BEAM, 1.0, tpl.bin_heading(k))
+        assert got == brute_force_cone(0.1, BEAM, 1.0, bin_heading(tpl, k))
         # ranges and bearings describe the cells, and ranges are sorted
         np.testing.assert_allclose(rng, 0.1 * np.hypot(drow, dcol), atol=1e-12)
         assert np.all(np.diff(rng) >= 0)
         assert np.all(rng <= 1.0 + 1e-9)
-        off = np.where(rng > 0, wrap(np.arctan2(drow, dcol) - tpl.bin_heading(k)), 0.0)
+        off = np.where(rng > 0, wrap(np.arctan2(drow, dcol) - bin_heading(tpl, k)), 0.0)
         np.testing.assert_allclose(bearing, off, atol=1e-9)
         assert np.all(np.abs(bearing) <= BEAM / 2 + 1e-9)
 
 
 def test_template_first_cell_is_the_sensor_cell_and_axis_cells_follow():
     tpl = build_cone_templates(0.1, BEAM, 0.5, n_bins=64)
-    drow, dcol, rng, _ = tpl.cells(0)  # pointing +x
+    drow, dcol, rng, _ = cells(tpl, 0)  # pointing +x
     assert (drow[0], dcol[0], rng[0]) == (0, 0, 0.0)
     on_axis = [(r, c) for r, c in zip(drow.tolist(), dcol.tolist(), strict=True) if r == 0]
     assert on_axis == [(0, i) for i in range(6)]
     # pointing +y (bin 16 of 64), the cone is the +x cone turned a quarter
-    drow_y, dcol_y, rng_y, _ = tpl.cells(16)
+    drow_y, dcol_y, rng_y, _ = cells(tpl, 16)
     assert set(zip(drow_y.tolist(), dcol_y.tolist(), strict=True)) == set(zip(dcol.tolist(), (-drow).tolist(), strict=True))
     np.testing.assert_array_equal(np.sort(rng_y), np.sort(rng))
 
@@ -76,7 +77,7 @@ def test_margin_extends_the_reach():
     a = build_cone_templates(0.1, BEAM, 1.0, n_bins=64)
     b = build_cone_templates(0.1, BEAM, 1.0, margin=0.2, n_bins=64)
     assert b.reach == pytest.approx(1.2)
-    assert b.cells(0)[2].max() > 1.1 >= a.cells(0)[2].max()
+    assert cells(b, 0)[2].max() > 1.1 >= cells(a, 0)[2].max()
 
 
 def test_heading_bins_cover_all_yaws():
@@ -85,9 +86,9 @@ def test_heading_bins_cover_all_yaws():
     k = tpl.heading_bin(yaw)
     assert k.min() >= 0 and k.max() < 64
     assert set(np.unique(k).tolist()) == set(range(64))
-    err = np.abs(wrap(yaw - tpl.bin_heading(k)))
+    err = np.abs(wrap(yaw - bin_heading(tpl, k)))
     assert err.max() <= math.pi / 64 + 1e-12
-    np.testing.assert_array_equal(tpl.heading_bin(tpl.bin_heading(np.arange(64))), np.arange(64))
+    np.testing.assert_array_equal(tpl.heading_bin(bin_heading(tpl, np.arange(64))), np.arange(64))
     assert tpl.heading_bin(-1e-9) == 0 and tpl.heading_bin(2 * math.pi) == 0
 
 
@@ -95,18 +96,18 @@ def test_reading_cells_in_range_order_clipped_to_the_grid():
     grid = GridSpec(0.0, 0.0, 0.1, 8, 8)
     tpl = build_cone_templates(0.1, BEAM, 1.0, n_bins=64)
     k = 8  # 45 degrees
-    index, rng = tpl.reading_cells(grid, 1, 1, k, 0.75)
-    drow, dcol, full_rng, _ = tpl.cells(k)
+    index, rng = reading_cells(tpl, grid, 1, 1, k, 0.75)
+    drow, dcol, full_rng, _ = cells(tpl, k)
     rows, cols = 1 + drow, 1 + dcol
     keep = grid.contains(rows, cols) & (full_rng <= 0.75)
     np.testing.assert_array_equal(index, (rows * 8 + cols)[keep])
     np.testing.assert_array_equal(rng, full_rng[keep])
     assert np.all(np.diff(rng) >= 0)
     # a sensor cell outside the grid still sees the cells of its cone that are inside
-    index, _ = tpl.reading_cells(grid, -2, 3, 16, 1.0)  # pointing +y from below the grid
+    index, _ = reading_cells(tpl, grid, -2, 3, 16, 1.0)  # pointing +y from below the grid
     assert index.size > 0 and np.all(index // 8 >= 0)
     # a cone pointing away from the grid sees nothing
-    assert tpl.reading_cells(grid, -2, 3, 48, 1.0)[0].size == 0
+    assert reading_cells(tpl, grid, -2, 3, 48, 1.0)[0].size == 0
 
 
 def test_cone_cells_kernel_matches_the_wrapper():
@@ -115,7 +116,7 @@ def test_cone_cells_kernel_matches_the_wrapper():
     out_i = np.empty(500, dtype=np.int64)
     out_r = np.empty(500, dtype=np.float64)
     n = cone_cells(tpl.kernel_arrays, 20, 20, 10, 10, 40, 0.6, out_i, out_r)
-    index, rng = tpl.reading_cells(grid, 10, 10, 40, 0.6)
+    index, rng = reading_cells(tpl, grid, 10, 10, 40, 0.6)
     np.testing.assert_array_equal(out_i[:n], index)
     np.testing.assert_array_equal(out_r[:n], rng)
 
@@ -197,12 +198,12 @@ def test_a_narrow_beams_cone_holds_every_cell_its_ray_crosses():
     row, col = grid.world_to_cell(0.0, 0.0)
     missing_narrow = 0
     for k in range(0, ray.n_bins, 97):
-        yaw = float(ray.bin_heading(k))
+        yaw = float(bin_heading(ray, k))
         rows, cols, _, _ = ray_cells(grid, 0.025, 0.025, yaw, 7.5)  # from the cell's centre
         crossed = set(zip((rows - row).tolist(), (cols - col).tolist(), strict=True))
-        drow, dcol, _, _ = ray.cells(k)
+        drow, dcol, _, _ = cells(ray, k)
         assert crossed <= set(zip(drow.tolist(), dcol.tolist(), strict=True)), k
-        drow, dcol, _, _ = narrow.cells(k)
+        drow, dcol, _, _ = cells(narrow, k)
         missing_narrow += len(crossed - set(zip(drow.tolist(), dcol.tolist(), strict=True)))
     assert missing_narrow > 0
 

@@ -9,7 +9,7 @@ from aogm_cli.core.grid import GridSpec
 from aogm_cli.mapping.em import em_problem, em_readings, run_em
 from aogm_cli.mapping.params import EMConfig
 from aogm_cli.sensor_models.cone_build import build_cone_templates
-from aogm_cli.sensor_models.forward_index import IndexMasks, build_forward_index, log_likelihoods
+from aogm_cli.sensor_models.forward_index import build_forward_index, log_likelihoods
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig
 
 GRID = GridSpec(0.0, 0.0, 0.1, 21, 41)
@@ -143,16 +143,6 @@ def test_residual_from_the_last_sweep_equals_a_fresh_pass():
     assert np.allclose(result.residual, fresh.residual, rtol=1e-9, atol=1e-12)
 
 
-def test_a_mask_keeps_only_the_readings_that_touch_it():
-    tpl = build_cone_templates(GRID.resolution, math.radians(10.0), 4.0)
-    rows, cols = np.array([10, 10]), np.array([5, 5])
-    bins = tpl.heading_bin(np.array([0.0, math.pi / 2]))  # one reading along +x, one along +y
-    mask = np.zeros(N_CELLS, dtype=bool)
-    mask[10 * GRID.width + 12] = True  # on the +x beam
-    index = build_forward_index((rows, cols, bins, np.array([1.0, 1.0])), GRID, tpl, 4.0, FORWARD, masks=IndexMasks(mask=mask))
-    assert np.diff(index.ptr).tolist()[1] == 0 and np.diff(index.ptr)[0] > 0
-
-
 def test_leaving_out_cells_held_free_changes_no_likelihood():
     # readings at two ranges, so that cones hold obstacles before and inside the windows
     tpl = build_cone_templates(GRID.resolution, math.radians(20.0), 4.0)
@@ -167,7 +157,7 @@ def test_leaving_out_cells_held_free_changes_no_likelihood():
     fixed_occupied[10 * GRID.width + 15] = True  # and one inside them
     fixed_occupied &= ~candidates
     held_free = ~(candidates | fixed_occupied)
-    small = build_forward_index((rows, cols, bins, ranges), GRID, tpl, 4.0, FORWARD, masks=IndexMasks(held_free=held_free))
+    small = build_forward_index((rows, cols, bins, ranges), GRID, tpl, 4.0, FORWARD, held_free=held_free)
     assert small.cell.size < full.cell.size and not held_free[small.cell].any()
     rng = np.random.default_rng(3)
     for _ in range(5):  # any map that keeps the held-free cells free: the same likelihoods

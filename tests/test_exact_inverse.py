@@ -13,9 +13,17 @@ from aogm_cli.core.log import SensorSpec
 from aogm_cli.mapping.exact import ExactMapper
 from aogm_cli.mapping.standard import standard_map
 from aogm_cli.sensor_models.exact_inverse import L0 as PRIOR_L0
-from aogm_cli.sensor_models.exact_inverse import PRIOR, cone_ratios
+from aogm_cli.sensor_models.exact_inverse import PRIOR, cone_terms
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig
 from aogm_cli.sensor_models.inverse_model import InverseModelConfig
+
+
+def cone_ratios(p, g, j0, g0, p_hit, const, w, n, a, u, r, na, out):
+    """``cone_terms``' ratios in ``out`` (False, ``out`` unset, when every ratio is exactly 1)."""
+    if not cone_terms(p, g, j0, g0, p_hit, const, w, n, a, u, r, na, out):
+        return False
+    out[:n] /= na[:n]
+    return True
 
 
 def ratios(p, g, g0, p_hit, const, w):
@@ -56,7 +64,7 @@ def test_linear_pass_matches_brute_force_on_random_cones():
 
 
 def three_passes(p, g, g0, p_hit, const, w):
-    """The ratios as the comment above ``cone_ratios`` writes them: forward, backward, then per cell."""
+    """The ratios as the comment above ``cone_terms`` writes them: forward, backward, then per cell."""
     n, q = len(p), 1.0 - p_hit
     a, u, r, out = [0.0] * n, [0.0] * n, [0.0] * n, [0.0] * n
     prod, acc = 1.0, 0.0

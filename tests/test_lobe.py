@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from cone_views import bin_heading
 
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.sensor_models.cone_build import build_cone_templates
@@ -47,7 +48,7 @@ def wall_readings(heard, band_rows=(12, 20, 30, 40, 50, 60), yaws=range(20, 161,
     for d in band_rows:
         for yaw in yaws:
             k = int(tpl.heading_bin(np.array([math.radians(yaw)]))[0])
-            heading = float(tpl.bin_heading(k))  # the yaw the cone is drawn at
+            heading = float(bin_heading(tpl, k))  # the yaw the cone is drawn at
             s = np.sin(heading + np.radians(phi))
             r = np.where(s > 1e-9, d * GRID.resolution / np.maximum(s, 1e-9), np.inf)
             ok = (r <= 5.0) & heard(r, phi)
@@ -179,9 +180,11 @@ def test_a_learned_lobe_replaces_a_configured_one_and_the_whole_cone_undoes_it(c
 
 def _before(log_path, mode: str, stage: str):
     """The state of a ``mode`` map of the log at ``log_path`` (defaults) just before its stage ``stage``."""
+    from cone_views import state_before
+
     from aogm_cli.io.logfile import LogReader
     from aogm_cli.map_files import resolve_params, sensor_model
-    from aogm_cli.mapping.modes import resolved_params, state_before
+    from aogm_cli.mapping.modes import resolved_params
 
     with LogReader(log_path) as reader:
         log = reader.read()

@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 import pytest
+from cone_views import bin_heading, cells
 
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.core.log import SensorSpec
@@ -86,11 +87,11 @@ def test_kernel_agrees_with_the_inverse_model_function(model, octant, z):
     config = InverseModelConfig(alpha=0.1, model=model)
     templates = standard_templates(grid, ONE_SONAR)
     k = int(templates.n_bins * (octant + 0.37) / 8)  # a heading bin in every octant
-    yaw = float(templates.bin_heading(k))
+    yaw = float(bin_heading(templates, k))
     pose = [5.55, 5.45, yaw]  # the centre of cell (54, 55)
     log_odds, observed = kernel_map([(0, None, np.array([pose]), np.array([[z]], np.float32))],
                                       ONE_SONAR, grid, config, templates=templates)
-    drow, dcol, rng, bearing = templates.cells(k)
+    drow, dcol, rng, bearing = cells(templates, k)
     want = inverse_model(rng, bearing, z, config, beam_width=BEAM, min_range=0.05, max_range=5.0)
     limit = 5.0 if z >= 5.0 else min(z + 0.05, 5.0)
     cover = rng <= limit
@@ -106,7 +107,7 @@ def test_flat_offsets_follow_every_heading_bin():
     templates = build_cone_templates(0.1, BEAM, 1.0, n_bins=64)
     flat = flat_offsets(templates, 37)
     for k in range(64):
-        drow, dcol, _, _ = templates.cells(k)
+        drow, dcol, _, _ = cells(templates, k)
         b = templates.base_bin[k]
         x = flat.offsets[flat.sel[k, 0], templates.offsets[b] : templates.offsets[b + 1]]
         np.testing.assert_array_equal(flat.sel[k, 1] * x.astype(np.int64), drow * 37 + dcol)

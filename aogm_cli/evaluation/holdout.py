@@ -26,7 +26,7 @@ from aogm_cli.sensor_models.cone import (
     range_search,
     reading_geometry,
 )
-from aogm_cli.sensor_models.forward_index import IndexMasks, build_forward_index, log_likelihoods
+from aogm_cli.sensor_models.forward_index import build_forward_index, log_likelihoods
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig
 from aogm_cli.sensor_models.inverse_model import occupied_arc
 from aogm_cli.sensor_models.ray import AXIS_SHORT, axis_counts, is_narrow_beam, ray_cells
@@ -302,7 +302,7 @@ def reference_log_likelihoods(pose: np.ndarray, ranges: np.ndarray, sensor: Sens
     for start in range(0, z.size, chunk):
         part = slice(start, start + chunk)
         index = build_forward_index((rows[part], cols[part], bins[part], z[part]), grid, laid.templates,
-                                    float(sensor.max_range), REFERENCE_MODEL, masks=IndexMasks(held_free=free))
+                                    float(sensor.max_range), REFERENCE_MODEL, held_free=free)
         out[part] = log_likelihoods(index, occupied_flat)
     return out
 

@@ -23,7 +23,7 @@ from aogm_cli.mapping.plan import Plan, plan_map
 from aogm_cli.mapping.runner import Stage, has, lacks, run_stages
 from aogm_cli.mapping.state import State
 
-__all__ = ["ALL", "Flagger", "map_in_mode", "map_source", "mode_stages", "planned", "state_before", "warm_up"]
+__all__ = ["ALL", "Flagger", "map_in_mode", "map_source", "mode_stages", "planned", "warm_up"]
 
 
 # Every stage once: its name (the map's phase), its function, the state's fields it reads and writes.
@@ -121,13 +121,6 @@ def planned(log, mode: str, params: MapParams, flagger: Flagger = ALL, progress:
     stages = mode_stages(plan)
     plan = dataclasses.replace(plan, stages=tuple(stage.name for stage in stages))
     return stages, State(params, TimedSource(log), grid, plan, *flagger, progress, learned=given or Learned())
-
-
-def state_before(log, mode: str, params: MapParams, stage: str, given: Learned | None = None) -> State:
-    """The state of a ``mode`` map of ``log`` just before its first stage named ``stage`` (for tests)."""
-    stages, state = planned(log, mode, params, given=given)
-    names = [s.name for s in stages]
-    return run_stages(stages[:names.index(stage)], state)[0]
 
 
 def resolved_params(log, params: MapParams) -> MapParams:

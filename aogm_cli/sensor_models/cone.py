@@ -81,10 +81,6 @@ class ConeTemplates:
     lobe: tuple[float, float] | None = None  # (lobe_deg, lobe_range) that ``heard`` was made of
 
     @property
-    def bin_width(self) -> float:
-        return TWO_PI / self.n_bins
-
-    @property
     def kernel_arrays(self) -> ConeArrays:
         """The templates as compiled kernels take them."""
         return ConeArrays(self.offsets, self.dcol, self.drow, self.ranges, self.base_bin, self.transform,
@@ -94,34 +90,6 @@ class ConeTemplates:
         """Heading bin (int64 array) of each yaw (rad, any real): the bin whose centre is nearest."""
         k = np.floor(np.asarray(yaw, dtype=np.float64) * (self.n_bins / TWO_PI) + 0.5).astype(np.int64)
         return k % self.n_bins
-
-    def bin_heading(self, k):
-        """Central yaw (rad, in [0, 2 pi)) of heading bin(s) ``k``."""
-        return np.asarray(k, dtype=np.float64) * self.bin_width
-
-    def cells(self, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(drow, dcol, range, bearing) of every cell of heading bin ``k``'s cone, in range order."""
-        k = int(k) % self.n_bins
-        b = int(self.base_bin[k])
-        a, bb, c, d = (int(v) for v in self.transform[k])
-        s, e = int(self.offsets[b]), int(self.offsets[b + 1])
-        dc, dr = self.dcol[s:e].astype(np.int64), self.drow[s:e].astype(np.int64)
-        det = a * d - bb * c
-        return (c * dc + d * dr, a * dc + bb * dr, self.ranges[s:e].copy(), det * self.bearings[s:e])
-
-    def reading_cells(self, grid: GridSpec, row: int, col: int, k: int, limit: float) -> tuple[np.ndarray, np.ndarray]:
-        """Cells (flat index, range) of one reading's cone inside ``grid``, up to ``limit`` metres."""
-        if grid.resolution != self.resolution:
-            raise ValueError(f"templates are for resolution {self.resolution}, grid has {grid.resolution}")
-        k = int(k) % self.n_bins
-        b = int(self.base_bin[k])
-        size = int(self.offsets[b + 1] - self.offsets[b])
-        out_index = np.empty(size, dtype=np.int64)
-        out_range = np.empty(size, dtype=np.float64)
-        n = cone_cells(
-            self.kernel_arrays, grid.height, grid.width, int(row), int(col), k, float(limit), out_index, out_range
-        )
-        return out_index[:n], out_range[:n]
 
 
 @numba.njit(cache=True, inline="always")

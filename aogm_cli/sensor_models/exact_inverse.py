@@ -1,6 +1,6 @@
 """The exact inverse sensor model of Thrun's forward model (Kaufman et al. 2016, for cones): each
 cell's posterior given one reading and the map so far, cells independent, in time linear in the
-cone's cells (``cone_ratios``), and the sequential log-odds update of a log's readings with it.
+cone's cells (``cone_terms``), and the sequential log-odds update of a log's readings with it.
 """
 
 from __future__ import annotations
@@ -109,32 +109,6 @@ def cone_terms(p, g, j0, g0, p_hit, const, w, n, a, u, r, na, out):
     return True
 
 
-@numba.njit(cache=True, error_model="numpy")
-def cone_ratios(p, g, j0, g0, p_hit, const, w, n, a, u, r, na, out):
-    """out[j] = p(z | m_j = 1) / p(z | m_j = 0) for the first ``n`` cells of one cone (``cone_terms``)."""
-    if not cone_terms(p, g, j0, g0, p_hit, const, w, n, a, u, r, na, out):
-        return False
-    for j in range(n):
-        out[j] /= na[j]
-    return True
-
-
-@numba.njit(cache=True, inline="always")
-def _heard_only(heard, rk, ib, m, j0, ranges):
-    """The first ``m`` cells of a cone (``ib``, ranges ``rk``) with the unheard left out: (m, j0, their ranges in
-    ``ranges``)."""
-    n = 0
-    n0 = 0
-    for j in range(m):
-        if heard[j] != 0:
-            ib[n] = ib[j]
-            ranges[n] = rk[j]
-            n += 1
-            if j < j0:
-                n0 += 1
-    return n, n0, ranges
-
-
 @numba.njit(cache=True, _nrt=False, error_model="numpy")
 def _reading_cone(tpl, flat, shape, readings, t, state, prior, model, ib, fl):
     """Reading t's cone under ``state`` (negative: ``prior``): flat ids in ``ib``, occupancy in
@@ -160,7 +134,16 @@ def _reading_cone(tpl, flat, shape, readings, t, state, prior, model, ib, fl):
     p = fl[0]
     g = fl[1]
     if tpl.heard.shape[0] > 0:  # the cone's heard cells only, in order (``ConeTemplates.heard``)
-        m, j0, rk = _heard_only(tpl.heard[tpl.offsets[b]:], rk, ib, m, j0, fl[2])
+        heard, ranges = tpl.heard[tpl.offsets[b]:], fl[2]
+        n = n0 = 0
+        for j in range(m):
+            if heard[j] != 0:
+                ib[n] = ib[j]
+                ranges[n] = rk[j]
+                n += 1
+                if j < j0:
+                    n0 += 1
+        m, j0, rk = n, n0, ranges
     for j in range(m):
         v = state[np.uint64(np.uint32(ib[j]))]
         p[j] = prior if v < 0.0 else v
@@ -176,20 +159,6 @@ def _reading_cone(tpl, flat, shape, readings, t, state, prior, model, ib, fl):
     return m, j0, g0, p_rand / z_max + p_max * g0
 
 
-@numba.njit(cache=True, _nrt=False, error_model="numpy")
-def _reading_terms(tpl, flat, shape, readings, t, state, prior, model, ib, fl):
-    """``_reading_cone``, then ``cone_terms`` (numerators in ``fl[6]``, denominators in ``fl[5]``).
-    Returns m, negated when every ratio is exactly 1, 0 for no reading or a cone off the grid."""
-    p_rand, p_max, p_hit = model[0], model[1], model[2]
-    m, j0, g0, const = _reading_cone(tpl, flat, shape, readings, t, state, prior, model, ib, fl)
-    if m == 0:
-        return 0
-    if not cone_terms(fl[0], fl[1], j0, g0, p_hit, const, 1.0 - p_rand - p_max, m, fl[2], fl[3], fl[4], fl[5],
-                      fl[6]):
-        return -m
-    return m
-
-
 # _nrt=False (as the standard kernel): nothing is allocated per reading; the scratch comes in
 @numba.njit(cache=True, _nrt=False, error_model="numpy")
 def exact_inverse_updates(tpl, flat, shape, readings, state, model, bounds, scratch, span):
@@ -197,15 +166,19 @@ def exact_inverse_updates(tpl, flat, shape, readings, state, model, bounds, scra
     each cone cell's odds times its ratio, clamped. The spare cells (occupancy 0) after the grid leave
     every product and sum unchanged to the last bit, so they need no test until the write."""
     p_min, p_max_clamp, prior = bounds
+    p_hit, w = model[2], 1.0 - model[0] - model[1]
     n_cells = np.uint64(shape[0] * shape[1])  # unsigned as the cell ids: compared as integers
     # what a reading whose ratios are all 1 leaves in an unobserved cell
     kept_prior = np.float32(min(max(prior / (prior + 1.0 - prior), p_min), p_max_clamp))
     ib = scratch[0]
     fl = scratch[1]
     for t in range(span[0], span[1]):  # in order: each reading sees the map the earlier ones left
-        m = _reading_terms(tpl, flat, shape, readings, t, state, prior, model, ib, fl)
-        if m < 0:
-            for j in range(-m):  # every ratio 1: the cone's unobserved cells become observed
+        m, j0, g0, const = _reading_cone(tpl, flat, shape, readings, t, state, prior, model, ib, fl)
+        if m == 0:  # no reading, or a cone off the grid
+            continue
+        # numerators in fl[6], denominators in fl[5]; False: every ratio exactly 1
+        if not cone_terms(fl[0], fl[1], j0, g0, p_hit, const, w, m, fl[2], fl[3], fl[4], fl[5], fl[6]):
+            for j in range(m):  # every ratio 1: the cone's unobserved cells become observed
                 c = np.uint64(np.uint32(ib[j]))
                 if c < n_cells and state[c] < 0.0:
                     state[c] = kept_prior
@@ -228,7 +201,7 @@ def map_evidence_sums(tpl, flat, shape, readings, occupancy, model, scratch, spa
     cone's cells under the fixed binary map ``occupancy``: EM's evidence at that map.
 
     Before the window, with K occupied cells and R the backward sum at it, A_j R_j is q^K R (free
-    cell) or q^(K - 1) R (occupied): two ratios; the window's cells are ``cone_ratios`` with w q^K."""
+    cell) or q^(K - 1) R (occupied): two ratios; the window's cells are ``cone_terms``' ratios with w q^K."""
     p_rand, p_max, p_hit = model[0], model[1], model[2]
     w = 1.0 - p_rand - p_max
     q = 1.0 - p_hit
@@ -252,11 +225,13 @@ def map_evidence_sums(tpl, flat, shape, readings, occupancy, model, scratch, spa
             tail = p[j] * p_hit * g[j] + (1.0 - p_hit * p[j]) * tail
         n = m - j0
         if n > 0:
-            cone_ratios(p[j0:m], g[j0:m], 0, g0, p_hit, const, wk, n, fl[2], fl[3], fl[4], fl[5], out)
+            # from j0 = 0 never all 1 (``cone_terms``): numerators in ``out``, denominators in fl[5]
+            cone_terms(p[j0:m], g[j0:m], 0, g0, p_hit, const, wk, n, fl[2], fl[3], fl[4], fl[5], out)
+            den = fl[5]
             for j in range(n):
                 c = np.uint64(np.uint32(ib[j0 + j]))
                 if c < n_cells:
-                    evidence[c] += math.log(out[j])
+                    evidence[c] += math.log(out[j] / den[j])
         free = (const + wk * (q * tail)) / (const + wk * tail)
         held = (const + wk * tail) / (const + wk * tail / q)
         if abs(free - 1.0) < NEGLIGIBLE and (occupied == 0 or abs(held - 1.0) < NEGLIGIBLE):

@@ -42,7 +42,6 @@ class ForwardIndex:
     g: np.ndarray
     g0: np.ndarray
     const: np.ndarray
-    reading: np.ndarray
     w: float
     p_hit: float
 
@@ -57,12 +56,11 @@ class ForwardIndex:
 
 
 class IndexGrid(NamedTuple):
-    """``_fill_index``'s grid: its shape and two optional flat bool masks (empty: none)."""
+    """``_fill_index``'s grid: its shape and the flat bool cells left out of every cone (empty: none)."""
 
     height: int
     width: int
-    mask: np.ndarray  # readings none of whose cells is in it get no entries
-    held_free: np.ndarray  # cells left out of every cone
+    held_free: np.ndarray
 
 
 class IndexBuffers(NamedTuple):
@@ -75,26 +73,19 @@ class IndexBuffers(NamedTuple):
 
 
 @numba.njit(cache=True)
-def _reading_sum(ptr, cell, g, g0, p_hit, occupied, t):
-    """S_t for reading t under the binary map ``occupied``."""
-    q = 1.0 - p_hit
-    qk = 1.0
-    s = 0.0
-    for e in range(ptr[t], ptr[t + 1]):
-        if occupied[cell[e]]:
-            s += qk * p_hit * g[e]
-            qk *= q
-    return s + qk * g0[t]
-
-
-@numba.njit(cache=True)
 def reading_log_likelihoods(index, p_hit, occupied):
-    """log p(z_t | m) for every reading of ``index`` (``ForwardArrays``)."""
+    """log p(z_t | m) for every reading of ``index`` (``ForwardArrays``): S_t under the binary map ``occupied``."""
     n = index.ptr.shape[0] - 1
     out = np.empty(n)
+    q = 1.0 - p_hit
     for t in range(n):
-        s = _reading_sum(index.ptr, index.cell, index.g, index.g0, p_hit, occupied, t)
-        out[t] = math.log(index.const[t] + index.w * s)
+        qk = 1.0
+        s = 0.0
+        for e in range(index.ptr[t], index.ptr[t + 1]):
+            if occupied[index.cell[e]]:
+                s += qk * p_hit * index.g[e]
+                qk *= q
+        out[t] = math.log(index.const[t] + index.w * (s + qk * index.g0[t]))
     return out
 
 
@@ -110,7 +101,6 @@ def _fill_index(tpl, flat, grid, readings, sigma, window, out):
     width = grid.width
     ext = tpl.extent
     n_cells = height * width
-    use_mask = grid.mask.shape[0] > 0
     drop = grid.held_free.shape[0] > 0
     ib = out.scratch
     pos = 0
@@ -126,34 +116,20 @@ def _fill_index(tpl, flat, grid, readings, sigma, window, out):
         z = readings.z[t]
         m = cone_entries(r, z, readings.limit[t], sigma, window)
         cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width)
-        touches = not use_mask
         n = 0
         s0 = tpl.offsets[b]
         for j in range(m):
             c = np.int64(ib[j])
             if c >= n_cells or unheard(tpl, s0 + j):  # unheard cells: not in the reading's cone
                 continue
-            if use_mask and grid.mask[c]:
-                touches = True
             if drop and grid.held_free[c]:
                 continue
             out.cell[pos + n] = c
             out.g[pos + n] = gaussian_at(z, r[j], sigma, window)
             n += 1
-        if touches:
-            out.counts[t] = n
-            pos += n
+        out.counts[t] = n
+        pos += n
     return pos
-
-
-class IndexMasks(NamedTuple):
-    """``build_forward_index``'s two optional flat bool masks over the grid (None: none)."""
-
-    mask: np.ndarray | None = None  # only the readings whose cones touch it get entries
-    held_free: np.ndarray | None = None  # cells free while the index is used: left out of every cone
-
-
-NO_MASKS = IndexMasks()
 
 
 def build_forward_index(
@@ -162,21 +138,19 @@ def build_forward_index(
     templates,
     z_max: float,
     config: ForwardModelConfig,
-    reading_ids: np.ndarray | None = None,
-    masks: IndexMasks = NO_MASKS,
+    held_free: np.ndarray | None = None,
     shadow: np.ndarray | None = None,
 ) -> ForwardIndex:
     """The forward model's index for ``cones`` = (rows, cols, bins, z); NaN readings are dropped.
-    ``masks.held_free`` cells stay free while the index is used: a free cell adds nothing to any S_t,
+    ``held_free`` (flat bool) cells stay free while the index is used: a free cell adds nothing to any S_t,
     so leaving it out changes no likelihood and keeps a small cluster's index small. ``shadow`` cuts
     readings short (``cone_limits``).
     """
     rows, cols, bins, z = cones
     z = np.asarray(z, dtype=np.float64).reshape(-1)
-    ids = np.arange(len(z)) if reading_ids is None else np.asarray(reading_ids).reshape(-1)
     keep = ~np.isnan(z)
     rows, cols, bins = (np.asarray(a, dtype=np.int64).reshape(-1)[keep] for a in (rows, cols, bins))
-    z, ids = z[keep], ids[keep]
+    z = z[keep]
     z, limits = cone_limits(z, z_max, config, None if shadow is None else np.asarray(shadow).reshape(-1)[keep])
     z_eff = np.where(np.isfinite(z), np.minimum(z, z_max), z_max)
     # an upper bound of each reading's entry count: template entries within its limit
@@ -190,12 +164,11 @@ def build_forward_index(
     out_g = np.empty(upper, dtype=np.float64)
     counts = np.zeros(len(z), dtype=np.int64)
     scratch = np.empty(int(np.diff(templates.offsets).max()), dtype=np.int32)
-    mask, held_free = (np.zeros(0, dtype=np.bool_) if a is None else np.ascontiguousarray(a, dtype=np.bool_).reshape(-1)
-                       for a in masks)
+    held_free = np.zeros(0, dtype=np.bool_) if held_free is None else np.ascontiguousarray(held_free, dtype=np.bool_).reshape(-1)
     n = _fill_index(templates.kernel_arrays, flat_offsets(templates, grid.width),
-                    IndexGrid(grid.height, grid.width, mask, held_free), ExpectationReadings(rows, cols, bins, z_eff, limits),
+                    IndexGrid(grid.height, grid.width, held_free), ExpectationReadings(rows, cols, bins, z_eff, limits),
                     float(config.sigma), float(config.window), IndexBuffers(out_cell, out_g, counts, scratch))
     ptr = np.zeros(len(z) + 1, dtype=np.int64)
     np.cumsum(counts, out=ptr[1:])
     g0, const, w = reading_constants(z, z_max, config)
-    return ForwardIndex(ptr, out_cell[:n], out_g[:n], g0, const, ids, w, config.p_hit)  # views: no copy
+    return ForwardIndex(ptr, out_cell[:n], out_g[:n], g0, const, w, config.p_hit)  # views: no copy

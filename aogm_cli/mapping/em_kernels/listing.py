@@ -11,7 +11,6 @@ import numba
 import numpy as np
 
 from aogm_cli.mapping.em_kernels.layout import SEGMENT, _trailing_zeros
-from aogm_cli.mapping.em_kernels.windows import _row_group
 
 
 @numba.njit(cache=True, inline="always")
@@ -47,7 +46,11 @@ SPAN = np.dtype([(name, np.int64) for name in (*RowSpan._fields, "t", "lo", "hi"
 @numba.njit(cache=True, inline="always")
 def _row_span(tpl, groups, rd, t, r):
     """``RowSpan`` of reading t's cone in grid row r (o_hi < o_lo: none there)."""
-    kind, b, gv, sign = _row_group(tpl, groups, rd.bin[t], r - rd.row0[t])
+    k, b = rd.bin[t], tpl.base_bin[rd.bin[t]]
+    if tpl.transform[k, 2] == 0:  # drow = d dr, dcol = a dc: the row's group is the stored bin's row dr
+        kind, gv, sign = 0, (r - rd.row0[t]) * tpl.transform[k, 3], tpl.transform[k, 0]
+    else:  # drow = c dc, dcol = b dr: its column dc
+        kind, gv, sign = 1, (r - rd.row0[t]) * tpl.transform[k, 2], tpl.transform[k, 1]
     ext = tpl.extent
     if gv < -ext or gv > ext or rd.m[t] == 0:
         return RowSpan(0, 0, 0, 1, 1, 0, 1, 0)

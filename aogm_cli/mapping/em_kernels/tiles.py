@@ -64,22 +64,6 @@ def _window_pairs(i, t, span, r, c0, c1, c_start, fill, tpl, groups, rd, model, 
 
 
 @numba.njit(cache=True, inline="always")
-def _tile_clean(cand, state, work, r, sg, list_lo, list_hi, c_start, c_stop):
-    """True (candidates stamped scored) when none of tile (r, sg)'s readings changed since its last visit."""
-    since = cand.tile_clock[r, sg]
-    if since < 0:
-        return False
-    for i in range(list_lo, list_hi):
-        if state.stamp[work.spans[work.seg_list[i]].t] > since:
-            return False
-    now = work.ctl[0].clock
-    for c in range(c_start, c_stop):
-        cand.stamp[c] = now
-    cand.tile_clock[r, sg] = now
-    return True
-
-
-@numba.njit(cache=True, inline="always")
 def _count_pairs(tpl, groups, rd, model, cand, state, work, r, c0, c1, c_start, list_lo, list_hi, nc):
     """The tile's listing: far runs into ``far_sum``, window pairs counted; (pairs, arena entries needed)."""
     cnt = work.count
@@ -116,16 +100,6 @@ def _count_pairs(tpl, groups, rd, model, cand, state, work, r, c0, c1, c_start, 
     for i in range(1, nc + 1):
         cnt[i] += cnt[i - 1]
     return n_pairs, room
-
-
-@numba.njit(cache=True, inline="always")
-def _write_pairs(tpl, groups, rd, model, cand, work, r, c0, c1, c_start, list_lo, list_hi):
-    """The tile's window pairs (counted by ``_count_pairs``), each candidate's in reading order."""
-    for i in range(list_lo, list_hi):
-        span = _span_at(work, work.seg_list[i])
-        t = work.spans[work.seg_list[i]].t
-        if span.o_hi >= span.o_lo:
-            _window_pairs(i - list_lo, t, span, r, c0, c1, c_start, True, tpl, groups, rd, model, cand, work)
 
 
 @numba.njit(cache=True, inline="always")
@@ -191,8 +165,18 @@ def _tile(r, sg, c_start, c_stop, tpl, flat, groups, rd, model, cand, state, wor
     list_hi = work.seg_ptr[sg + 1]
     ctl.budget -= list_hi - list_lo
     clock0 = ctl.clock
-    if mode == SWEEP and _tile_clean(cand, state, work, r, sg, list_lo, list_hi, c_start, c_stop):
-        return True
+    since = cand.tile_clock[r, sg] if mode == SWEEP else -1
+    if since >= 0:  # skipped, its candidates stamped scored, when none of its readings changed since
+        clean = True
+        for i in range(list_lo, list_hi):
+            if state.stamp[work.spans[work.seg_list[i]].t] > since:
+                clean = False
+                break
+        if clean:
+            for c in range(c_start, c_stop):
+                cand.stamp[c] = clock0
+            cand.tile_clock[r, sg] = clock0
+            return True
     nc = c_stop - c_start
     n_list = list_hi - list_lo
     if n_list > work.far_lo.shape[0]:
@@ -204,7 +188,11 @@ def _tile(r, sg, c_start, c_stop, tpl, flat, groups, rd, model, cand, state, wor
         return False
     ctl.pairs += n_pairs
     ctl.budget -= n_pairs + 8 * nc
-    _write_pairs(tpl, groups, rd, model, cand, work, r, c0, c1, c_start, list_lo, list_hi)
+    for i in range(list_lo, list_hi):  # the window pairs counted, each candidate's in reading order
+        span = _span_at(work, work.seg_list[i])
+        if span.o_hi >= span.o_lo:
+            _window_pairs(i - list_lo, work.spans[work.seg_list[i]].t, span, r, c0, c1, c_start, True, tpl, groups, rd,
+                          model, cand, work)
     cnt = work.count
     for c in range(c_start, c_stop):
         li = c - c_start

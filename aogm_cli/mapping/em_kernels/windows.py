@@ -13,15 +13,6 @@ from aogm_cli.sensor_models.forward_model import gaussian_at
 
 
 @numba.njit(cache=True, inline="always")
-def _row_group(tpl, groups, k, v):
-    """(kind, stored bin, group value, column sign) of row offset v of heading bin k's cone."""
-    b = tpl.base_bin[k]
-    if tpl.transform[k, 2] == 0:  # drow = d dr, dcol = a dc
-        return 0, b, v * tpl.transform[k, 3], tpl.transform[k, 0]
-    return 1, b, v * tpl.transform[k, 2], tpl.transform[k, 1]
-
-
-@numba.njit(cache=True, inline="always")
 def _room(rd, t):
     """Arena entries of reading t's slot: a header, and room for every window entry plus one."""
     return max(rd.m[t] - rd.jlo[t], 0) + 2
