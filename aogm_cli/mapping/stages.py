@@ -102,7 +102,7 @@ def lobe(s: State) -> State:
 
 def deflections(s: State) -> State:
     """The echoes' surfaces, beams met beyond ``em.specular_deg`` stopped (standard map taken away)."""
-    normals = B.surfaces(s.readings, s.in_use, s.standard.log_odds)
+    normals = B.surfaces(s.readings, s.standard.log_odds)
     run = B.deflected_run(s.readings, normals, s.in_use)
     return s if run is None else s.but(readings=run, standard=None)
 
