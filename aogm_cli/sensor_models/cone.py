@@ -119,9 +119,9 @@ def range_search(r, index_row, resolution, v, right):
 
 
 @numba.njit(cache=True)
-def cone_cells(tpl, height, width, row, col, k, limit, out_index, out_range, lower=-1.0):
+def cone_cells(tpl, height, width, row, col, k, limit, out_index, out_range, lower):
     """Compiled: write the grid cells of bin ``k``'s cone from cell (row, col), range from ``lower``
-    (default: all) to ``limit``, in range order, as flat indices to ``out_index`` and ranges to
+    (<= 0: all) to ``limit``, in range order, as flat indices to ``out_index`` and ranges to
     ``out_range`` (sized for the stored bin), cells off the grid left out. Returns how many."""
     offsets = tpl.offsets
     transform = tpl.transform
@@ -135,15 +135,7 @@ def cone_cells(tpl, height, width, row, col, k, limit, out_index, out_range, low
     rng = tpl.ranges[s:e]
     dcs = tpl.dcol[s:e]
     drs = tpl.drow[s:e]
-    first = 0  # the template's first entry at range >= lower (ranges are sorted)
-    if lower > 0.0:
-        hi = e - s
-        while first < hi:
-            mid = (first + hi) >> 1
-            if rng[mid] < lower:
-                first = mid + 1
-            else:
-                hi = mid
+    first = np.searchsorted(rng, lower, side="left") if lower > 0.0 else 0  # the first entry at range >= lower
     n = 0
     for j in range(first, e - s):
         if rng[j] > limit:

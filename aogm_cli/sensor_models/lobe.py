@@ -180,12 +180,6 @@ class Lobe:
     counts: np.ndarray  # (2, A, R) chances and hits
     explained: np.ndarray
 
-    def heard_deg(self, r: float) -> float:
-        """The angle off the axis (degrees) out to which a surface met head-on at ``r`` m is heard."""
-        if self.full_cone:
-            return math.inf
-        return self.theta0_deg * math.sqrt(max(math.log(self.r0_m / r), 0.0))
-
     def as_dict(self) -> dict:
         """The record as JSON takes it (inf as None; the objective left out)."""
         def finite(v: float) -> float | None:
