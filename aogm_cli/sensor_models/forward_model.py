@@ -126,6 +126,24 @@ def cone_entries(r, z, limit, sigma, window):
     return m
 
 
+@numba.njit(cache=True, inline="always")
+def reading_cone_cells(tpl, flat, shape, readings, t, reach, gauss, ib):
+    """Reading t's cone (``reach`` its (z, limit), ``gauss`` (sigma, window)) into ``ib`` (``cone_flat_cells``):
+    (m, its bin's ranges, its bin's first entry); m = 0 for a cone off the grid (``cone_entries``)."""
+    height, width = shape
+    ext = tpl.extent
+    row0 = readings.rows[t]
+    col0 = readings.cols[t]
+    k = readings.bins[t]
+    s0 = tpl.offsets[tpl.base_bin[k]]
+    r = tpl.ranges[s0 : tpl.offsets[tpl.base_bin[k] + 1]]
+    if row0 + ext < 0 or row0 - ext >= height or col0 + ext < 0 or col0 - ext >= width:
+        return 0, r, s0
+    m = cone_entries(r, reach[0], reach[1], gauss[0], gauss[1])
+    cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width)
+    return m, r, s0
+
+
 def deflect(z: np.ndarray, shadow: np.ndarray | None, z_max: float) -> tuple[np.ndarray, np.ndarray]:
     """(z, limit) of readings: a deflected one becomes a max-range reading ending before the surface."""
     z = np.asarray(z, dtype=np.float64)
@@ -151,31 +169,20 @@ E_READINGS, E_LOGLIK, E_RANDOM, E_DROPOUT, E_DETECTED, E_EXAMINED, E_SQUARED, E_
 def cone_obstacles(tpl, flat, shape, readings, occupied, sigma, window, z_max, ptr, d):
     """The ranges of the occupied cells of each reading's cone at ``sigma``, reading t's at
     ``d[ptr[t]:ptr[t + 1]]``. Returns how many there are (when ``d`` holds fewer, only ``ptr`` is right)."""
-    height, width = shape
-    n_cells = height * width
-    ext = tpl.extent
-    ranges = tpl.ranges
+    n_cells = shape[0] * shape[1]
     room = d.shape[0]
     ib = np.empty(int(np.max(np.diff(tpl.offsets))), dtype=np.int32)
     ptr[0] = 0
     for t in range(readings.z.shape[0]):
         z, limit = cone_reach(readings.z[t], readings.limit[t], z_max, sigma, window)
-        row0 = readings.rows[t]
-        col0 = readings.cols[t]
         n = ptr[t]
-        if not (row0 + ext < 0 or row0 - ext >= height or col0 + ext < 0 or col0 - ext >= width):
-            k = readings.bins[t]
-            b = tpl.base_bin[k]
-            r = ranges[tpl.offsets[b] : tpl.offsets[b + 1]]
-            m = cone_entries(r, z, limit, sigma, window)
-            cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width)
-            s0 = tpl.offsets[b]
-            for j in range(m):
-                c = ib[j]
-                if c < n_cells and occupied[c] and not unheard(tpl, s0 + j):  # unheard: no obstacle of the reading
-                    if n < room:
-                        d[n] = r[j]
-                    n += 1
+        m, r, s0 = reading_cone_cells(tpl, flat, shape, readings, t, (z, limit), (sigma, window), ib)
+        for j in range(m):
+            c = ib[j]
+            if c < n_cells and occupied[c] and not unheard(tpl, s0 + j):  # unheard: no obstacle of the reading
+                if n < room:
+                    d[n] = r[j]
+                n += 1
         ptr[t + 1] = n
     return ptr[readings.z.shape[0]]
 
