@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from aogm_cli.mapping.em_kernels import layout as L
-from aogm_cli.mapping.em_kernels.extents import _box_of_cells, _far_gains, _reading_extent, _window_cells, _window_rows
+from aogm_cli.mapping.em_kernels.extents import _box_of_cells, _reading_extent, _window_or_far, _window_rows
 from aogm_cli.mapping.em_kernels.likelihood import _find, _init_state, _join_parents, _objective, _residual_from_gains
 from aogm_cli.mapping.params import EMConfig
 from aogm_cli.mapping.sweeps import Sweeps
@@ -216,7 +216,7 @@ def _flippable(problem: EMProblem, occupied: np.ndarray, cells: np.ndarray) -> t
     rd = problem.readings
     window = np.zeros(problem.shape[0] * problem.shape[1], dtype=np.bool_)
     tpl = problem.templates.kernel_arrays
-    reading_parts(rd.ints.shape[0], lambda _, span: _window_cells(tpl, rd, problem.shape, span, window))
+    reading_parts(rd.ints.shape[0], lambda _, span: _window_or_far(tpl, rd, problem.shape, None, span, window))
     swept = window[cells] | occupied[cells]
     if np.count_nonzero(~swept) < HELD_FREE_SHARE * cells.size:
         return cells, cells[:0]
@@ -241,7 +241,7 @@ def _held_free_gains(problem: EMProblem, cells: np.ndarray) -> np.ndarray:
     rd = problem.readings
     tpl = problem.templates.kernel_arrays
     out = np.zeros(cells.size)
-    summed_in_parts(rd.ints.shape[0], out, lambda _, part, span: _far_gains(tpl, rd, problem.shape, of_cell, span, part))
+    summed_in_parts(rd.ints.shape[0], out, lambda _, part, span: _window_or_far(tpl, rd, problem.shape, of_cell, span, part))
     return out
 
 
