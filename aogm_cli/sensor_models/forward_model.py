@@ -45,24 +45,21 @@ class ForwardModelConfig:
     window = WINDOW  # sigmas beyond z up to which a cone's cells count: the model's own, no setting
 
     def validate(self) -> ForwardModelConfig:
-        def bad(key, msg):
-            return InputError(msg, key=key)
-
         if not self.sigma > 0:
-            raise bad("sigma", f"expected a positive number, got {self.sigma:g}")
+            raise InputError(f"expected a positive number, got {self.sigma:g}", key="sigma")
         if not 0 < self.p_rand < 1:  # > 0: every reading keeps a finite likelihood
-            raise bad("p_rand", f"expected a probability in (0, 1), got {self.p_rand:g}")
+            raise InputError(f"expected a probability in (0, 1), got {self.p_rand:g}", key="p_rand")
         if not 0 < self.p_hit <= 1:
-            raise bad("p_hit", f"expected a probability in (0, 1], got {self.p_hit:g}")
+            raise InputError(f"expected a probability in (0, 1], got {self.p_hit:g}", key="p_hit")
         if not 0 <= self.p_max < 1 or self.p_rand + self.p_max >= 1:
-            raise bad("p_max", f"expected p_max in [0, 1) with p_rand + p_max < 1, got {self.p_max:g}")
+            raise InputError(f"expected p_max in [0, 1) with p_rand + p_max < 1, got {self.p_max:g}", key="p_max")
         if not 0 < self.specular_deg <= 90:
-            raise bad("specular_deg", f"expected an angle in (0, 90] degrees, got {self.specular_deg:g}")
+            raise InputError(f"expected an angle in (0, 90] degrees, got {self.specular_deg:g}", key="specular_deg")
         if not 0 <= self.lobe_deg <= 90:
-            raise bad("lobe_deg", f"expected an angle in [0, 90] degrees (0: every cell of the cone heard), "
-                                  f"got {self.lobe_deg:g}")
+            raise InputError(f"expected an angle in [0, 90] degrees (0: every cell of the cone heard), "
+                             f"got {self.lobe_deg:g}", key="lobe_deg")
         if not self.lobe_range > 0:
-            raise bad("lobe_range", f"expected a positive range (m), got {self.lobe_range:g}")
+            raise InputError(f"expected a positive range (m), got {self.lobe_range:g}", key="lobe_range")
         return self
 
     def as_dict(self) -> dict:
