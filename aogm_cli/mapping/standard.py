@@ -290,43 +290,29 @@ def _standard_kernel(grid, readings, tpl, flat, entries, update, span):
     state = grid.state
     height = grid.height
     width = grid.width
-    idx_buf = grid.idx_buf
-    inc_buf = grid.inc_buf
-    rows = readings.rows
-    cols = readings.cols
-    bins = readings.bins
-    z = readings.z
-    offset = readings.offset
-    offsets = tpl.offsets
-    ranges = tpl.ranges
-    base_bin = tpl.base_bin
-    range_index = tpl.range_index
     resolution = tpl.resolution
     ext = tpl.extent
     weights = entries.weights
-    ranges32 = entries.ranges32
-    half_alpha = update.half_alpha
     min_range = update.min_range
     max_range = update.max_range
     c_free = update.l_free_minus_l0
     c_occ, lo, hi, l0 = float32_update(update)
-    elfes = update.elfes
     zero = np.float32(0.0)
     for t in range(span[0], span[1]):
-        zt = np.float64(z[t])
+        zt = np.float64(readings.z[t])
         if not zt >= 0.0:  # NaN or negative: no information
             continue
-        row0 = rows[t]
-        col0 = cols[t]
+        row0 = readings.rows[t]
+        col0 = readings.cols[t]
         if row0 + ext < 0 or row0 - ext >= height or col0 + ext < 0 or col0 - ext >= width:
             continue  # the cone cannot touch the grid
-        k = bins[t]
-        b = base_bin[k]
-        s = offsets[b]
-        r = ranges[s : offsets[b + 1]]
-        ri = range_index[b]
+        k = readings.bins[t]
+        b = tpl.base_bin[k]
+        s = tpl.offsets[b]
+        r = tpl.ranges[s : tpl.offsets[b + 1]]
+        ri = tpl.range_index[b]
         # region boundaries, in template ranges (= real ranges + the sensor's axis offset)
-        shift = offset[t]
+        shift = readings.offset[t]
         blind_end = range_search(r, ri, resolution, min_range + shift, False)
         ct = np.float64(readings.cut[t]) if readings.cut.shape[0] > 0 else np.inf
         if ct < max_range + shift:  # a deflected beam: free space only, up to where it was deflected
@@ -338,7 +324,7 @@ def _standard_kernel(grid, readings, tpl, flat, entries, update, span):
             m = f1
             span = max_range - min_range
         else:
-            z_free, arc_end = occupied_arc(zt, half_alpha, max_range)
+            z_free, arc_end = occupied_arc(zt, update.half_alpha, max_range)
             f1 = range_search(r, ri, resolution, z_free + shift, False)
             m = range_search(r, ri, resolution, arc_end + shift, True)
             span = z_free - min_range
@@ -346,20 +332,20 @@ def _standard_kernel(grid, readings, tpl, flat, entries, update, span):
         # increments: free (<= 0 exactly: rounding must not make it positive), occupied (>= 0)
         fa = np.float32(c_free)
         fb = np.float32(0.0)
-        if elfes and span > 0.0:
+        if update.elfes and span > 0.0:
             fb = np.float32(max(c_free / (span * span), -1e30))
         r_min = np.float32(min_range + shift)
         w1 = weights[s + f0 : s + f1]
-        r1 = ranges32[s + f0 : s + f1]
-        c1 = inc_buf[f0:f1]
+        r1 = entries.ranges32[s + f0 : s + f1]
+        c1 = grid.inc_buf[f0:f1]
         for j in range(f1 - f0):
             u = r1[j] - r_min
             c1[j] = min(w1[j] * (fa - fb * (u * u)), zero)
         w2 = weights[s + f1 : s + m]
-        c2 = inc_buf[f1:m]
+        c2 = grid.inc_buf[f1:m]
         for j in range(m - f1):
             c2[j] = c_occ * w2[j]
-        ib = idx_buf[:m]
+        ib = grid.idx_buf[:m]
         cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width)
         # read-modify-write: the only loops that touch the grid
         i0 = ib[:f0]
