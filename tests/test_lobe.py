@@ -84,7 +84,7 @@ def test_a_known_lobe_is_learned_from_readings_of_a_wall(theta0, r0):
     lobe = learn_lobe(tpl, GRID, cones, wall(), 5.0, 0.05)
     assert not lobe.full_cone
     assert abs(lobe.theta0_deg - theta0) <= 1.5, lobe.theta0_deg
-    true = Lobe(theta0, r0, *([None] * 10))
+    true = Lobe(theta0, r0, *([None] * 9))
     for r in (1.0, 3.0):
         assert abs(heard_deg(lobe, r) - heard_deg(true, r)) <= 1.5
     assert lobe.theta0_interval_deg[0] <= lobe.theta0_deg <= lobe.theta0_interval_deg[1]
