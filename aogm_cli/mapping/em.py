@@ -289,8 +289,6 @@ def whole_log_problems(run: LaidOutReadings) -> ProblemFor:
     return problem_for
 
 
-def prepared_templates(grid, sensor):
+def prepared_templates(grid, sensor) -> None:
     """The forward templates of ``grid`` with their row groups, built or loaded before any clock starts."""
-    templates = forward_templates(grid, sensor)
-    L.row_groups(templates)
-    return templates
+    L.row_groups(forward_templates(grid, sensor))

@@ -183,19 +183,18 @@ def standard_map(
     return mapper.result()
 
 
-def set_up(sensor: SensorSpec, grid: GridSpec, params: MapParams) -> ConeTemplates | None:
-    """One-time set-up of ``standard_log_odds`` before any clock starts: the templates (None for a narrow beam)."""
+def set_up(sensor: SensorSpec, grid: GridSpec, params: MapParams) -> None:
+    """One-time set-up of ``standard_log_odds`` before any clock starts: the templates (none for a narrow beam)."""
     narrow = is_narrow_beam(sensor, grid.resolution)
-    templates = None if narrow else cone_templates(grid, sensor, narrow=narrow)
+    templates = None if narrow else cone_templates(grid, sensor)
     standard_map([], sensor, grid, params.inverse_model, templates=templates, narrow=narrow,
                  forward=params.em.forward)
-    return templates
 
 
 def standard_log_odds(log, grid: GridSpec, params: MapParams, cuts=None, chunk: int = 4096):
     """(log_odds, observed) of a whole log source, streamed in chunks; ``cuts`` stop deflected beams."""
     narrow = is_narrow_beam(log.sensor, grid.resolution)  # decided once, for the templates and the map
-    templates = None if narrow else cone_templates(grid, log.sensor, narrow=narrow)
+    templates = None if narrow else cone_templates(grid, log.sensor)
     if templates is not None and params.inverse_model.model == "exact":  # it hears what EM hears
         templates = heard_templates(templates, params.em.forward.lobe_deg, params.em.forward.lobe_range)
     return standard_map(log.chunks(chunk), log.sensor, grid, params.inverse_model, templates=templates,
