@@ -7,7 +7,8 @@ import numpy as np
 
 from aogm_cli.core.log import Log
 from aogm_cli.mapping.cluster import grown, label_clusters, near_occupied, readings_near_clusters
-from aogm_cli.mapping.em import EMProblem, ProblemFor, find_root, run_problem
+from aogm_cli.mapping.em import EMProblem, ProblemFor, run_problem
+from aogm_cli.mapping.em_kernels.likelihood import _find
 from aogm_cli.mapping.params import EMConfig, MapParams
 from aogm_cli.mapping.plan import CONE, Plan
 from aogm_cli.mapping.standard import occupied_evidence
@@ -18,8 +19,8 @@ NEAR_OCCUPIED = 0  # cells (8-connected) from a cell the standard map holds occu
 
 
 def coupled_groups(problem: EMProblem, n_clusters: int) -> int:
-    """How many groups of clusters coupled through shared readings: the independent problems."""
-    return len({find_root(problem.parent, k) for k in range(1, n_clusters + 1)})
+    """How many groups of clusters coupled through shared readings (union-find roots): the independent problems."""
+    return len({_find(problem.parent, k) for k in range(1, n_clusters + 1)})
 
 
 def find_clusters(run: LaidOutReadings, flags: np.ndarray, standard, params: MapParams, plan: Plan,

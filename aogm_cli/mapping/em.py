@@ -12,7 +12,7 @@ import numpy as np
 
 from aogm_cli.mapping.em_kernels import layout as L
 from aogm_cli.mapping.em_kernels.extents import _box_of_cells, _reading_extent, _window_or_far, _window_rows
-from aogm_cli.mapping.em_kernels.likelihood import _find, _init_state, _join_parents, _objective, _residual_from_gains
+from aogm_cli.mapping.em_kernels.likelihood import _init_state, _join_parents, _objective, _residual_from_gains
 from aogm_cli.mapping.params import EMConfig
 from aogm_cli.mapping.sweeps import Sweeps
 from aogm_cli.sensor_models.cone import flat_offsets
@@ -137,11 +137,6 @@ def run_problem(run: LaidOutReadings, config: EMConfig, select: np.ndarray, occu
     rd = em_readings(run.cones, run.templates, run.grid, run.sensor.max_range, config.forward, select=select,
                      shadow=run.shadow)
     return em_problem(rd, run.templates, run.grid.shape, occupied, config, labels=labels)
-
-
-def find_root(parent: np.ndarray, x: int) -> int:
-    """The union-find root of x in ``EMProblem.parent`` (the kernels' own ``_find``)."""
-    return int(_find(parent, x))
 
 
 def _flat_bool(a: np.ndarray) -> np.ndarray:

@@ -94,14 +94,8 @@ class StandardMapper:
     state, ``UNOBSERVED`` (-inf) until a cone covers a cell (no second scattered write for "observed"),
     padded by the templates' extent so that a sensor inside the grid needs no bounds checks."""
 
-    def __init__(
-        self,
-        sensor: SensorSpec,
-        grid: GridSpec,
-        config: InverseModelConfig,
-        *,
-        templates: ConeTemplates | None = None,
-    ):
+    def __init__(self, sensor: SensorSpec, grid: GridSpec, config: InverseModelConfig, *,
+                 templates: ConeTemplates | None = None):
         config.validate()
         if templates is None:
             templates = cone_templates(grid, sensor)
@@ -154,17 +148,9 @@ def _mapper_for(sensor: SensorSpec, grid: GridSpec, config: InverseModelConfig, 
     return StandardMapper(sensor, grid, config, templates=templates)
 
 
-def standard_map(
-    chunks: Iterable[tuple[int, np.ndarray, np.ndarray, np.ndarray]],
-    sensor: SensorSpec,
-    grid: GridSpec,
-    config: InverseModelConfig,
-    *,
-    templates: ConeTemplates | None = None,
-    narrow: bool | None = None,
-    cuts: np.ndarray | None = None,
-    forward: ForwardModelConfig | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
+def standard_map(chunks: Iterable[tuple[int, np.ndarray, np.ndarray, np.ndarray]], sensor: SensorSpec, grid: GridSpec,
+                 config: InverseModelConfig, *, templates: ConeTemplates | None = None, narrow: bool | None = None,
+                 cuts: np.ndarray | None = None, forward: ForwardModelConfig | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Standard log-odds map of logged scans: (log_odds float32 (H, W), observed bool (H, W)).
     ``chunks`` yields (start, time, pose (T, 3), ranges (T, S)) as logged (``LogReader.chunks()``). Cones
     take ``readings.echo_ranges``; rays the logged range, the hit being the endpoint's cell (OctoMap's

@@ -120,15 +120,8 @@ def _fill_index(tpl, flat, grid, readings, sigma, window, out):
     return pos
 
 
-def build_forward_index(
-    cones: tuple,
-    grid,
-    templates,
-    z_max: float,
-    config: ForwardModelConfig,
-    held_free: np.ndarray | None = None,
-    shadow: np.ndarray | None = None,
-) -> ForwardIndex:
+def build_forward_index(cones: tuple, grid, templates, z_max: float, config: ForwardModelConfig,
+                        held_free: np.ndarray | None = None, shadow: np.ndarray | None = None) -> ForwardIndex:
     """The forward model's index for ``cones`` = (rows, cols, bins, z); NaN readings are dropped.
     ``held_free`` (flat bool) cells stay free while the index is used: a free cell adds nothing to any S_t,
     so leaving it out changes no likelihood and keeps a small cluster's index small. ``shadow`` cuts
