@@ -178,11 +178,10 @@ def _on_sweep(s: State):
 
 def calibration(s: State) -> State:
     """The forward model learned in rounds of EM and fits (``calibration.calibration_rounds``)."""
-    config = s.in_use.em
-    used, record = calibration_rounds(s.readings, s.occupied, config, s.params.calibration,
+    used, record = calibration_rounds(s.readings, s.occupied, s.in_use.em, s.params.calibration,
                                       E.em_step(s.region.problems, _on_sweep(s)), s.region.fitted_readings())
-    sensor = SensorModel.of(used.forward)
-    return s.but(learned=dataclasses.replace(s.learned, sensor=sensor, origin=FROM_LOG, calibration=record))
+    return s.but(learned=dataclasses.replace(s.learned, sensor=SensorModel.of(used.forward), origin=FROM_LOG,
+                                             calibration=record))
 
 
 def index(s: State) -> State:

@@ -156,8 +156,7 @@ def reading_geometry(pose: np.ndarray, sensor, grid: GridSpec, templates: ConeTe
     """Each reading's sensor cell, heading bin, validity and axis offset, each (T, S). A pose that is
     not finite is invalid. Positions far off the grid are pulled in to just beyond the reach (they
     see no cell), so that indices never overflow. ``offset`` is the sensor's offset from its cell's
-    centre along the beam (m; 0 when invalid): a reading z compares with template ranges at z + offset.
-    """
+    centre along the beam (m; 0 when invalid): a reading z compares with template ranges at z + offset."""
     sp = sensor_poses(np.asarray(pose, dtype=np.float64).reshape(-1, 3), sensor.mount)
     xs, ys, yaws = sp[..., 0], sp[..., 1], sp[..., 2]
     valid = np.isfinite(sp).all(axis=-1)

@@ -1,7 +1,6 @@
 """The exact inverse sensor model of Thrun's forward model (Kaufman et al. 2016, for cones): each
 cell's posterior given one reading and the map so far, cells independent, in time linear in the
-cone's cells (``cone_terms``), and the sequential log-odds update of a log's readings with it.
-"""
+cone's cells (``cone_terms``), and the sequential log-odds update of a log's readings with it."""
 
 from __future__ import annotations
 

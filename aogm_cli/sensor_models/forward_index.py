@@ -125,8 +125,7 @@ def build_forward_index(cones: tuple, grid, templates, z_max: float, config: For
     """The forward model's index for ``cones`` = (rows, cols, bins, z); NaN readings are dropped.
     ``held_free`` (flat bool) cells stay free while the index is used: a free cell adds nothing to any S_t,
     so leaving it out changes no likelihood and keeps a small cluster's index small. ``shadow`` cuts
-    readings short (``cone_limits``).
-    """
+    readings short (``cone_limits``)."""
     rows, cols, bins, z = cones
     z = np.asarray(z, dtype=np.float64).reshape(-1)
     keep = ~np.isnan(z)

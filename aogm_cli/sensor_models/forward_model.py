@@ -246,8 +246,7 @@ def expectation_sums(tpl, flat, shape, readings, occupied, model, out, obstacles
     """The expectations of every reading's cause under the flat binary map ``occupied``, summed:
     the causes' posteriors are e_rand = (p_rand / z_max) / p, e_dropout = p_max G0 / p, e_k = w
     q^(k-1) p_hit g(d_k) / p and e_0 = w q^K G0 / p; ``out`` gets their sums (the E_* slots).
-    ``obstacles`` found at a sigma at least ``model``'s are reused; returns those used.
-    """
+    ``obstacles`` found at a sigma at least ``model``'s are reused; returns those used."""
     sigma, window, z_max = model[3], model[4], model[5]
     if obstacles is None or obstacles.sigma < sigma:
         obstacles = find_obstacles(tpl, flat, shape, readings, occupied, sigma, window, z_max)

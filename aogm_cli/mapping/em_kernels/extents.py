@@ -50,7 +50,6 @@ def _reading_extent(tpl, groups, readings, bounds, gauss, grid_shape, span):
     rd, _ = _columns(readings)
     rows, cols, bins, z = rd.row0, rd.col0, rd.bin, rd.z
     limits, lower = bounds
-    sigma, window = gauss
     height, width = grid_shape
     out_m, out_jlo, out_box, out_reach2, out_inside = rd.m, rd.jlo, rd.box, rd.reach2, rd.inside
     for t in range(span[0], span[1]):
@@ -58,7 +57,7 @@ def _reading_extent(tpl, groups, readings, bounds, gauss, grid_shape, span):
         b = tpl.base_bin[k]
         s = tpl.offsets[b]
         r = tpl.ranges[s : tpl.offsets[b + 1]]
-        m = cone_entries(r, z[t], limits[t], sigma, window)
+        m = cone_entries(r, z[t], limits[t], gauss[0], gauss[1])
         out_m[t] = m
         out_jlo[t] = np.searchsorted(r, lower[t], side="left") if lower[t] >= 0.0 else 0
         out_box[0, t] = height  # none
