@@ -79,7 +79,7 @@ def _gather_cells(tpl, height, width, rows, cols, bins, limits, max_cells):
     for t in range(rows.size):
         if limits[t] < 0.0:
             continue
-        m = cone_cells(tpl, height, width, rows[t], cols[t], bins[t], limits[t], out_index, out_range)
+        m = cone_cells(tpl, height, width, rows[t], cols[t], bins[t], limits[t], out_index, out_range, -1.0)
         for j in range(m):
             idx[n + j] = out_index[j]
         n += m

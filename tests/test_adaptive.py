@@ -18,7 +18,8 @@ from aogm_cli.map_files import map_file, resolve_params
 from aogm_cli.mapping import cluster
 from aogm_cli.mapping.adaptive import coupled_groups, find_clusters
 from aogm_cli.mapping.cluster import label_clusters
-from aogm_cli.mapping.em import em_problem, em_readings, find_root
+from aogm_cli.mapping.em import em_problem, em_readings
+from aogm_cli.mapping.em_kernels.likelihood import _find
 from aogm_cli.mapping.view import footprint, hit_rate_curve, one_scale, pool_adjacent_violators
 from aogm_cli.sensor_models.cone_build import build_cone_templates
 
@@ -222,7 +223,7 @@ def test_coupled_groups_joins_the_clusters_one_cone_holds():
         problem = em_problem(rd, tpl, grid.shape, occupied, config, labels=labels.reshape(-1))
         assert problem.seen[labels.reshape(-1) == 3].all() and not problem.seen[labels.reshape(-1) == 4].any()
         assert coupled_groups(problem, 4) == groups
-        root = [find_root(problem.parent, k) for k in range(1, 5)]
+        root = [_find(problem.parent, k) for k in range(1, 5)]
         assert (root[0] == root[1]) == (groups == 3)
         assert len({root[1], root[2], root[3]}) == 3
 
@@ -251,7 +252,7 @@ def test_clusters_joined_in_different_parts_of_the_readings_share_a_root_on_any_
             rd = em_readings(cones, tpl, grid, 4.0, config.forward)
             problem = em_problem(rd, tpl, grid.shape, np.zeros(grid.height * grid.width, dtype=bool), config,
                                  labels=labels.reshape(-1))
-        assert [find_root(problem.parent, k) for k in (1, 2, 3)] == [1, 1, 1]
+        assert [_find(problem.parent, k) for k in (1, 2, 3)] == [1, 1, 1]
         made.append(problem)
     assert np.array_equal(made[0].readings.ints, made[1].readings.ints)
     assert np.array_equal(made[0].readings.floats, made[1].readings.floats)

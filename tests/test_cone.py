@@ -115,7 +115,7 @@ def test_cone_cells_kernel_matches_the_wrapper():
     tpl = build_cone_templates(0.1, BEAM, 1.0, n_bins=64)
     out_i = np.empty(500, dtype=np.int64)
     out_r = np.empty(500, dtype=np.float64)
-    n = cone_cells(tpl.kernel_arrays, 20, 20, 10, 10, 40, 0.6, out_i, out_r)
+    n = cone_cells(tpl.kernel_arrays, 20, 20, 10, 10, 40, 0.6, out_i, out_r, -1.0)
     index, rng = reading_cells(tpl, grid, 10, 10, 40, 0.6)
     np.testing.assert_array_equal(out_i[:n], index)
     np.testing.assert_array_equal(out_r[:n], rng)

@@ -19,7 +19,7 @@ from aogm_cli.core.budget import Limits, using
 from aogm_cli.core.grid import GridSpec
 from aogm_cli.mapping import em as E
 from aogm_cli.mapping import sweeps as S
-from aogm_cli.mapping.em import em_problem, em_readings, find_root, run_em
+from aogm_cli.mapping.em import em_problem, em_readings, run_em
 from aogm_cli.mapping.em_kernels import extents as kernel_readings
 from aogm_cli.mapping.em_kernels import layout as L
 from aogm_cli.mapping.em_kernels import likelihood, tiles
@@ -366,7 +366,7 @@ def test_a_cluster_problem_climbs_as_the_reference_over_the_cluster_cells(seed):
     occupied = case.start.copy()
     rd = em_readings((case.rows, case.cols, case.bins, case.z), case.templates, case.grid, Z_MAX, case.config.forward)
     problem = em_problem(rd, case.templates, case.grid.shape, occupied, case.config, labels=labels)
-    groups = [find_root(problem.parent, k) for k in range(1, n_clusters + 1)]
+    groups = [likelihood._find(problem.parent, k) for k in range(1, n_clusters + 1)]
     reference = coupled_reference(case.index(), labels, n_clusters)
     assert all((groups[a] == groups[b]) == (reference[a] == reference[b])
                for a in range(n_clusters) for b in range(n_clusters))

@@ -8,6 +8,7 @@ import pytest
 
 from aogm_cli.core.errors import InputError
 from aogm_cli.core.log import SensorSpec
+from aogm_cli.mapping.params import params_from
 from aogm_cli.sensor_models.inverse_model import (
     InverseModelConfig,
     InverseUpdate,
@@ -147,8 +148,8 @@ def test_config_defaults_and_record():
 )
 def test_impossible_values_are_rejected(kwargs, key):
     with pytest.raises(InputError) as err:
-        InverseModelConfig(**kwargs).validate()
-    assert err.value.key == key
+        params_from({"inverse_model": kwargs}, "p.yaml")
+    assert err.value.key == f"inverse_model.{key}" and err.value.file == "p.yaml"
 
 
 @pytest.mark.parametrize("model", ["elfes", "constant"])

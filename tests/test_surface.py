@@ -16,7 +16,6 @@ from aogm_cli.sensor_models.forward_model import ForwardModelConfig, cone_limits
 from aogm_cli.sensor_models.readings import LaidOutReadings
 from aogm_cli.sensor_models.surface import (
     SurfaceConfig,
-    cos2_of,
     hidden,
     reading_shadows,
     surface_normals,
@@ -25,11 +24,11 @@ from aogm_cli.sensor_models.surface import (
 GRID = GridSpec(0.0, 0.0, 0.1, 40, 40)
 
 
-def normals_of(rows, cols, yaw, z, config=None, beam_deg=10.0):
+def normals_of(rows, cols, yaw, z, beam_deg=10.0):
     tpl = build_cone_templates(GRID.resolution, math.radians(beam_deg), 3.0)
     cones = (np.array(rows), np.array(cols), tpl.heading_bin(np.array(yaw)), np.array(z, dtype=float))
     return surface_normals(tpl.kernel_arrays, flat_offsets(tpl, GRID.width), GRID.shape, cones, 3.0,
-                           GRID.resolution, config or SurfaceConfig())
+                           GRID.resolution, np.ones(GRID.shape, dtype=bool))
 
 
 def test_hidden_by_hand():
@@ -38,7 +37,7 @@ def test_hidden_by_hand():
     width = 20
     for col in range(width):
         normal[:, 10 * width + col] = (1.0, 0.0)
-    cos2 = cos2_of(30.0)
+    cos2 = math.cos(math.radians(30.0)) ** 2
     assert cos2 == pytest.approx(0.75)
     # straight on (incidence 0) and at 26.6 deg (offset 10 rows, 5 columns) the wall echoes
     assert not hidden(normal, cos2, 10 * width + 0, 0, 0, width)
@@ -50,7 +49,7 @@ def test_hidden_by_hand():
     assert hidden(-normal, cos2, 10 * width + 19, 19, 0, width)
     # no surface (NaN) or a specular angle of 90 deg: every cell counts
     assert not hidden(normal, cos2, 5 * width + 19, 0, 0, width)
-    assert not hidden(normal, cos2_of(90.0), 10 * width + 19, 0, 0, width)
+    assert not hidden(normal, 0.0, 10 * width + 19, 0, 0, width)
 
 
 def test_a_wall_heard_head_on_gets_its_normal():
@@ -114,14 +113,13 @@ def test_a_beam_that_grazes_a_surface_before_its_echo_is_deflected_there():
     # 30 deg (60 deg off) its axis meets the wall at 3.0 m, beyond the echo, its near edge at 2.6 m
     run, normal = wall_run([math.pi / 2, math.radians(30), math.radians(50), math.radians(50)],
                            [1.5, 2.9, 2.9, 1.9])
-    shadow = reading_shadows(run, normal, ForwardModelConfig(specular_deg=30.0))
+    shadow = reading_shadows(run, normal, ForwardModelConfig(specular_deg=30.0), 1.0)
     assert shadow[0] == np.inf
     assert 2.5 < shadow[1] < 2.78
     assert 1.7 < shadow[2] < 1.96
     assert shadow[3] == np.inf  # the wall lies within its window (1.9 m): the echo may be the wall's
-    # a specular angle of 50 deg keeps the 40-deg pass; of 90 deg nothing is deflected
-    assert reading_shadows(run, normal, ForwardModelConfig(specular_deg=50.0))[2] == np.inf
-    assert reading_shadows(run, normal, ForwardModelConfig(specular_deg=90.0)) is None
+    # a specular angle of 50 deg keeps the 40-deg pass
+    assert reading_shadows(run, normal, ForwardModelConfig(specular_deg=50.0), 1.0)[2] == np.inf
 
 
 def test_by_default_a_beam_that_meets_a_surface_over_15_degrees_off_its_normal_is_deflected():
@@ -168,13 +166,13 @@ def test_a_doorway_passed_head_on_is_no_surface():
     tpl = build_cone_templates(GRID.resolution, math.radians(10.0), 3.0)
     cones = (np.full(len(z), 5), np.array(cols), tpl.heading_bin(np.full(len(z), math.pi / 2)), np.array(z))
     normal = surface_normals(tpl.kernel_arrays, flat_offsets(tpl, GRID.width), GRID.shape, cones, 3.0,
-                             GRID.resolution, SurfaceConfig()).reshape(2, *GRID.shape)
+                             GRID.resolution, np.ones(GRID.shape, dtype=bool)).reshape(2, *GRID.shape)
     assert np.isnan(normal[0, 20, 20])
     assert abs(normal[0, 20, 12]) == pytest.approx(1.0) and abs(normal[0, 20, 28]) == pytest.approx(1.0)
     believed = np.zeros(GRID.shape, dtype=bool)
     believed[20, 25:] = True  # only where a map believes the cells occupied
     only = surface_normals(tpl.kernel_arrays, flat_offsets(tpl, GRID.width), GRID.shape, cones, 3.0,
-                           GRID.resolution, SurfaceConfig(), believed).reshape(2, *GRID.shape)
+                           GRID.resolution, believed).reshape(2, *GRID.shape)
     assert np.isnan(only[0, 20, 12]) and abs(only[0, 20, 28]) == pytest.approx(1.0)
 
 
@@ -183,5 +181,5 @@ def test_only_the_core_of_a_cone_is_deflected():
     # the wall at 1.5 / sin 38 = 2.44 m, before the window (from 2.58 m), the axis only at 2.75 m
     run, normal = wall_run([math.radians(33)], [2.7])
     forward = ForwardModelConfig(specular_deg=30.0)
-    assert 2.3 < reading_shadows(run, normal, forward)[0] < 2.58
+    assert 2.3 < reading_shadows(run, normal, forward, 1.0)[0] < 2.58
     assert reading_shadows(run, normal, forward, core=0.25)[0] == np.inf

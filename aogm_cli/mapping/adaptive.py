@@ -7,7 +7,8 @@ import numpy as np
 
 from aogm_cli.core.log import Log
 from aogm_cli.mapping.cluster import grown, label_clusters, near_occupied, readings_near_clusters
-from aogm_cli.mapping.em import EMProblem, ProblemFor, find_root, run_problem
+from aogm_cli.mapping.em import EMProblem, ProblemFor, run_problem
+from aogm_cli.mapping.em_kernels.likelihood import _find
 from aogm_cli.mapping.params import EMConfig, MapParams
 from aogm_cli.mapping.plan import CONE, Plan
 from aogm_cli.mapping.standard import occupied_evidence
@@ -17,27 +18,9 @@ BAND_BELOW = 0.2  # m: a flagged reading's band starts this far before its range
 NEAR_OCCUPIED = 0  # cells (8-connected) from a cell the standard map holds occupied that a band may mark
 
 
-def cluster_problem(run: LaidOutReadings, clusters: np.ndarray, occupied: np.ndarray, config: EMConfig,
-                    subset: np.ndarray | None = None) -> EMProblem:
-    """EM's problem inside ``clusters`` over the readings whose cones could reach them, under ``occupied``."""
-    near = readings_near_clusters(clusters, run.rows, run.cols, run.z, run.grid, run.sensor.max_range, config.forward)
-    if subset is not None:
-        near = near[subset[near]]
-    return run_problem(run, config, near, occupied, labels=clusters.reshape(-1))
-
-
 def coupled_groups(problem: EMProblem, n_clusters: int) -> int:
-    """How many groups of clusters coupled through shared readings: the independent problems."""
-    parent = problem.parent
-    roots = {int(find_root(parent, k)) for k in range(1, n_clusters + 1)}
-    return len(roots)
-
-
-def contested_cells(log: Log, grid, params: MapParams, log_odds: np.ndarray,
-                    shadow: np.ndarray | None = None) -> np.ndarray:
-    """Cells (H, W) with ``adaptive.contested`` occupied evidence that the standard map holds free: cleared walls."""
-    cuts = None if shadow is None else shadow.reshape(np.shape(log.ranges))
-    return (occupied_evidence(log, grid, params, cuts) >= params.adaptive.contested) & (log_odds <= 0)
+    """How many groups of clusters coupled through shared readings (union-find roots): the independent problems."""
+    return len({_find(problem.parent, k) for k in range(1, n_clusters + 1)})
 
 
 def find_clusters(run: LaidOutReadings, flags: np.ndarray, standard, params: MapParams, plan: Plan,
@@ -46,7 +29,7 @@ def find_clusters(run: LaidOutReadings, flags: np.ndarray, standard, params: Map
     holds cells occupied (the walls EM may thin or open), and as ``plan.outside`` says: "thinned", the
     cells the exact model's evidence holds occupied by ``adaptive.contested`` but the thinned map free,
     then one cell into the wall layers thinning removed (EM starts there from Elfes' map); "elfes", the
-    ``contested_cells`` and the ``weak`` ones near the prior (space behind a wall one random reading
+    contested cells the standard map holds free and the ``weak`` ones near the prior (space behind a wall one random reading
     crossed), grown by ``adaptive.grow`` (cones only: it cost the intel laser log's AUC, docs/algorithms.md)."""
     log_odds, observed, config = standard.log_odds, standard.observed, params.adaptive
     region, _ = cone_bands(run.grid, run.templates, tuple(a[flags] for a in run.cones),
@@ -60,8 +43,9 @@ def find_clusters(run: LaidOutReadings, flags: np.ndarray, standard, params: Map
         if standard.elfes is not None:  # the inner layers: EM, not the exact model, thins a wall it works on
             region |= grown(region, 1) & observed & (standard.elfes > 0) & (log_odds <= 0)
     else:
-        if config.contested > 0:
-            region |= contested_cells(log, run.grid, params, log_odds, run.shadow) & observed
+        if config.contested > 0:  # cleared walls: occupied evidence by ``contested`` the standard map holds free
+            cuts = None if run.shadow is None else run.shadow.reshape(np.shape(log.ranges))
+            region |= (occupied_evidence(log, run.grid, params, cuts) >= config.contested) & (log_odds <= 0) & observed
         if config.weak > 0:
             region |= observed & (np.abs(log_odds - params.inverse_model.l0) < config.weak)
         grow = config.grow if plan.sensor == CONE else 0
@@ -72,7 +56,12 @@ def cluster_problems(run: LaidOutReadings, clusters: np.ndarray) -> ProblemFor:
     """EM over every cluster cell at once, the others held; clusters sharing no reading are independent results."""
     cells = np.flatnonzero(clusters.reshape(-1) > 0)
     def problem_for(config: EMConfig, occ: np.ndarray, subset: np.ndarray | None):
-        return cluster_problem(run, clusters, occ, config, subset), cells
+        """EM's problem inside ``clusters`` over the readings whose cones could reach them, under ``occ``."""
+        near = readings_near_clusters(clusters, run.rows, run.cols, run.z, run.grid, run.sensor.max_range,
+                                      config.forward)
+        if subset is not None:
+            near = near[subset[near]]
+        return run_problem(run, config, near, occ, labels=clusters.reshape(-1)), cells
     return problem_for
 
 

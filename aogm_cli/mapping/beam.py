@@ -91,12 +91,7 @@ def _beam_kernel(grid, rays, update, n_beams, first_scan):
     hit_scan = grid.hit_scan
     height = grid.height
     width = grid.width
-    px = rays.px
-    py = rays.py
-    ux = rays.ux
-    uy = rays.uy
     z = rays.z
-    half_alpha = update.half_alpha
     min_range = update.min_range
     max_range = update.max_range
     c_free = np.float32(update.l_free_minus_l0)
@@ -111,9 +106,9 @@ def _beam_kernel(grid, rays, update, n_beams, first_scan):
             zt = np.float64(z[t])
             if not (zt >= 0.0 and zt < max_range):
                 continue
-            arc_start, arc_end = occupied_arc(zt, half_alpha, max_range)
+            arc_start, arc_end = occupied_arc(zt, update.half_alpha, max_range)
             row, col, t0, t_stop, t_max_row, t_max_col, d_row, d_col, s_row, s_col = ray_start(
-                px[t], py[t], ux[t], uy[t], arc_start, arc_end, height, width, res
+                rays.px[t], rays.py[t], rays.ux[t], rays.uy[t], arc_start, arc_end, height, width, res
             )
             inside = True
             while inside and t0 < t_stop:  # False for a NaN pose
@@ -133,9 +128,9 @@ def _beam_kernel(grid, rays, update, n_beams, first_scan):
                 end = max_range
                 z_free = np.inf
             else:
-                z_free, end = occupied_arc(zt, half_alpha, max_range)
+                z_free, end = occupied_arc(zt, update.half_alpha, max_range)
             row, col, t0, t_stop, t_max_row, t_max_col, d_row, d_col, s_row, s_col = ray_start(
-                px[t], py[t], ux[t], uy[t], 0.0, end, height, width, res
+                rays.px[t], rays.py[t], rays.ux[t], rays.uy[t], 0.0, end, height, width, res
             )
             inside = True
             while inside and t0 < t_stop:

@@ -23,18 +23,18 @@ from aogm_cli.sensor_models.surface import reading_shadows, surface_normals
 LOBE_SCANS = 2000
 
 
-def surfaces(run: LaidOutReadings, params: MapParams, log_odds: np.ndarray) -> np.ndarray:
+def surfaces(run: LaidOutReadings, log_odds: np.ndarray) -> np.ndarray:
     """The surfaces the echoes came from (``surface.surface_normals``) among the standard map's walls."""
     grid = run.grid
     believed = np.asarray(log_odds).reshape(grid.shape) > 0
     return surface_normals(run.templates.kernel_arrays, flat_offsets(run.templates, grid.width), grid.shape,
-                           run.cones, run.sensor.max_range, grid.resolution, params.surface, believed)
+                           run.cones, run.sensor.max_range, grid.resolution, believed)
 
 
 def deflected_run(run: LaidOutReadings, normals: np.ndarray, params: MapParams) -> LaidOutReadings | None:
     """``run`` with beams that met a surface beyond the specular angle stopped there (None: no such beam)."""
     shadow = reading_shadows(run, normals, params.em.forward, params.surface.core)
-    if shadow is None or not np.isfinite(shadow).any():
+    if not np.isfinite(shadow).any():
         return None
     return dataclasses.replace(run, shadow=shadow)
 

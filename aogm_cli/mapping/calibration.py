@@ -16,7 +16,6 @@ from aogm_cli.sensor_models import forward_model as F
 from aogm_cli.sensor_models.cone import flat_offsets
 from aogm_cli.sensor_models.readings import LaidOutReadings
 
-LEARNED = SENSOR_KEYS  # the forward model's parameters calibration sets
 CAL_BLOCKS = 4  # a long log's calibration maps this many runs of consecutive scans (``_scan_blocks``)
 
 
@@ -108,7 +107,7 @@ def settled(a: F.ForwardModelConfig, b: F.ForwardModelConfig, tolerance: float) 
     """True when no learned parameter moved by more than ``tolerance`` (sigma relative, the rest absolute)."""
     if abs(a.sigma - b.sigma) > tolerance * max(a.sigma, b.sigma):
         return False
-    return all(abs(getattr(a, k) - getattr(b, k)) <= tolerance for k in LEARNED if k != "sigma")
+    return all(abs(getattr(a, k) - getattr(b, k)) <= tolerance for k in SENSOR_KEYS if k != "sigma")
 
 
 @dataclass
@@ -144,8 +143,8 @@ def fit_at_map(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: 
 
 
 def model_values(forward: F.ForwardModelConfig) -> dict:
-    """The learned parameters' values (LEARNED)."""
-    return {k: float(getattr(forward, k)) for k in LEARNED}
+    """The learned parameters' values (``learned.SENSOR_KEYS``: those calibration sets)."""
+    return {k: float(getattr(forward, k)) for k in SENSOR_KEYS}
 
 
 # (config, flat occupied updated in place, reading mask or None) -> (EM's last objective, sweeps, the result)

@@ -11,8 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from aogm_cli.mapping.em_kernels import layout as L
-from aogm_cli.mapping.em_kernels.extents import _box_of_cells, _far_gains, _reading_extent, _window_cells, _window_rows
-from aogm_cli.mapping.em_kernels.likelihood import _find, _init_state, _join_parents, _objective, _residual_from_gains
+from aogm_cli.mapping.em_kernels.extents import _box_of_cells, _reading_extent, _window_or_far, _window_rows
+from aogm_cli.mapping.em_kernels.likelihood import _init_state, _join_parents, _objective, _residual_from_gains
 from aogm_cli.mapping.params import EMConfig
 from aogm_cli.mapping.sweeps import Sweeps
 from aogm_cli.sensor_models.cone import flat_offsets
@@ -139,11 +139,6 @@ def run_problem(run: LaidOutReadings, config: EMConfig, select: np.ndarray, occu
     return em_problem(rd, run.templates, run.grid.shape, occupied, config, labels=labels)
 
 
-def find_root(parent: np.ndarray, x: int) -> int:
-    """The union-find root of x in ``EMProblem.parent`` (the kernels' own ``_find``)."""
-    return int(_find(parent, x))
-
-
 def _flat_bool(a: np.ndarray) -> np.ndarray:
     if a.dtype != np.bool_ or a.ndim != 1 or not a.flags.c_contiguous:
         raise ValueError("occupied must be a flat, contiguous bool array")
@@ -216,7 +211,7 @@ def _flippable(problem: EMProblem, occupied: np.ndarray, cells: np.ndarray) -> t
     rd = problem.readings
     window = np.zeros(problem.shape[0] * problem.shape[1], dtype=np.bool_)
     tpl = problem.templates.kernel_arrays
-    reading_parts(rd.ints.shape[0], lambda _, span: _window_cells(tpl, rd, problem.shape, span, window))
+    reading_parts(rd.ints.shape[0], lambda _, span: _window_or_far(tpl, rd, problem.shape, None, span, window))
     swept = window[cells] | occupied[cells]
     if np.count_nonzero(~swept) < HELD_FREE_SHARE * cells.size:
         return cells, cells[:0]
@@ -241,7 +236,7 @@ def _held_free_gains(problem: EMProblem, cells: np.ndarray) -> np.ndarray:
     rd = problem.readings
     tpl = problem.templates.kernel_arrays
     out = np.zeros(cells.size)
-    summed_in_parts(rd.ints.shape[0], out, lambda _, part, span: _far_gains(tpl, rd, problem.shape, of_cell, span, part))
+    summed_in_parts(rd.ints.shape[0], out, lambda _, part, span: _window_or_far(tpl, rd, problem.shape, of_cell, span, part))
     return out
 
 
@@ -289,8 +284,6 @@ def whole_log_problems(run: LaidOutReadings) -> ProblemFor:
     return problem_for
 
 
-def prepared_templates(grid, sensor):
+def prepared_templates(grid, sensor) -> None:
     """The forward templates of ``grid`` with their row groups, built or loaded before any clock starts."""
-    templates = forward_templates(grid, sensor)
-    L.row_groups(templates)
-    return templates
+    L.row_groups(forward_templates(grid, sensor))

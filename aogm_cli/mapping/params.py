@@ -73,10 +73,9 @@ class AdaptiveConfig:
     grow: int = 2
 
     def validate(self) -> AdaptiveConfig:
-        check_field_types(self)
         if self.outside not in ("auto", "elfes", "thinned"):
             raise InputError(f"expected 'auto', 'elfes' or 'thinned', got {self.outside!r}", key="outside")
-        if isinstance(self.grow, bool) or not isinstance(self.grow, int) or self.grow < 0:
+        if self.grow < 0:
             raise InputError(f"expected a whole number >= 0, got {self.grow!r}", key="grow")
         for key in ("contested", "weak"):
             if not getattr(self, key) >= 0:
@@ -100,7 +99,6 @@ class CalibrationConfig:
     learn: str = ",".join(LEARNABLE)
 
     def validate(self) -> CalibrationConfig:
-        check_field_types(self)
         unknown = set(self.learned) - set(LEARNABLE)
         if unknown or not self.learned:
             raise InputError(f"expected a comma-separated list of {', '.join(LEARNABLE)}, got {self.learn!r}",

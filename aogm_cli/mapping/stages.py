@@ -102,7 +102,7 @@ def lobe(s: State) -> State:
 
 def deflections(s: State) -> State:
     """The echoes' surfaces, beams met beyond ``em.specular_deg`` stopped (standard map taken away)."""
-    normals = B.surfaces(s.readings, s.in_use, s.standard.log_odds)
+    normals = B.surfaces(s.readings, s.standard.log_odds)
     run = B.deflected_run(s.readings, normals, s.in_use)
     return s if run is None else s.but(readings=run, standard=None)
 
@@ -178,11 +178,10 @@ def _on_sweep(s: State):
 
 def calibration(s: State) -> State:
     """The forward model learned in rounds of EM and fits (``calibration.calibration_rounds``)."""
-    config = s.in_use.em
-    used, record = calibration_rounds(s.readings, s.occupied, config, s.params.calibration,
+    used, record = calibration_rounds(s.readings, s.occupied, s.in_use.em, s.params.calibration,
                                       E.em_step(s.region.problems, _on_sweep(s)), s.region.fitted_readings())
-    sensor = SensorModel.of(used.forward)
-    return s.but(learned=dataclasses.replace(s.learned, sensor=sensor, origin=FROM_LOG, calibration=record))
+    return s.but(learned=dataclasses.replace(s.learned, sensor=SensorModel.of(used.forward), origin=FROM_LOG,
+                                             calibration=record))
 
 
 def index(s: State) -> State:

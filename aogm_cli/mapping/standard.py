@@ -94,14 +94,8 @@ class StandardMapper:
     state, ``UNOBSERVED`` (-inf) until a cone covers a cell (no second scattered write for "observed"),
     padded by the templates' extent so that a sensor inside the grid needs no bounds checks."""
 
-    def __init__(
-        self,
-        sensor: SensorSpec,
-        grid: GridSpec,
-        config: InverseModelConfig,
-        *,
-        templates: ConeTemplates | None = None,
-    ):
+    def __init__(self, sensor: SensorSpec, grid: GridSpec, config: InverseModelConfig, *,
+                 templates: ConeTemplates | None = None):
         config.validate()
         if templates is None:
             templates = cone_templates(grid, sensor)
@@ -154,17 +148,9 @@ def _mapper_for(sensor: SensorSpec, grid: GridSpec, config: InverseModelConfig, 
     return StandardMapper(sensor, grid, config, templates=templates)
 
 
-def standard_map(
-    chunks: Iterable[tuple[int, np.ndarray, np.ndarray, np.ndarray]],
-    sensor: SensorSpec,
-    grid: GridSpec,
-    config: InverseModelConfig,
-    *,
-    templates: ConeTemplates | None = None,
-    narrow: bool | None = None,
-    cuts: np.ndarray | None = None,
-    forward: ForwardModelConfig | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
+def standard_map(chunks: Iterable[tuple[int, np.ndarray, np.ndarray, np.ndarray]], sensor: SensorSpec, grid: GridSpec,
+                 config: InverseModelConfig, *, templates: ConeTemplates | None = None, narrow: bool | None = None,
+                 cuts: np.ndarray | None = None, forward: ForwardModelConfig | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Standard log-odds map of logged scans: (log_odds float32 (H, W), observed bool (H, W)).
     ``chunks`` yields (start, time, pose (T, 3), ranges (T, S)) as logged (``LogReader.chunks()``). Cones
     take ``readings.echo_ranges``; rays the logged range, the hit being the endpoint's cell (OctoMap's
@@ -183,19 +169,18 @@ def standard_map(
     return mapper.result()
 
 
-def set_up(sensor: SensorSpec, grid: GridSpec, params: MapParams) -> ConeTemplates | None:
-    """One-time set-up of ``standard_log_odds`` before any clock starts: the templates (None for a narrow beam)."""
+def set_up(sensor: SensorSpec, grid: GridSpec, params: MapParams) -> None:
+    """One-time set-up of ``standard_log_odds`` before any clock starts: the templates (none for a narrow beam)."""
     narrow = is_narrow_beam(sensor, grid.resolution)
-    templates = None if narrow else cone_templates(grid, sensor, narrow=narrow)
+    templates = None if narrow else cone_templates(grid, sensor)
     standard_map([], sensor, grid, params.inverse_model, templates=templates, narrow=narrow,
                  forward=params.em.forward)
-    return templates
 
 
 def standard_log_odds(log, grid: GridSpec, params: MapParams, cuts=None, chunk: int = 4096):
     """(log_odds, observed) of a whole log source, streamed in chunks; ``cuts`` stop deflected beams."""
     narrow = is_narrow_beam(log.sensor, grid.resolution)  # decided once, for the templates and the map
-    templates = None if narrow else cone_templates(grid, log.sensor, narrow=narrow)
+    templates = None if narrow else cone_templates(grid, log.sensor)
     if templates is not None and params.inverse_model.model == "exact":  # it hears what EM hears
         templates = heard_templates(templates, params.em.forward.lobe_deg, params.em.forward.lobe_range)
     return standard_map(log.chunks(chunk), log.sensor, grid, params.inverse_model, templates=templates,
@@ -290,43 +275,29 @@ def _standard_kernel(grid, readings, tpl, flat, entries, update, span):
     state = grid.state
     height = grid.height
     width = grid.width
-    idx_buf = grid.idx_buf
-    inc_buf = grid.inc_buf
-    rows = readings.rows
-    cols = readings.cols
-    bins = readings.bins
-    z = readings.z
-    offset = readings.offset
-    offsets = tpl.offsets
-    ranges = tpl.ranges
-    base_bin = tpl.base_bin
-    range_index = tpl.range_index
     resolution = tpl.resolution
     ext = tpl.extent
     weights = entries.weights
-    ranges32 = entries.ranges32
-    half_alpha = update.half_alpha
     min_range = update.min_range
     max_range = update.max_range
     c_free = update.l_free_minus_l0
     c_occ, lo, hi, l0 = float32_update(update)
-    elfes = update.elfes
     zero = np.float32(0.0)
     for t in range(span[0], span[1]):
-        zt = np.float64(z[t])
+        zt = np.float64(readings.z[t])
         if not zt >= 0.0:  # NaN or negative: no information
             continue
-        row0 = rows[t]
-        col0 = cols[t]
+        row0 = readings.rows[t]
+        col0 = readings.cols[t]
         if row0 + ext < 0 or row0 - ext >= height or col0 + ext < 0 or col0 - ext >= width:
             continue  # the cone cannot touch the grid
-        k = bins[t]
-        b = base_bin[k]
-        s = offsets[b]
-        r = ranges[s : offsets[b + 1]]
-        ri = range_index[b]
+        k = readings.bins[t]
+        b = tpl.base_bin[k]
+        s = tpl.offsets[b]
+        r = tpl.ranges[s : tpl.offsets[b + 1]]
+        ri = tpl.range_index[b]
         # region boundaries, in template ranges (= real ranges + the sensor's axis offset)
-        shift = offset[t]
+        shift = readings.offset[t]
         blind_end = range_search(r, ri, resolution, min_range + shift, False)
         ct = np.float64(readings.cut[t]) if readings.cut.shape[0] > 0 else np.inf
         if ct < max_range + shift:  # a deflected beam: free space only, up to where it was deflected
@@ -338,7 +309,7 @@ def _standard_kernel(grid, readings, tpl, flat, entries, update, span):
             m = f1
             span = max_range - min_range
         else:
-            z_free, arc_end = occupied_arc(zt, half_alpha, max_range)
+            z_free, arc_end = occupied_arc(zt, update.half_alpha, max_range)
             f1 = range_search(r, ri, resolution, z_free + shift, False)
             m = range_search(r, ri, resolution, arc_end + shift, True)
             span = z_free - min_range
@@ -346,20 +317,20 @@ def _standard_kernel(grid, readings, tpl, flat, entries, update, span):
         # increments: free (<= 0 exactly: rounding must not make it positive), occupied (>= 0)
         fa = np.float32(c_free)
         fb = np.float32(0.0)
-        if elfes and span > 0.0:
+        if update.elfes and span > 0.0:
             fb = np.float32(max(c_free / (span * span), -1e30))
         r_min = np.float32(min_range + shift)
         w1 = weights[s + f0 : s + f1]
-        r1 = ranges32[s + f0 : s + f1]
-        c1 = inc_buf[f0:f1]
+        r1 = entries.ranges32[s + f0 : s + f1]
+        c1 = grid.inc_buf[f0:f1]
         for j in range(f1 - f0):
             u = r1[j] - r_min
             c1[j] = min(w1[j] * (fa - fb * (u * u)), zero)
         w2 = weights[s + f1 : s + m]
-        c2 = inc_buf[f1:m]
+        c2 = grid.inc_buf[f1:m]
         for j in range(m - f1):
             c2[j] = c_occ * w2[j]
-        ib = idx_buf[:m]
+        ib = grid.idx_buf[:m]
         cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width)
         # read-modify-write: the only loops that touch the grid
         i0 = ib[:f0]

@@ -6,8 +6,7 @@ what was learned and from how many readings; the lobe that hears (``lobe_line``)
 from __future__ import annotations
 
 from aogm_cli.core.occupancy_map import OccupancyMap
-from aogm_cli.mapping.calibration import LEARNED
-from aogm_cli.mapping.learned import FROM_LOG
+from aogm_cli.mapping.learned import FROM_LOG, SENSOR_KEYS
 
 
 def calibration_table(record: dict) -> str:
@@ -25,7 +24,7 @@ def calibration_table(record: dict) -> str:
         lines.append(f"final map, every scan with the last fit: EM objective {record['final_em']['em_objective']:.2f}, "
                      f"{record['final_em']['em_sweeps']} sweeps (the rounds' maps: {record['fitted_at']})")
     lines.append(f"learned from {record['readings_used']} readings: "
-                 + ", ".join(f"{k} {final[k]:.4g}" for k in LEARNED if k in final))
+                 + ", ".join(f"{k} {final[k]:.4g}" for k in SENSOR_KEYS if k in final))
     return "\n".join(lines)
 
 

@@ -119,9 +119,9 @@ def range_search(r, index_row, resolution, v, right):
 
 
 @numba.njit(cache=True)
-def cone_cells(tpl, height, width, row, col, k, limit, out_index, out_range, lower=-1.0):
+def cone_cells(tpl, height, width, row, col, k, limit, out_index, out_range, lower):
     """Compiled: write the grid cells of bin ``k``'s cone from cell (row, col), range from ``lower``
-    (default: all) to ``limit``, in range order, as flat indices to ``out_index`` and ranges to
+    (<= 0: all) to ``limit``, in range order, as flat indices to ``out_index`` and ranges to
     ``out_range`` (sized for the stored bin), cells off the grid left out. Returns how many."""
     offsets = tpl.offsets
     transform = tpl.transform
@@ -135,15 +135,7 @@ def cone_cells(tpl, height, width, row, col, k, limit, out_index, out_range, low
     rng = tpl.ranges[s:e]
     dcs = tpl.dcol[s:e]
     drs = tpl.drow[s:e]
-    first = 0  # the template's first entry at range >= lower (ranges are sorted)
-    if lower > 0.0:
-        hi = e - s
-        while first < hi:
-            mid = (first + hi) >> 1
-            if rng[mid] < lower:
-                first = mid + 1
-            else:
-                hi = mid
+    first = np.searchsorted(rng, lower, side="left") if lower > 0.0 else 0  # the first entry at range >= lower
     n = 0
     for j in range(first, e - s):
         if rng[j] > limit:
@@ -164,8 +156,7 @@ def reading_geometry(pose: np.ndarray, sensor, grid: GridSpec, templates: ConeTe
     """Each reading's sensor cell, heading bin, validity and axis offset, each (T, S). A pose that is
     not finite is invalid. Positions far off the grid are pulled in to just beyond the reach (they
     see no cell), so that indices never overflow. ``offset`` is the sensor's offset from its cell's
-    centre along the beam (m; 0 when invalid): a reading z compares with template ranges at z + offset.
-    """
+    centre along the beam (m; 0 when invalid): a reading z compares with template ranges at z + offset."""
     sp = sensor_poses(np.asarray(pose, dtype=np.float64).reshape(-1, 3), sensor.mount)
     xs, ys, yaws = sp[..., 0], sp[..., 1], sp[..., 2]
     valid = np.isfinite(sp).all(axis=-1)

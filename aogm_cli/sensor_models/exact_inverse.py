@@ -1,7 +1,6 @@
 """The exact inverse sensor model of Thrun's forward model (Kaufman et al. 2016, for cones): each
 cell's posterior given one reading and the map so far, cells independent, in time linear in the
-cone's cells (``cone_terms``), and the sequential log-odds update of a log's readings with it.
-"""
+cone's cells (``cone_terms``), and the sequential log-odds update of a log's readings with it."""
 
 from __future__ import annotations
 
@@ -11,8 +10,8 @@ from dataclasses import asdict, dataclass
 import numba
 import numpy as np
 
-from aogm_cli.sensor_models.cone import cone_flat_cells, range_search
-from aogm_cli.sensor_models.forward_model import cone_entries, cone_reach, gaussian_at
+from aogm_cli.sensor_models.cone import range_search
+from aogm_cli.sensor_models.forward_model import cone_reach, gaussian_at, reading_cone_cells
 
 BOUND = 7.0  # the exact model's log-odds stay within +-BOUND (the standard map's clamps starve it)
 MARGIN = 0.5  # log-odds below the prior at which the thinning frees a cell
@@ -114,27 +113,18 @@ def _reading_cone(tpl, flat, shape, readings, t, state, prior, model, ib, fl):
     """Reading t's cone under ``state`` (negative: ``prior``): flat ids in ``ib``, occupancy in
     ``fl[0]``, Gaussians in ``fl[1]``. Returns (m, j0, g0, C); m = 0 for no reading or a cone off the grid."""
     p_rand, p_max, p_hit, sigma, window, z_max = model
-    height, width = shape
-    ext = tpl.extent
     z = readings.z[t]
     if not z == z:  # NaN: no reading
         return 0, 0, 0.0, 0.0
-    row0 = readings.rows[t]
-    col0 = readings.cols[t]
-    if row0 + ext < 0 or row0 - ext >= height or col0 + ext < 0 or col0 - ext >= width:
-        return 0, 0, 0.0, 0.0
     z, limit = cone_reach(z, readings.limit[t], z_max, sigma, window)
-    k = readings.bins[t]
-    b = tpl.base_bin[k]
-    rk = tpl.ranges[tpl.offsets[b] : tpl.offsets[b + 1]]
-    m = cone_entries(rk, z, limit, sigma, window)
-    cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width)
+    m, rk, s0 = reading_cone_cells(tpl, flat, shape, readings, t, (z, limit), (sigma, window), ib)
+    b = tpl.base_bin[readings.bins[t]]
     # the slack keeps in the window any cell whose g might not round to 0
     j0 = min(range_search(rk, tpl.range_index[b], tpl.resolution, z - window * sigma - 1e-9, False), m)
     p = fl[0]
     g = fl[1]
     if tpl.heard.shape[0] > 0:  # the cone's heard cells only, in order (``ConeTemplates.heard``)
-        heard, ranges = tpl.heard[tpl.offsets[b]:], fl[2]
+        heard, ranges = tpl.heard[s0:], fl[2]
         n = n0 = 0
         for j in range(m):
             if heard[j] != 0:

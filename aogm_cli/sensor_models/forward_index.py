@@ -11,13 +11,13 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from aogm_cli.sensor_models.cone import cone_flat_cells, flat_offsets, unheard
+from aogm_cli.sensor_models.cone import flat_offsets, unheard
 from aogm_cli.sensor_models.forward_model import (
     ExpectationReadings,
     ForwardModelConfig,
-    cone_entries,
     cone_limits,
     gaussian_at,
+    reading_cone_cells,
     reading_constants,
 )
 
@@ -97,27 +97,15 @@ def log_likelihoods(index: ForwardIndex, occupied_flat: np.ndarray) -> np.ndarra
 @numba.njit(cache=True, _nrt=False)  # allocates nothing: as ``standard._standard_kernel``
 def _fill_index(tpl, flat, grid, readings, sigma, window, out):
     """Cone cells (flat ids) and Gaussians of every reading, packed; returns the number of entries."""
-    height = grid.height
-    width = grid.width
-    ext = tpl.extent
-    n_cells = height * width
+    n_cells = grid.height * grid.width
     drop = grid.held_free.shape[0] > 0
     ib = out.scratch
     pos = 0
     for t in range(readings.z.shape[0]):
-        row0 = readings.rows[t]
-        col0 = readings.cols[t]
-        out.counts[t] = 0
-        if row0 + ext < 0 or row0 - ext >= height or col0 + ext < 0 or col0 - ext >= width:
-            continue
-        k = readings.bins[t]
-        b = tpl.base_bin[k]
-        r = tpl.ranges[tpl.offsets[b] : tpl.offsets[b + 1]]
         z = readings.z[t]
-        m = cone_entries(r, z, readings.limit[t], sigma, window)
-        cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width)
+        m, r, s0 = reading_cone_cells(tpl, flat, (grid.height, grid.width), readings, t, (z, readings.limit[t]),
+                                      (sigma, window), ib)
         n = 0
-        s0 = tpl.offsets[b]
         for j in range(m):
             c = np.int64(ib[j])
             if c >= n_cells or unheard(tpl, s0 + j):  # unheard cells: not in the reading's cone
@@ -132,20 +120,12 @@ def _fill_index(tpl, flat, grid, readings, sigma, window, out):
     return pos
 
 
-def build_forward_index(
-    cones: tuple,
-    grid,
-    templates,
-    z_max: float,
-    config: ForwardModelConfig,
-    held_free: np.ndarray | None = None,
-    shadow: np.ndarray | None = None,
-) -> ForwardIndex:
+def build_forward_index(cones: tuple, grid, templates, z_max: float, config: ForwardModelConfig,
+                        held_free: np.ndarray | None = None, shadow: np.ndarray | None = None) -> ForwardIndex:
     """The forward model's index for ``cones`` = (rows, cols, bins, z); NaN readings are dropped.
     ``held_free`` (flat bool) cells stay free while the index is used: a free cell adds nothing to any S_t,
     so leaving it out changes no likelihood and keeps a small cluster's index small. ``shadow`` cuts
-    readings short (``cone_limits``).
-    """
+    readings short (``cone_limits``)."""
     rows, cols, bins, z = cones
     z = np.asarray(z, dtype=np.float64).reshape(-1)
     keep = ~np.isnan(z)

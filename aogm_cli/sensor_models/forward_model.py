@@ -45,24 +45,21 @@ class ForwardModelConfig:
     window = WINDOW  # sigmas beyond z up to which a cone's cells count: the model's own, no setting
 
     def validate(self) -> ForwardModelConfig:
-        def bad(key, msg):
-            return InputError(msg, key=key)
-
         if not self.sigma > 0:
-            raise bad("sigma", f"expected a positive number, got {self.sigma:g}")
+            raise InputError(f"expected a positive number, got {self.sigma:g}", key="sigma")
         if not 0 < self.p_rand < 1:  # > 0: every reading keeps a finite likelihood
-            raise bad("p_rand", f"expected a probability in (0, 1), got {self.p_rand:g}")
+            raise InputError(f"expected a probability in (0, 1), got {self.p_rand:g}", key="p_rand")
         if not 0 < self.p_hit <= 1:
-            raise bad("p_hit", f"expected a probability in (0, 1], got {self.p_hit:g}")
+            raise InputError(f"expected a probability in (0, 1], got {self.p_hit:g}", key="p_hit")
         if not 0 <= self.p_max < 1 or self.p_rand + self.p_max >= 1:
-            raise bad("p_max", f"expected p_max in [0, 1) with p_rand + p_max < 1, got {self.p_max:g}")
+            raise InputError(f"expected p_max in [0, 1) with p_rand + p_max < 1, got {self.p_max:g}", key="p_max")
         if not 0 < self.specular_deg <= 90:
-            raise bad("specular_deg", f"expected an angle in (0, 90] degrees, got {self.specular_deg:g}")
+            raise InputError(f"expected an angle in (0, 90] degrees, got {self.specular_deg:g}", key="specular_deg")
         if not 0 <= self.lobe_deg <= 90:
-            raise bad("lobe_deg", f"expected an angle in [0, 90] degrees (0: every cell of the cone heard), "
-                                  f"got {self.lobe_deg:g}")
+            raise InputError(f"expected an angle in [0, 90] degrees (0: every cell of the cone heard), "
+                             f"got {self.lobe_deg:g}", key="lobe_deg")
         if not self.lobe_range > 0:
-            raise bad("lobe_range", f"expected a positive range (m), got {self.lobe_range:g}")
+            raise InputError(f"expected a positive range (m), got {self.lobe_range:g}", key="lobe_range")
         return self
 
     def as_dict(self) -> dict:
@@ -126,6 +123,24 @@ def cone_entries(r, z, limit, sigma, window):
     return m
 
 
+@numba.njit(cache=True, inline="always")
+def reading_cone_cells(tpl, flat, shape, readings, t, reach, gauss, ib):
+    """Reading t's cone (``reach`` its (z, limit), ``gauss`` (sigma, window)) into ``ib`` (``cone_flat_cells``):
+    (m, its bin's ranges, its bin's first entry); m = 0 for a cone off the grid (``cone_entries``)."""
+    height, width = shape
+    ext = tpl.extent
+    row0 = readings.rows[t]
+    col0 = readings.cols[t]
+    k = readings.bins[t]
+    s0 = tpl.offsets[tpl.base_bin[k]]
+    r = tpl.ranges[s0 : tpl.offsets[tpl.base_bin[k] + 1]]
+    if row0 + ext < 0 or row0 - ext >= height or col0 + ext < 0 or col0 - ext >= width:
+        return 0, r, s0
+    m = cone_entries(r, reach[0], reach[1], gauss[0], gauss[1])
+    cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width)
+    return m, r, s0
+
+
 def deflect(z: np.ndarray, shadow: np.ndarray | None, z_max: float) -> tuple[np.ndarray, np.ndarray]:
     """(z, limit) of readings: a deflected one becomes a max-range reading ending before the surface."""
     z = np.asarray(z, dtype=np.float64)
@@ -151,31 +166,20 @@ E_READINGS, E_LOGLIK, E_RANDOM, E_DROPOUT, E_DETECTED, E_EXAMINED, E_SQUARED, E_
 def cone_obstacles(tpl, flat, shape, readings, occupied, sigma, window, z_max, ptr, d):
     """The ranges of the occupied cells of each reading's cone at ``sigma``, reading t's at
     ``d[ptr[t]:ptr[t + 1]]``. Returns how many there are (when ``d`` holds fewer, only ``ptr`` is right)."""
-    height, width = shape
-    n_cells = height * width
-    ext = tpl.extent
-    ranges = tpl.ranges
+    n_cells = shape[0] * shape[1]
     room = d.shape[0]
     ib = np.empty(int(np.max(np.diff(tpl.offsets))), dtype=np.int32)
     ptr[0] = 0
     for t in range(readings.z.shape[0]):
         z, limit = cone_reach(readings.z[t], readings.limit[t], z_max, sigma, window)
-        row0 = readings.rows[t]
-        col0 = readings.cols[t]
         n = ptr[t]
-        if not (row0 + ext < 0 or row0 - ext >= height or col0 + ext < 0 or col0 - ext >= width):
-            k = readings.bins[t]
-            b = tpl.base_bin[k]
-            r = ranges[tpl.offsets[b] : tpl.offsets[b + 1]]
-            m = cone_entries(r, z, limit, sigma, window)
-            cone_flat_cells(ib, tpl, flat, k, m, row0, col0, height, width)
-            s0 = tpl.offsets[b]
-            for j in range(m):
-                c = ib[j]
-                if c < n_cells and occupied[c] and not unheard(tpl, s0 + j):  # unheard: no obstacle of the reading
-                    if n < room:
-                        d[n] = r[j]
-                    n += 1
+        m, r, s0 = reading_cone_cells(tpl, flat, shape, readings, t, (z, limit), (sigma, window), ib)
+        for j in range(m):
+            c = ib[j]
+            if c < n_cells and occupied[c] and not unheard(tpl, s0 + j):  # unheard: no obstacle of the reading
+                if n < room:
+                    d[n] = r[j]
+                n += 1
         ptr[t + 1] = n
     return ptr[readings.z.shape[0]]
 
@@ -242,8 +246,7 @@ def expectation_sums(tpl, flat, shape, readings, occupied, model, out, obstacles
     """The expectations of every reading's cause under the flat binary map ``occupied``, summed:
     the causes' posteriors are e_rand = (p_rand / z_max) / p, e_dropout = p_max G0 / p, e_k = w
     q^(k-1) p_hit g(d_k) / p and e_0 = w q^K G0 / p; ``out`` gets their sums (the E_* slots).
-    ``obstacles`` found at a sigma at least ``model``'s are reused; returns those used.
-    """
+    ``obstacles`` found at a sigma at least ``model``'s are reused; returns those used."""
     sigma, window, z_max = model[3], model[4], model[5]
     if obstacles is None or obstacles.sigma < sigma:
         obstacles = find_obstacles(tpl, flat, shape, readings, occupied, sigma, window, z_max)

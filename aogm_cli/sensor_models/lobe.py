@@ -47,14 +47,6 @@ LOBE_MIN_GAIN = 0.015
 LOBE_MIN_HEARD_AT_1M = 1.0 / 3.0
 
 
-def surfaces_in_parts(tpl, flat, bearings, shape, readings, occupied, model, out) -> None:
-    """``nearest_surfaces`` of every reading into ``out`` = (near, angle), in ``readings.reading_parts`` (each
-    reading's own rows: any thread count gives the same tables)."""
-    near, angle = out
-    reading_parts(readings[3].shape[0], lambda _, span: nearest_surfaces(tpl, flat, bearings, shape, readings,
-                                                                         occupied, model, near, angle, span))
-
-
 @numba.njit(cache=True, nogil=True)
 def nearest_surfaces(tpl, flat, bearings, shape, readings, occupied, model, near, angle, span):
     """For every echo span[0] <= t < span[1] (z < z_max) and bin a of the angle off the axis, the nearest cell
@@ -163,7 +155,7 @@ class Lobe:
     """The detection lobe learned from a log (``learn_lobe``): theta0 (degrees) and R0 (metres) of the rule
     above, each with the interval of values explaining the log as well (``LOBE_TIE``), or ``full_cone``: the
     cone as drawn explains the echoes within ``LOBE_CONE_TOLERANCE`` as well as the best lobe (then theta0_deg and
-    r0_m are inf). ``explained`` (THETA0_GRID_DEG, R0_GRID_M): the fit's objective. ``counts`` (2, angle bins,
+    r0_m are inf). ``counts`` (2, angle bins,
     range bins): per echo, the nearest wall cell of each angle bin up to it (chances, counts[0]) and those
     on it (hits, counts[1]), by the cell's range: the hit rate traces the lobe."""
 
@@ -178,16 +170,9 @@ class Lobe:
     angle_edges_deg: np.ndarray  # (A + 1,) the bins of |angle off the axis|
     range_edges_m: np.ndarray  # (R + 1,)
     counts: np.ndarray  # (2, A, R) chances and hits
-    explained: np.ndarray
-
-    def heard_deg(self, r: float) -> float:
-        """The angle off the axis (degrees) out to which a surface met head-on at ``r`` m is heard."""
-        if self.full_cone:
-            return math.inf
-        return self.theta0_deg * math.sqrt(max(math.log(self.r0_m / r), 0.0))
 
     def as_dict(self) -> dict:
-        """The record as JSON takes it (inf as None; the objective left out)."""
+        """The record as JSON takes it (inf as None)."""
         def finite(v: float) -> float | None:
             return float(v) if math.isfinite(v) else None
         return {"theta0_deg": finite(self.theta0_deg), "r0_m": finite(self.r0_m), "full_cone": self.full_cone,
@@ -208,9 +193,11 @@ def surface_table(templates, grid: GridSpec, cones: tuple, occupied: np.ndarray,
     readings = (rows[echo].astype(np.int64), cols[echo].astype(np.int64), bins[echo].astype(np.int64),
                 z[echo].astype(np.float64))
     table = SurfaceTable(*(np.empty((echo.size, lobe_bins(templates.beam_width))) for _ in range(2)), readings[3])
-    surfaces_in_parts(templates.kernel_arrays, flat_offsets(templates, grid.width), templates.bearings, grid.shape,
-                      readings, np.ascontiguousarray(occupied, dtype=np.bool_).reshape(-1),
-                      (float(band), float(z_max), math.radians(LOBE_BIN_DEG)), (table.near, table.angle))
+    tpl, flat = templates.kernel_arrays, flat_offsets(templates, grid.width)
+    occupied = np.ascontiguousarray(occupied, dtype=np.bool_).reshape(-1)
+    model = (float(band), float(z_max), math.radians(LOBE_BIN_DEG))  # each reading's own rows: any thread count alike
+    reading_parts(echo.size, lambda _, span: nearest_surfaces(tpl, flat, templates.bearings, grid.shape, readings,
+                                                              occupied, model, table.near, table.angle, span))
     return table
 
 
@@ -271,4 +258,4 @@ def learn_lobe(templates, grid: GridSpec, cones: tuple, occupied: np.ndarray, z_
     theta0, r0 = (math.inf, math.inf) if full else (float(THETA0_GRID_DEG[i]), float(R0_GRID_M[j]))
     return Lobe(theta0, r0, full, _interval(explained.max(axis=1), THETA0_GRID_DEG, best),
                 _interval(explained.max(axis=0), R0_GRID_M, best), int(table.z.size), int(best), cone,
-                LOBE_BIN_DEG * np.arange(table.near.shape[1] + 1), edges, counts, explained)
+                LOBE_BIN_DEG * np.arange(table.near.shape[1] + 1), edges, counts)

@@ -30,13 +30,11 @@ def echo_ranges(ranges: np.ndarray, grid: GridSpec) -> np.ndarray:
     return np.asarray(ranges, dtype=np.float64) + 0.5 * grid.resolution
 
 
-def cone_templates(grid: GridSpec, sensor: SensorSpec, narrow: bool | None = None) -> ConeTemplates:
+def cone_templates(grid: GridSpec, sensor: SensorSpec) -> ConeTemplates:
     """The cone templates every mode uses on ``grid``: reach max_range plus one cell (for the axis
     offset); a narrow beam's cones also hold every cell their ray crosses, as ray tracing does."""
-    if narrow is None:
-        narrow = is_narrow_beam(sensor, grid.resolution)
     return build_cone_templates(grid.resolution, sensor.beam_width, sensor.max_range, margin=grid.resolution,
-                                ray=narrow)
+                                ray=is_narrow_beam(sensor, grid.resolution))
 
 
 def forward_templates(grid: GridSpec, sensor: SensorSpec) -> ConeTemplates:

@@ -43,19 +43,16 @@ class SurfaceConfig:
 
 
 def surface_normals(tpl, flat, shape: tuple[int, int], cones: tuple, z_max: float, resolution: float,
-                    config: SurfaceConfig, believed: np.ndarray | None = None) -> np.ndarray:
+                    believed: np.ndarray) -> np.ndarray:
     """(2, H * W) float32: the unit normal (d row, d col) of each surface the readings ``cones`` echoed
-    from, NaN elsewhere; with ``believed``, only the cells it marks can be surfaces."""
+    from, NaN elsewhere; only the cells ``believed`` marks can be surfaces."""
     rows, cols, bins, z = (np.ascontiguousarray(a).reshape(-1) for a in cones)
     readings = (rows.astype(np.int64), cols.astype(np.int64), bins.astype(np.int64), z.astype(np.float64))
     # float32: sums of counts and unit terms, exact enough for a threshold on their ratio
     sums = np.zeros((3, shape[0] * shape[1]), dtype=np.float32)
     echo_direction_sums(tpl, flat, shape, readings, float(resolution), float(z_max), sums)
     count = sums[2]
-    surface = count >= MIN_ECHOES
-    if believed is not None:
-        surface &= np.asarray(believed, dtype=bool).reshape(-1)
-    cells = np.flatnonzero(surface)
+    cells = np.flatnonzero((count >= MIN_ECHOES) & np.asarray(believed, dtype=bool).reshape(-1))
     coherent = np.hypot(sums[0, cells], sums[1, cells]) >= MIN_COHERENCE * count[cells]
     cells = cells[coherent]
     angle = 0.5 * np.arctan2(sums[1, cells], sums[0, cells])  # the mean axis, from the doubled angles
@@ -135,13 +132,6 @@ def echo_direction_sums(tpl, flat, shape, readings, half_band, z_max, out):
             out[2, c] += 1.0
 
 
-def cos2_of(specular_deg: float) -> float:
-    """cos^2 of the largest incidence angle that still echoes (0 at 90 deg: nothing hidden)."""
-    if specular_deg >= 90.0:
-        return 0.0
-    return math.cos(math.radians(specular_deg)) ** 2
-
-
 @numba.njit(cache=True, inline="always")
 def hidden(normal, cos2, cell, row0, col0, width):
     """True when a reading from (row0, col0) meets the surface ``cell`` beyond the specular angle."""
@@ -180,16 +170,14 @@ def shadow_ranges(tpl, flat, shape, readings, normal, cos2, model, out, span):
                 break
 
 
-def reading_shadows(run, normals: np.ndarray, forward, core: float = 1.0) -> np.ndarray | None:
+def reading_shadows(run, normals: np.ndarray, forward, core: float) -> np.ndarray:
     """Per reading of ``run``, the range where the core of its beam met a surface beyond
-    ``forward.specular_deg`` before its window (+inf: none); None when that angle is 90 degrees."""
-    if forward.specular_deg >= 90.0:
-        return None
+    ``forward.specular_deg`` (below 90: ``plan.incidence``) before its window (+inf: none)."""
     out = np.full(run.z.shape[0], np.inf)
     grid = run.grid
     args = (run.templates.kernel_arrays, flat_offsets(run.templates, grid.width), grid.shape,
             (run.rows.astype(np.int64), run.cols.astype(np.int64), run.bins.astype(np.int64), run.z.astype(np.float64)),
-            normals, cos2_of(forward.specular_deg),
+            normals, math.cos(math.radians(forward.specular_deg)) ** 2,  # cos^2 of the widest angle that echoes
             (float(forward.sigma), float(forward.window), float(run.sensor.max_range),
              math.cos(0.5 * core * run.sensor.beam_width)), out)
     reading_parts(out.size, lambda _, span: shadow_ranges(*args, span))  # each reading's own: any thread count

@@ -50,7 +50,6 @@ def _reading_extent(tpl, groups, readings, bounds, gauss, grid_shape, span):
     rd, _ = _columns(readings)
     rows, cols, bins, z = rd.row0, rd.col0, rd.bin, rd.z
     limits, lower = bounds
-    sigma, window = gauss
     height, width = grid_shape
     out_m, out_jlo, out_box, out_reach2, out_inside = rd.m, rd.jlo, rd.box, rd.reach2, rd.inside
     for t in range(span[0], span[1]):
@@ -58,7 +57,7 @@ def _reading_extent(tpl, groups, readings, bounds, gauss, grid_shape, span):
         b = tpl.base_bin[k]
         s = tpl.offsets[b]
         r = tpl.ranges[s : tpl.offsets[b + 1]]
-        m = cone_entries(r, z[t], limits[t], sigma, window)
+        m = cone_entries(r, z[t], limits[t], gauss[0], gauss[1])
         out_m[t] = m
         out_jlo[t] = np.searchsorted(r, lower[t], side="left") if lower[t] >= 0.0 else 0
         out_box[0, t] = height  # none
@@ -112,40 +111,28 @@ def _window_rows(tpl, readings, height, span):
 
 
 @numba.njit(cache=True, nogil=True)
-def _window_cells(tpl, readings, grid_shape, span, out):
-    """Mark each reading's window cells in ``out`` (only True is written: threads may share it)."""
-    rd, _ = _columns(readings)
-    height, width = grid_shape
-    for t in range(span[0], span[1]):
-        k = rd.bin[t]
-        s = tpl.offsets[tpl.base_bin[k]]
-        tr = _bin_transform(tpl, k)
-        for j in range(rd.jlo[t], rd.m[t]):
-            if unheard(tpl, s + j):  # no window cell of the reading
-                continue
-            c = _entry_cell(tpl, s, tr, j, np.int64(rd.row0[t]), np.int64(rd.col0[t]), height, width)
-            if c >= 0:
-                out[c] = True
-
-
-@numba.njit(cache=True, nogil=True)
-def _far_gains(tpl, readings, grid_shape, of_cell, span, out):
-    """Add each reading's ``far_log[t, 0]`` to the gain of every candidate before its window."""
+def _window_or_far(tpl, readings, grid_shape, of_cell, span, out):
+    """With ``of_cell`` None, mark each reading's window cells in ``out`` (only True is written: threads may share
+    it); else add each reading's ``far_log[t, 0]`` to the gain of every candidate before its window."""
     rd, state = _columns(readings)
     height, width = grid_shape
     for t in range(span[0], span[1]):
-        far = min(rd.jlo[t], rd.m[t])
-        if far <= 0:
-            continue
         k = rd.bin[t]
         s = tpl.offsets[tpl.base_bin[k]]
         tr = _bin_transform(tpl, k)
-        v = state.far_log[t, 0]
-        for j in range(far):
+        if of_cell is None:
+            lo, hi = rd.jlo[t], rd.m[t]
+        else:
+            lo, hi = 0, min(rd.jlo[t], rd.m[t])
+            v = state.far_log[t, 0]
+        for j in range(lo, hi):
             if unheard(tpl, s + j):  # no part of the reading
                 continue
             c = _entry_cell(tpl, s, tr, j, np.int64(rd.row0[t]), np.int64(rd.col0[t]), height, width)
-            if c >= 0 and of_cell[c] >= 0:
+            if of_cell is None:
+                if c >= 0:
+                    out[c] = True
+            elif c >= 0 and of_cell[c] >= 0:
                 out[of_cell[c]] += v
 
 
