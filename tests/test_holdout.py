@@ -298,7 +298,7 @@ def test_holdout_maps_come_back_with_the_same_split_only(room_log, compared, tmp
 
 
 def test_a_results_file_of_before_the_axis_auc_reads_back_as_the_band_auc(compared, tmp_path):
-    """A --json file written before issue 28 (its reference records no AUC protocol) scored
+    """A --json file written before the axis protocol (its reference records no AUC protocol) scored
     holdout_auc as holdout_auc_band is scored now: read back so, with holdout_auc not available,
     and written again as it now reads."""
     out, doc, _ = compared

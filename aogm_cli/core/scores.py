@@ -4,7 +4,7 @@ the gates (``report``) name them.
 """
 
 METRIC_KEYS = ("accuracy", "occupied_precision", "occupied_recall", "occupied_f1", "brier", "ece")  # against the truth
-LATER_METRIC_KEYS = ("ece",)  # of METRIC_KEYS, those a --json file written before issue 28 lacks
+LATER_METRIC_KEYS = ("ece",)  # of METRIC_KEYS, those a --json file written before ECE lacks
 TRUTH_KEYS = ("leak", "block", "surface_recall")  # what a planner sees, against a simulated log's truth
 STANDARD_KEYS = ("walls_kept", "leak_vs_standard", "far_leak")  # what a planner sees, against the standard map (no truth)
 PLANNER_KEYS = (*TRUTH_KEYS, *STANDARD_KEYS)  # ``evaluation.planner``: with truth the first, without the others

@@ -316,7 +316,7 @@ def reference_log_likelihoods(pose: np.ndarray, ranges: np.ndarray, sensor: Sens
 #   (reading, cell) pair counted once, ties by average ranks (Mann-Whitney); no-echo readings label
 #   nothing. Every cell is scored by what the map says of that very cell: a map that puts a wall one
 #   cell off where held-out readings end, or holds the cell confidently free, is penalised.
-# * ``holdout_auc_band``: the definition before (issue 28), kept under its own name: a reading's
+# * ``holdout_auc_band``: the earlier definition, kept under its own name: a reading's
 #   positive is the largest probability over a band of cells around its range, the negatives the cells
 #   before the band. Sonar cones: the band is its occupied arc (one cell of the arc echoed), the
 #   negatives the cells of its free region, both drawn as the standard mapper's inverse model draws

@@ -205,8 +205,8 @@ def read_results_file(path: str) -> tuple[list[ModeResult], dict | None]:
     return _ResultsReader(path).document(doc)
 
 
-BAND_AUC = "holdout_auc_band"  # ``evaluation.holdout``: the held-out AUC's definition before issue 28
-BANDED = "holdout_auc not measured (a file written before issue 28; its AUC is holdout_auc_band)"
+BAND_AUC = "holdout_auc_band"  # ``evaluation.holdout``: the held-out AUC's earlier definition
+BANDED = "holdout_auc not measured (a file written before the axis protocol; its AUC is holdout_auc_band)"
 
 
 def _axis_auc(holdout: dict) -> bool:
@@ -297,7 +297,7 @@ class _ResultsReader:
         if holdout:
             scores = {k: _nan(get(metrics, k, f"{where}.metrics", _number_or_null, "a number or null"))
                       for k in SCORE_KEYS if not (banded and k == BAND_AUC)}
-            if banded:  # written before issue 28: its holdout_auc is what holdout_auc_band is now
+            if banded:  # written before the axis protocol: its holdout_auc is what holdout_auc_band is now
                 scores[BAND_AUC], scores["holdout_auc"] = scores["holdout_auc"], math.nan
         truth_metrics = self.truth_metrics(metrics, f"{where}.metrics") if truth else None
         # what a planner sees: optional key by key, as files written before it was measured lack it

@@ -69,7 +69,7 @@ def em_view(log_odds: np.ndarray, observed: np.ndarray, outcome: EMOutcome | Non
     return probability, observed
 
 
-# --- one scale (issue 28) --------------------------------------------------------------------------
+# --- one scale --------------------------------------------------------------------------------------
 # EM's residuals inside the clusters and the standard map outside rank cells unlike each other (docs/algorithms.md,
 # "Where the defaults come from"), so each outside cell takes the EM probability of the cluster cells with its hit
 # rate (``ray.axis_counts``): one increasing map per log, from its readings, each cell on its side of 0.5.
