@@ -239,3 +239,17 @@ def test_check_counts_per_mode():
 def test_an_estimate_has_its_median_and_range():
     e = estimate([10.0, 15.0, 5.0, 40.0])
     assert (e.median, e.min, e.max) == (12.5, 5.0, 40.0)
+
+
+def test_the_printed_summary_shows_worlds_of_several_logs_and_all_logs(tmp_path):
+    """make demo's run (one log per world) prints the summary over all logs only; a world's checks per world."""
+    from aogm_cli.report.summary_table import check_lines, groups
+
+    one_each = results()
+    for r, world in zip(one_each, ("a", "a", "b", "b", "c", "c"), strict=True):
+        r.world = world
+    s = summarize(one_each)
+    assert [g.name for g in groups(s)] == ["all"] and check_lines(s) == []
+    s = summarize(results())
+    assert [g.name for g in groups(s)] == ["corridor_door"]
+    assert check_lines(s) == ["checks passed, corridor_door: standard door_passable 3/3, em door_passable 3/3"]

@@ -22,8 +22,12 @@ def group_label(group: GroupSummary) -> str:
 
 
 def groups(summary: Summary) -> list[GroupSummary]:
-    """The groups shown: each world's, then every log's (only when there are several worlds)."""
-    return [*summary.worlds, summary.all] if len(summary.worlds) > 1 else list(summary.worlds)
+    """The groups shown: each world's of two or more logs (one log's is its row of the table), then every log's
+    when there are several worlds; a single log's when that is all there is."""
+    shown = [g for g in summary.worlds if g.logs > 1]
+    if len(summary.worlds) > 1:
+        shown.append(summary.all)
+    return shown or list(summary.worlds)
 
 
 def shown_metrics(summary: Summary) -> list[str]:
@@ -96,7 +100,7 @@ def print_summary(summary: Summary, quiet: bool) -> None:
 def check_lines(summary: Summary) -> list[str]:
     """One line per group: on how many of its logs each mode passes each world check."""
     lines = []
-    for g in groups(summary):
+    for g in (g for g in groups(summary) if g.name != ALL):  # a check is a world's
         found = [f"{mode} {name} {p}/{n}" for mode, by in g.checks.items() for name, (p, n) in by.items()]
         if found:
             lines.append(f"checks passed, {group_label(g)}: {', '.join(found)}")
