@@ -49,7 +49,8 @@ def learned_over(mode: str, params: MapParams, keys: set[str], log, model: str |
                  detector: str | None = None) -> list[str]:
     """One warning per forward-model key of ``keys`` (set by the user: ``set_em_keys``) whose value a ``mode`` map of
     ``log`` does not map with: one ``calibration.learn`` lists learns it from the log (``Plan.learns``; the value set
-    only starts the fit, a lobe's is replaced), or a sensor model given or carried (``sensor_model``) replaces it."""
+    only starts the fit, a lobe's is replaced), a sensor model given or carried (``sensor_model``) replaces it, or
+    (``lobe_range``) no lobe is configured for it to shape."""
     if mode == "standard" or not keys & {*LEARNABLE, "lobe_range"}:
         return []
     given = sensor_model(mode, params, log, str(getattr(log, "path", "")), model, detector)
@@ -65,6 +66,9 @@ def learned_over(mode: str, params: MapParams, keys: set[str], log, model: str |
             fix = ("map without --forward-model" if given.origin.startswith("file ") else "set calibration.carried: false")
             out.append(f"warning: em.{key} is the sensor model's, {given.origin}; {fix} and take {key} out of "
                        f"calibration.learn {with_value}")
+        elif key == "lobe_range" and forward.lobe_deg == 0:
+            out.append("warning: em.lobe_range has no effect while em.lobe_deg is 0 (every cell of the cone hears); "
+                       "set em.lobe_deg too")
     return out
 
 

@@ -233,6 +233,9 @@ def test_a_set_key_that_calibration_learns_or_a_carried_model_replaces_is_warned
 
     assert warnings("em: {lobe_deg: 12}\n") == [LOBE_LEARNED]
     assert warnings("em: {lobe_deg: 12}\ncalibration: {learn: 'sigma,p_rand,p_hit,p_max'}\n") == []
+    assert warnings("em: {lobe_range: 5}\ncalibration: {learn: 'sigma,p_rand,p_hit,p_max'}\n") == [
+        "warning: em.lobe_range has no effect while em.lobe_deg is 0 (every cell of the cone hears); set em.lobe_deg too"]
+    assert warnings("em: {lobe_deg: 12, lobe_range: 5}\ncalibration: {learn: 'sigma,p_rand,p_hit,p_max'}\n") == []
     sigma = warnings("em: {sigma: 0.05}\n")
     if command == "calibrate":
         assert sigma == ["warning: em.sigma is learned from the log (calibration.learn lists sigma); take sigma out of "
