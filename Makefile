@@ -69,6 +69,7 @@ bench: $(STAMP)
 	$(BIN)/python bench/bench_standard.py
 	$(BIN)/python bench/bench_em.py
 	$(BIN)/python bench/bench_adaptive.py
+	$(BIN)/python bench/bench_summary.py
 
 # Benchmarks at building scale (not part of test or bench; docs/benchmarks.md, "Benchmarks at scale"): each
 # mode on the two seed worlds (best of BENCH_RUNS, one process), then the generated office floor at

@@ -136,12 +136,15 @@ class Gate:
 
 
 def _names_in(node: Node) -> list[tuple[str, str]]:
-    if node[0] == "num":
+    """The (mode, metric) names of an aggregate's expression (which holds no aggregate), in order."""
+    kind = node[0]
+    if kind == "num":
         return []
-    if node[0] == "name":
+    if kind == "name":
         return [node[1]]
-    return [n for child in node[1:] if isinstance(child, tuple) and child and isinstance(child[0], str)
-            for n in _names_in(child)]
+    if kind == "neg":
+        return _names_in(node[1])
+    return _names_in(node[1]) + _names_in(node[2])
 
 
 def _aggregate(node: Node, logs, text: str) -> float:

@@ -66,9 +66,9 @@ class Estimate:
     sd: float | None
     ci_low: float | None
     ci_high: float | None
-    median: float = math.nan
-    min: float = math.nan
-    max: float = math.nan
+    median: float
+    min: float
+    max: float
 
     def as_dict(self) -> dict:
         return {"n": self.n, "mean": self.mean, "sd": self.sd, "ci_low": self.ci_low, "ci_high": self.ci_high,
