@@ -18,7 +18,7 @@ from aogm_cli.detector.network import ConstantDetector, Detector
 from aogm_cli.io import template_store
 from aogm_cli.io.detectorfile import BASELINE_DETECTORS, file_sha256, load_detector
 from aogm_cli.io.logfile import LogReader
-from aogm_cli.io.modelfile import MODEL_KEYS, check_sensor, model_for, read_model, sensor_record
+from aogm_cli.io.modelfile import LOBE_KEYS, MODEL_KEYS, check_sensor, model_for, read_model, sensor_record
 from aogm_cli.io.yamlfile import read_yaml
 from aogm_cli.mapping.learned import FROM_LOG, SENSOR_KEYS, Learned, SensorModel
 from aogm_cli.mapping.map_cost import map_estimate
@@ -62,6 +62,9 @@ def learned_over(mode: str, params: MapParams, keys: set[str], log, model: str |
         if learned in learns:
             out.append(f"warning: em.{key} is learned from the log (calibration.learn lists {learned}); take "
                        f"{learned} out of calibration.learn {with_value}")
+        elif learned == "lobe_deg" and given is not None and given.carries_lobe and learned in params.calibration.learned:
+            out.append(f"warning: em.{key} is the lobe the sensor's model carries ({given.origin}); take lobe_deg out "
+                       f"of calibration.learn {with_value}")
         elif given is not None and key in SENSOR_KEYS:
             fix = ("map without --forward-model" if given.origin.startswith("file ") else "set calibration.carried: false")
             out.append(f"warning: em.{key} is the sensor model's, {given.origin}; {fix} and take {key} out of "
@@ -138,8 +141,14 @@ def carried_model(detector: str | None, sensor, simulated: bool, loaded=None) ->
     model = model_for(carrier.sensor_models, sensor, simulated)
     if model is None:
         return None
-    values = model["model"]
-    return Learned(sensor=SensorModel(**values), origin=f"carried by the {'packaged' if spec is None else spec} detector")
+    return robots_model(model["model"], f"carried by the {'packaged' if spec is None else spec} detector")
+
+
+def robots_model(values: dict, origin: str) -> Learned:
+    """A robot's model (``io.modelfile.model_values``) as its maps take it: the sensor's part, and the lobe when it
+    carries one (``io.modelfile.LOBE_KEYS``; then no log learns it)."""
+    return Learned(sensor=SensorModel.read(values), origin=origin, lobe_deg=values.get("lobe_deg"),
+                   lobe_range=values.get("lobe_range"))
 
 
 def calibration_notice(path, m: OccupancyMap) -> str | None:
@@ -161,7 +170,7 @@ def calibration_notice(path, m: OccupancyMap) -> str | None:
 def learn_sensor_models(paths, params: MapParams, advance=None) -> tuple[dict, ...]:
     """The sensor models a detector trained on the logs at ``paths`` carries: one per sensor among
     them, each value the median over its logs' calibrations (an em map each, as ``aogm
-    calibrate``), with the logs' names."""
+    calibrate``; the lobe's too, when every log learned one: ``model_record``), with the logs' names."""
     groups: dict[str, tuple[dict, list, list]] = {}
     for path in paths:
         m = map_file(path, "em", dataclasses.replace(params, calibration=dataclasses.replace(params.calibration,
@@ -170,12 +179,21 @@ def learn_sensor_models(paths, params: MapParams, advance=None) -> tuple[dict, .
             record = sensor_record(reader.sensor) | {"simulated": reader.has_truth}
         key = json.dumps(record, sort_keys=True)
         groups.setdefault(key, (record, [], []))
-        groups[key][1].append(m.learned["sensor"])
+        groups[key][1].append(model_record(m.learned))
         groups[key][2].append(Path(path).name)
         if advance is not None:
             advance(1)
-    return tuple({"sensor": record, "model": {k: float(np.median([v[k] for v in values])) for k in MODEL_KEYS},
+    keys = (*MODEL_KEYS, *LOBE_KEYS)
+    return tuple({"sensor": record, "model": {k: float(np.median([v[k] for v in values])) for k in keys
+                                              if all(k in v for v in values)},
                   "learned_from": names} for record, values, names in groups.values())
+
+
+def model_record(learned: dict) -> dict:
+    """The robot's model a map learned (its ``learned`` record): the sensor's part, and the lobe if it learned one
+    (``io.modelfile.LOBE_KEYS``), as a model file or detector carries it."""
+    lobe = {} if learned.get("lobe_deg") is None else {k: float(learned[k]) for k in LOBE_KEYS}
+    return dict(learned["sensor"]) | lobe
 
 
 def given_model(path: str | Path, sensor, log: str | Path) -> Learned:
@@ -184,7 +202,7 @@ def given_model(path: str | Path, sensor, log: str | Path) -> Learned:
     was learned for another sensor."""
     values, record = read_model(path)
     check_sensor(record, sensor, str(path), str(log))
-    return Learned(sensor=SensorModel(**values), origin=f"file {path}")
+    return robots_model(values, f"file {path}")
 
 
 class NamedSource:

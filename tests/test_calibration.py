@@ -205,6 +205,8 @@ def test_calibrate_writes_the_sensors_model_that_map_and_compare_take(corridor_d
     written = yaml.safe_load(model.read_text())
     assert written["format"] == "aogm-sensor-model" and written["format_version"] == 1
     assert written["sensor"]["count"] == 24 and written["sensor"]["beam_width_deg"] == pytest.approx(30)
+    # the transducer's lobe goes with the model: here the whole cone (lobe_deg 0)
+    assert written["model"]["lobe_deg"] == 0.0 and written["model"]["lobe_range"] > 0
     other = tmp_path / "other.h5"  # another log of the same robot: the same world, another seed
     assert run("simulate", WORLDS / "corridor_door.yaml", "-o", other, "--seed", 5, "-q").exit_code == 0
     out = tmp_path / "m.h5"
@@ -213,8 +215,12 @@ def test_calibrate_writes_the_sensors_model_that_map_and_compare_take(corridor_d
     m = read_map_file(out)
     assert "calibration" not in m.stats["phase_seconds"] and "calibration" not in m.stats
     assert m.learned["origin"] == f"file {model}"
-    # the sensor's part as the file has it; the building's share of lost readings fitted on this log
-    assert m.learned["sensor"] == written["model"] | m.learned["rates"] and set(m.learned["rates"]) == {"p_max"}
+    # the sensor's part as the file has it; the building's share of lost readings fitted on this log; the lobe
+    # carried, not learned again (no lobe stage)
+    sensor_part = {k: v for k, v in written["model"].items() if k not in ("lobe_deg", "lobe_range")}
+    assert m.learned["sensor"] == sensor_part | m.learned["rates"] and set(m.learned["rates"]) == {"p_max"}
+    assert "lobe" not in m.stats["phase_seconds"] and "lobe_deg" not in m.plan["learns"]
+    assert m.learned["lobe_deg"] == 0.0 and m.learned["lobe"] is None
     assert m.params["em"]["sigma"] == 0.03 and m.params["calibration"]["enabled"] is True  # as configured
     # the same model as --params (the old way) makes the same map
     old = tmp_path / "old.yaml"
@@ -251,6 +257,8 @@ def model_text(corridor_door_log, tmp_path_factory):
     (lambda d: d["model"].update(sigma=-1.0), "model.sigma", "expected a number in"),
     (lambda d: d["model"].pop("p_hit"), "model.p_hit", "expected a number"),
     (lambda d: d.update(sensor=[1, 2]), "sensor", "expected a mapping"),
+    (lambda d: d["model"].pop("lobe_range"), "model.lobe_range", "expected both lobe_deg and lobe_range"),
+    (lambda d: d["model"].update(lobe_deg=95.0), "model.lobe_deg", "expected a number in [0, 90]"),
 ])
 @pytest.mark.parametrize("command", ["map", "compare"])
 def test_a_model_file_of_another_sensor_or_damaged_is_refused(corridor_door_log, model_text, tmp_path, change, key, word,
@@ -266,6 +274,35 @@ def test_a_model_file_of_another_sensor_or_damaged_is_refused(corridor_door_log,
     assert result.exit_code == 2, result.output
     assert str(model) in result.output and key in result.output and word in result.output, result.output
     assert "Traceback" not in result.output and not out.exists() and model.read_bytes() == before
+
+
+def test_a_model_files_lobe_is_the_maps_and_one_without_leaves_it_to_the_log(corridor_door_log, model_text, tmp_path):
+    """A model file that carries a lobe maps with it, learning none (the same map as the lobe configured and not
+    learned); one without (an older file) leaves the lobe to each log, as before."""
+    written = yaml.safe_load(model_text)
+    written["model"].update(lobe_deg=12.0, lobe_range=6.0)
+    narrow = tmp_path / "narrow.yaml"
+    narrow.write_text(yaml.safe_dump(written))
+    result = run("map", corridor_door_log, "--mode", "em", "--forward-model", narrow, "-o", tmp_path / "n.h5", "-q")
+    assert result.exit_code == 0, result.output
+    m = read_map_file(tmp_path / "n.h5")
+    assert (m.learned["lobe_deg"], m.learned["lobe_range"], m.learned["lobe"]) == (12.0, 6.0, None)
+    assert "lobe" not in m.stats["phase_seconds"] and m.plan["learns"] == ["p_max"]
+    # the lobe configured instead, the same model without it, the lobe not learned: the same map
+    del written["model"]["lobe_deg"], written["model"]["lobe_range"]
+    older = tmp_path / "older.yaml"
+    older.write_text(yaml.safe_dump(written))
+    params = tmp_path / "lobe.yaml"
+    params.write_text("em: {lobe_deg: 12.0, lobe_range: 6.0}\ncalibration: {learn: 'sigma,p_rand,p_hit,p_max'}\n")
+    result = run("map", corridor_door_log, "--mode", "em", "--forward-model", older, "--params", params, "-o",
+                 tmp_path / "c.h5", "-q")
+    assert result.exit_code == 0, result.output
+    assert np.array_equal(read_map_file(tmp_path / "c.h5").probability, m.probability)
+    # the older file alone: the lobe learned from the log
+    result = run("map", corridor_door_log, "--mode", "em", "--forward-model", older, "-o", tmp_path / "o.h5", "-q")
+    assert result.exit_code == 0, result.output
+    o = read_map_file(tmp_path / "o.h5")
+    assert "lobe" in o.stats["phase_seconds"] and "lobe_deg" in o.plan["learns"] and o.learned["lobe"] is not None
 
 
 def test_a_model_file_that_is_not_yaml_is_refused(corridor_door_log, tmp_path):

@@ -488,4 +488,7 @@ def test_train_learns_the_sensor_model_each_sensor_carries(tiny_logs, tmp_path):
 
     own = map_file(tiny_logs[0], "em", resolve_params(overrides={"calibration": {"carried": False}}))
     assert models[0]["learned_from"] == [tiny_logs[0].name]
-    assert models[0]["model"] == pytest.approx(own.learned["sensor"])
+    # the transducer's lobe goes with the model (one learned: here the whole cone, lobe_deg 0)
+    assert models[0]["model"] == pytest.approx(own.learned["sensor"] | {k: own.learned[k] for k in
+                                                                         ("lobe_deg", "lobe_range")})
+    assert own.learned["lobe_deg"] is not None

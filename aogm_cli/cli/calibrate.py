@@ -67,7 +67,7 @@ def calibrate(log_file, mode, output, detector, params_file, resolution, quiet, 
     from aogm_cli.io.logfile import LogReader
     from aogm_cli.io.modelfile import model_bytes
     from aogm_cli.io.provenance import provenance
-    from aogm_cli.map_files import learned_over, map_file, resolve_params, set_em_keys
+    from aogm_cli.map_files import learned_over, map_file, model_record, resolve_params, set_em_keys
     from aogm_cli.mapping.calibration import TUNING
     from aogm_cli.report.calibration_table import calibration_table, lobe_line
 
@@ -94,6 +94,6 @@ def calibrate(log_file, mode, output, detector, params_file, resolution, quiet, 
 
         with LogReader(log_file) as reader:
             sensor = reader.sensor
-        write_files_atomically([(output, model_bytes(result.learned["sensor"], sensor, str(log_file), made))])
+        write_files_atomically([(output, model_bytes(model_record(result.learned), sensor, str(log_file), made))])
         if not quiet:
             click.echo(f"{output}: the sensor's model, for --forward-model", err=True)

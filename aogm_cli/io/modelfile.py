@@ -1,6 +1,6 @@
 """The sensor model file (YAML) that ``aogm calibrate -o MODEL`` writes and ``--forward-model MODEL``
-reads: the forward model's sensor part (sigma, p_rand, p_hit, p_max) and the sensor it was learned
-for, checked against every log it is used with."""
+reads: the forward model's sensor part (sigma, p_rand, p_hit, p_max, and the transducer's lobe that hears:
+lobe_deg, lobe_range) and the sensor it was learned for, checked against every log it is used with."""
 
 from __future__ import annotations
 
@@ -19,6 +19,9 @@ FORMAT = "aogm-sensor-model"
 FORMAT_VERSION = 1
 # ``mapping.learned.SensorModel``'s fields; the ``opening_deg`` that older files and detectors carry is not read
 MODEL_KEYS = ("sigma", "p_rand", "p_hit", "p_max")
+# the lobe that hears (``ForwardModelConfig.lobe_deg``, 0: the whole cone), carried with the model; a file without
+# it (an older one) leaves the lobe to each log
+LOBE_KEYS = ("lobe_deg", "lobe_range")
 MOUNT_TOLERANCE = 1e-6  # m and rad: mounts that differ by less are the same sensor
 ANGLE_TOLERANCE = 1e-6  # degrees
 
@@ -31,9 +34,11 @@ def sensor_record(sensor: SensorSpec) -> dict:
 
 
 def model_bytes(model: dict, sensor: SensorSpec, source: str, provenance: dict | None = None) -> bytes:
-    """The model file of ``model`` (``MODEL_KEYS``' values), learned from the log ``source`` of ``sensor``."""
+    """The model file of ``model`` (``MODEL_KEYS``' values and the lobe's, if any), learned from the log ``source``
+    of ``sensor``."""
     body = {"format": FORMAT, "format_version": FORMAT_VERSION, "sensor": sensor_record(sensor),
-            "model": {k: float(model[k]) for k in MODEL_KEYS}, "learned_from": source}
+            "model": {k: float(model[k]) for k in (*MODEL_KEYS, *LOBE_KEYS) if model.get(k) is not None},
+            "learned_from": source}
     if provenance is not None:
         body["provenance"] = json.loads(json.dumps(provenance))
     head = (f"# the forward model of a {sensor.kind} ring of {sensor.count}, learned by aogm calibrate from {source}:\n"
@@ -75,12 +80,21 @@ def read_model(path: str | Path) -> tuple[dict, dict]:
 
 
 def model_values(values: dict, file: str, key: str) -> dict:
-    """``MODEL_KEYS``' values of a model (the mapping at ``key`` of ``file``), checked."""
+    """``MODEL_KEYS``' values of a model (the mapping at ``key`` of ``file``) and ``LOBE_KEYS``' (both or
+    neither), checked."""
     bounds = {"sigma": (1e-6, 10.0), "p_rand": (1e-9, 1.0), "p_hit": (1e-9, 1.0), "p_max": (0.0, 1.0)}
     model = {k: _number(values.get(k), file, f"{key}.{k}", *bounds[k]) for k in MODEL_KEYS}
     if model["p_rand"] + model["p_max"] >= 1:
         raise InputError(f"expected p_rand + p_max < 1, got {model['p_rand'] + model['p_max']:g}", file=file,
                          key=f"{key}.p_max")
+    lobe = [k for k in LOBE_KEYS if k in values]
+    if lobe:
+        missing = next((k for k in LOBE_KEYS if k not in values), None)
+        if missing is not None:
+            raise InputError(f"expected both {' and '.join(LOBE_KEYS)}, got only {lobe[0]}", file=file,
+                             key=f"{key}.{missing}")
+        model["lobe_deg"] = _number(values["lobe_deg"], file, f"{key}.lobe_deg", 0.0, 90.0, closed_high=True)
+        model["lobe_range"] = _number(values["lobe_range"], file, f"{key}.lobe_range", 1e-9, math.inf)
     return model
 
 

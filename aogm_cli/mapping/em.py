@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from aogm_cli.mapping.em_kernels import layout as L
-from aogm_cli.mapping.em_kernels.extents import _box_of_cells, _reading_extent, _window_or_far, _window_rows
+from aogm_cli.mapping.em_kernels.extents import _box_of_cells, _far_gains, _reading_extent, _window_rows
 from aogm_cli.mapping.em_kernels.likelihood import _init_state, _join_parents, _objective, _residual_from_gains
 from aogm_cli.mapping.params import EMConfig
 from aogm_cli.mapping.sweeps import Sweeps
@@ -95,6 +95,7 @@ class EMProblem:
     templates: object
     shape: tuple[int, int]
     seen: np.ndarray  # flat bool: cells some cone holds
+    window: np.ndarray | None  # flat bool: cells in some reading's window (``_flippable``; None: not marked)
     parent: np.ndarray | None  # union-find over cluster ids (with labels): clusters sharing a reading
 
 
@@ -110,25 +111,30 @@ def em_problem(rd: L.EMReadings, templates, shape: tuple[int, int], occupied: np
                       qpow=(1.0 - p_hit) ** np.arange(top + 1, dtype=np.float64), w=1.0 - fwd.p_rand - fwd.p_max,
                       sigma=float(fwd.sigma), window=float(fwd.window))
     seen = np.zeros(shape[0] * shape[1], dtype=np.bool_)
+    window = None
     if labels is None:
-        marks = [(seen, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), np.zeros((0, 4), dtype=np.int32))]
+        # the window cells ``_flippable`` asks for, marked in the same walk
+        window = np.zeros_like(seen) if config.l_prior < 0.0 else seen[:0]
+        marks = [(seen, window, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64),
+                  np.zeros((0, 4), dtype=np.int32))]
         marks *= READING_PARTS
+        window = window if window.size else None
     else:
         labels = np.ascontiguousarray(labels, dtype=np.int64).reshape(-1)
         box = np.empty((n, 4), dtype=np.int32)
         # a union-find per part, joined after: one root (the least id) per group for any thread count
-        marks = [(seen, labels, np.arange(int(labels.max(initial=0)) + 1, dtype=np.int64), box)
+        marks = [(seen, seen[:0], labels, np.arange(int(labels.max(initial=0)) + 1, dtype=np.int64), box)
                  for _ in range(READING_PARTS)]
     flat, occupied = flat_offsets(templates, shape[1]), _flat_bool(occupied)
     reading_parts(n, lambda k, span: _init_state(templates.kernel_arrays, flat, rd, model, occupied, shape, marks[k],
                                                  span))  # into state
     parent = None
     if labels is not None:
-        parent = marks[0][2]
+        parent = marks[0][3]
         for other in marks[1:]:
-            _join_parents(parent, other[2])
+            _join_parents(parent, other[3])
         rd = _with_extent(rd, box)
-    return EMProblem(rd, model, L.em_state(rd), templates, shape, seen, parent)
+    return EMProblem(rd, model, L.em_state(rd), templates, shape, seen, window, parent)
 
 
 def run_problem(run: LaidOutReadings, config: EMConfig, select: np.ndarray, occupied: np.ndarray,
@@ -206,13 +212,9 @@ def _flippable(problem: EMProblem, occupied: np.ndarray, cells: np.ndarray) -> t
     There an obstacle only scales each echo's chance by 1 - p_hit, so occupancy can only lower the
     objective; their gains are one walk of the far runs (``_held_free_gains``). Not in a cluster
     problem, whose extents are narrowed already (no gain measured: docs/algorithms.md)."""
-    if problem.model.l_prior >= 0.0 or cells.size == 0 or problem.parent is not None:
+    if problem.model.l_prior >= 0.0 or cells.size == 0 or problem.window is None:
         return cells, cells[:0]
-    rd = problem.readings
-    window = np.zeros(problem.shape[0] * problem.shape[1], dtype=np.bool_)
-    tpl = problem.templates.kernel_arrays
-    reading_parts(rd.ints.shape[0], lambda _, span: _window_or_far(tpl, rd, problem.shape, None, span, window))
-    swept = window[cells] | occupied[cells]
+    swept = problem.window[cells] | occupied[cells]
     if np.count_nonzero(~swept) < HELD_FREE_SHARE * cells.size:
         return cells, cells[:0]
     return cells[swept], cells[~swept]
@@ -236,7 +238,7 @@ def _held_free_gains(problem: EMProblem, cells: np.ndarray) -> np.ndarray:
     rd = problem.readings
     tpl = problem.templates.kernel_arrays
     out = np.zeros(cells.size)
-    summed_in_parts(rd.ints.shape[0], out, lambda _, part, span: _window_or_far(tpl, rd, problem.shape, of_cell, span, part))
+    summed_in_parts(rd.ints.shape[0], out, lambda _, part, span: _far_gains(tpl, rd, problem.shape, of_cell, span, part))
     return out
 
 

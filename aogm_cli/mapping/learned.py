@@ -10,8 +10,9 @@ from dataclasses import dataclass
 from aogm_cli.sensor_models.forward_model import ForwardModelConfig
 
 SENSOR_KEYS = ("sigma", "p_rand", "p_hit", "p_max")  # the forward model's parameters calibration sets
-# what a robot's model leaves to each log: the building's max-range share (``stages.rates``) and the lobe that hears
-# (``stages.lobe``)
+# what a robot's model leaves to each log: the building's max-range share (``stages.rates``), and the lobe that hears
+# (``stages.lobe``) when the model carries none (a model file or detector of an older aogm: the lobe is the
+# transducer's, carried with the model since)
 BUILDING = ("p_max", "lobe_deg")
 
 # where a sensor model came from (``Learned.origin``)
@@ -52,16 +53,28 @@ class Learned:
     seconds: float = 0.0
     made_by: str | None = None  # the mode of the map of the same log that learned it (``carried``)
     rates: dict | None = None  # the building's p_max fitted for a robot's model (``stages.rates``)
-    lobe_deg: float | None = None  # the lobe that hears (``ForwardModelConfig.lobe_deg``), learned from this log
+    lobe_deg: float | None = None  # the lobe that hears (``ForwardModelConfig.lobe_deg``), learned or carried
     lobe_range: float | None = None
     lobe: dict | None = None  # ``beam_model.lobe_record``'s record
+
+    @property
+    def carries_lobe(self) -> bool:
+        """A robot's model (given, not learned by another map of the log) that carries the lobe: no log learns it."""
+        return self.made_by is None and self.lobe_deg is not None
 
     def model(self, configured: ForwardModelConfig) -> ForwardModelConfig:
         """The forward model EM uses: ``configured`` with what was learned in its place."""
         values = {} if self.sensor is None else {k: getattr(self.sensor, k) for k in SENSOR_KEYS}
-        if self.lobe_deg is not None:  # learned from this log: it wins over a configured lobe
+        if self.lobe_deg is not None:  # learned from this log or carried: it wins over a configured lobe
             values["lobe_deg"], values["lobe_range"] = self.lobe_deg, self.lobe_range
         return dataclasses.replace(configured, **values)
+
+    def kept_for(self, learn: tuple[str, ...]) -> Learned:
+        """This model as a map whose ``calibration.learn`` is ``learn`` takes it: a carried lobe only in place of
+        learning one (without lobe_deg in ``learn`` the configured lobe stays)."""
+        if not self.carries_lobe or "lobe_deg" in learn:
+            return self
+        return dataclasses.replace(self, lobe_deg=None, lobe_range=None)
 
     def carried(self, mode: str, seconds: float) -> Learned:
         """What the ``mode`` map of a log learned, as another map of the same log takes it."""

@@ -51,11 +51,13 @@ class Plan:
 
 
 def learned_keys(params: MapParams, given: Learned | None) -> tuple[str, ...]:
-    """The forward model's keys a map learns from its log (of a robot's model given, the building's part only)."""
+    """The forward model's keys a map learns from its log (of a robot's model given, the building's part only, the
+    lobe not when the model carries one)."""
     config = params.calibration
     if not config.enabled:
         return ()
-    return tuple(k for k in config.learned if given is None or (given.made_by is None and k in BUILDING))
+    return tuple(k for k in config.learned if given is None or (given.made_by is None and k in BUILDING
+                                                                 and not (k == "lobe_deg" and given.carries_lobe)))
 
 
 def auto_outside(known: bool, sensor: str) -> str:

@@ -51,6 +51,12 @@ def _in_place(params: dict) -> str:
             f"keeps that one)")
 
 
+def _carried_lobe(learned: dict) -> dict:
+    """The lobe a map took with its sensor's model (its ``learned`` record's lobe_deg, lobe_range) as ``_lobe_words``
+    takes a fit's record."""
+    return {"full_cone": learned["lobe_deg"] == 0.0, "theta0_deg": learned["lobe_deg"], "r0_m": learned["lobe_range"]}
+
+
 def _lobe_words(record: dict) -> str:
     """The lobe of a ``Lobe.as_dict`` record in words."""
     if record["full_cone"]:
@@ -72,5 +78,7 @@ def learned_line(path, m: OccupancyMap) -> str | None:
               if k in rates or (from_log and k in sensor)]
     if not parts:
         return None
-    rest = f"; the sensor's model {learned.get('origin', 'configured')}" if sensor and not from_log else ""
+    carried_lobe = "" if learned.get("lobe") is not None or learned.get("lobe_deg") is None else (
+        f" and its lobe ({_lobe_words(_carried_lobe(learned))})")
+    rest = f"; the sensor's model{carried_lobe} {learned.get('origin', 'configured')}" if sensor and not from_log else ""
     return f"{path}: learned from this log: {', '.join(parts)}{rest}"

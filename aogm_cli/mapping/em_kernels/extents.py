@@ -111,28 +111,20 @@ def _window_rows(tpl, readings, height, span):
 
 
 @numba.njit(cache=True, nogil=True)
-def _window_or_far(tpl, readings, grid_shape, of_cell, span, out):
-    """With ``of_cell`` None, mark each reading's window cells in ``out`` (only True is written: threads may share
-    it); else add each reading's ``far_log[t, 0]`` to the gain of every candidate before its window."""
+def _far_gains(tpl, readings, grid_shape, of_cell, span, out):
+    """Add each reading's ``far_log[t, 0]`` to the gain of every candidate (``of_cell``) before its window."""
     rd, state = _columns(readings)
     height, width = grid_shape
     for t in range(span[0], span[1]):
         k = rd.bin[t]
         s = tpl.offsets[tpl.base_bin[k]]
         tr = _bin_transform(tpl, k)
-        if of_cell is None:
-            lo, hi = rd.jlo[t], rd.m[t]
-        else:
-            lo, hi = 0, min(rd.jlo[t], rd.m[t])
-            v = state.far_log[t, 0]
-        for j in range(lo, hi):
+        v = state.far_log[t, 0]
+        for j in range(0, min(rd.jlo[t], rd.m[t])):
             if unheard(tpl, s + j):  # no part of the reading
                 continue
             c = _entry_cell(tpl, s, tr, j, np.int64(rd.row0[t]), np.int64(rd.col0[t]), height, width)
-            if of_cell is None:
-                if c >= 0:
-                    out[c] = True
-            elif c >= 0 and of_cell[c] >= 0:
+            if c >= 0 and of_cell[c] >= 0:
                 out[of_cell[c]] += v
 
 

@@ -57,15 +57,16 @@ def _join_parents(parent, other):
 @numba.njit(cache=True, _nrt=False, nogil=True)
 def _init_state(tpl, flat, readings, model, occupied, grid_shape, marks, span):
     """The ``EMState`` of each reading in ``span`` under ``occupied`` (one walk of its cone).
-    ``marks`` = (seen, labels, parent, box), each optional (empty): every cone cell is marked in
-    ``seen``; clusters (``labels``) that share a reading are joined in ``parent``, and ``box`` gets
+    ``marks`` = (seen, window, labels, parent, box), each optional (empty): every cone cell is marked in
+    ``seen``, every heard cell of its Gaussian window (entries from jlo) in ``window``; clusters (``labels``) that share a reading are joined in ``parent``, and ``box`` gets
     each reading's cluster cells' bounds, the only cells EM may flip."""
     rd, state = _columns(readings)
-    seen, labels, parent, box = marks
+    seen, window, labels, parent, box = marks
     height, width = grid_shape
     qpow = model.qpow
     p_hit = model.p_hit
     mark = seen.shape[0] > 0
+    mark_window = window.shape[0] > 0
     join = labels.shape[0] > 0
     inv_width = 1.0 / width
     for t in range(span[0], span[1]):
@@ -99,6 +100,8 @@ def _init_state(tpl, flat, readings, model, occupied, grid_shape, marks, span):
                     seen[cell] = True
                 if unheard(tpl, s0 + j):  # left out but for ``seen``
                     continue
+                if mark_window and j >= jlo:
+                    window[cell] = True
                 if join and labels[cell] > 0:
                     row = np.int64(cell * inv_width)  # cell // width without a division per cell:
                     if row * width > cell:  # the product is off by at most one row either way
