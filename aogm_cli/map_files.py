@@ -170,7 +170,9 @@ def calibration_notice(path, m: OccupancyMap) -> str | None:
 def learn_sensor_models(paths, params: MapParams, advance=None) -> tuple[dict, ...]:
     """The sensor models a detector trained on the logs at ``paths`` carries: one per sensor among
     them, each value the median over its logs' calibrations (an em map each, as ``aogm
-    calibrate``; the lobe's too, when every log learned one: ``model_record``), with the logs' names."""
+    calibrate``), with the logs' names; the lobe (``model_record``) only when every log learned the same shape (all the
+    whole cone, or all a narrower lobe: their median), as a lobe some logs learn and others not is the logs', not the
+    transducer's."""
     groups: dict[str, tuple[dict, list, list]] = {}
     for path in paths:
         m = map_file(path, "em", dataclasses.replace(params, calibration=dataclasses.replace(params.calibration,
@@ -183,10 +185,14 @@ def learn_sensor_models(paths, params: MapParams, advance=None) -> tuple[dict, .
         groups[key][2].append(Path(path).name)
         if advance is not None:
             advance(1)
-    keys = (*MODEL_KEYS, *LOBE_KEYS)
-    return tuple({"sensor": record, "model": {k: float(np.median([v[k] for v in values])) for k in keys
-                                              if all(k in v for v in values)},
+    return tuple({"sensor": record, "model": {k: float(np.median([v[k] for v in values]))
+                                              for k in (*MODEL_KEYS, *(LOBE_KEYS if one_lobe(values) else ()))},
                   "learned_from": names} for record, values, names in groups.values())
+
+
+def one_lobe(values: list[dict]) -> bool:
+    """Every model of ``values`` (``model_record``) has a lobe, and all the same shape: the whole cone, or narrower."""
+    return all("lobe_deg" in v for v in values) and len({v["lobe_deg"] == 0.0 for v in values}) == 1
 
 
 def model_record(learned: dict) -> dict:

@@ -166,9 +166,9 @@ def test_adaptive_cli_writes_clusters_and_stats(corridor_door_log, tmp_path):
     assert m.stats["clusters"] == int(m.clusters.max())
     # the runtime is the sum of the phases, each recorded, named as the em mode names its own
     phases = m.stats["phase_seconds"]
-    # the sensor's model and its lobe carried by the detector: the building's p_max fitted (rates), no
+    # the sensor's model carried by the detector: the building's lobe and p_max fitted (lobe, rates), no
     # calibration; so the thinned map outside the clusters (thinning) and its free cells checked (decided)
-    assert set(phases) == {"standard", "readings", "deflections", "walls", "thinning", "detector", "clusters",
+    assert set(phases) == {"standard", "readings", "deflections", "walls", "lobe", "thinning", "detector", "clusters",
                            "index", "rates", "sweeps", "decided", "view"}
     assert m.runtime_s == pytest.approx(sum(phases.values()), rel=1e-12)
     em = read_map_file(_em_map(corridor_door_log, tmp_path))

@@ -106,6 +106,34 @@ def test_obstacles_found_at_a_broader_sigma_give_the_same_sums():
                               broad).sigma == 0.2
 
 
+def test_a_fit_of_p_max_walks_only_the_readings_a_dropout_may_explain():
+    """``dropout_readings`` leaves out the echoes more than 40 sigmas short of z_max: their N(z; z_max) is 0, so the
+    sums p_max's update reads (E_READINGS, E_DROPOUT) are those of every reading, bit for bit."""
+    from aogm_cli.mapping.calibration import DROPOUT_SIGMAS, dropout_readings
+
+    tpl = build_cone_templates(GRID.resolution, math.radians(25), Z_MAX)
+    rng = np.random.default_rng(7)
+    n = 80
+    rows, cols = rng.integers(20, 40, n), rng.integers(2, 20, n)
+    bins = tpl.heading_bin(rng.uniform(-0.6, 0.6, n))
+    sigma = 0.04
+    z = rng.uniform(0.3, Z_MAX, n)
+    z[::6] = np.inf
+    z[1::6] = Z_MAX - 0.5 * DROPOUT_SIGMAS * sigma  # near the max range: a dropout explains some of them
+    readings = F.ExpectationReadings(rows, cols, bins, z, np.full(n, np.inf))
+    kept, left_out = dropout_readings(readings, sigma, Z_MAX)
+    near = ~(z < Z_MAX - DROPOUT_SIGMAS * sigma)
+    assert left_out == n - near.sum() > 10 and np.array_equal(kept.z, z[near])
+    flat, occupied = flat_offsets(tpl, GRID.width), wall_map()
+    model = (0.07, 0.05, 0.6, sigma, 4.0, Z_MAX)
+    every, part = np.zeros(F.E_SIZE), np.zeros(F.E_SIZE)
+    F.expectation_sums(tpl.kernel_arrays, flat, GRID.shape, readings, occupied, model, every)
+    part[F.E_READINGS] = left_out
+    F.expectation_sums(tpl.kernel_arrays, flat, GRID.shape, kept, occupied, model, part)
+    assert part[F.E_READINGS] == every[F.E_READINGS] == n and part[F.E_DROPOUT] == every[F.E_DROPOUT] > 0
+    assert dropout_readings(kept, sigma, Z_MAX) == (kept, 0)
+
+
 def test_one_reading_one_obstacle_by_hand():
     """A reading at 1.0 m, the only obstacle of its cone at the axis cell 1.0 m away."""
     grid = GridSpec(0.0, 0.0, 0.1, 21, 41)
@@ -283,8 +311,10 @@ def test_a_model_files_lobe_is_the_maps_and_one_without_leaves_it_to_the_log(cor
     written["model"].update(lobe_deg=12.0, lobe_range=6.0)
     narrow = tmp_path / "narrow.yaml"
     narrow.write_text(yaml.safe_dump(written))
-    result = run("map", corridor_door_log, "--mode", "em", "--forward-model", narrow, "-o", tmp_path / "n.h5", "-q")
+    result = run("map", corridor_door_log, "--mode", "em", "--forward-model", narrow, "-o", tmp_path / "n.h5")
     assert result.exit_code == 0, result.output
+    assert (f"learned from this log: p_max {read_map_file(tmp_path / 'n.h5').learned['rates']['p_max']:.3g}; the "
+            f"sensor's model and its lobe (theta0 12 deg, heard out to 6 m on the axis) file {narrow}") in result.output
     m = read_map_file(tmp_path / "n.h5")
     assert (m.learned["lobe_deg"], m.learned["lobe_range"], m.learned["lobe"]) == (12.0, 6.0, None)
     assert "lobe" not in m.stats["phase_seconds"] and m.plan["learns"] == ["p_max"]
@@ -298,6 +328,14 @@ def test_a_model_files_lobe_is_the_maps_and_one_without_leaves_it_to_the_log(cor
                  tmp_path / "c.h5", "-q")
     assert result.exit_code == 0, result.output
     assert np.array_equal(read_map_file(tmp_path / "c.h5").probability, m.probability)
+    # a lobe set in --params gives way to the carried one, and the CLI says so
+    params.write_text("em: {lobe_deg: 8.0}\n")
+    result = run("map", corridor_door_log, "--mode", "em", "--forward-model", narrow, "--params", params, "-o",
+                 tmp_path / "w.h5", "-q")
+    assert result.exit_code == 0 and result.output.splitlines()[0] == (
+        f"warning: em.lobe_deg is the lobe the sensor's model carries (file {narrow}); take lobe_deg out of "
+        "calibration.learn to map with 8")
+    assert np.array_equal(read_map_file(tmp_path / "w.h5").probability, m.probability)
     # the older file alone: the lobe learned from the log
     result = run("map", corridor_door_log, "--mode", "em", "--forward-model", older, "-o", tmp_path / "o.h5", "-q")
     assert result.exit_code == 0, result.output
@@ -473,3 +511,14 @@ def test_carried_model_maps_without_calibrating(corridor_door_log, tmp_path):
                                        str(tmp_path / "m.h5"), "--quiet"])
     assert result.exit_code == 0, result.output
     assert "calibrated the sensor's model on this log (calibration.carried is false)" in result.output
+
+
+def test_a_detector_carries_the_lobe_only_when_its_training_logs_learned_one_shape():
+    """``aogm train --sensor-models``: the median lobe when every log learned the whole cone, or every log a narrower
+    lobe; none when they disagree (the packaged detector's training logs: 8 the whole cone, 1 theta0 10), nor when a
+    log learned none."""
+    from aogm_cli.map_files import one_lobe
+
+    cone, narrow = {"lobe_deg": 0.0, "lobe_range": 10.0}, {"lobe_deg": 9.5, "lobe_range": 6.0}
+    assert one_lobe([cone, cone]) and one_lobe([narrow, narrow | {"lobe_deg": 4.0}])
+    assert not one_lobe([cone, cone, narrow]) and not one_lobe([cone, {}])

@@ -184,9 +184,8 @@ def test_map_says_in_one_line_what_it_learned(corridor_door_log, tmp_path):
     r = CliRunner().invoke(main, ["map", str(log), "--mode", "em", "-o", str(tmp_path / "m.h5")])
     assert r.exit_code == 0, r.output
     line = [x for x in r.output.splitlines() if "learned from this log" in x]
-    assert len(line) == 1 and "p_max" in line[0] and "lobe" not in line[0].split(";")[0]
-    # the lobe is the transducer's: carried with the sensor's model, not learned again
-    assert "; the sensor's model and its lobe (the whole cone) carried by the packaged detector" in line[0]
+    assert len(line) == 1 and "lobe: the whole cone" in line[0] and "p_max" in line[0]
+    assert "carried by the packaged detector" in line[0]
     r = CliRunner().invoke(main, ["map", str(log), "--mode", "em", "-o", str(tmp_path / "q.h5"), "--quiet"])
     assert r.exit_code == 0 and "learned from this log" not in r.output
 
@@ -195,7 +194,7 @@ def test_map_says_when_the_lobe_learned_replaces_a_configured_one(corridor_door_
     """A lobe configured (em.lobe_deg) gives way to the one learned from the log (calibration.learn has lobe_deg by
     default), and the map says so and how to keep it; without lobe_deg in calibration.learn it is not learned."""
     configured = tmp_path / "lobe.yaml"
-    configured.write_text("em:\n  lobe_deg: 12\n  lobe_range: 10\ncalibration:\n  carried: false\n")
+    configured.write_text("em:\n  lobe_deg: 12\n  lobe_range: 10\n")
     r = CliRunner().invoke(main, ["map", str(corridor_door_log), "--mode", "em", "-o", str(tmp_path / "m.h5"),
                                   "--params", str(configured)])
     assert r.exit_code == 0, r.output
@@ -214,15 +213,13 @@ def test_map_says_when_the_lobe_learned_replaces_a_configured_one(corridor_door_
 
 LOBE_LEARNED = ("warning: em.lobe_deg is learned from the log (calibration.learn lists lobe_deg); take lobe_deg out of "
                 "calibration.learn to map with 12")
-LOBE_CARRIED = ("warning: em.lobe_deg is the lobe the sensor's model carries (carried by the packaged detector); take "
-                "lobe_deg out of calibration.learn to map with 12")
 
 
 @pytest.mark.parametrize("command", ["map", "compare", "calibrate"])
 def test_a_set_key_that_calibration_learns_or_a_carried_model_replaces_is_warned_of(corridor_door_log, tmp_path,
                                                                                   command):
     """A forward-model key set in --params (or by an option) that the map does not map with: the lobe learned from
-    the log (or the one the packaged detector's model carries) replaces a configured one, a learned sigma only starts at the one set, and the packaged detector's model
+    the log replaces a configured one, a learned sigma only starts at the one set, and the packaged detector's model
     replaces sigma, p_rand, p_hit and p_max. One warning each; none once calibration.learn omits the key or
     calibration is off. (aogm calibrate never takes a carried model, so it learns sigma from the log.)"""
     def warnings(text, *extra):
@@ -234,8 +231,7 @@ def test_a_set_key_that_calibration_learns_or_a_carried_model_replaces_is_warned
         assert result.exit_code == 0, result.output
         return [line for line in result.output.splitlines() if line.startswith("warning: ")]
 
-    # the packaged detector's model carries the lobe (aogm calibrate learns it from the log)
-    assert warnings("em: {lobe_deg: 12}\n") == [LOBE_LEARNED if command == "calibrate" else LOBE_CARRIED]
+    assert warnings("em: {lobe_deg: 12}\n") == [LOBE_LEARNED]
     assert warnings("em: {lobe_deg: 12}\ncalibration: {learn: 'sigma,p_rand,p_hit,p_max'}\n") == []
     assert warnings("em: {lobe_range: 5}\ncalibration: {learn: 'sigma,p_rand,p_hit,p_max'}\n") == [
         "warning: em.lobe_range has no effect while em.lobe_deg is 0 (every cell of the cone hears); set em.lobe_deg too"]

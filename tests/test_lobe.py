@@ -184,10 +184,7 @@ def test_a_learned_lobe_replaces_a_configured_one_and_the_whole_cone_undoes_it(c
 
 
 def _before(log_path, mode: str, stage: str):
-    """The state of a ``mode`` map of the log at ``log_path`` (defaults) just before its stage ``stage``, the
-    packaged detector's model taken without its lobe (as a model of an older aogm: the log learns the lobe)."""
-    import dataclasses
-
+    """The state of a ``mode`` map of the log at ``log_path`` (defaults) just before its stage ``stage``."""
     from cone_views import state_before
 
     from aogm_cli.io.logfile import LogReader
@@ -196,8 +193,7 @@ def _before(log_path, mode: str, stage: str):
 
     with LogReader(log_path) as reader:
         log = reader.read()
-        given = dataclasses.replace(sensor_model(mode, resolve_params(), reader, str(log_path)), lobe_deg=None,
-                                    lobe_range=None)
+        given = sensor_model(mode, resolve_params(), reader, str(log_path))
     return state_before(log, mode, resolved_params(log, resolve_params()), stage, given)
 
 

@@ -128,8 +128,9 @@ def test_the_plan_is_in_the_map_file_and_in_aogm_info(corridor_door_log, tmp_pat
     assert info.exit_code == 0, info.output
     assert "plan (decided before the first stage):" in info.output
     assert "  outside: thinned" in info.output and "read > set_up > readings > standard" in info.output
-    # the lobe carried with the model, not learned: no record of a fit
-    assert "lobe" not in plan["learns"] and "lobe" not in plan["stages"] and "echo rate by angle" not in info.output
+    # the lobe's record in words, as aogm calibrate prints it; its counts stay in --json
+    assert "  lobe: echo rate by angle off the axis" in info.output and "-> the whole cone" in info.output
+    assert "chances" not in info.output
     assert json.loads(runner.invoke(main, ["info", str(out), "--json"]).output)["plan"] == plan
 
 

@@ -74,9 +74,12 @@ def _flat_bool(occupied: np.ndarray) -> np.ndarray:
 
 
 def expectations(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: np.ndarray,
-                 forward: F.ForwardModelConfig, obstacles: F.Obstacles | None = None) -> tuple[np.ndarray, F.Obstacles]:
-    """The summed expectations of ``readings`` under ``occupied`` and ``forward``, and the obstacles they came from."""
+                 forward: F.ForwardModelConfig, obstacles: F.Obstacles | None = None,
+                 uncounted: int = 0) -> tuple[np.ndarray, F.Obstacles]:
+    """The summed expectations of ``readings`` under ``occupied`` and ``forward``, and the obstacles they came from;
+    ``uncounted`` readings more, left out because they add nothing but their count to the sums asked for."""
     out = np.zeros(F.E_SIZE)
+    out[F.E_READINGS] = uncounted
     obstacles = F.expectation_sums(*_cones(run), readings, _flat_bool(occupied), forward.kernel_model(run.sensor.max_range),
                                    out, obstacles)
     return out, obstacles
@@ -122,14 +125,18 @@ class Fit:
 def fit_at_map(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: np.ndarray, forward: F.ForwardModelConfig,
                config: CalibrationConfig, tuning: Tuning = TUNING, loglik: bool = True) -> Fit:
     """EM over the parameters alone at a fixed map: expectations, then ``m_step``, until they settle
-    (``tuning.tolerance`` / 10); with ``loglik``, one more pass for the sample's mean log-likelihood."""
+    (``tuning.tolerance`` / 10); with ``loglik``, one more pass for the sample's mean log-likelihood. A fit of
+    p_max alone walks the cones of the readings a dropout may explain only (``dropout_readings``)."""
+    uncounted = 0
+    if config.learned == ("p_max",) and not loglik:
+        readings, uncounted = dropout_readings(readings, forward.sigma, float(run.sensor.max_range))
     iterations = 0
     # obstacles found once at twice the starting sigma serve every iteration below it: one cone walk
     obstacles = F.find_obstacles(*_cones(run), readings, _flat_bool(occupied), min(2.0 * forward.sigma, tuning.sigma_max),
                                  float(forward.window), float(run.sensor.max_range))
     while iterations < tuning.fit_iterations:
         iterations += 1
-        sums, obstacles = expectations(run, readings, occupied, forward, obstacles)
+        sums, obstacles = expectations(run, readings, occupied, forward, obstacles, uncounted)
         new = m_step(sums, forward, config.learned, tuning)
         done = settled(new, forward, tuning.tolerance / 10)
         forward = new
@@ -140,6 +147,21 @@ def fit_at_map(run: LaidOutReadings, readings: F.ExpectationReadings, occupied: 
     sums, _ = expectations(run, readings, occupied, forward, obstacles)
     n = max(sums[F.E_READINGS], 1.0)
     return Fit(forward, iterations, float(sums[F.E_LOGLIK] / n))
+
+
+# a reading this many sigmas short of the max range has N(z; z_max) = 0 exactly (exp underflows beyond ~38.6)
+DROPOUT_SIGMAS = 40.0
+
+
+def dropout_readings(readings: F.ExpectationReadings, sigma: float, z_max: float) -> tuple[F.ExpectationReadings, int]:
+    """(the readings a dropout may explain, how many others): an echo more than ``DROPOUT_SIGMAS`` short of z_max
+    has G0 = 0, so it adds 1 to E_READINGS and exactly 0 to E_DROPOUT, all that p_max's update reads (``m_step``:
+    p_rand + p_max, each clipped, never exceeds their bounds' sum). Sums over the rest alone are the same, bit for
+    bit: adding 0.0 changes no float."""
+    keep = ~(readings.z < z_max - DROPOUT_SIGMAS * sigma)
+    if keep.all():
+        return readings, 0
+    return F.ExpectationReadings(*(a[keep] for a in readings)), int(keep.size - np.count_nonzero(keep))
 
 
 def model_values(forward: F.ForwardModelConfig) -> dict:
