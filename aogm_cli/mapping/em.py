@@ -162,8 +162,7 @@ def _candidates(cells: np.ndarray, shape: tuple[int, int]) -> L.Candidates:
     n_seg = -(-width // L.SEGMENT)
     return L.Candidates(cell=cells, of_cell=of_cell, row_first=row_first, occupied=np.zeros(0, dtype=np.bool_),
                         stamp=np.full(cells.size, -1, dtype=np.int64), last_gain=np.zeros(cells.size),
-                        tile_clock=np.full((n_seg, height), -1, dtype=np.int64).T,  # a segment's clocks in one run
-                        tile_drift=np.zeros((n_seg, height)).T, tile_best=np.full((n_seg, height), np.inf).T)
+                        tile_clock=np.full((n_seg, height), -1, dtype=np.int64).T)  # a segment's clocks in one run
     # of memory: two bands' threads write apart
 
 
@@ -184,16 +183,9 @@ def run_em(problem: EMProblem, occupied: np.ndarray, candidates: np.ndarray, con
     sweeps = Sweeps(_narrowed(problem, swept) if held_free.size else problem, cand)
     model, tables = problem.model, sweeps.tables
     objective = [_objective(tables, model, occupied, cand.cell)]
-    passed_over = 0  # tiles a bounded sweep passed over (``tiles._tile``): their gains are of an earlier visit
     with sweeps:
         for sweep in range(1, config.max_sweeps + 1):
-            n_flips, n_scored, n_pairs, n_passed = sweeps.one_pass(L.SWEEP, bounded=True)
-            passed_over += n_passed
-            if n_flips == 0 and passed_over and final:
-                # the residuals at the map: every tile visited once more where a reading changed since its
-                # last visit, as unbounded sweeps leave them (no flip can follow: the bounds held them)
-                n_flips, more_scored, more_pairs, _ = sweeps.one_pass(L.SWEEP)
-                n_scored, n_pairs, passed_over = n_scored + more_scored, n_pairs + more_pairs, 0
+            n_flips, n_scored, n_pairs = sweeps.one_pass(L.SWEEP)
             flips.append(n_flips)
             scored.append(n_scored)
             pairs.append(n_pairs)

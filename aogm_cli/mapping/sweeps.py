@@ -156,28 +156,27 @@ class Sweeps:
             self.problem.readings.ints[self.order] = self.tables.ints
             self.problem.readings.floats[self.order] = self.tables.floats
 
-    def one_pass(self, mode: int, bounded: bool = False) -> tuple[int, int, int, int]:
-        """One sweep (``mode`` SWEEP; ``bounded``: passing over the tiles no flip can reach, ``tiles._tile``) or
-        scoring pass (SCORE): (flips, candidates scored, pairs generated, tiles passed over)."""
-        totals = [0, 0, 0, 0]
+    def one_pass(self, mode: int) -> tuple[int, int, int]:
+        """One sweep (``mode`` SWEEP) or scoring pass (SCORE): (flips, candidates scored, pairs generated)."""
+        totals = [0, 0, 0]
         for bands in self.phases:
             # the costliest bands first, so that the threads end together (the order changes nothing computed)
             by_cost = sorted(bands, key=lambda band: -self.seconds.get(band.seg_lo, 0.0))
-            done = in_parts(len(by_cost), lambda k, stop, by_cost=by_cost: self._band(by_cost[k], mode, bounded, stop))
-            for i in range(4):
+            done = in_parts(len(by_cost), lambda k, stop, by_cost=by_cost: self._band(by_cost[k], mode, stop))
+            for i in range(3):
                 totals[i] += sum(d[i] for d in done)
             self.band_seconds += sum(self.seconds[band.seg_lo] for band in bands)
-            self.clock = max(d[4] for d in done)
+            self.clock = max(d[3] for d in done)
         return tuple(totals)
 
-    def _band(self, band: Band, mode: int, bounded: bool, stop: threading.Event) -> tuple[int, int, int, int, int]:
-        """Sweep one band with a scratch of the pool: (flips, scored, pairs, tiles passed over, the clock after)."""
+    def _band(self, band: Band, mode: int, stop: threading.Event) -> tuple[int, int, int, int]:
+        """Sweep one band with a scratch of the pool: (flips, scored, pairs, the clock after)."""
         work = self.works.get()
         t0 = time.perf_counter()
         try:
             work.ctl.fill(0)
             ctl = work.ctl[0]
-            ctl["mode"], ctl["clock"], ctl["bounded"] = mode, self.clock, int(bounded)
+            ctl["mode"], ctl["clock"] = mode, self.clock
             ctl["sg_lo"], ctl["sg_hi"], ctl["listed"] = band.seg_lo, band.seg_hi, -1
             work = work._replace(members=band.members, enter=band.enter, leave=band.leave,
                                  window_leave=band.window_leave)
@@ -193,7 +192,7 @@ class Sweeps:
                     self.peak[1] = max(self.peak[1], _scratch_bytes(work))
                 # PAUSED: back in Python, where a pending signal's handler runs (core.interrupts); resume
             self.peak[0] = max(self.peak[0], work.pair_pos.shape[0])
-            return tuple(int(ctl[name]) for name in ("flips", "scored", "pairs", "skipped", "clock"))
+            return tuple(int(ctl[name]) for name in ("flips", "scored", "pairs", "clock"))
         finally:
             self.seconds[band.seg_lo] = time.perf_counter() - t0
             self.works.put(work)

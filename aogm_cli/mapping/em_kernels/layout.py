@@ -36,7 +36,6 @@ READING_FLOATS = np.dtype([
     ("z", np.float64),  # range in template ranges (max-range readings: z_max)
     ("g0", np.float64), ("const", np.float64),  # G0_t, C_t
     ("s", np.float64), ("wsum", np.float64), ("far_ratio", np.float64, (2,)), ("far_log", np.float64, (2,)),  # EMState
-    ("drift", np.float64),  # EMState
 ], align=True)
 
 # TileWork.ctl: one record of a sweep's control words
@@ -51,8 +50,6 @@ CONTROL = np.dtype([(name, np.int64) for name in (
     "budget",  # the work left before a pause (in window pairs: see _sweep_tiles)
     "listed",  # the row whose readings are listed (-1: none)
     "sg_lo", "sg_hi",  # the band's segments: the sweep visits tiles sg_lo <= sg < sg_hi
-    "bounded",  # 1: a SWEEP passes over the tiles whose candidates' drift bound keeps them from flipping
-    "skipped",  # the tiles passed over so in this pass
 )], align=True)
 DONE, NEED_BUFFERS, PAUSED = 0, 1, 2
 # the work (window pairs) after which a sweep pauses, so that Python, where a signal's handler runs,
@@ -124,7 +121,6 @@ class EMState(NamedTuple):
     nfar: np.ndarray  # (R,) int32 obstacles before it
     far_ratio: np.ndarray  # (R, 2) float64 likelihood ratios of adding / removing a far obstacle
     far_log: np.ndarray  # (R, 2) float64 their logs
-    drift: np.ndarray  # (R,) float64 how far far_log has moved in a run's sweeps: the sum of its changes' sizes
     stamp: np.ndarray  # (R,) int32 the clock when the reading last changed
     slot: np.ndarray  # (R,) int32 where its window obstacles are in a sweep's arena (-1: none)
 
@@ -140,8 +136,8 @@ _INT_WORDS, _FLOAT_WORDS = READING_INTS.itemsize // 4, READING_FLOATS.itemsize /
 _ROW0, _COL0, _BIN, _M, _JLO, _REACH2, _BOX, _NOBS, _NFAR, _STAMP, _SLOT, _INSIDE, _WINDOW_HI = (
     READING_INTS.fields[name][1] // 4 for name in ("row0", "col0", "bin", "m", "jlo", "reach2", "box", "nobs", "nfar",
                                                    "stamp", "slot", "inside", "window_hi"))
-_Z, _G0, _CONST, _S, _WSUM, _FAR_RATIO, _FAR_LOG, _DRIFT = (
-    READING_FLOATS.fields[name][1] // 8 for name in ("z", "g0", "const", "s", "wsum", "far_ratio", "far_log", "drift"))
+_Z, _G0, _CONST, _S, _WSUM, _FAR_RATIO, _FAR_LOG = (
+    READING_FLOATS.fields[name][1] // 8 for name in ("z", "g0", "const", "s", "wsum", "far_ratio", "far_log"))
 
 
 @numba.njit(cache=True, inline="always")
@@ -155,7 +151,6 @@ def _columns(rd):
                       reach2=ints[:, _REACH2:_REACH2 + 2].T, inside=ints[:, _INSIDE], window_hi=ints[:, _WINDOW_HI])
     state = EMState(s=floats[:, _S], wsum=floats[:, _WSUM], nobs=ints[:, _NOBS], nfar=ints[:, _NFAR],
                     far_ratio=floats[:, _FAR_RATIO:_FAR_RATIO + 2], far_log=floats[:, _FAR_LOG:_FAR_LOG + 2],
-                    drift=floats[:, _DRIFT],
                     stamp=ints[:, _STAMP], slot=ints[:, _SLOT])
     return columns, state
 
@@ -170,10 +165,6 @@ class Candidates(NamedTuple):
     stamp: np.ndarray  # (C,) int64 the clock when last scored (-1: never)
     last_gain: np.ndarray  # (C,) float64 the last data gain of flipping
     tile_clock: np.ndarray  # (H, n_seg) int64, Fortran order, the clock when each tile was last visited (-1: never)
-    # the tile's bound (``tiles._tile``), of its last visit: its listed readings' drift summed at the start, and
-    # its candidates' greatest gain of flipping (the prior's term in) at the end; Fortran order as tile_clock
-    tile_drift: np.ndarray  # (H, n_seg) float64
-    tile_best: np.ndarray  # (H, n_seg) float64 (+inf: no bound)
 
 
 class TileWork(NamedTuple):

@@ -11,7 +11,6 @@ each flip kept when it raises the objective (``_sweep_tiles``)."""
 from __future__ import annotations
 
 import numba
-import numpy as np
 
 from aogm_cli.mapping.em_kernels.layout import DONE, NEED_BUFFERS, PAUSED, SEGMENT, SWEEP, _columns
 from aogm_cli.mapping.em_kernels.likelihood import _far_changed, _flip_gain, _set_sum, _update_reading
@@ -25,10 +24,6 @@ from aogm_cli.mapping.em_kernels.listing import (
 )
 from aogm_cli.mapping.em_kernels.windows import _build_window, _make_room, _room
 from aogm_cli.sensor_models.forward_model import gaussian_at
-
-# A bounded sweep passes over a tile when its candidates' greatest gain of flipping at its last visit, plus how
-# far its readings' far ratios have moved since, stays this far below the flip threshold (rounding is ~1e-12)
-BOUND_MARGIN = 1e-6
 
 
 @numba.njit(cache=True, inline="always")
@@ -108,26 +103,6 @@ def _count_pairs(tpl, groups, rd, model, cand, state, work, r, c0, c1, c_start, 
 
 
 @numba.njit(cache=True, inline="always")
-def _drifted(t, old_add, old_rem, state):
-    """Reading t's far ratios moved from (old_add, old_rem): add how far to its drift."""
-    state.drift[t] += abs(state.far_log[t, 0] - old_add) + abs(state.far_log[t, 1] - old_rem)
-
-
-@numba.njit(cache=True, inline="always")
-def _window_in_tile(span, col0, c0, c1):
-    """True when reading ``span``'s cells in the row's tile columns [c0, c1) include one of its window (past the
-    far run; the whole row when it has none)."""
-    if span.f_lo > span.f_hi:
-        lo, hi = _o_range(span, col0, c0, c1, span.o_lo, span.o_hi)
-        return lo <= hi
-    lo, hi = _o_range(span, col0, c0, c1, span.o_lo, span.f_lo - 1)
-    if lo <= hi:
-        return True
-    lo, hi = _o_range(span, col0, c0, c1, span.f_hi + 1, span.o_hi)
-    return lo <= hi
-
-
-@numba.njit(cache=True, inline="always")
 def _flip(c, x, lo_pair, hi_pair, n_list, rd, model, cand, state, work):
     """Flip candidate c (tile column x) and update the tile's readings that hold it."""
     ctl = work.ctl[0]
@@ -147,7 +122,6 @@ def _flip(c, x, lo_pair, hi_pair, n_list, rd, model, cand, state, work):
             state.nfar[t] += 1 if adding else -1
             _set_sum(t, rd, model, state)
             _far_changed(i, t, x, old_add, old_rem, state, work)
-            _drifted(t, old_add, old_rem, state)
             state.stamp[t] = now
     for p in range(lo_pair, hi_pair):
         i = work.pair_pos[p]
@@ -155,7 +129,6 @@ def _flip(c, x, lo_pair, hi_pair, n_list, rd, model, cand, state, work):
         old_add, old_rem = state.far_log[t, 0], state.far_log[t, 1]
         _update_reading(t, work.pair_j[p], work.pair_g[p], adding, model, rd, state, work)
         _far_changed(i, t, x, old_add, old_rem, state, work)
-        _drifted(t, old_add, old_rem, state)
         state.stamp[t] = now
 
 
@@ -182,10 +155,7 @@ def _visit(c, x, lo_pair, hi_pair, n_list, mode, tpl, flat, rd, model, cand, sta
 @numba.njit(cache=True, inline="always")
 def _tile(r, sg, c_start, c_stop, tpl, flat, groups, rd, model, cand, state, work):
     """Tile (r, sg): its candidates scored (and flipped, ``_visit``); skipped when none of its readings
-    changed since its last visit (SWEEP), or (``ctl.bounded``) passed over when none changed in its candidates'
-    windows and the far ratios' drift since cannot raise a gain of its last visit to a flip: no candidate of
-    it would flip, and its gains stay those of that visit (``em.run_em`` scores such tiles once more at the
-    end). False, before any change, when the scratch is too small."""
+    changed since its last visit (SWEEP). False, before any change, when the scratch is too small."""
     ctl = work.ctl[0]
     mode = ctl.mode
     width = cand.of_cell.shape[0] // cand.tile_clock.shape[0]
@@ -196,33 +166,17 @@ def _tile(r, sg, c_start, c_stop, tpl, flat, groups, rd, model, cand, state, wor
     ctl.budget -= list_hi - list_lo
     clock0 = ctl.clock
     since = cand.tile_clock[r, sg] if mode == SWEEP else -1
-    bounded = mode == SWEEP and ctl.bounded != 0
-    drift = 0.0  # the listed readings' drift now
     if since >= 0:  # skipped, its candidates stamped scored, when none of its readings changed since
         clean = True
-        window = False  # a reading changed since holds a cell of the tile in its window
         for i in range(list_lo, list_hi):
-            k = work.seg_list[i]
-            t = work.spans[k].t
-            drift += state.drift[t]
-            if state.stamp[t] > since:
+            if state.stamp[work.spans[work.seg_list[i]].t] > since:
                 clean = False
-                if not bounded:
-                    break
-                if not window:
-                    window = _window_in_tile(_span_at(work, k), rd.col0[t], c0, c1)
+                break
         if clean:
             for c in range(c_start, c_stop):
                 cand.stamp[c] = clock0
             cand.tile_clock[r, sg] = clock0
             return True
-        moved = drift - cand.tile_drift[r, sg]
-        if bounded and not window and cand.tile_best[r, sg] + moved + 1e-9 * abs(drift) < -BOUND_MARGIN:
-            ctl.skipped += 1
-            return True
-    elif bounded:
-        for i in range(list_lo, list_hi):
-            drift += state.drift[work.spans[work.seg_list[i]].t]
     nc = c_stop - c_start
     n_list = list_hi - list_lo
     if n_list > work.far_lo.shape[0]:
@@ -246,13 +200,6 @@ def _tile(r, sg, c_start, c_stop, tpl, flat, groups, rd, model, cand, state, wor
                model, cand, state, work)
     if mode == SWEEP:
         cand.tile_clock[r, sg] = clock0
-        if bounded:
-            best = -np.inf
-            for c in range(c_start, c_stop):
-                d = cand.last_gain[c] + (-model.l_prior if cand.occupied[cand.cell[c]] else model.l_prior)
-                best = max(best, d)
-            cand.tile_drift[r, sg] = drift
-            cand.tile_best[r, sg] = best
     return True
 
 
