@@ -62,7 +62,7 @@ def learned_over(mode: str, params: MapParams, keys: set[str], log, model: str |
         if learned in learns:
             out.append(f"warning: em.{key} is learned from the log (calibration.learn lists {learned}); take "
                        f"{learned} out of calibration.learn {with_value}")
-        elif learned == "lobe_deg" and given is not None and given.carries_lobe and learned in params.calibration.learned:
+        elif learned == "lobe_deg" and given is not None and given.carries_lobe:
             out.append(f"warning: em.{key} is the lobe the sensor's model carries ({given.origin}); take lobe_deg out "
                        f"of calibration.learn {with_value}")
         elif given is not None and key in SENSOR_KEYS:
@@ -118,15 +118,17 @@ def sensor_model(mode: str, params: MapParams, log, name: str, model: Learned | 
     same log, or the model file at that path (``given_model``); else, with ``calibration.carried``,
     the one ``detector`` carries for the log's sensor (``carried_model``; ``loaded``: that detector
     as the adaptive mode read it); else none (the map learns it from the log, or takes the
-    configured values: ``mapping.plan``)."""
+    configured values: ``mapping.plan``). A robot's model keeps its lobe only where the map would
+    learn one (``Learned.kept_for``)."""
     if mode == "standard":
         return None
     if isinstance(model, Learned):
         return model
     if model:
-        return given_model(model, log.sensor, name)
+        return given_model(model, log.sensor, name).kept_for(params.calibration.learned)
     if params.calibration.enabled and params.calibration.carried:
-        return carried_model(detector, log.sensor, log.truth_grid() is not None, loaded)
+        carried = carried_model(detector, log.sensor, log.truth_grid() is not None, loaded)
+        return None if carried is None else carried.kept_for(params.calibration.learned)
     return None
 
 

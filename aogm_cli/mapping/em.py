@@ -111,14 +111,12 @@ def em_problem(rd: L.EMReadings, templates, shape: tuple[int, int], occupied: np
                       qpow=(1.0 - p_hit) ** np.arange(top + 1, dtype=np.float64), w=1.0 - fwd.p_rand - fwd.p_max,
                       sigma=float(fwd.sigma), window=float(fwd.window))
     seen = np.zeros(shape[0] * shape[1], dtype=np.bool_)
-    window = None
+    # the window cells ``_flippable`` asks for, marked in the same walk (a cluster problem holds none free)
+    window = np.zeros_like(seen) if labels is None and config.l_prior < 0.0 else None
     if labels is None:
-        # the window cells ``_flippable`` asks for, marked in the same walk
-        window = np.zeros_like(seen) if config.l_prior < 0.0 else seen[:0]
-        marks = [(seen, window, np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64),
-                  np.zeros((0, 4), dtype=np.int32))]
+        marks = [(seen, seen[:0] if window is None else window, np.zeros(0, dtype=np.int64),
+                  np.zeros(0, dtype=np.int64), np.zeros((0, 4), dtype=np.int32))]
         marks *= READING_PARTS
-        window = window if window.size else None
     else:
         labels = np.ascontiguousarray(labels, dtype=np.int64).reshape(-1)
         box = np.empty((n, 4), dtype=np.int32)
@@ -212,7 +210,7 @@ def _flippable(problem: EMProblem, occupied: np.ndarray, cells: np.ndarray) -> t
     There an obstacle only scales each echo's chance by 1 - p_hit, so occupancy can only lower the
     objective; their gains are one walk of the far runs (``_held_free_gains``). Not in a cluster
     problem, whose extents are narrowed already (no gain measured: docs/algorithms.md)."""
-    if problem.model.l_prior >= 0.0 or cells.size == 0 or problem.window is None:
+    if problem.window is None or cells.size == 0:  # none marked: a cluster problem, or a prior of 0.5 or more
         return cells, cells[:0]
     swept = problem.window[cells] | occupied[cells]
     if np.count_nonzero(~swept) < HELD_FREE_SHARE * cells.size:

@@ -11,8 +11,8 @@ from aogm_cli.sensor_models.forward_model import ForwardModelConfig
 
 SENSOR_KEYS = ("sigma", "p_rand", "p_hit", "p_max")  # the forward model's parameters calibration sets
 # what a robot's model leaves to each log: the building's max-range share (``stages.rates``), and the lobe that hears
-# (``stages.lobe``) when the model carries none (a model file or detector of an older aogm: the lobe is the
-# transducer's, carried with the model since)
+# (``stages.lobe``) when the model carries none (the packaged detector's, whose training logs disagree on it, or a
+# model file of an older aogm)
 BUILDING = ("p_max", "lobe_deg")
 
 # where a sensor model came from (``Learned.origin``)

@@ -117,7 +117,6 @@ def planned(log, mode: str, params: MapParams, flagger: Flagger = ALL, progress:
     if mode not in MODES:
         raise ValueError(f"unknown mode {mode!r}; expected one of {', '.join(MODES)}")
     grid = log_grid(log, params.resolution)
-    given = None if given is None else given.kept_for(params.calibration.learned)
     plan = plan_map(mode, params, log.sensor, grid.resolution, given)
     stages = mode_stages(plan)
     plan = dataclasses.replace(plan, stages=tuple(stage.name for stage in stages))

@@ -58,8 +58,9 @@ def _join_parents(parent, other):
 def _init_state(tpl, flat, readings, model, occupied, grid_shape, marks, span):
     """The ``EMState`` of each reading in ``span`` under ``occupied`` (one walk of its cone).
     ``marks`` = (seen, window, labels, parent, box), each optional (empty): every cone cell is marked in
-    ``seen``, every heard cell of its Gaussian window (entries from jlo) in ``window``; clusters (``labels``) that share a reading are joined in ``parent``, and ``box`` gets
-    each reading's cluster cells' bounds, the only cells EM may flip."""
+    ``seen``, every heard cell of its Gaussian window (entries from jlo) in ``window``; clusters
+    (``labels``) that share a reading are joined in ``parent``, and ``box`` gets each reading's
+    cluster cells' bounds, the only cells EM may flip."""
     rd, state = _columns(readings)
     seen, window, labels, parent, box = marks
     height, width = grid_shape
